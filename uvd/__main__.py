@@ -1,0 +1,5 @@
+import sys
+
+from uvd.cli import main
+
+sys.exit(main())

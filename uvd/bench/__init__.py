@@ -1,0 +1,60 @@
+"""Benchmarks (``uvd bench NAME``): they print figures, never assert them.
+
+Each module in this package exposes ``BENCH``, a :class:`Bench`; the registry discovers them.
+Figures are a flat or nested dict of numbers; medians and percentiles are quoted, not means.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from uvd.errors import ExperimentError
+
+
+@dataclass(frozen=True)
+class Bench:
+    name: str
+    summary: str
+    run: Callable[[argparse.Namespace], dict[str, Any]]
+    add_arguments: Callable[[argparse.ArgumentParser], None] | None = None
+
+
+def registry() -> dict[str, Bench]:
+    found: dict[str, Bench] = {}
+    for info in pkgutil.iter_modules(__path__):
+        if info.name.startswith("_") or info.name == "all":
+            continue
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        bench = getattr(module, "BENCH", None)
+        if bench is not None:
+            found[bench.name] = bench
+    return found
+
+
+def get(name: str) -> Bench:
+    reg = registry()
+    if name not in reg:
+        raise ExperimentError(f"unknown benchmark {name!r}; known: {', '.join(sorted(reg))}")
+    return reg[name]
+
+
+def percentiles(samples_s, scale: float = 1e6) -> dict[str, float]:
+    """Median, p90, p99, p99.9 and max of timing samples (seconds), scaled (µs by default)."""
+    a = np.asarray(samples_s, dtype=float) * scale
+    if a.size == 0:
+        return {"n": 0}
+    return {
+        "n": int(a.size),
+        "p50": float(np.percentile(a, 50)),
+        "p90": float(np.percentile(a, 90)),
+        "p99": float(np.percentile(a, 99)),
+        "p999": float(np.percentile(a, 99.9)),
+        "max": float(a.max()),
+    }

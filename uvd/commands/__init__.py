@@ -1,0 +1,1 @@
+"""Sub-commands of ``uvd``: one module each, exposing ``register(subparsers)``."""

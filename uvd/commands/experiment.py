@@ -1,0 +1,48 @@
+"""``uvd experiment NAME --json OUT [--plots DIR] [--hours H] [--seed S]``."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from uvd import experiments
+from uvd.jsonio import write_json
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "experiment",
+        help="run a lockstep (simulated-clock) experiment from the thesis",
+        description="Run a lockstep experiment; `uvd experiment list` lists them.",
+    )
+    p.add_argument("name", help="experiment name, or 'list'")
+    p.add_argument("--json", type=Path, metavar="OUT", help="write results to this JSON file")
+    p.add_argument("--plots", type=Path, metavar="DIR", help="write figures into this folder")
+    p.add_argument("--hours", type=float, help="override the simulated duration (hours)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random generator")
+    p.set_defaults(handler=_run)
+
+
+def _run(args) -> int:
+    if args.name == "list":
+        for name, exp in sorted(experiments.registry().items()):
+            print(f"{name:24s} {exp.summary}")
+        return 0
+    exp = experiments.get(args.name)
+    opts = experiments.ExperimentOptions(seed=args.seed, hours=args.hours, plots=args.plots)
+    t0 = time.perf_counter()
+    result = exp.run(opts)
+    result.setdefault("experiment", exp.name)
+    result.setdefault("seed", args.seed)
+    result["wall_seconds"] = round(time.perf_counter() - t0, 3)
+    if args.json:
+        write_json(args.json, result)
+    summary = result.get("summary")
+    if summary:
+        print(summary)
+    else:
+        print(json.dumps(result, indent=2, default=float)[:4000])
+    print(f"[{exp.name}] finished in {result['wall_seconds']:.1f} s wall"
+          + (f"; results in {args.json}" if args.json else ""))
+    return 0
