@@ -1,0 +1,362 @@
+"""Navigation state: pose H ∈ SE(3) and body velocity v = [ν; ω] from INS, DVL and depth.
+
+Pure (numpy, plus the pure frame functions of :mod:`drivers.frames`; no I/O, no clock, no
+logging) and cheap enough to run every control cycle.
+One call of :func:`nav_step` per cycle takes the samples that arrived since the previous call
+(``None`` where none did) and returns a :class:`NavState` and the next :class:`NavMemory`.
+
+How the state is assembled (thesis App. A.1, Table A.1):
+
+* **Attitude R and ω** from the latest INS sample (PHINS III, 10 Hz): R = Rz(ψ)Ry(θ)Rx(φ)
+  (App. A), ω in the body frame. When the INS delivers no rates (``rates_valid=False``, e.g.
+  PHINS standard ASCII, which carries none) and its ``omega_body`` is not finite, ω is derived
+  here from successive attitudes, ω ≈ vee(log(R_prevᵀ R)) / Δt, and ``rates_degraded`` is set;
+  when the driver already derived them (finite ``omega_body``), they are used and flagged
+  degraded too.
+* **ν** from the latest DVL sample with bottom lock (6 Hz): ν = R_mount v_dvl − ω × r with the
+  configured mounting rotation and lever arm (:func:`drivers.frames.dvl_mount_to_body`; the
+  defaults make it the identity, which is what the lockstep instrument models deliver).
+* **x, y (north, east)** by dead reckoning, as the thesis's DVLNAV did: between two calls the
+  position advances by the trapezoid of the world-frame velocities R ν at both calls.
+* **z (depth)** from the latest valid depth sample (Digiquartz, 7 Hz).
+
+Validity and ages: a source is valid when its latest usable sample is at most its timeout old
+(``NavConfig.*_timeout_s``); ages are seconds since the sample's ``t_ns`` (``inf`` before the
+first one). ``valid`` is the conjunction of INS, DVL and depth validity — what control needs.
+
+**Lost bottom lock.** A DVL sample without bottom lock (or with fewer good beams than
+``min_good_beams``) does not change ν; ``bottom_lock`` turns False at once. The last locked
+velocity is then *held* (zero-order hold) and dead reckoning continues with it for at most
+``dvl_timeout_s`` after the last locked sample — the DVL's normal dropout gap. After that the
+DVL is invalid: ``dvl_valid`` and ``valid`` become False, dead reckoning stops (north/east are
+frozen at their last value, not extrapolated), and ν keeps its last finite value only so
+nothing non-finite leaves this module; the consumer must act on ``valid``. Dead reckoning
+resumes with the next locked sample (the position is not corrected: a DVLNAV-style solution
+drifts, <0.5 % of distance travelled in Table A.1; use :func:`nav_set_position` to reset it
+from an external fix).
+
+Time going backwards or samples stamped after ``t_ns`` are treated as age 0 / no integration;
+nothing here raises on bad input — non-finite samples are ignored.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from drivers.frames import dvl_mount_to_body
+from drivers.samples import euler_to_R
+
+if TYPE_CHECKING:  # the sample types are plain dataclasses; only their attributes are read
+    from drivers.samples import DepthSample, DvlSample, InsSample
+
+__all__ = ["NavConfig", "NavState", "NavMemory", "nav_init", "nav_step", "nav_set_position"]
+
+_I3 = np.eye(3)
+_Z3 = np.zeros(3)
+_INF = float("inf")
+_H_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _eye3() -> np.ndarray:
+    return np.eye(3)
+
+
+def _zeros3() -> np.ndarray:
+    return np.zeros(3)
+
+
+@dataclass(frozen=True)
+class NavConfig:
+    """Constant configuration of :func:`nav_step`.
+
+    Attributes
+    ----------
+    ins_timeout_s, dvl_timeout_s, depth_timeout_s : float
+        Largest age (s) of a source's latest usable sample for it to count as valid. The DVL
+        one is also the longest time a lost bottom lock is bridged by holding the velocity.
+    dvl_mount_R : (3, 3) ndarray
+        Rotation DVL frame → body frame (identity: DVL axes along the body axes).
+    dvl_lever_arm_m : (3,) ndarray
+        Position of the DVL in the body frame, metres from the vehicle origin.
+    min_good_beams : int
+        Fewest good beams for a DVL sample to count as bottom lock (RDI 3-beam solution).
+    derive_rates_min_dt_s : float
+        Shortest attitude interval used to derive rates (shorter ones keep the previous ω).
+    """
+
+    ins_timeout_s: float = 0.1
+    dvl_timeout_s: float = 1.0
+    depth_timeout_s: float = 0.5
+    dvl_mount_R: np.ndarray = field(default_factory=_eye3)
+    dvl_lever_arm_m: np.ndarray = field(default_factory=_zeros3)
+    min_good_beams: int = 3
+    derive_rates_min_dt_s: float = 1e-3
+
+    def __post_init__(self):
+        R = np.asarray(self.dvl_mount_R, dtype=float)
+        r = np.asarray(self.dvl_lever_arm_m, dtype=float)
+        if R.shape != (3, 3) or not np.allclose(R.T @ R, _I3, atol=1e-6) \
+                or np.linalg.det(R) < 0.0:
+            raise ValueError(f"NavConfig.dvl_mount_R must be a rotation matrix (3x3), got {R!r}")
+        if r.shape != (3,) or not np.all(np.isfinite(r)):
+            raise ValueError(f"NavConfig.dvl_lever_arm_m must be 3 finite numbers, got {r!r}")
+        for name in ("ins_timeout_s", "dvl_timeout_s", "depth_timeout_s"):
+            val = getattr(self, name)
+            if not (val > 0.0 and math.isfinite(val)):
+                raise ValueError(f"NavConfig.{name} must be a positive number, got {val!r}")
+        object.__setattr__(self, "dvl_mount_R", R)
+        object.__setattr__(self, "dvl_lever_arm_m", r)
+        # derived constants (not fields), computed once
+        has_arm = bool(np.any(r != 0.0))
+        object.__setattr__(self, "_has_lever_arm", has_arm)
+        object.__setattr__(self, "_mount_is_identity", bool(np.array_equal(R, _I3)) and not has_arm)
+
+    @property
+    def has_lever_arm(self) -> bool:
+        """True when the DVL is not at the origin (ν then depends on ω)."""
+        return self._has_lever_arm
+
+    @property
+    def mount_is_identity(self) -> bool:
+        """True when the DVL frame is the body frame at the origin (ν = v_dvl)."""
+        return self._mount_is_identity
+
+
+@dataclass(frozen=True)
+class NavState:
+    """Navigation output of one cycle.
+
+    Attributes
+    ----------
+    t_ns : int
+        Time of the cycle (monotonic ns, the clock the samples are stamped with).
+    H : (4, 4) ndarray
+        Pose body → world, SE(3); p = [north, east, depth] in metres.
+    v : (6,) ndarray
+        Body velocity [ν; ω] (m/s, rad/s).
+    valid : bool
+        INS, DVL and depth all valid (what control needs).
+    ins_valid, dvl_valid, depth_valid : bool
+        Per-source validity (latest usable sample within its timeout).
+    ins_age_s, dvl_age_s, depth_age_s : float
+        Age of each source's latest usable sample (``inf`` before the first).
+    rates_degraded : bool
+        ω was derived from attitude, not measured.
+    bottom_lock : bool
+        The latest DVL sample had bottom lock.
+    """
+
+    t_ns: int
+    H: np.ndarray
+    v: np.ndarray
+    valid: bool
+    ins_valid: bool
+    dvl_valid: bool
+    depth_valid: bool
+    ins_age_s: float
+    dvl_age_s: float
+    depth_age_s: float
+    rates_degraded: bool
+    bottom_lock: bool
+
+
+@dataclass(slots=True)
+class NavMemory:
+    """Explicit memory of :func:`nav_step` (treat as opaque; a new one is returned each call).
+
+    Attributes
+    ----------
+    t_ns : int or None
+        Time of the previous call.
+    north_m, east_m : float
+        Dead-reckoned horizontal position.
+    depth_m : float
+        Latest valid depth (0 before the first).
+    R : (3, 3) ndarray
+        Latest attitude (identity before the first INS sample).
+    omega : (3,) ndarray
+        Latest body angular rate.
+    nu : (3,) ndarray
+        Latest (held) body translational velocity of the origin.
+    v_world_prev : (3,) ndarray or None
+        World velocity R ν at the previous call if the DVL was valid then (for the trapezoid).
+    ins_t_ns, dvl_t_ns, depth_t_ns : int or None
+        Stamp of each source's latest usable sample.
+    rates_degraded, bottom_lock : bool
+        Flags carried to the next cycle.
+    att_prev_R, att_prev_t_ns :
+        Previous INS attitude and its stamp, for rates derived from attitude.
+    dvl_raw : (3,) ndarray or None
+        Latest locked DVL velocity in the DVL frame (the lever arm is re-applied with each ω).
+    """
+
+    t_ns: int | None = None
+    north_m: float = 0.0
+    east_m: float = 0.0
+    depth_m: float = 0.0
+    R: np.ndarray = field(default_factory=_eye3)
+    omega: np.ndarray = field(default_factory=_zeros3)
+    nu: np.ndarray = field(default_factory=_zeros3)
+    v_world_prev: np.ndarray | None = None
+    ins_t_ns: int | None = None
+    dvl_t_ns: int | None = None
+    depth_t_ns: int | None = None
+    rates_degraded: bool = False
+    bottom_lock: bool = False
+    att_prev_R: np.ndarray | None = None
+    att_prev_t_ns: int | None = None
+    dvl_raw: np.ndarray | None = None
+
+
+def nav_init(cfg: NavConfig, north_m: float = 0.0, east_m: float = 0.0) -> NavMemory:
+    """Initial memory: position (north_m, east_m), no sample seen, every source invalid."""
+    return NavMemory(north_m=float(north_m), east_m=float(east_m))
+
+
+def nav_set_position(mem: NavMemory, north_m: float, east_m: float) -> NavMemory:
+    """Memory with the dead-reckoned position replaced by an external fix (north, east, m)."""
+    return replace(mem, north_m=float(north_m), east_m=float(east_m))
+
+
+def _log_so3_vee(R: np.ndarray) -> np.ndarray:
+    """vee(log R) for a small rotation (rates derived from successive attitudes)."""
+    c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    c = min(1.0, max(-1.0, c))
+    th = math.acos(c)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if th < 1e-6:
+        return 0.5 * w
+    s = math.sin(th)
+    if s < 1e-9:  # θ ≈ π: not a rate step a 10 Hz INS can produce; give up on this one
+        return np.zeros(3)
+    return (th / (2.0 * s)) * w
+
+
+def _finite3(a) -> bool:
+    return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
+
+
+def _age_s(t_ns: int, stamp: int | None) -> float:
+    if stamp is None:
+        return _INF
+    d = t_ns - stamp
+    return d * 1e-9 if d > 0 else 0.0
+
+
+def nav_step(cfg: NavConfig, mem: NavMemory, t_ns: int, ins: InsSample | None,
+             dvl: DvlSample | None, depth: DepthSample | None) -> tuple[NavState, NavMemory]:
+    """One navigation cycle at time ``t_ns`` (see the module docstring for the rules).
+
+    Parameters
+    ----------
+    cfg : NavConfig
+    mem : NavMemory
+        Memory returned by the previous call (or :func:`nav_init`); not modified.
+    t_ns : int
+        Cycle time, monotonic ns on the clock the samples were stamped with.
+    ins, dvl, depth : InsSample, DvlSample, DepthSample or None
+        The newest sample of each source that arrived since the previous call.
+
+    Returns
+    -------
+    (NavState, NavMemory)
+    """
+    R = mem.R
+    omega = mem.omega
+    nu = mem.nu
+    ins_t = mem.ins_t_ns
+    dvl_t = mem.dvl_t_ns
+    depth_t = mem.depth_t_ns
+    depth_m = mem.depth_m
+    rates_degraded = mem.rates_degraded
+    bottom_lock = mem.bottom_lock
+    att_prev_R = mem.att_prev_R
+    att_prev_t = mem.att_prev_t_ns
+    dvl_raw = mem.dvl_raw
+    omega_changed = False
+
+    # --- INS: attitude and rates ------------------------------------------------------------
+    if ins is not None and ins.valid and math.isfinite(ins.roll) and math.isfinite(ins.pitch) \
+            and math.isfinite(ins.heading):
+        R_new = euler_to_R(ins.roll, ins.pitch, ins.heading)
+        w = ins.omega_body
+        if _finite3(w):
+            omega = np.array([float(w[0]), float(w[1]), float(w[2])])
+            omega_changed = True
+            rates_degraded = not ins.rates_valid
+        else:
+            rates_degraded = True
+            if att_prev_R is not None and att_prev_t is not None:
+                dt = (ins.t_ns - att_prev_t) * 1e-9
+                if dt >= cfg.derive_rates_min_dt_s:
+                    omega = _log_so3_vee(att_prev_R.T @ R_new) / dt
+                    omega_changed = True
+        R = R_new
+        att_prev_R = R_new
+        att_prev_t = ins.t_ns
+        ins_t = ins.t_ns
+
+    # --- DVL: body velocity of the origin ---------------------------------------------------
+    new_dvl = False
+    if dvl is not None:
+        vb = dvl.velocity_body
+        locked = bool(dvl.bottom_lock) and dvl.good_beams >= cfg.min_good_beams \
+            and _finite3(vb)
+        bottom_lock = locked
+        if locked:
+            dvl_raw = np.array([float(vb[0]), float(vb[1]), float(vb[2])])
+            dvl_t = dvl.t_ns
+            new_dvl = True
+    if dvl_raw is not None and (new_dvl or (omega_changed and cfg._has_lever_arm)):
+        # re-applied when ω changes so the lever-arm term uses the latest rate
+        if cfg._mount_is_identity:
+            nu = dvl_raw
+        else:
+            nu = dvl_mount_to_body(cfg.dvl_mount_R, cfg.dvl_lever_arm_m, dvl_raw, omega)
+
+    # --- depth --------------------------------------------------------------------------------
+    if depth is not None and depth.valid and math.isfinite(depth.depth_m):
+        depth_m = float(depth.depth_m)
+        depth_t = depth.t_ns
+
+    # --- ages and validity -----------------------------------------------------------------
+    ins_age = _age_s(t_ns, ins_t)
+    dvl_age = _age_s(t_ns, dvl_t)
+    depth_age = _age_s(t_ns, depth_t)
+    ins_valid = ins_age <= cfg.ins_timeout_s
+    dvl_valid = dvl_age <= cfg.dvl_timeout_s
+    depth_valid = depth_age <= cfg.depth_timeout_s
+
+    # --- dead reckoning (DVLNAV): trapezoid of world velocities while the DVL is valid -------
+    north, east = mem.north_m, mem.east_m
+    v_world_prev = None
+    if dvl_valid:
+        v_world_prev = R @ nu
+        prev = mem.v_world_prev
+        t_prev = mem.t_ns
+        if prev is not None and t_prev is not None and t_ns > t_prev:
+            half_dt = (t_ns - t_prev) * 0.5e-9
+            north += (float(prev[0]) + float(v_world_prev[0])) * half_dt
+            east += (float(prev[1]) + float(v_world_prev[1])) * half_dt
+
+    H = np.empty((4, 4))
+    H[:3, :3] = R
+    H[:3, 3] = (north, east, depth_m)
+    H[3] = _H_LAST_ROW
+    v = np.empty(6)
+    v[:3] = nu
+    v[3:] = omega
+
+    state = NavState(
+        int(t_ns), H, v, ins_valid and dvl_valid and depth_valid, ins_valid, dvl_valid,
+        depth_valid, ins_age, dvl_age, depth_age, rates_degraded, bottom_lock,
+    )
+    new_mem = NavMemory(
+        int(t_ns), north, east, depth_m, R, omega, nu, v_world_prev, ins_t, dvl_t, depth_t,
+        rates_degraded, bottom_lock, att_prev_R, att_prev_t, dvl_raw,
+    )
+    return state, new_mem
