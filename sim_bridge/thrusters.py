@@ -17,9 +17,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from uvd.model.thrusters import ThrusterSpec, speed_from_thrust, thrust_from_speed
+from uvd.model.thrusters import ThrusterSpec
 
 
 @dataclass(frozen=True)
@@ -56,30 +57,47 @@ class ThrusterBank:
 
     def _alpha(self, dt: float) -> np.ndarray:
         if self._alpha_cache is None or self._alpha_cache[0] != dt:
-            with np.errstate(divide="ignore"):
-                a = np.where(self.tau > 0.0, 1.0 - np.exp(-dt / np.maximum(self.tau, 1e-300)), 1.0)
+            a = np.ones_like(self.tau)
+            pos = self.tau > 0.0
+            a[pos] = 1.0 - np.exp(-dt / self.tau[pos])
             self._alpha_cache = (dt, a)
         return self._alpha_cache[1]
 
     def step(self, command_n: np.ndarray, dt: float) -> np.ndarray:
         """Advance by dt with the thrust commands held; return the thrust produced (N)."""
         cmd = np.asarray(command_n, dtype=float)
-        cmd = np.where(np.isfinite(cmd), cmd, 0.0)  # a non-finite command is no command
-        if self.effects.saturation:
-            cmd = np.clip(cmd, -self.max_thrust, self.max_thrust)
-        if self.effects.stiction:
-            sign = np.sign(cmd)
-            reversed_ = (sign != 0.0) & (self._last_sign != 0.0) & (sign != self._last_sign)
-            self._stuck |= reversed_
-            self._stuck &= ~(np.abs(cmd) >= self.stiction)
-            cmd = np.where(self._stuck, 0.0, cmd)
-            self._last_sign = np.where(cmd != 0.0, np.sign(cmd), self._last_sign)
-        target = speed_from_thrust(cmd, self.k)
-        if self.effects.lag:
-            self.omega += self._alpha(dt) * (target - self.omega)
-            if self.effects.stiction:
-                self.omega = np.where(self._stuck, 0.0, self.omega)
-        else:
-            self.omega = target
-        self.thrust = self.health * thrust_from_speed(self.omega, self.k)
+        e = self.effects
+        _thruster_step(cmd, self._alpha(dt), self.k, self.max_thrust, self.stiction, self.health,
+                       e.saturation, e.stiction, e.lag, self.omega, self._last_sign, self._stuck,
+                       self.thrust)
         return self.thrust
+
+
+@numba.njit(cache=True)
+def _thruster_step(cmd_in, alpha, k, max_thrust, stiction, health, saturate, stick, lag,
+                   omega, last_sign, stuck, thrust_out):
+    """The per-thruster effects of the module docstring, in place (compiled: ~1 µs for six)."""
+    for i in range(cmd_in.shape[0]):
+        c = cmd_in[i]
+        if not np.isfinite(c):  # a non-finite command is no command
+            c = 0.0
+        if saturate:
+            c = min(max(c, -max_thrust[i]), max_thrust[i])
+        if stick:
+            s = np.sign(c)
+            if s != 0.0 and last_sign[i] != 0.0 and s != last_sign[i]:
+                stuck[i] = True
+            if abs(c) >= stiction[i]:
+                stuck[i] = False
+            if stuck[i]:
+                c = 0.0
+            if c != 0.0:
+                last_sign[i] = np.sign(c)
+        target = np.sign(c) * np.sqrt(abs(c) / k[i])
+        if lag:
+            omega[i] += alpha[i] * (target - omega[i])
+            if stick and stuck[i]:
+                omega[i] = 0.0
+        else:
+            omega[i] = target
+        thrust_out[i] = health[i] * k[i] * omega[i] * abs(omega[i])

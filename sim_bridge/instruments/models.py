@@ -1,0 +1,137 @@
+"""Instrument models of the simulated vehicle (thesis App. A.1, Table A.1) — pure, no I/O.
+
+Each model turns the plant's true state into the samples of :mod:`drivers.samples` at its own
+rate, with noise from a seeded ``numpy.random.Generator`` passed in (the core is deterministic;
+randomness lives only here). Defaults are Table A.1:
+
+============  =======================  =======  ==============================================
+state         source                   rate     noise (std dev)
+============  =======================  =======  ==============================================
+heading       PHINS III                10 Hz    0.13°
+pitch, roll   PHINS III                10 Hz    0.01°
+angular vel.  PHINS III                10 Hz    0.01°/s
+body velocity 1200 kHz RDI DVL         6 Hz     0.003 m/s, zero bias
+depth         Digiquartz 8CDP010-1     7 Hz     see ``depth_std_m``
+x, y          DVLNAV dead reckoning    10 Hz    drift ≤ 0.5 % of distance travelled
+============  =======================  =======  ==============================================
+
+Table A.1 gives the Digiquartz only as a resolution (2 ppm of its 10 m range = 20 µm; the
+extracted text's ">0.75 …" has lost its unit). We use 0.75 mm standard deviation, which also
+covers the tank's surface disturbance; set ``depth_std_m`` to change it.
+
+XY: the thesis's DVLNAV dead-reckons DVL velocity; here the simulated DVLNAV integrates the
+*noisy* DVL velocity rotated by the *noisy* INS attitude, plus a scale error drawn once per run
+(uniform within ±``xy_scale_error`` = 0.5 %), so its drift matches Table A.1. The daemon's own
+navigation (``uvd.estimation.navigation``) does its own dead reckoning from the raw DVL/INS
+samples; this model is what a lockstep run uses when it wants DVLNAV's XY.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+
+_DEG = math.pi / 180.0
+
+
+@dataclass(frozen=True)
+class InstrumentConfig:
+    """Rates (Hz) and noise (SI units) of the simulated instruments; defaults: Table A.1."""
+
+    noise: bool = True
+    ins_rate_hz: float = 10.0
+    heading_std_rad: float = 0.13 * _DEG
+    roll_pitch_std_rad: float = 0.01 * _DEG
+    rate_std_rad_s: float = 0.01 * _DEG
+    dvl_rate_hz: float = 6.0
+    dvl_std_m_s: float = 0.003
+    dvl_altitude_m: float = 2.0  # the vehicle's height above the tank floor at depth 0
+    depth_rate_hz: float = 7.0
+    depth_std_m: float = 0.00075
+    xy_scale_error: float = 0.005
+
+    def __post_init__(self) -> None:
+        for name in ("ins_rate_hz", "dvl_rate_hz", "depth_rate_hz"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"instrument {name} must be > 0, got {getattr(self, name)}")
+
+
+class _Periodic:
+    """Fires at t = k/rate on a simulated clock (no drift: integer tick counting)."""
+
+    def __init__(self, rate_hz: float) -> None:
+        self.period_ns = int(round(1e9 / rate_hz))
+        self.next_ns = 0
+
+    def due(self, t_ns: int) -> bool:
+        if t_ns >= self.next_ns:
+            self.next_ns += self.period_ns * max(1, (t_ns - self.next_ns) // self.period_ns + 1)
+            return True
+        return False
+
+
+class Instruments:
+    """INS, DVL, depth and DVLNAV models sampling a plant's true state.
+
+    Call :meth:`sample` after every plant step with the simulated time and true (H, v); it
+    returns the samples that fell due (possibly none).
+    """
+
+    def __init__(self, config: InstrumentConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        self.rng = rng
+        self._ins = _Periodic(config.ins_rate_hz)
+        self._dvl = _Periodic(config.dvl_rate_hz)
+        self._depth = _Periodic(config.depth_rate_hz)
+        self.dr_north = 0.0
+        self.dr_east = 0.0
+        self._dr_scale = 1.0 + (rng.uniform(-1, 1) * config.xy_scale_error if config.noise else 0)
+        self._last_dvl: DvlSample | None = None
+        self._last_dr_ns: int | None = None
+        self._last_ins: InsSample | None = None
+
+    def _n(self, std: float, size: int | None = None):
+        if not self.config.noise or std == 0.0:
+            return 0.0 if size is None else np.zeros(size)
+        return self.rng.normal(0.0, std, size)
+
+    def sample(self, t_ns: int, H: np.ndarray, v: np.ndarray
+               ) -> tuple[InsSample | None, DvlSample | None, DepthSample | None]:
+        """Samples due at t_ns from the true pose H (4×4) and body velocity v = [ν; ω]."""
+        c = self.config
+        ins = dvl = depth = None
+        if self._ins.due(t_ns):
+            roll, pitch, heading = R_to_euler(H[:3, :3])
+            heading = (heading + self._n(c.heading_std_rad) + math.pi) % (2 * math.pi) - math.pi
+            ins = InsSample(t_ns=t_ns, roll=roll + self._n(c.roll_pitch_std_rad),
+                            pitch=pitch + self._n(c.roll_pitch_std_rad), heading=heading,
+                            omega_body=v[3:] + self._n(c.rate_std_rad_s, 3))
+            self._last_ins = ins
+        if self._dvl.due(t_ns):
+            altitude = c.dvl_altitude_m - float(H[2, 3])
+            dvl = DvlSample(t_ns=t_ns, velocity_body=v[:3] + self._n(c.dvl_std_m_s, 3),
+                            bottom_lock=True, altitude_m=altitude)
+            self._dead_reckon(t_ns, H, dvl)
+        if self._depth.due(t_ns):
+            depth = DepthSample(t_ns=t_ns, depth_m=float(H[2, 3]) + self._n(c.depth_std_m))
+        return ins, dvl, depth
+
+    def _dead_reckon(self, t_ns: int, H: np.ndarray, dvl: DvlSample) -> None:
+        """DVLNAV: integrate the previous DVL velocity, rotated by the measured attitude."""
+        if self._last_dvl is not None and self._last_dr_ns is not None:
+            dt = (t_ns - self._last_dr_ns) * 1e-9
+            if self._last_ins is not None:
+                from drivers.samples import euler_to_R
+
+                R = euler_to_R(self._last_ins.roll, self._last_ins.pitch, self._last_ins.heading)
+            else:
+                R = H[:3, :3]
+            vw = R @ self._last_dvl.velocity_body
+            self.dr_north += self._dr_scale * vw[0] * dt
+            self.dr_east += self._dr_scale * vw[1] * dt
+        self._last_dvl = dvl
+        self._last_dr_ns = t_ns
