@@ -1,0 +1,180 @@
+"""Lockstep simulation: the plant, its instruments and the core advance together on a simulated
+clock — no I/O, no sleeping (DESIGN.md, "the three ways one core runs", way 2).
+
+Each control period the plant takes ``plant_rate_hz / control_rate_hz`` RKMK4 steps with the
+thrust command held (zero-order hold, as the thesis's 100 ms cycle, §5.3.1); the instruments
+sample the true state at their own rates (Table A.1); the samples that arrived during the
+period, and the propeller speeds, are the next cycle's :class:`uvd.core.CoreInputs`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from drivers.samples import R_to_euler
+from sim_bridge.instruments.models import InstrumentConfig, Instruments
+from sim_bridge.plant import Plant, PlantConfig
+from uvd import core
+from uvd.control.errors import error_coordinates
+from uvd.model.vehicle import Vehicle
+
+DOF_NAMES = ("x", "y", "z", "roll", "pitch", "heading")
+VEL_NAMES = ("u", "v", "w", "p", "q", "r")
+
+
+@dataclass(frozen=True)
+class LockstepConfig:
+    plant_rate_hz: float = 100.0
+    control_rate_hz: float = 10.0
+    plant: PlantConfig = field(default_factory=PlantConfig)
+    instruments: InstrumentConfig = field(default_factory=InstrumentConfig)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        ratio = self.plant_rate_hz / self.control_rate_hz
+        if abs(ratio - round(ratio)) > 1e-9 or ratio < 1:
+            raise ValueError("plant_rate_hz must be an integer multiple of control_rate_hz "
+                             f"(got {self.plant_rate_hz} and {self.control_rate_hz})")
+
+
+@dataclass
+class LockstepLog:
+    """Per-cycle records (arrays of length n_cycles)."""
+
+    t: np.ndarray
+    eta: np.ndarray        # true [x, y, z, roll, pitch, heading]
+    eta_ref: np.ndarray    # reference, same layout
+    v: np.ndarray          # true body velocity
+    dpsi: np.ndarray       # Δψ of (5.3), true state vs reference
+    dv: np.ndarray         # Δv of (5.4)
+    u_cmd: np.ndarray
+    u_applied: np.ndarray
+    thrust: np.ndarray
+    saturated: np.ndarray
+    status: list
+    wall_s: float = 0.0
+
+
+def eta_of(H: np.ndarray) -> np.ndarray:
+    roll, pitch, heading = R_to_euler(H[:3, :3])
+    return np.array([H[0, 3], H[1, 3], H[2, 3], roll, pitch, heading])
+
+
+class Lockstep:
+    """A plant + instruments + core, stepped one control cycle at a time."""
+
+    def __init__(self, vehicle: Vehicle, core_cfg: core.CoreConfig, cfg: LockstepConfig, *,
+                 H0: np.ndarray | None = None, v0: np.ndarray | None = None) -> None:
+        self.cfg = cfg
+        self.core_cfg = core_cfg
+        self.plant = Plant(vehicle, PlantConfig(rate_hz=cfg.plant_rate_hz,
+                                                thrusters=cfg.plant.thrusters), H0=H0, v0=v0)
+        self.rng = np.random.default_rng(cfg.seed)
+        self.instruments = Instruments(cfg.instruments, self.rng)
+        self.substeps = int(round(cfg.plant_rate_hz / cfg.control_rate_hz))
+        self.dt_control = 1.0 / cfg.control_rate_hz
+        self.plant_dt_ns = int(round(1e9 / cfg.plant_rate_hz))
+        self.t_ns = 0
+        north, east = self.plant.H[0, 3], self.plant.H[1, 3]
+        self.instruments.dr_north, self.instruments.dr_east = north, east
+        self.state = core.core_init(core_cfg, north_m=north, east_m=east)
+        self.thrust_cmd = np.zeros(vehicle.n_thrusters)
+        # prime the instruments so the first cycle has every source
+        self._pending = list(self.instruments.sample(0, self.plant.H, self.plant.v))
+
+    def cycle(self, *, armed: bool = True) -> core.CoreOutputs:
+        ins, dvl, depth = self._pending
+        inputs = core.CoreInputs(t_ns=self.t_ns, ins=ins, dvl=dvl, depth=depth,
+                                 propeller_speed_rad_s=self.plant.thrusters.omega.copy(),
+                                 armed=armed)
+        out, self.state = core.step(self.core_cfg, inputs, self.state, self.dt_control)
+        self.thrust_cmd = out.thrust_n
+        newest = [None, None, None]
+        for _ in range(self.substeps):
+            self.plant.step(self.thrust_cmd)
+            self.t_ns += self.plant_dt_ns
+            got = self.instruments.sample(self.t_ns, self.plant.H, self.plant.v)
+            for i, s in enumerate(got):
+                if s is not None:
+                    newest[i] = s
+        self._pending = newest
+        return out
+
+
+def run(sim: Lockstep, duration_s: float, *, progress: Callable[[str], None] | None = None,
+        progress_every_s: float = 600.0) -> LockstepLog:
+    """Run ``duration_s`` simulated seconds, recording every cycle (true state vs reference)."""
+    n = int(round(duration_s / sim.dt_control))
+    nthr = sim.plant.thrusters.omega.shape[0]
+    log = LockstepLog(t=np.empty(n), eta=np.empty((n, 6)), eta_ref=np.empty((n, 6)),
+                      v=np.empty((n, 6)), dpsi=np.empty((n, 6)), dv=np.empty((n, 6)),
+                      u_cmd=np.empty((n, 6)), u_applied=np.empty((n, 6)),
+                      thrust=np.empty((n, nthr)), saturated=np.zeros((n, nthr), dtype=bool),
+                      status=[])
+    t_wall = time.perf_counter()
+    next_report = progress_every_s
+    for k in range(n):
+        H, v = sim.plant.H.copy(), sim.plant.v.copy()
+        out = sim.cycle()
+        ref = out.reference
+        log.t[k] = k * sim.dt_control
+        log.eta[k] = eta_of(H)
+        log.eta_ref[k] = eta_of(ref.H)
+        log.v[k] = v
+        _, dpsi, dv, _ = error_coordinates(H, v, ref.H, ref.v)
+        log.dpsi[k], log.dv[k] = dpsi, dv
+        log.u_cmd[k] = out.u_cmd
+        log.u_applied[k] = out.u_applied
+        log.thrust[k] = out.thrust_n
+        log.saturated[k] = out.saturated
+        log.status.append(out.status)
+        if progress is not None and log.t[k] >= next_report:
+            next_report += progress_every_s
+            progress(f"  simulated {log.t[k] / 60:.0f} / {duration_s / 60:.0f} min "
+                     f"({time.perf_counter() - t_wall:.0f} s wall)")
+    log.wall_s = time.perf_counter() - t_wall
+    return log
+
+
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def tracking_errors(log: LockstepLog, start_s: float = 0.0, end_s: float | None = None) -> dict:
+    """Per-DOF tracking MAE (SI: m and rad; body velocities m/s and rad/s) and the MNE of
+    Δψ and Δv (mean of the error-vector norms, §5.3.1) over [start_s, end_s)."""
+    sel = log.t >= start_s
+    if end_s is not None:
+        sel &= log.t < end_s
+    e = log.eta[sel] - log.eta_ref[sel]
+    e[:, 3:] = wrap_angle(e[:, 3:])
+    return {
+        "position_mae": {n: float(np.mean(np.abs(e[:, i]))) for i, n in enumerate(DOF_NAMES)},
+        "velocity_mae": {n: float(np.mean(np.abs(log.dv[sel, i])))
+                         for i, n in enumerate(VEL_NAMES)},
+        "position_mne": float(np.mean(np.linalg.norm(log.dpsi[sel], axis=1))),
+        "velocity_mne": float(np.mean(np.linalg.norm(log.dv[sel], axis=1))),
+        "samples": int(np.count_nonzero(sel)),
+    }
+
+
+def format_tracking_table(errs: dict, title: str = "") -> str:
+    """A per-DOF table: position MAE (m / deg) and velocity MAE (m/s / deg/s)."""
+    lines = []
+    if title:
+        lines.append(title)
+    lines.append(f"{'DOF':>8} {'position MAE':>14} {'velocity MAE':>14}")
+    for i, (pn, vn) in enumerate(zip(DOF_NAMES, VEL_NAMES, strict=True)):
+        pe, ve = errs["position_mae"][pn], errs["velocity_mae"][vn]
+        if i < 3:
+            lines.append(f"{pn:>8} {pe:>11.4f} m  {ve:>9.4f} m/s")
+        else:
+            lines.append(f"{pn:>8} {math.degrees(pe):>9.3f} deg  {math.degrees(ve):>7.3f} deg/s")
+    lines.append(f"MNE: position {errs['position_mne']:.4f}, velocity {errs['velocity_mne']:.4f} "
+                 f"({errs['samples']} cycles)")
+    return "\n".join(lines)
