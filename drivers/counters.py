@@ -33,6 +33,8 @@ class Counters:
         Times the buffer cap forced the oldest bytes out.
     reconnects : int
         Times the transport re-opened its port or socket after a failure.
+    queue_drops : int
+        Decoded frames dropped because the consumer did not take them (oldest first).
     """
 
     frames: int = 0
@@ -43,6 +45,7 @@ class Counters:
     bytes_dropped: int = 0
     overflows: int = 0
     reconnects: int = 0
+    queue_drops: int = 0
 
     def as_dict(self) -> dict[str, int]:
         """The counters as a plain dict (for JSON)."""

@@ -1,0 +1,55 @@
+"""Serial framed reader over pyserial + pyserial-asyncio-fast (PHINS, DVL, Digiquartz ports).
+
+The port is opened **exclusively** (pyserial's ``exclusive=True``: an advisory ``flock`` that
+a second uvd or a stray terminal cannot take), non-blocking, and read in the event loop's
+callback. An unplugged USB adapter or a closed pseudo-terminal shows up as a read error; the
+reader closes the port, discards the partial frame, counts the reconnect and re-opens the same
+path with back-off (a udev symlink such as ``/dev/serial/by-id/…`` makes the path stable).
+See :class:`drivers.transport.FrameReader` for the consumer API.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import serial
+import serial_asyncio_fast
+
+from drivers.framing import FrameCodec
+from drivers.transport import FrameReader, _Protocol
+from uvd.errors import TransportError
+
+
+class SerialFrameReader(FrameReader):
+    """Framed reader of one serial port.
+
+    Parameters
+    ----------
+    port : str
+        Device path (``/dev/ttyUSB0``, a pty slave, a by-id symlink) or a pyserial URL.
+    codec : FrameCodec
+    baudrate : int
+        Line speed (8N1).
+    exclusive : bool
+        Lock the port against other openers (default True).
+    **kwargs
+        Passed to :class:`~drivers.transport.FrameReader` (name, clock, back-off, …).
+    """
+
+    def __init__(self, port: str, codec: FrameCodec, baudrate: int = 115200, *,
+                 exclusive: bool = True, **kwargs):
+        super().__init__(codec, **kwargs)
+        self.port = str(port)
+        self.where = self.port
+        self.baudrate = int(baudrate)
+        self.exclusive = exclusive
+
+    async def _open(self, protocol: _Protocol) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            await serial_asyncio_fast.create_serial_connection(
+                loop, lambda: protocol, self.port, baudrate=self.baudrate,
+                exclusive=self.exclusive)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise TransportError(f"{self.name}: cannot open serial port {self.port}: {exc}") \
+                from exc
