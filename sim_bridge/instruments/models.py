@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler, euler_to_R
 
 _DEG = math.pi / 180.0
 
@@ -61,15 +61,17 @@ class InstrumentConfig:
 
 
 class _Periodic:
-    """Fires at t = k/rate on a simulated clock (no drift: integer tick counting)."""
+    """Fires at t = k/rate on a simulated clock: the k-th due time is computed from k, so no
+    rounding error accumulates (6 Hz gives exactly 360 samples a minute)."""
 
     def __init__(self, rate_hz: float) -> None:
-        self.period_ns = int(round(1e9 / rate_hz))
-        self.next_ns = 0
+        self.rate_hz = rate_hz
+        self.k = 0
 
     def due(self, t_ns: int) -> bool:
-        if t_ns >= self.next_ns:
-            self.next_ns += self.period_ns * max(1, (t_ns - self.next_ns) // self.period_ns + 1)
+        if t_ns >= round(self.k * 1e9 / self.rate_hz):
+            # skip the due times already passed (a coarse caller never gets a burst)
+            self.k = max(self.k + 1, math.floor(t_ns * self.rate_hz / 1e9) + 1)
             return True
         return False
 
@@ -125,8 +127,6 @@ class Instruments:
         if self._last_dvl is not None and self._last_dr_ns is not None:
             dt = (t_ns - self._last_dr_ns) * 1e-9
             if self._last_ins is not None:
-                from drivers.samples import euler_to_R
-
                 R = euler_to_R(self._last_ins.roll, self._last_ins.pitch, self._last_ins.heading)
             else:
                 R = H[:3, :3]

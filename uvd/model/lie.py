@@ -163,15 +163,13 @@ def _log_so3(R):
     tr = R[0, 0] + R[1, 1] + R[2, 2]
     c = min(max(0.5 * (tr - 1.0), -1.0), 1.0)
     w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin(t) n
-    if c > 0.0:
-        # sin t from the skew part is accurate here; atan2 avoids acos' loss of precision near 0
-        s = 0.5 * _norm3(w)
-        t = np.arctan2(s, c)
+    s = 0.5 * _norm3(w)
+    t = np.arctan2(s, c)  # accurate everywhere, unlike acos near 0 and near π
+    if c > -0.7:
         if t < 1e-4:
             return 0.5 * w * (1.0 + t * t / 6.0)
         return 0.5 * w * (t / np.sin(t))
-    # near π: the axis from the symmetric part, R + Rᵀ = 2 I cos t + 2 (1 − cos t) n nᵀ
-    t = np.arccos(c)
+    # near π sin t → 0: the axis from the symmetric part, R + Rᵀ = 2 I cos t + 2(1 − cos t) n nᵀ
     B = 0.5 * (R + R.T)
     for i in range(3):
         B[i, i] -= c  # (1 − c) n nᵀ
