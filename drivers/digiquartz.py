@@ -78,8 +78,12 @@ class DigiquartzCodec:
 
     def frame_length(self, buf: bytearray, start: int) -> int | None:
         end = buf.find(b"\n", start + 1, start + self.max_frame)
+        limit = end if end >= 0 else min(len(buf), start + self.max_frame)
+        star = buf.find(b"*", start + 1, limit)
+        # a second '*' means the line was cut — except in the "EW*ddssCMD" write command
+        if star >= 0 and buf[star - 2:star] != b"EW":
+            raise FrameError(f"digiquartz: line cut by a new '*' after {star - start} bytes")
         if end < 0:
-            # a '*' that is not at an address position starts a new line only if "*dd"
             if len(buf) - start >= self.max_frame:
                 raise FrameError(f"digiquartz: no end of line within {self.max_frame} bytes")
             return None
