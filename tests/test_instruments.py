@@ -10,7 +10,8 @@ from sim_bridge.instruments.models import InstrumentConfig, Instruments
 from uvd.model.lie import make_H
 
 
-def run(cfg, seconds=60.0, seed=0, v=np.array([0.2, 0.0, 0.0, 0.0, 0.0, 0.0])):
+def run(cfg, seconds=60.0, seed=0, v=None):
+    v = np.array([0.2, 0.0, 0.0, 0.0, 0.0, 0.0]) if v is None else v
     ins = Instruments(cfg, np.random.default_rng(seed))
     H = make_H(euler_to_R(0.1, -0.05, 1.0), np.array([0.0, 0.0, 2.0]))
     out = {"ins": [], "dvl": [], "depth": []}

@@ -96,6 +96,21 @@ def test_dissipativity_of_coupled_drag():
     assert worst >= v @ np.tensordot(np.abs(v), mixed, axes=1) @ v - 1e-9
 
 
+@settings(max_examples=200, deadline=None)
+@given(vec(6))
+def test_decoupled_dissipativity_closed_form(x):
+    """max over ‖v‖ = 1 of Σ d_i|v_i|³ is −(Σ d_i⁻²)^(−1/2), attained at |v_i| ∝ 1/|d_i|; no
+    sampled direction beats it."""
+    d = -(np.abs(x) + 0.1)
+    D = P.UVParams.decoupled(np.ones(6), d, 0.0, [0, 0, 1]).D
+    best = P.drag_dissipativity_max(D)
+    v = (1.0 / np.abs(d)) / np.linalg.norm(1.0 / np.abs(d))
+    assert best == pytest.approx(np.sum(d * v**3), rel=1e-9)
+    V = np.random.default_rng(0).normal(size=(2000, 6))
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    assert np.max(np.sum(d * np.abs(V) ** 3, axis=1)) <= best + 1e-12
+
+
 def test_toml_round_trip(tmp_path):
     rng = np.random.default_rng(0)
     A = rng.normal(size=(6, 6))

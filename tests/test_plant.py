@@ -41,7 +41,7 @@ def test_kinetic_energy_never_increases_without_input_or_gravity(name):
     """u = 0, g = 0, b = 0: d/dt ½vᵀMv = vᵀ(Σ|v_i|D_i)v ≤ 0 (adᵀ does no work)."""
     vehicle = _with(load_vehicle(name), g=0.0, b=np.zeros(3))
     rng = np.random.default_rng(1)
-    for trial in range(3):
+    for _trial in range(3):
         plant = Plant(vehicle, PlantConfig(rate_hz=100.0),
                       H0=make_H(exp_so3(rng.normal(size=3)), rng.normal(size=3)),
                       v0=rng.normal(size=6) * [0.5, 0.5, 0.5, 0.6, 0.6, 0.6])

@@ -7,7 +7,8 @@ from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
 from uvd.model.thrusters import ThrusterSpec, speed_from_thrust, thrust_from_speed, thruster_matrix
 
 
-def bank(effects=ThrusterEffects(), n=2):
+def bank(effects=None, n=2):
+    effects = ThrusterEffects() if effects is None else effects
     specs = [ThrusterSpec(f"t{i}", (0.0, 0.0, 0.0), (1.0, 0.0, 0.0), k_thrust=0.005,
                           max_thrust_n=100.0, time_constant_s=0.2, stiction_n=5.0)
              for i in range(n)]

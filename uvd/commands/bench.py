@@ -18,7 +18,8 @@ def register(sub) -> None:
         bp = bsub.add_parser(name, help=b.summary, description=b.summary)
         bp.add_argument("--json", type=Path, metavar="OUT", help="write the figures to this file")
         bp.add_argument("--report", type=Path, metavar="MD",
-                        help="append the figures to this Markdown file (make bench: docs/BENCHMARKS.md)")
+                        help="append the figures to this Markdown file "
+                             "(make bench: docs/BENCHMARKS.md)")
         if b.add_arguments:
             b.add_arguments(bp)
         bp.set_defaults(handler=_run, bench_obj=b)
@@ -45,5 +46,6 @@ def _run(args) -> int:
         args.report.parent.mkdir(parents=True, exist_ok=True)
         stamp = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
         with args.report.open("a") as fh:
-            fh.write(f"\n## `uvd bench {b.name}` — {stamp}\n\n{b.summary}\n\n```json\n{text}\n```\n")
+            fh.write(f"\n## `uvd bench {b.name}` — {stamp}\n\n{b.summary}\n\n"
+                     f"```json\n{text}\n```\n")
     return 0

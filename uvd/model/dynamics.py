@@ -112,7 +112,8 @@ def rot_accel(p: RotParams, w: np.ndarray, R: np.ndarray, tau: np.ndarray) -> np
     return np.linalg.solve(I, rhs)
 
 
-def rot_inverse_dynamics(p: RotParams, w: np.ndarray, wdot: np.ndarray, R: np.ndarray) -> np.ndarray:
+def rot_inverse_dynamics(p: RotParams, w: np.ndarray, wdot: np.ndarray,
+                         R: np.ndarray) -> np.ndarray:
     """τ = Iω̇ − J(Iω)ω − Σ|ωᵢ|Cᵢ ω − J(b)Rᵀe₃ (2.40)."""
     I = np.asarray(p.I)
     C_sum = np.tensordot(np.abs(w), np.asarray(p.C), axes=1)

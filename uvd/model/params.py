@@ -1,4 +1,4 @@
-"""UV parameters: θ_UV ∈ R²⁴¹ (2.48), θ_UVR ∈ R³⁶ (2.41) and the decoupled 16-parameter view (§5.3.1).
+"""UV parameters: θ_UV ∈ R²⁴¹ (2.48), θ_UVR ∈ R³⁶ (2.41), the decoupled 16-parameter view (§5.3.1).
 
 θ_UV = [θ_Mᵀ, (D₁ˢ)ᵀ, …, (D₆ˢ)ᵀ, g, bᵀ]ᵀ where θ_M holds the 21 unique entries m₁…m₂₁ of the
 symmetric mass matrix M numbered row by row over the upper triangle (2.45), so that
@@ -178,10 +178,12 @@ def drag_dissipativity_max(D: np.ndarray, *, samples: int = 4000, seed: int = 0)
     """max over the unit sphere of f(v) = vᵀ(Σ|v_i|D_i)v (negative ⇔ dissipative drag, §2.6).
 
     Exact fast paths: decoupled drag (D_i = d_i e_i e_iᵀ) gives f = Σ d_i|v_i|³, whose maximum
-    over the sphere is −(Σ|d_i|^{-1/2})^{-2} when every d_i < 0. If every D_i has a negative
+    over the sphere (Lagrange: |v_i| ∝ 1/|d_i|) is −(Σ d_i⁻²)^{-1/2} when every d_i < 0.
+    If every D_i has a negative
     definite symmetric part, f(v) ≤ max_i λ_max(D_iˢ) Σ|v_i| ≤ max_i λ_max(D_iˢ) < 0 on the
-    sphere, and that certified upper bound is returned. Otherwise f is searched on ``samples`` deterministic random directions plus the axes and
-    refined locally (f is positively homogeneous of degree 3, smooth inside each orthant).
+    sphere, and that certified upper bound is returned. Otherwise f is searched on ``samples``
+    deterministic random directions plus the axes and refined locally (f is positively
+    homogeneous of degree 3, smooth inside each orthant).
     """
     D = np.asarray(D, dtype=float)
     diag_only = all(np.count_nonzero(D[i]) <= 1 and np.count_nonzero(D[i]) == np.count_nonzero(
@@ -189,7 +191,7 @@ def drag_dissipativity_max(D: np.ndarray, *, samples: int = 4000, seed: int = 0)
     if diag_only:
         d = np.array([D[i][i, i] for i in range(6)])
         if np.all(d < 0.0):
-            return float(-1.0 / np.sum(1.0 / np.sqrt(-d)) ** 2)
+            return float(-(np.sum(d**-2.0) ** -0.5))
         return float(np.max(d))  # f(e_i) = d_i
     Ds = 0.5 * (D + np.transpose(D, (0, 2, 1)))
     lam_max = float(np.max(np.linalg.eigvalsh(Ds)[:, -1]))

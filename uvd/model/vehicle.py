@@ -96,7 +96,8 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
         except (TypeError, ParameterError) as exc:
             raise ConfigError(f"{path}: thrusters[{i}]: {exc}") from exc
     if len(specs) < 6:
-        raise ConfigError(f"{path}: a fully actuated vehicle needs >= 6 thrusters, got {len(specs)}")
+        raise ConfigError(
+            f"{path}: a fully actuated vehicle needs >= 6 thrusters, got {len(specs)}")
     v = Vehicle(name=doc.get("name", path.stem), description=doc.get("description", ""),
                 params=params, thrusters=tuple(specs))
     rank = np.linalg.matrix_rank(v.B)
