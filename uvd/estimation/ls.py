@@ -1,0 +1,472 @@
+"""Least-squares identification (LS, §4.4) of the UV models from a recorded run (R, v, u).
+
+From (4.40) u(tᵢ) = W_UV(v(tᵢ), v̇(tᵢ), R(tᵢ)) θ_UV for every sample; stacking gives F = 𝒲 θ
+(4.41)–(4.42), and likewise τ = W_UVR(ω, ω̇, R) θ_UVR (4.39) for the rotational model (2.40).
+
+**Acceleration.** v̇ is not measured; it comes from numerical differentiation of v with a
+Savitzky–Golay filter (local least-squares polynomial, :func:`scipy.signal.savgol_filter`;
+default: cubic over a 2.1 s window, i.e. 21 samples at 10 Hz — the JHU ROV's motions vary over
+seconds, §4.5, while DVL noise (0.003 m/s at 6 Hz, Table A.1) and the zero-order hold of the
+6 Hz DVL samples live above 1 Hz). The same filter (derivative order 0) smooths v and u, so
+both sides of the regression see the same low-pass and the same (zero) phase.
+
+**Solver.** The thesis used one Moore–Penrose pseudo-inverse (4.43); we never form it. The
+rows are reduced chunk by chunk with Householder QR ([R; 𝒲_chunk] = Q R', the tall-skinny
+QR, so a 35-minute run never builds its 120 000 × 241 matrix at once); the columns are
+equilibrated (unit 2-norm) and the triangular system is solved by SVD-based
+:func:`scipy.linalg.lstsq` (LAPACK gelsd), which gives the numerical **rank** and the
+**condition number** (of the equilibrated regressor) that :class:`LSResult` reports.
+
+**Physically consistent variant** (``consistent=True``). Unconstrained LS can return a model
+no vehicle has: the thesis's own LS drag D₄ (Table 4.11) has a symmetric part with an
+eigenvalue ≈ +1034, i.e. drag that *feeds* energy in some directions. With ``consistent=True``
+the same objective ‖𝒲θ − F‖ is minimised over the convex set
+
+* M ⪰ ε_M I (M symmetric by construction through θ_M and P_M, (2.46)), and
+* ½(Dᵢ + Dᵢᵀ) ⪯ −ε_D I for every i — a convex *sufficient* condition for dissipative drag:
+  vᵀ(Σ|vᵢ|Dᵢ)v = Σ|vᵢ| vᵀ Dᵢˢʸᵐ v ≤ −ε_D ‖v‖₁‖v‖² < 0 for v ≠ 0 (§2.6)
+
+(for the rotational model: I ⪰ ε_M I and ½(Cᵢ + Cᵢᵀ) ⪯ −ε_D I). It is a second-order-cone
+program with linear matrix inequalities, solved by **cvxpy** with the Clarabel interior-point
+solver (SCS as fall-back). A final eigenvalue projection onto the same set guards against
+solver tolerance (and is the whole answer, applied to the unconstrained solution, if no solver
+succeeds), so the result *always* has M positive definite and dissipative drag and passes
+:meth:`UVParams.validate`; :class:`LSResult` says whether the projection moved anything.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+from scipy.signal import savgol_filter
+
+from uvd.errors import ParameterError
+from uvd.model.params import (
+    N_THETA_UV,
+    N_THETA_UVR,
+    P_I,
+    P_M,
+    RotParams,
+    UVParams,
+    params_from_theta,
+)
+
+__all__ = ["DiffFilter", "LSResult", "differentiate", "regressor_uv_batch",
+           "regressor_uvr_batch", "ls_identify", "ls_solve", "project_consistent",
+           "consistency_margins"]
+
+_UPPER6 = [(i, j) for i in range(6) for j in range(i, 6)]
+_UPPER3 = [(i, j) for i in range(3) for j in range(i, 3)]
+
+
+@dataclass(frozen=True)
+class DiffFilter:
+    """Savitzky–Golay smoothing/differentiation: polynomial order and window length (s)."""
+
+    window_s: float = 2.1
+    polyorder: int = 3
+
+    def samples(self, dt: float) -> int:
+        n = int(round(self.window_s / dt))
+        n += 1 - n % 2  # odd
+        return max(n, self.polyorder + 2 + (self.polyorder + 1) % 2)
+
+    def describe(self, dt: float) -> str:
+        return (f"Savitzky-Golay, order {self.polyorder}, window {self.samples(dt)} samples "
+                f"({self.samples(dt) * dt:.2f} s)")
+
+
+def differentiate(t: np.ndarray, x: np.ndarray, filt: DiffFilter = DiffFilter()
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(smoothed x, ẋ) of uniformly sampled x (n, k) by the Savitzky–Golay filter ``filt``."""
+    t = np.asarray(t, dtype=float)
+    dt = float((t[-1] - t[0]) / (len(t) - 1))
+    w = filt.samples(dt)
+    if len(t) < w:
+        raise ValueError(f"run of {len(t)} samples is shorter than the {w}-sample "
+                         "differentiation window")
+    xs = savgol_filter(x, w, filt.polyorder, deriv=0, axis=0, mode="interp")
+    xd = savgol_filter(x, w, filt.polyorder, deriv=1, delta=dt, axis=0, mode="interp")
+    return xs, xd
+
+
+# ---------------------------------------------------------------------------------------------
+# batched regressors (n samples at once; equal to uvd.model.regressors per sample — tested)
+# ---------------------------------------------------------------------------------------------
+def _adT(v: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """ad_vᵀ x row by row: [p × ω; p × ν + h × ω] for v = [ν; ω], x = [p; h]."""
+    nu, om = v[:, :3], v[:, 3:]
+    p, h = x[:, :3], x[:, 3:]
+    return np.concatenate([np.cross(p, om), np.cross(p, nu) + np.cross(h, om)], axis=1)
+
+
+def _cross_mat_rows(r: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) stack of J(r)."""
+    n = r.shape[0]
+    Jr = np.zeros((n, 3, 3))
+    Jr[:, 0, 1], Jr[:, 0, 2] = -r[:, 2], r[:, 1]
+    Jr[:, 1, 0], Jr[:, 1, 2] = r[:, 2], -r[:, 0]
+    Jr[:, 2, 0], Jr[:, 2, 1] = -r[:, 1], r[:, 0]
+    return Jr
+
+
+def regressor_uv_batch_mass(v: np.ndarray, vdot: np.ndarray) -> np.ndarray:
+    """W_M of (2.49) for n samples: (n, 6, 21), W_M θ_M = M v̇ − ad_vᵀ(Mv)."""
+    n = v.shape[0]
+    W = np.zeros((n, 6, 21))
+    for k, (i, j) in enumerate(_UPPER6):  # E_k v̇ − ad_vᵀ(E_k v), E_k the basis of θ_M
+        Ev = np.zeros((n, 6))
+        Ea = np.zeros((n, 6))
+        Ev[:, i] = v[:, j]
+        Ea[:, i] = vdot[:, j]
+        if i != j:
+            Ev[:, j] = v[:, i]
+            Ea[:, j] = vdot[:, i]
+        W[:, :, k] = Ea - _adT(v, Ev)
+    return W
+
+
+def _inertia_batch(w: np.ndarray, wdot: np.ndarray) -> np.ndarray:
+    """W_I of (2.39) for n samples: (n, 3, 6), W_I θ_I = Iω̇ − J(Iω)ω = Iω̇ + ω × (Iω)."""
+    n = w.shape[0]
+    W = np.zeros((n, 3, 6))
+    for k, (i, j) in enumerate(_UPPER3):
+        Ew = np.zeros((n, 3))
+        Ea = np.zeros((n, 3))
+        Ew[:, i] = w[:, j]
+        Ea[:, i] = wdot[:, j]
+        if i != j:
+            Ew[:, j] = w[:, i]
+            Ea[:, j] = wdot[:, i]
+        W[:, :, k] = Ea + np.cross(w, Ew)
+    return W
+
+
+def regressor_uv_batch(v: np.ndarray, vdot: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """W_UV of (2.49) for n samples: (n, 6, 241), u = W_UV θ_UV; r = Rᵀe₃ (n, 3)."""
+    Phi, A, drag, shared = _features("6dof", v, vdot, r)
+    W = np.zeros((v.shape[0], 6, N_THETA_UV))
+    for row in range(6):
+        W[:, row, drag[row]] = Phi
+        W[:, row, shared] = A[:, row, :]
+    return W
+
+
+def regressor_uvr_batch(w: np.ndarray, wdot: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """W_UVR of (2.42) for n samples: (n, 3, 36), τ = W_UVR θ_UVR."""
+    Phi, A, drag, shared = _features("rot", w, wdot, r)
+    W = np.zeros((w.shape[0], 3, N_THETA_UVR))
+    for row in range(3):
+        W[:, row, drag[row]] = Phi
+        W[:, row, shared] = A[:, row, :]
+    return W
+
+
+# ---------------------------------------------------------------------------------------------
+# results
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LSResult:
+    """An LS identification.
+
+    Attributes
+    ----------
+    params : UVParams (model "6dof") or RotParams (model "rot").
+    theta : θ_UV (241,) or θ_UVR (36,).
+    rank : numerical rank of the equilibrated regressor (of ``n_params``).
+    condition : its 2-norm condition number σ_max/σ_min (inf if rank deficient).
+    residual_rms : RMS of u − 𝒲θ per wrench component (N, N m).
+    consistent : whether the physically consistent variant was asked for.
+    solver, solver_status : "lstsq/gelsd" or the cvxpy solver and its status.
+    projected : the final projection onto {M ⪰ ε_M I, sym Dᵢ ⪯ −ε_D I} changed the solution.
+    """
+
+    model: str
+    params: UVParams | RotParams
+    theta: np.ndarray
+    rank: int
+    n_params: int
+    condition: float
+    singular_values: np.ndarray
+    residual_rms: np.ndarray
+    n_samples: int
+    filter: str
+    consistent: bool = False
+    solver: str = "scipy.linalg.lstsq (gelsd)"
+    solver_status: str = "optimal"
+    projected: bool = False
+    mass_min_eig: float = float("nan")
+    drag_max_sym_eig: float = float("nan")
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def summary(self) -> dict:
+        return {"model": self.model, "rank": self.rank, "n_params": self.n_params,
+                "condition": self.condition, "n_samples": self.n_samples,
+                "residual_rms": self.residual_rms.tolist(), "filter": self.filter,
+                "consistent": self.consistent, "solver": self.solver,
+                "solver_status": self.solver_status, "projected": self.projected,
+                "mass_min_eig": self.mass_min_eig, "drag_max_sym_eig": self.drag_max_sym_eig,
+                "notes": list(self.notes)}
+
+
+# ---------------------------------------------------------------------------------------------
+# reduction and solution
+# ---------------------------------------------------------------------------------------------
+def _features(model: str, x: np.ndarray, xd: np.ndarray, r: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The regressor in its block form: (Φ, A, drag index, shared index).
+
+    Row ``row`` of W_UV (W_UVR) is Φ on the drag columns ``drag[row]`` (the same n × 36 (9)
+    features −|vᵢ|v_c for every row) plus A[:, row, :] on the shared mass/gravity columns.
+    """
+    if model == "6dof":
+        W_sh = np.zeros((x.shape[0], 6, 25))
+        W_sh[:, :, :21] = regressor_uv_batch_mass(x, xd)
+        W_sh[:, :3, 21] = -r
+        W_sh[:, 3:, 22:25] = _cross_mat_rows(r)
+        k, base0 = 6, 21
+        shared = np.r_[0:21, 237:241]
+    else:
+        W_sh = np.zeros((x.shape[0], 3, 9))
+        W_sh[:, :, :6] = _inertia_batch(x, xd)
+        W_sh[:, :, 6:9] = _cross_mat_rows(r)
+        k, base0 = 3, 6
+        shared = np.r_[0:6, 33:36]
+    ax = np.abs(x)
+    Phi = -(ax[:, :, None] * x[:, None, :]).reshape(x.shape[0], k * k)  # column k·i + c
+    drag = np.array([[base0 + k * k * i + k * c + row for i in range(k) for c in range(k)]
+                     for row in range(k)])
+    return Phi, W_sh, drag, shared
+
+
+def _reduce(model: str, run, filt: DiffFilter):
+    """Reduce the stacked LS problem of a run to a square triangular one.
+
+    Per wrench component (row) ``row``: Householder QR of [Φ | A_row | F_row] (mode "r", Q never
+    formed) gives [[R₁, Y, f], [0, T, g], [0, 0, ρ]]; the stacked [T | g] of all rows is reduced
+    again. With R assembled from these blocks (columns in θ order), ‖𝒲θ − F‖² = ‖Rθ − z‖² +
+    residual² exactly, and R has the singular values of 𝒲.
+    Returns (R, z, residual², n, features…).
+    """
+    t = run.t
+    if model == "6dof":
+        x = run.v
+        p, k = N_THETA_UV, 6
+    else:
+        x = run.v[:, 3:]
+        p, k = N_THETA_UVR, 3
+    xs, xd = differentiate(t, x, filt)
+    u = np.asarray(run.u, dtype=float)
+    if run.input_interp == "hold":  # the wrench switches at t_k: take the mean of both sides
+        u = np.vstack([0.5 * (u[:-1] + u[1:]), u[-1:]])
+    us, _ = differentiate(t, u, filt)
+    us = us[:, 6 - k:]
+    r = run.R[:, 2, :]  # Rᵀe₃ = third row of R
+    Phi, A, drag, shared = _features(model, xs, xd, r)
+    nd, ns = Phi.shape[1], A.shape[2]
+    n = len(t)
+    R = np.zeros((p, p))
+    z = np.zeros(p)
+    resid2 = 0.0
+    TG = []
+    for row in range(k):
+        B = np.hstack([Phi, A[:, row, :], us[:, row:row + 1]])
+        Rb = scipy.linalg.qr(B, mode="r", check_finite=False)[0]
+        m = min(Rb.shape[0], nd + ns + 1)
+        Rb_full = np.zeros((nd + ns + 1, nd + ns + 1))
+        Rb_full[:m] = Rb[:m]
+        R[np.ix_(drag[row], drag[row])] = Rb_full[:nd, :nd]
+        R[np.ix_(drag[row], shared)] = Rb_full[:nd, nd:nd + ns]
+        z[drag[row]] = Rb_full[:nd, -1]
+        TG.append(Rb_full[nd:, nd:])
+    Rb = scipy.linalg.qr(np.vstack(TG), mode="r", check_finite=False)[0]
+    m = min(Rb.shape[0], ns + 1)
+    Rb_full = np.zeros((ns + 1, ns + 1))
+    Rb_full[:m] = Rb[:m]
+    R[np.ix_(shared, shared)] = Rb_full[:ns, :ns]
+    z[shared] = Rb_full[:ns, -1]
+    resid2 += float(Rb_full[ns, ns] ** 2)
+    return R, z, resid2, n, Phi, A, drag, shared, us
+
+
+def _params_of(model: str, theta: np.ndarray) -> UVParams | RotParams:
+    return params_from_theta(theta) if model == "6dof" else RotParams.from_theta(theta)
+
+
+def _blocks(model: str, theta: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """(mass matrix, drag matrices) of θ for either model."""
+    p = _params_of(model, theta)
+    if model == "6dof":
+        return p.M, list(p.D)
+    return p.I, list(p.C)
+
+
+def consistency_margins(model: str, theta: np.ndarray) -> tuple[float, float]:
+    """(λ_min(M), max_i λ_max(½(Dᵢ + Dᵢᵀ))) — positive and negative respectively when the
+    sufficient conditions of the module docstring hold."""
+    M, Ds = _blocks(model, theta)
+    lam_m = float(np.linalg.eigvalsh(M)[0])
+    lam_d = float(max(np.linalg.eigvalsh(0.5 * (D + D.T))[-1] for D in Ds))
+    return lam_m, lam_d
+
+
+def project_consistent(model: str, theta: np.ndarray, eps_mass: float, eps_drag: float
+                       ) -> tuple[np.ndarray, bool]:
+    """Nearest (Frobenius) θ with M ⪰ ε_M I and sym(Dᵢ) ⪯ −ε_D I: eigenvalue clipping of M and
+    of each Dᵢ's symmetric part (skew parts kept). Returns (θ, changed)."""
+    theta = np.array(theta, dtype=float)
+    n = 6 if model == "6dof" else 3
+    M, Ds = _blocks(model, theta)
+    changed = False
+    lam, V = np.linalg.eigh(M)
+    if lam[0] < eps_mass:
+        M = (V * np.maximum(lam, eps_mass)) @ V.T
+        M = 0.5 * (M + M.T)
+        changed = True
+    newD = []
+    for D in Ds:
+        S, K = 0.5 * (D + D.T), 0.5 * (D - D.T)
+        lam, V = np.linalg.eigh(S)
+        if lam[-1] > -eps_drag:
+            S = (V * np.minimum(lam, -eps_drag)) @ V.T
+            S = 0.5 * (S + S.T)
+            changed = True
+        newD.append(S + K)
+    iu = np.triu_indices(n)
+    if model == "6dof":
+        theta[:21] = M[iu]
+        theta[21:237] = np.concatenate([D.reshape(-1, order="F") for D in newD])
+    else:
+        theta[:6] = M[iu]
+        theta[6:33] = np.concatenate([D.reshape(-1, order="F") for D in newD])
+    return theta, changed
+
+
+_PROBLEMS: dict = {}
+
+
+def _cvx_problem(model: str):
+    """The cached (DPP) cvxpy problem: min ‖A x − z‖ (+ tiny ridge) over the consistent set,
+    θ = c ∘ x (column equilibration), with A, z, c, ε_M, ε_D parameters."""
+    if model in _PROBLEMS:
+        return _PROBLEMS[model]
+    import cvxpy as cp
+
+    if model == "6dof":
+        p, n, P, n_m, sl_d = N_THETA_UV, 6, P_M, 21, (21, 237)
+    else:
+        p, n, P, n_m, sl_d = N_THETA_UVR, 3, P_I, 6, (6, 33)
+    A = cp.Parameter((p, p), name="A")
+    z = cp.Parameter(p, name="z")
+    c = cp.Parameter(p, nonneg=True, name="c")
+    eps_m = cp.Parameter(nonneg=True, name="eps_m")
+    eps_d = cp.Parameter(nonneg=True, name="eps_d")
+    x = cp.Variable(p, name="x")
+    theta = cp.multiply(c, x)
+    M = cp.reshape(P @ theta[:n_m], (n, n), order="F")
+    I_n = np.eye(n)
+    cons = [0.5 * (M + M.T) - eps_m * I_n >> 0]
+    for i in range(n):
+        Dv = theta[sl_d[0] + n * n * i: sl_d[0] + n * n * (i + 1)]
+        D = cp.reshape(Dv, (n, n), order="F")
+        cons.append(-0.5 * (D + D.T) - eps_d * I_n >> 0)
+    ridge = 1e-7
+    obj = cp.Minimize(cp.norm(cp.hstack([A @ x - z, ridge * x]), 2))
+    prob = cp.Problem(obj, cons)
+    _PROBLEMS[model] = (prob, A, z, c, eps_m, eps_d, x)
+    return _PROBLEMS[model]
+
+
+def _solve_consistent(model: str, Rs: np.ndarray, z: np.ndarray, c: np.ndarray,
+                      eps_mass: float, eps_drag: float) -> tuple[np.ndarray | None, str, str]:
+    """Solve the constrained problem on the equilibrated triangular factor; θ or None."""
+    import cvxpy as cp
+
+    prob, A, zp, cp_c, em, ed, x = _cvx_problem(model)
+    scale = float(np.linalg.norm(Rs, 2)) or 1.0
+    A.value = Rs / scale
+    zp.value = z / scale
+    cp_c.value = c
+    em.value = eps_mass
+    ed.value = eps_drag
+    last = "not run"
+    for solver in ("CLARABEL", "SCS"):
+        if solver not in cp.installed_solvers():
+            continue
+        try:
+            prob.solve(solver=solver)
+        except (cp.error.SolverError, ValueError, ArithmeticError) as exc:
+            last = f"{solver}: {type(exc).__name__}: {exc}"
+            continue
+        last = f"{solver}: {prob.status}"
+        if prob.status in ("optimal", "optimal_inaccurate") and x.value is not None \
+                and np.all(np.isfinite(x.value)):
+            return c * np.asarray(x.value), solver, prob.status
+    return None, "none", last
+
+
+def ls_solve(model: str, Rfac: np.ndarray, z: np.ndarray, colnorm: np.ndarray, *,
+             consistent: bool = False, eps_mass: float = 1e-3, eps_drag: float = 1e-3,
+             rcond: float = 1e-10):
+    """Solve the reduced problem ‖R θ − z‖ → (θ, rank, cond, sv, solver, status, projected)."""
+    c = np.where(colnorm > 0.0, 1.0 / np.where(colnorm > 0.0, colnorm, 1.0), 1.0)
+    Rs = Rfac * c[None, :]
+    xs, _, rank, sv = scipy.linalg.lstsq(Rs, z, cond=rcond, lapack_driver="gelsd",
+                                         check_finite=False)
+    theta = c * xs
+    sv = np.asarray(sv)
+    cond = float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else math.inf
+    solver, status, projected = "scipy.linalg.lstsq (gelsd)", "optimal", False
+    if consistent:
+        th_c, solver, status = _solve_consistent(model, Rs, z, c, eps_mass, eps_drag)
+        if th_c is None:
+            th_c, status = theta, f"solver failed ({status}); projected the LS solution"
+        theta, projected = project_consistent(model, th_c, eps_mass, eps_drag)
+    return theta, int(rank), cond, sv, solver, status, projected
+
+
+def ls_identify(run, model: str = "6dof", *, filt: DiffFilter = DiffFilter(),
+                consistent: bool = False, eps_mass: float = 1e-3, eps_drag: float = 1e-3,
+                rcond: float = 1e-10) -> LSResult:
+    """Least-squares identification (§4.4) of the 6-DOF (2.44) or rotational (2.40) model.
+
+    Parameters
+    ----------
+    run : :class:`uvd.estimation.runlog.RunLog` (or anything with t, R, v, u, input_interp).
+    model : "6dof" (θ_UV ∈ R²⁴¹) or "rot" (θ_UVR ∈ R³⁶; uses ω and τ only).
+    filt : the differentiation filter.
+    consistent : constrain M ⪰ ε_M I and sym(Dᵢ) ⪯ −ε_D I (see the module docstring).
+    eps_mass, eps_drag : the margins ε_M (kg, kg m²) and ε_D (N s²/m², N m s²).
+    rcond : relative singular-value cut-off of the rank decision.
+
+    Returns
+    -------
+    LSResult
+    """
+    if model not in ("6dof", "rot"):
+        raise ValueError(f"model must be '6dof' or 'rot', got {model!r}")
+    Rfac, z, _resid2, n, Phi, A, drag, shared, us = _reduce(model, run, filt)
+    colnorm = np.linalg.norm(Rfac, axis=0)
+    theta, rank, cond, sv, solver, status, projected = ls_solve(
+        model, Rfac, z, colnorm, consistent=consistent, eps_mass=eps_mass, eps_drag=eps_drag,
+        rcond=rcond)
+    # residual per wrench component, in chunks
+    k = 6 if model == "6dof" else 3
+    ss = np.array([np.sum((us[:, row] - Phi @ theta[drag[row]] - A[:, row, :] @ theta[shared])
+                          ** 2) for row in range(k)])
+    params = _params_of(model, theta)
+    lam_m, lam_d = consistency_margins(model, theta)
+    notes = []
+    if consistent and model == "6dof":
+        try:
+            params.validate(where="ls-consistent")
+        except ParameterError as exc:  # must not happen: the projection guarantees it
+            notes.append(f"validate failed: {exc}")
+    return LSResult(model=model, params=params, theta=theta, rank=rank, n_params=theta.size,
+                    condition=cond, singular_values=sv, residual_rms=np.sqrt(ss / n),
+                    n_samples=n, filter=filt.describe(run.dt), consistent=consistent,
+                    solver=solver, solver_status=status, projected=projected,
+                    mass_min_eig=lam_m, drag_max_sym_eig=lam_d, notes=tuple(notes))

@@ -1,0 +1,160 @@
+"""A recorded run as the identification tools read it: (t, R, p, v, u) per control cycle.
+
+This is the interface between recordings and :mod:`uvd.estimation.ls` /
+:mod:`uvd.estimation.xval` / ``uvd identify`` / ``uvd xval``. Until the black-box recorder
+exists, runs come from the lockstep experiments (``uvd experiment aid-6dof --plots DIR`` writes
+``DIR/<dataset>-run.npz``) or from :meth:`RunLog.from_lockstep` on a
+:class:`uvd.experiments.lockstep.LockstepLog`.
+
+File format (``.npz``, numpy's zip of arrays; see ``docs/experiments-identification.md``):
+
+==============  ===========  =====================================================================
+key             shape        meaning
+==============  ===========  =====================================================================
+``t``           (n,)         sample times (s), uniformly spaced (the control period)
+``R``           (n, 3, 3)    measured attitude, body → world (NED)
+``p``           (n, 3)       measured position, world (m)
+``v``           (n, 6)       measured body velocity [ν; ω] (m/s, rad/s)
+``u``           (n, 6)       applied body wrench [f; τ] (N, N m), see ``input_interp``
+``meta``        ()           JSON text: ``name``, ``input_interp``, free-form ``source``
+``R_true`` …    optional     ``R_true``, ``v_true``: the plant's true state (simulation only)
+==============  ===========  =====================================================================
+
+``input_interp`` says how u relates to the intervals: ``"linear"`` — u[k] is the instantaneous
+wrench at t[k] (from measured propeller speeds, App. A.1; the core's ``u_applied``);
+``"hold"`` — u[k] was held over [t[k−1], t[k]] (ideal actuators driven by the previous command).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from uvd.errors import ConfigError
+
+_INTERP = ("linear", "hold")
+
+
+@dataclass(frozen=True)
+class RunLog:
+    """One recorded run; arrays are per control cycle (see the module docstring)."""
+
+    t: np.ndarray
+    R: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    u: np.ndarray
+    name: str = "run"
+    input_interp: str = "linear"
+    source: str = ""
+    R_true: np.ndarray | None = None
+    v_true: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, dtype=float).reshape(-1)
+        n = t.shape[0]
+        shapes = {"R": (n, 3, 3), "p": (n, 3), "v": (n, 6), "u": (n, 6)}
+        for key, shape in shapes.items():
+            arr = np.asarray(getattr(self, key), dtype=float)
+            if arr.shape != shape:
+                raise ConfigError(f"run {self.name!r}: {key} has shape {arr.shape}, "
+                                  f"expected {shape}")
+            if not np.all(np.isfinite(arr)):
+                raise ConfigError(f"run {self.name!r}: {key} has non-finite entries")
+            object.__setattr__(self, key, arr)
+        object.__setattr__(self, "t", t)
+        if n < 2:
+            raise ConfigError(f"run {self.name!r}: needs at least 2 samples, got {n}")
+        dts = np.diff(t)
+        if not np.all(dts > 0):
+            raise ConfigError(f"run {self.name!r}: time stamps must increase")
+        if np.max(np.abs(dts - dts.mean())) > 1e-6 * max(1.0, dts.mean()) + 1e-9:
+            raise ConfigError(f"run {self.name!r}: samples must be uniformly spaced "
+                              f"(period {dts.min():.6g}…{dts.max():.6g} s)")
+        if self.input_interp not in _INTERP:
+            raise ConfigError(f"run {self.name!r}: input_interp must be one of {_INTERP}, "
+                              f"got {self.input_interp!r}")
+
+    @property
+    def dt(self) -> float:
+        return float((self.t[-1] - self.t[0]) / (len(self.t) - 1))
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def H(self) -> np.ndarray:
+        """(n, 4, 4) measured poses."""
+        n = len(self)
+        H = np.zeros((n, 4, 4))
+        H[:, :3, :3] = self.R
+        H[:, :3, 3] = self.p
+        H[:, 3, 3] = 1.0
+        return H
+
+    def slice(self, start: int, stop: int | None = None) -> RunLog:
+        sl = slice(start, stop)
+        return RunLog(t=self.t[sl], R=self.R[sl], p=self.p[sl], v=self.v[sl], u=self.u[sl],
+                      name=self.name, input_interp=self.input_interp, source=self.source,
+                      R_true=None if self.R_true is None else self.R_true[sl],
+                      v_true=None if self.v_true is None else self.v_true[sl])
+
+    # -- files ---------------------------------------------------------------------------------
+    def save(self, path: str | Path) -> None:
+        """Write the ``.npz`` file of the module docstring."""
+        meta = {"name": self.name, "input_interp": self.input_interp, "source": self.source,
+                "format": "uvd-runlog-1", **self.extra}
+        arrays = {"t": self.t, "R": self.R, "p": self.p, "v": self.v, "u": self.u,
+                  "meta": np.array(json.dumps(meta))}
+        if self.R_true is not None:
+            arrays["R_true"] = self.R_true
+        if self.v_true is not None:
+            arrays["v_true"] = self.v_true
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+    @classmethod
+    def load(cls, path: str | Path) -> RunLog:
+        """Read a run written by :meth:`save`; raises :class:`ConfigError` naming what is wrong."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"{path}: not a readable run log (.npz): {exc}") from exc
+        missing = {"t", "R", "p", "v", "u"} - set(data)
+        if missing:
+            raise ConfigError(f"{path}: run log lacks array(s) {sorted(missing)}")
+        meta = {}
+        if "meta" in data:
+            try:
+                meta = json.loads(str(data["meta"]))
+            except json.JSONDecodeError as exc:
+                raise ConfigError(f"{path}: meta is not JSON: {exc}") from exc
+        extra = {k: v for k, v in meta.items()
+                 if k not in ("name", "input_interp", "source", "format")}
+        return cls(t=data["t"], R=data["R"], p=data["p"], v=data["v"], u=data["u"],
+                   name=meta.get("name", path.stem), input_interp=meta.get("input_interp",
+                                                                           "linear"),
+                   source=meta.get("source", str(path)), R_true=data.get("R_true"),
+                   v_true=data.get("v_true"), extra=extra)
+
+    @classmethod
+    def from_lockstep(cls, log, name: str = "lockstep", input_interp: str = "linear") -> RunLog:
+        """From the lockstep runner's own :class:`LockstepLog` (true state, ``u_applied``).
+
+        The lockstep log records the plant's *true* pose and velocity, so the run is noise-free
+        in its states; ``u_applied`` is the wrench the core's estimators saw.
+        """
+        from drivers.samples import euler_to_R
+
+        eta = np.asarray(log.eta, dtype=float)
+        R = np.stack([euler_to_R(*e[3:]) for e in eta])
+        return cls(t=log.t, R=R, p=eta[:, :3], v=log.v, u=log.u_applied, name=name,
+                   input_interp=input_interp, source="LockstepLog (true states)")

@@ -1,0 +1,266 @@
+"""Cross-validation of identified parameter sets (thesis App. A.2).
+
+A parameter set is judged by how well it *predicts* a run it was not identified from: the
+model is simulated open loop from the run's first measured state, driven by the run's recorded
+wrench, and its open-loop-stable states are compared with the measured ones. Velocities are
+open-loop stable through hydrodynamic damping, roll and pitch through the buoyancy torque (the
+COB above the COG), so these — and only these — are compared; the mean absolute error (MAE)
+per state is reported in the units of Tables 4.3, 4.12 and 4.13:
+
+==============  ==============================
+state key       meaning
+==============  ==============================
+``roll_deg``    roll (deg)
+``pitch_deg``   pitch (deg)
+``u_mps`` …     body velocities ν (m/s): u, v, w
+``p_degps`` …   angular velocities ω (deg/s): p, q, r
+==============  ==============================
+
+Simulation: the RKMK4 kernel of the plant (:mod:`uvd.model.integrate`, compiled) with
+``substeps`` steps per recorded period; over each period the wrench follows the run's
+``input_interp`` — "linear" interpolation between the samples at both ends, or "hold" of the
+sample that ends the period. A rotational parameter set (2.40) is simulated exactly by the same
+kernel through an embedding whose translational part stays at rest (ν ≡ 0, see
+:func:`embed_rotational`). A simulation that leaves any physical range (|v| > 100) is stopped
+and reported as diverged (MAE = inf).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from uvd.model.dynamics import UVModel
+from uvd.model.integrate import _rkmk4
+from uvd.model.params import RotParams, UVParams
+
+__all__ = ["STATES_6DOF", "STATES_ROT", "XvalResult", "embed_rotational", "simulate_run",
+           "states_of", "mae", "cross_validate", "format_mae_table", "write_figures"]
+
+STATES_6DOF = ("roll_deg", "pitch_deg", "u_mps", "v_mps", "w_mps", "p_degps", "q_degps",
+               "r_degps")
+STATES_ROT = ("roll_deg", "pitch_deg", "p_degps", "q_degps", "r_degps")
+_LABELS = {"roll_deg": ("Roll", "deg"), "pitch_deg": ("Pitch", "deg"),
+           "u_mps": ("BodVelX", "m/s"), "v_mps": ("BodVelY", "m/s"), "w_mps": ("BodVelZ", "m/s"),
+           "p_degps": ("AngVelX", "deg/s"), "q_degps": ("AngVelY", "deg/s"),
+           "r_degps": ("AngVelZ", "deg/s")}
+V_LIMIT = 100.0
+
+
+def embed_rotational(p: RotParams) -> UVParams:
+    """A 6-DOF parameter set whose rotational motion is exactly (2.40) with ``p``.
+
+    M = blockdiag(I₃, I), D₁…D₃ = −e_i e_iᵀ, D_{3+i} = blockdiag(0, C_i), g = 0. With zero force
+    and ν(0) = 0 the translation stays at rest (ad_vᵀ(Mv) = [0; Iω × ω] when ν = 0), so ω obeys
+    I ω̇ = J(Iω)ω + Σ|ωᵢ|Cᵢω + J(b)Rᵀe₃ + τ.
+    """
+    M = np.eye(6)
+    M[3:, 3:] = 0.5 * (np.asarray(p.I) + np.asarray(p.I).T)
+    D = np.zeros((6, 6, 6))
+    for i in range(3):
+        D[i, i, i] = -1.0
+        D[3 + i, 3:, 3:] = np.asarray(p.C)[i]
+    return UVParams(M=M, D=D, g=0.0, b=np.asarray(p.b, dtype=float))
+
+
+@numba.njit(cache=True)
+def _simulate(M, M_inv, D_flat, g, b, H0, v0, U, substeps, dt, linear, vlim, Rs, vs):
+    """Open-loop simulation over the run's periods; returns the index of divergence or −1."""
+    n = U.shape[0]
+    H = H0.copy()
+    v = v0.copy()
+    Hn = np.empty((4, 4))
+    vn = np.empty(6)
+    u = np.empty(6)
+    h = dt / substeps
+    for i in range(3):
+        for j in range(3):
+            Rs[0, i, j] = H[i, j]
+    for i in range(6):
+        vs[0, i] = v[i]
+    for k in range(n - 1):
+        for s in range(substeps):
+            if linear:
+                a = (s + 0.5) / substeps
+                for i in range(6):
+                    u[i] = (1.0 - a) * U[k, i] + a * U[k + 1, i]
+            else:
+                for i in range(6):
+                    u[i] = U[k + 1, i]
+            _rkmk4(M, M_inv, D_flat, g, b, H, v, u, h, Hn, vn)
+            for i in range(4):
+                for j in range(4):
+                    H[i, j] = Hn[i, j]
+            for i in range(6):
+                v[i] = vn[i]
+        bad = False
+        for i in range(6):
+            if not (abs(v[i]) <= vlim):
+                bad = True
+        if bad:
+            for kk in range(k + 1, n):
+                for i in range(3):
+                    for j in range(3):
+                        Rs[kk, i, j] = np.nan
+                for i in range(6):
+                    vs[kk, i] = np.nan
+            return k + 1
+        for i in range(3):
+            for j in range(3):
+                Rs[k + 1, i, j] = H[i, j]
+        for i in range(6):
+            vs[k + 1, i] = v[i]
+    return -1
+
+
+def simulate_run(params: UVParams | RotParams, run, *, substeps: int = 5
+                 ) -> tuple[np.ndarray, np.ndarray, int | None]:
+    """Simulate ``params`` open loop with the run's wrench from its first measured state.
+
+    Returns (R (n, 3, 3), v (n, 6), index of divergence or None). For a :class:`RotParams`
+    the translational velocity is held at zero and only the torque drives the model.
+    """
+    rot = isinstance(params, RotParams)
+    p6 = embed_rotational(params) if rot else params
+    model = UVModel.from_params(p6)
+    U = np.ascontiguousarray(run.u, dtype=float).copy()
+    H0 = np.ascontiguousarray(run.H[0])
+    v0 = np.asarray(run.v[0], dtype=float).copy()
+    if rot:
+        U[:, :3] = 0.0
+        v0[:3] = 0.0
+    n = len(run.t)
+    Rs = np.empty((n, 3, 3))
+    vs = np.empty((n, 6))
+    k = _simulate(model.M, model.M_inv, model.D_flat, model.g, model.b, H0, v0, U,
+                  int(substeps), float(run.dt), run.input_interp == "linear", V_LIMIT, Rs, vs)
+    return Rs, vs, (None if k < 0 else int(k))
+
+
+def states_of(R: np.ndarray, v: np.ndarray) -> dict[str, np.ndarray]:
+    """The compared states (units of the module table) of attitudes R and velocities v."""
+    r20 = np.clip(R[:, 2, 0], -1.0, 1.0)
+    roll = np.arctan2(R[:, 2, 1], R[:, 2, 2])
+    pitch = -np.arcsin(r20)
+    deg = 180.0 / math.pi
+    return {"roll_deg": roll * deg, "pitch_deg": pitch * deg, "u_mps": v[:, 0],
+            "v_mps": v[:, 1], "w_mps": v[:, 2], "p_degps": v[:, 3] * deg,
+            "q_degps": v[:, 4] * deg, "r_degps": v[:, 5] * deg}
+
+
+def mae(measured: dict[str, np.ndarray], simulated: dict[str, np.ndarray],
+        states=STATES_6DOF, mask: np.ndarray | None = None) -> dict[str, float]:
+    """Mean absolute error per state (inf where the simulation is not finite)."""
+    out = {}
+    for s in states:
+        a, b = np.asarray(measured[s]), np.asarray(simulated[s])
+        if mask is not None:
+            a, b = a[mask], b[mask]
+        d = b - a
+        if s in ("roll_deg", "pitch_deg"):
+            d = (d + 180.0) % 360.0 - 180.0
+        out[s] = float(np.mean(np.abs(d))) if np.all(np.isfinite(d)) else math.inf
+    return out
+
+
+@dataclass(frozen=True)
+class XvalResult:
+    """MAE per state, the simulated trajectory and where (if) it diverged."""
+
+    mae: dict
+    R_sim: np.ndarray
+    v_sim: np.ndarray
+    diverged_at_s: float | None
+
+
+def cross_validate(params: UVParams | RotParams, run, *, substeps: int = 5,
+                   states=None) -> XvalResult:
+    """App. A.2: simulate ``params`` with the run's inputs and return the MAE per state."""
+    if states is None:
+        states = STATES_ROT if isinstance(params, RotParams) else STATES_6DOF
+    Rs, vs, k = simulate_run(params, run, substeps=substeps)
+    meas = states_of(run.R, run.v)
+    sim = states_of(Rs, vs)
+    return XvalResult(mae=mae(meas, sim, states), R_sim=Rs, v_sim=vs,
+                      diverged_at_s=None if k is None else float(run.t[k] - run.t[0]))
+
+
+def format_mae_table(rows, states=STATES_6DOF, title: str = "") -> str:
+    """A table in the layout of Tables 4.3/4.12/4.13: one row per (model, experiment).
+
+    ``rows`` is an iterable of (model name, experiment name, {state: MAE}).
+    """
+    head = ["UV Model", "Exp"] + [f"{_LABELS[s][0]} ({_LABELS[s][1]})" for s in states]
+    widths = [max(10, len(h)) for h in head]
+    lines = [title] if title else []
+    lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
+    for model, exp, vals in rows:
+        cells = [model, exp]
+        for s in states:
+            x = vals.get(s, math.nan)
+            if not math.isfinite(x):
+                cells.append("diverged" if x == math.inf else "-")
+            elif _LABELS[s][1] == "m/s":
+                cells.append(f"{x:.4f}")
+            else:
+                cells.append(f"{x:.3g}" if x >= 1 else f"{x:.3f}")
+        lines.append("  ".join(c.rjust(w) for c, w in zip(cells, widths, strict=True)))
+    return "\n".join(lines)
+
+
+def write_figures(directory: Path, run, sims: dict[str, tuple[np.ndarray, np.ndarray]],
+                  states=STATES_6DOF, *, window_s: tuple[float, float] = (0.0, 180.0),
+                  prefix: str = "") -> list[Path]:
+    """Figures in the style of Figs. 4.3–4.7 (a 3-minute window): per state, measured vs each
+    model (top) and each model's error with its MAE (bottom).
+
+    Uses matplotlib when it is installed (PNG); otherwise writes the plotted series as CSV so
+    any tool can draw them. Returns the files written.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    t = run.t - run.t[0]
+    sel = (t >= window_s[0]) & (t <= window_s[1])
+    meas = states_of(run.R, run.v)
+    simst = {name: states_of(R, v) for name, (R, v) in sims.items()}
+    maes = {name: mae(meas, s, states) for name, s in simst.items()}
+    written = []
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        plt = None
+    for s in states:
+        label, unit = _LABELS[s]
+        stem = f"{prefix}{s}"
+        if plt is None:
+            path = directory / f"{stem}.csv"
+            cols = [t[sel], meas[s][sel]] + [simst[m][s][sel] for m in sims]
+            header = "t_s,measured," + ",".join(sims)
+            np.savetxt(path, np.column_stack(cols), delimiter=",", header=header, comments="")
+            written.append(path)
+            continue
+        fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+        ax1.plot(t[sel] / 60, meas[s][sel], "k-", label="MEAS")
+        for m in sims:
+            ax1.plot(t[sel] / 60, simst[m][s][sel], label=m)
+            ax2.plot(t[sel] / 60, simst[m][s][sel] - meas[s][sel], label=m)
+        ax1.set_ylabel(f"{label} ({unit})")
+        ax1.set_title(f"{run.name} - simulated vs measured {label}")
+        ax1.legend(loc="upper right", fontsize=7)
+        ax2.set_ylabel(f"{label} error ({unit})")
+        ax2.set_xlabel("Time (min)")
+        ax2.set_title("Mean Absolute Error: " + ", ".join(
+            f"{m} {maes[m][s]:.3g}" for m in sims), fontsize=8)
+        fig.tight_layout()
+        path = directory / f"{stem}.png"
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        written.append(path)
+    return written
