@@ -53,8 +53,8 @@ class DigiquartzLine:
         after ``=``) or ``"command"`` (a host command, ``text``).
     text : str
         The payload as on the wire (encoded back verbatim).
-    value : float
-        The pressure (NaN unless kind is pressure, or a numeric parameter value).
+    value : float or None
+        The pressure (kind pressure) or a numeric parameter value; None otherwise.
     name : str
         Parameter or command name (``"UN"``, ``"P4"``…), empty for a pressure.
     """
@@ -63,7 +63,7 @@ class DigiquartzLine:
     src: int
     kind: str
     text: str
-    value: float = float("nan")
+    value: float | None = None
     name: str = ""
 
 
@@ -118,10 +118,10 @@ def decode_line(frame: bytes) -> DigiquartzLine:
     pm = _PARAM.fullmatch(payload)
     if pm and dest == 0:
         val = pm.group(2).strip()
-        num = float(val) if _NUMBER.fullmatch(val) else float("nan")
+        num = float(val) if _NUMBER.fullmatch(val) else None
         return DigiquartzLine(dest, src, "param", text, num, pm.group(1))
     if _COMMAND.fullmatch(payload) and src == 0:
-        return DigiquartzLine(dest, src, "command", text, float("nan"), payload[:2])
+        return DigiquartzLine(dest, src, "command", text, None, payload[:2])
     raise FrameError(f"digiquartz: unrecognised payload {payload[:30]!r}")
 
 

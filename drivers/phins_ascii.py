@@ -223,8 +223,9 @@ def encode_sentence(s: PhinsSentence) -> bytes:
 def make(kind: str, *values) -> PhinsSentence:
     """A sentence of :data:`SENTENCES` from typed values (formatted as PHINS does)."""
     names, _ = SENTENCES[kind]
-    if len(values) != len(names):
-        raise ValueError(f"{kind} takes {len(names)} values")
+    n_values = 1 if kind == "HEHDT" else len(names)  # HEHDT's second field is always "T"
+    if len(values) != n_values:
+        raise ValueError(f"{kind} takes {n_values} value(s)")
     if kind in ("ALGSTS", "STATUS", "HT_STS"):
         flds = tuple(f"{int(v) & 0xFFFFFFFF:08X}" for v in values)
     elif kind == "TIME__":
