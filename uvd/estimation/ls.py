@@ -55,7 +55,7 @@ from uvd.model.params import (
 )
 
 __all__ = ["DiffFilter", "LSResult", "differentiate", "regressor_uv_batch",
-           "regressor_uvr_batch", "ls_identify", "ls_solve", "project_consistent",
+           "regressor_uvr_batch", "ls_reduce", "ls_identify", "ls_solve", "project_consistent",
            "consistency_margins"]
 
 _UPPER6 = [(i, j) for i in range(6) for j in range(i, 6)]
@@ -245,10 +245,11 @@ def _features(model: str, x: np.ndarray, xd: np.ndarray, r: np.ndarray
 def _reduce(model: str, run, filt: DiffFilter):
     """Reduce the stacked LS problem of a run to a square triangular one.
 
-    Per wrench component (row) ``row``: Householder QR of [Φ | A_row | F_row] (mode "r", Q never
-    formed) gives [[R₁, Y, f], [0, T, g], [0, 0, ρ]]; the stacked [T | g] of all rows is reduced
-    again. With R assembled from these blocks (columns in θ order), ‖𝒲θ − F‖² = ‖Rθ − z‖² +
-    residual² exactly, and R has the singular values of 𝒲.
+    Every wrench component (row) of 𝒲 is [Φ on its drag columns | A_row on the shared columns]
+    with the *same* Φ. Level 1: Φ = Q₁R₁; each row block [A_row | F_row] splits orthogonally into
+    Q₁ᵀ(·) = [Y | f] and its complement. Level 2: Householder QR (R only) of the stacked
+    complements gives [[T, g], [0, ρ]]. With R assembled from R₁, Y and T (columns in θ order),
+    ‖𝒲θ − F‖² = ‖Rθ − z‖² + ρ² exactly, and R has the singular values of 𝒲.
     Returns (R, z, residual², n, features…).
     """
     t = run.t
@@ -268,27 +269,52 @@ def _reduce(model: str, run, filt: DiffFilter):
     Phi, A, drag, shared = _features(model, xs, xd, r)
     nd, ns = Phi.shape[1], A.shape[2]
     n = len(t)
+    # level 1: Φ = Q₁R₁ (Householder, so Q₁ has orthonormal columns even if Φ is rank
+    # deficient); every row block's [A_row | F_row] splits into Q₁ᵀ(·) and (I − Q₁Q₁ᵀ)(·)
+    # ("twice is enough" re-projection keeps the split orthogonal to working precision).
+    C = np.concatenate([np.concatenate([A[:, row, :], us[:, row:row + 1]], axis=1)
+                        for row in range(k)], axis=1)  # n × k(ns + 1)
+    if n >= nd:
+        Q1, R1 = scipy.linalg.qr(Phi, mode="economic", check_finite=False)
+        Y = Q1.T @ C
+        C = C - Q1 @ Y
+        Y2 = Q1.T @ C
+        C -= Q1 @ Y2
+        Y += Y2
+    else:  # fewer samples than drag features: no split, everything goes to level 2
+        Q1, R1 = np.zeros((n, 0)), np.zeros((0, nd))
+        Y = np.zeros((0, C.shape[1]))
     R = np.zeros((p, p))
     z = np.zeros(p)
-    resid2 = 0.0
-    TG = []
+    m1 = R1.shape[0]
+    level2 = []
+    w = ns + 1
     for row in range(k):
-        B = np.hstack([Phi, A[:, row, :], us[:, row:row + 1]])
+        Yr = Y[:, row * w:(row + 1) * w]
+        R[np.ix_(drag[row][:m1], drag[row])] = R1
+        R[np.ix_(drag[row][:m1], shared)] = Yr[:, :ns]
+        z[drag[row][:m1]] = Yr[:, ns]
+        level2.append(C[:, row * w:(row + 1) * w] if n >= nd
+                      else np.hstack([np.zeros((n, 0)), C[:, row * w:(row + 1) * w]]))
+    if n < nd:  # no level-1 split: reduce the full rows of every block together
+        B = np.zeros((k * n, p + 1))
+        for row in range(k):
+            B[row * n:(row + 1) * n, drag[row]] = Phi
+            B[row * n:(row + 1) * n, shared] = A[:, row, :]
+            B[row * n:(row + 1) * n, p] = us[:, row]
         Rb = scipy.linalg.qr(B, mode="r", check_finite=False)[0]
-        m = min(Rb.shape[0], nd + ns + 1)
-        Rb_full = np.zeros((nd + ns + 1, nd + ns + 1))
-        Rb_full[:m] = Rb[:m]
-        R[np.ix_(drag[row], drag[row])] = Rb_full[:nd, :nd]
-        R[np.ix_(drag[row], shared)] = Rb_full[:nd, nd:nd + ns]
-        z[drag[row]] = Rb_full[:nd, -1]
-        TG.append(Rb_full[nd:, nd:])
-    Rb = scipy.linalg.qr(np.vstack(TG), mode="r", check_finite=False)[0]
-    m = min(Rb.shape[0], ns + 1)
-    Rb_full = np.zeros((ns + 1, ns + 1))
+        m = min(Rb.shape[0], p + 1)
+        Rf = np.zeros((p + 1, p + 1))
+        Rf[:m] = Rb[:m]
+        return Rf[:p, :p], Rf[:p, p], float(Rf[p, p] ** 2), n, Phi, A, drag, shared, us
+    # level 2: the projected shared columns of all rows, stacked
+    Rb = scipy.linalg.qr(np.vstack(level2), mode="r", check_finite=False)[0]
+    m = min(Rb.shape[0], w)
+    Rb_full = np.zeros((w, w))
     Rb_full[:m] = Rb[:m]
     R[np.ix_(shared, shared)] = Rb_full[:ns, :ns]
-    z[shared] = Rb_full[:ns, -1]
-    resid2 += float(Rb_full[ns, ns] ** 2)
+    z[shared] = Rb_full[:ns, ns]
+    resid2 = float(Rb_full[ns, ns] ** 2)
     return R, z, resid2, n, Phi, A, drag, shared, us
 
 
@@ -428,9 +454,18 @@ def ls_solve(model: str, Rfac: np.ndarray, z: np.ndarray, colnorm: np.ndarray, *
     return theta, int(rank), cond, sv, solver, status, projected
 
 
+def ls_reduce(run, model: str = "6dof", filt: DiffFilter = DiffFilter()) -> tuple:
+    """The reduced problem of a run (opaque; pass it to :func:`ls_identify` as ``reduced`` to
+    solve the same data twice, e.g. unconstrained and consistent, for the price of one
+    reduction)."""
+    if model not in ("6dof", "rot"):
+        raise ValueError(f"model must be '6dof' or 'rot', got {model!r}")
+    return (model, filt, _reduce(model, run, filt))
+
+
 def ls_identify(run, model: str = "6dof", *, filt: DiffFilter = DiffFilter(),
                 consistent: bool = False, eps_mass: float = 1e-3, eps_drag: float = 1e-3,
-                rcond: float = 1e-10) -> LSResult:
+                rcond: float = 1e-10, reduced: tuple | None = None) -> LSResult:
     """Least-squares identification (§4.4) of the 6-DOF (2.44) or rotational (2.40) model.
 
     Parameters
@@ -441,14 +476,17 @@ def ls_identify(run, model: str = "6dof", *, filt: DiffFilter = DiffFilter(),
     consistent : constrain M ⪰ ε_M I and sym(Dᵢ) ⪯ −ε_D I (see the module docstring).
     eps_mass, eps_drag : the margins ε_M (kg, kg m²) and ε_D (N s²/m², N m s²).
     rcond : relative singular-value cut-off of the rank decision.
+    reduced : the result of :func:`ls_reduce` for this run, model and filter (optional).
 
     Returns
     -------
     LSResult
     """
-    if model not in ("6dof", "rot"):
-        raise ValueError(f"model must be '6dof' or 'rot', got {model!r}")
-    Rfac, z, _resid2, n, Phi, A, drag, shared, us = _reduce(model, run, filt)
+    if reduced is None:
+        reduced = ls_reduce(run, model, filt)
+    if reduced[0] != model or reduced[1] != filt:
+        raise ValueError("reduced problem was made for another model or filter")
+    Rfac, z, _resid2, n, Phi, A, drag, shared, us = reduced[2]
     colnorm = np.linalg.norm(Rfac, axis=0)
     theta, rank, cond, sv, solver, status, projected = ls_solve(
         model, Rfac, z, colnorm, consistent=consistent, eps_mass=eps_mass, eps_drag=eps_drag,

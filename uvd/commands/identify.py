@@ -1,0 +1,118 @@
+"""``uvd identify --log RUN --method aid|ls|ls-consistent --out PARAMS.toml``.
+
+Identifies the 6-DOF UV parameters θ_UV (2.48) of a recorded run (format:
+:mod:`uvd.estimation.runlog`, ``docs/experiments-identification.md``) offline:
+
+* ``aid`` — 6-DOF AID (Theorem 4.3.1) replayed over the run at its own period, from INITP
+  (Tables 4.6–4.7) or ``--init PARAMS.toml``, gains of §4.6 unless given;
+* ``ls`` — least squares (§4.4); ``ls-consistent`` — the constrained fit with M positive
+  definite and dissipative drag.
+
+Writes a ``[parameters]`` TOML (loadable by every ``--params`` option) and prints a summary.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from uvd.errors import ConfigError, ParameterError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("identify", help="identify UV parameters from a recorded run (AID or LS)",
+                       description="Identify the 241 UV parameters of (2.44) from a recorded run.")
+    p.add_argument("--log", type=Path, required=True, metavar="RUN",
+                   help="recorded run (.npz, see docs/experiments-identification.md)")
+    p.add_argument("--method", choices=("aid", "ls", "ls-consistent"), required=True)
+    p.add_argument("--out", type=Path, required=True, metavar="PARAMS.toml",
+                   help="where to write the identified parameters")
+    p.add_argument("--init", type=Path, metavar="PARAMS.toml",
+                   help="aid: initial parameters (default INITP of Tables 4.6-4.7)")
+    p.add_argument("--gains", metavar="a,g1,g2,g3,g4",
+                   help="aid: gains a, γ1..γ4 (default 10,5000,20000,2000,2000, §4.6)")
+    p.add_argument("--window", type=float, default=2.1, metavar="S",
+                   help="ls: Savitzky-Golay window in seconds (default 2.1)")
+    p.add_argument("--json", type=Path, metavar="OUT", help="also write a summary as JSON")
+    p.set_defaults(handler=_run)
+
+
+def identify_aid(run, theta0, gains):
+    """Replay a run through 6-DOF AID; returns the final :class:`AID6State`."""
+    from uvd.control.types import VehicleState
+    from uvd.estimation.aid import AID6Params, aid6_init, aid6_step
+
+    prm = AID6Params(gains=gains, input_interp=run.input_interp)
+    st = aid6_init(theta0)
+    H = run.H
+    dt = run.dt
+    for k in range(len(run.t)):
+        st = aid6_step(VehicleState(H=H[k], v=run.v[k]), run.u[k], prm, st, dt)
+    return st
+
+
+def _parse_gains(text):
+    from uvd.estimation.aid import AID6Gains
+
+    if text is None:
+        return AID6Gains()
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError as exc:
+        raise ConfigError(f"--gains: not numbers: {text!r}") from exc
+    if len(vals) != 5:
+        raise ConfigError(f"--gains needs 5 values a,g1,g2,g3,g4; got {len(vals)}")
+    try:
+        return AID6Gains(*vals)
+    except ValueError as exc:
+        raise ConfigError(f"--gains: {exc}") from exc
+
+
+def _run(args) -> int:
+    from uvd.estimation.aid import INITP_6DOF, aid6_params
+    from uvd.estimation.ls import DiffFilter, ls_identify
+    from uvd.estimation.runlog import RunLog
+    from uvd.jsonio import write_json
+    from uvd.model.params import params_from_toml, save_params
+
+    run = RunLog.load(args.log)
+    summary: dict = {"log": str(args.log), "method": args.method, "samples": len(run.t),
+                     "duration_s": float(len(run.t) * run.dt)}
+    if args.method == "aid":
+        init = params_from_toml(args.init) if args.init else INITP_6DOF
+        try:
+            st = identify_aid(run, init.theta, _parse_gains(args.gains))
+        except ValueError as exc:
+            raise ConfigError(f"aid: {exc}") from exc
+        params = aid6_params(st)
+        summary.update(frozen=st.frozen, freeze_reason=st.freeze_reason, steps=st.steps,
+                       M_min_eigenvalue=st.m_min_eig,
+                       final_velocity_error=float(np.linalg.norm(st.dv)))
+        title = (f"6-DOF AID (Theorem 4.3.1) on {args.log.name}, {st.steps} steps"
+                 + (f"; FROZEN: {st.freeze_reason}" if st.frozen else ""))
+    else:
+        try:
+            res = ls_identify(run, "6dof", filt=DiffFilter(window_s=args.window),
+                              consistent=args.method == "ls-consistent")
+        except ValueError as exc:
+            raise ConfigError(f"{args.method}: {exc}") from exc
+        params = res.params
+        summary.update(res.summary())
+        title = (f"{args.method} (§4.4) on {args.log.name}: rank {res.rank}/241, "
+                 f"condition {res.condition:.3g}")
+    lam = params.mass_min_eigenvalue()
+    try:
+        params.validate(where="identified parameters")
+        valid = "valid (M positive definite, drag dissipative)"
+    except ParameterError as exc:
+        valid = f"NOT physically valid: {exc}"
+    summary["validity"] = valid
+    save_params(params, args.out, title=title)
+    print(title)
+    print(f"M min eigenvalue {lam:.4g}; g = {params.g:.4g} N; b = "
+          f"{np.array2string(params.b, precision=4)} N m; {valid}")
+    print(f"wrote {args.out}")
+    if args.json:
+        write_json(args.json, summary)
+    return 0
