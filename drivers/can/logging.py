@@ -1,0 +1,129 @@
+"""Recording every CAN frame uvd sends and receives, with python-can's own writers.
+
+The format follows the file suffix — ``.log`` (candump, readable by ``can.LogReader``,
+``python -m can.player`` and the Linux ``canplayer``), ``.asc`` (Vector ASCII) or ``.blf``
+(Vector binary) — and the file rotates by size (``can.SizedRotatingLogger``) when
+``max_bytes`` > 0: the full file is renamed ``<stem>_<date>_#NNN<suffix>`` and a new one is
+started under the configured name.
+
+Recording is off the control cycle's critical path: :meth:`CanRecorder.record` only puts the
+frame on a bounded queue; a writer thread does the file I/O. If the disk cannot keep up and
+the queue fills, frames are dropped from the *log* (counted in ``dropped``), never delayed on
+the bus.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from pathlib import Path
+
+import can
+
+from drivers.can.config import LOG_SUFFIXES, CanLogConfig
+from uvd.errors import ConfigError, TransportError
+
+log = logging.getLogger(__name__)
+
+
+class CanRecorder:
+    """Writes frames to a candump/ASC/BLF file from a background thread.
+
+    Parameters
+    ----------
+    path : str or Path
+        Log file; the suffix chooses the format.
+    max_bytes : int
+        Rotate when the file reaches this size; 0 never rotates.
+    queue_size : int
+        Frames that may wait for the writer thread.
+
+    Raises
+    ------
+    ConfigError
+        Unsupported suffix.
+    TransportError
+        The file cannot be created.
+    """
+
+    def __init__(self, path: str | Path, max_bytes: int = 0, queue_size: int = 100_000) -> None:
+        self.path = Path(path)
+        if self.path.suffix.lower() not in LOG_SUFFIXES:
+            raise ConfigError(f"[can.log] path: {str(self.path)!r} must end in one of "
+                              f"{', '.join(LOG_SUFFIXES)}")
+        self.max_bytes = int(max_bytes)
+        self.written = 0
+        self.dropped = 0
+        self.write_errors = 0
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            if self.max_bytes > 0:
+                self._writer = can.SizedRotatingLogger(str(self.path), max_bytes=self.max_bytes)
+            else:
+                self._writer = can.Logger(str(self.path))
+        except (OSError, ValueError) as exc:
+            raise TransportError(f"cannot open CAN log {str(self.path)!r}: {exc}") from exc
+        self._queue: queue.Queue[can.Message | None] = queue.Queue(maxsize=queue_size)
+        self._thread = threading.Thread(target=self._run, name="uvd-can-log", daemon=True)
+        self._stopped = False
+        self._thread.start()
+
+    @classmethod
+    def from_config(cls, cfg: CanLogConfig) -> CanRecorder | None:
+        """A recorder for ``[can.log]``, or ``None`` when no path is configured."""
+        if cfg.path is None:
+            return None
+        return cls(cfg.path, cfg.max_bytes)
+
+    def record(self, msg: can.Message, *, is_rx: bool) -> None:
+        """Queue one frame for the log (never blocks, never raises)."""
+        if self._stopped:
+            return
+        msg.is_rx = is_rx
+        try:
+            self._queue.put_nowait(msg)
+        except queue.Full:
+            self.dropped += 1
+
+    def __call__(self, msg: can.Message) -> None:
+        self.record(msg, is_rx=True)
+
+    @property
+    def rollovers(self) -> int:
+        """How many times the file was rotated."""
+        return int(getattr(self._writer, "rollover_count", 0))
+
+    def _run(self) -> None:
+        while True:
+            msg = self._queue.get()
+            if msg is None:
+                return
+            try:
+                self._writer.on_message_received(msg)
+                self.written += 1
+            except Exception as exc:  # noqa: BLE001 - a log problem must not stop the bus
+                self.write_errors += 1
+                if self.write_errors <= 3:
+                    log.warning("CAN log %s: %s", self.path, exc)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Write what is queued, close the file (idempotent)."""
+        if self._stopped:
+            return
+        self._stopped = True
+        try:
+            self._queue.put(None, timeout=timeout)
+        except queue.Full:
+            pass
+        self._thread.join(timeout)
+        try:
+            self._writer.stop()
+        except Exception as exc:  # noqa: BLE001
+            log.warning("closing CAN log %s: %s", self.path, exc)
+
+    def __enter__(self) -> CanRecorder:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
