@@ -170,7 +170,7 @@ def beam_to_instrument(b1: float, b2: float, b3: float, b4: float, beam_angle_de
 
     RDI "ADCP Coordinate Transformation" (P/N 951-6079), eq. for a convex head: with
     a = 1/(2 sin θ), b = 1/(4 cos θ), d = a/√2:
-    X = c a (b1 − b2), Y = a (b4 − b3), Z = b (b1 + b2 + b3 + b4), E = d (b1 + b2 − b3 − b4),
+    X = c a (b1 − b2), Y = c a (b4 − b3), Z = b (b1 + b2 + b3 + b4), E = d (b1 + b2 − b3 − b4),
     c = +1 convex, −1 concave. Sign as stored in PD0 (positive toward the transducer).
     """
     th = math.radians(beam_angle_deg)
@@ -178,7 +178,7 @@ def beam_to_instrument(b1: float, b2: float, b3: float, b4: float, beam_angle_de
     b = 1.0 / (4.0 * math.cos(th))
     d = a / math.sqrt(2.0)
     c = 1.0 if convex else -1.0
-    return (c * a * (b1 - b2), a * (b4 - b3), b * (b1 + b2 + b3 + b4),
+    return (c * a * (b1 - b2), c * a * (b4 - b3), b * (b1 + b2 + b3 + b4),
             d * (b1 + b2 - b3 - b4))
 
 
