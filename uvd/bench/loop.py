@@ -1,0 +1,220 @@
+"""``uvd bench loop``: how precisely the fixed-rate loop keeps its deadlines, vs naive asyncio.
+
+Runs :class:`uvd.runtime.loop.FixedRateLoop` at ``--rate`` for ``--duration`` seconds with the
+chosen per-cycle work (``--cycle``), then, in the same process, a naive loop that does the
+same work and ``await asyncio.sleep(period)`` between cycles. Lateness is wake-up time minus
+the deadline (for the naive loop: minus the time it asked to wake, ``now + period``, which
+flatters it — its schedule also drifts by every cycle's compute time; ``achieved_rate_hz``
+shows that). Compute is the cycle's own time. Percentiles are exact (from every sample, via
+:func:`uvd.bench.percentiles`); the loop's own histogram snapshot is included as
+``histogram`` for comparison.
+
+Per-cycle work (``--cycle``), registered in :data:`CYCLES`:
+
+* ``none`` — nothing: the timer alone;
+* ``pdc`` — the core's full PDC cycle (:func:`uvd.core.step`: navigation from fresh INS, DVL
+  and depth samples → RefTraj1 reference → PD (5.11) → allocation) on ``jhu-rov``, as in
+  ``uvd demo``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from uvd.bench import Bench, percentiles
+from uvd.runtime.loop import FixedRateLoop, LoopSettings, apply_realtime
+
+CycleFactory = Callable[[], Callable[[int, float], None]]
+
+
+def _cycle_none() -> Callable[[int, float], None]:
+    def cycle(t_ns: int, dt: float) -> None:
+        return None
+    return cycle
+
+
+def _cycle_pdc() -> Callable[[int, float], None]:
+    """The core's PDC cycle on jhu-rov tracking RefTraj1 (built as in ``uvd demo``)."""
+    from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+    from uvd import core
+    from uvd.control.allocation import Allocator
+    from uvd.control.pdc import PDGains, PDState, pdc_step
+    from uvd.control.trajectory import reftraj1
+    from uvd.estimation.navigation import NavConfig
+    from uvd.model.vehicle import load_vehicle
+
+    vehicle = load_vehicle("jhu-rov")
+    traj = reftraj1()
+    cfg = core.CoreConfig(
+        nav=NavConfig(),
+        controller=core.ControllerSpec("pdc", pdc_step, PDGains(kp=300.0, kd=100.0), PDState()),
+        reference=traj, allocator=Allocator.from_vehicle(vehicle), k_thrust=vehicle.k_thrust)
+    ref0 = traj.at(0.0)
+    roll, pitch, heading = R_to_euler(ref0.H[:3, :3])
+    offset = np.array([0.05, -0.03, 0.02])  # a tracking error, so PD has work to do
+    omega = np.array([0.01, -0.02, 0.03])
+    nu = ref0.v[:3] + 0.01
+    depth0 = float(ref0.H[2, 3] + offset[2])
+    st = {"state": core.core_init(cfg, north_m=ref0.H[0, 3] + offset[0],
+                                  east_m=ref0.H[1, 3] + offset[1]),
+          "n": 0}
+
+    def cycle(t_ns: int, dt: float) -> None:
+        k = st["n"]
+        st["n"] = k + 1
+        wobble = 1e-4 * (k % 7)
+        ins = InsSample(t_ns=t_ns, roll=roll + wobble, pitch=pitch, heading=heading,
+                        omega_body=omega)
+        dvl = DvlSample(t_ns=t_ns, velocity_body=nu, bottom_lock=True)
+        depth = DepthSample(t_ns=t_ns, depth_m=depth0 + wobble)
+        inputs = core.CoreInputs(t_ns=t_ns, ins=ins, dvl=dvl, depth=depth)
+        out, st["state"] = core.step(cfg, inputs, st["state"], dt)
+        if out.status != "ok":
+            raise RuntimeError(f"PDC cycle status {out.status!r}")
+
+    # compile/warm the numba kernels off the clock
+    t0 = time.monotonic_ns()
+    for i in range(50):
+        cycle(t0 + i * 1_000_000, 1e-3)
+    st["state"] = core.core_init(cfg, north_m=ref0.H[0, 3] + offset[0],
+                                 east_m=ref0.H[1, 3] + offset[1])
+    return cycle
+
+
+#: Per-cycle work selectable with ``--cycle``; the integration adds ``ambc-aid`` here.
+CYCLES: dict[str, CycleFactory] = {"none": _cycle_none, "pdc": _cycle_pdc}
+
+
+def _add(p) -> None:
+    p.add_argument("--rate", type=float, default=1000.0, help="loop rate, Hz (default 1000)")
+    p.add_argument("--duration", type=float, default=10.0,
+                   help="seconds measured for each loop (default 10)")
+    p.add_argument("--cycle", choices=sorted(CYCLES), default="none",
+                   help="per-cycle work (default none)")
+    p.add_argument("--timer", choices=("timerfd", "asyncio"), default="timerfd",
+                   help="coarse wait of our loop (default timerfd)")
+    p.add_argument("--fine", choices=("spin", "sleep"), default="spin",
+                   help="fine wait of our loop (default spin)")
+    p.add_argument("--margin-us", type=float, default=None,
+                   help="coarse wait ends this long before the deadline (default per timer)")
+    p.add_argument("--sched-fifo", type=int, default=0, metavar="PRIO",
+                   help="SCHED_FIFO priority for the benchmark (default 0 = normal)")
+    p.add_argument("--cpu", type=int, action="append", default=[],
+                   help="pin to this CPU (repeatable)")
+    p.add_argument("--warmup", type=float, default=0.5,
+                   help="seconds run before measuring (default 0.5)")
+    p.add_argument("--no-naive", action="store_true", help="skip the naive asyncio loop")
+
+
+async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float) -> dict:
+    n_max = int(math.ceil(duration * settings.rate_hz)) + 16
+    loop = FixedRateLoop(cycle, settings, trace_capacity=n_max)
+    try:
+        if warmup > 0:
+            await loop.run(duration_s=warmup)
+            loop.reset_stats()
+            loop.trace.n = 0
+        wall0 = time.monotonic()
+        snap = await loop.run(duration_s=duration)
+        wall = time.monotonic() - wall0
+    finally:
+        loop.close()
+    n = loop.trace.n
+    return {
+        "lateness_us": percentiles(loop.trace.lateness_ns[:n] * 1e-9),
+        "compute_us": percentiles(loop.trace.compute_ns[:n] * 1e-9),
+        "cycles": snap["cycles"],
+        "overruns": snap["overruns"],
+        "skipped": snap["skipped"],
+        "max_overrun_streak": snap["max_overrun_streak"],
+        "cycle_errors": snap["cycle_errors"],
+        "last_error": snap["last_error"],
+        "achieved_rate_hz": (snap["cycles"] + snap["skipped"]) / wall if wall > 0 else 0.0,
+        "timer": snap["timer"],
+        "histogram": {"lateness_us": snap["lateness_us"], "compute_us": snap["compute_us"]},
+    }
+
+
+async def _naive(rate: float, cycle, duration: float) -> dict:
+    period = 1.0 / rate
+    lat: list[int] = []
+    comp: list[int] = []
+    now = time.monotonic_ns
+    t0 = now()
+    end = t0 + int(duration * 1e9)
+    prev = t0
+    while True:
+        want = now() + int(period * 1e9)
+        if want > end:
+            break
+        await asyncio.sleep(period)
+        t = now()
+        lat.append(t - want)
+        cycle(t, (t - prev) * 1e-9)
+        prev = t
+        comp.append(now() - t)
+    wall = (now() - t0) * 1e-9
+    return {
+        "lateness_us": percentiles(np.asarray(lat) * 1e-9),
+        "compute_us": percentiles(np.asarray(comp) * 1e-9),
+        "cycles": len(lat),
+        "achieved_rate_hz": len(lat) / wall if wall > 0 else 0.0,
+    }
+
+
+def _fmt(d: dict) -> str:
+    return "  ".join(f"{k} {d[k]:8.1f}" for k in ("p50", "p99", "p999", "max") if k in d)
+
+
+def _run(args) -> dict:
+    settings = LoopSettings(rate_hz=args.rate, timer=args.timer, fine=args.fine,
+                            fine_margin_us=args.margin_us)
+    rt = apply_realtime(args.sched_fifo, args.cpu)
+    for m in rt.messages:
+        print(f"uvd bench loop: {m}")
+    cycle = CYCLES[args.cycle]()
+    load0 = os.getloadavg()
+    ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup))
+    naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
+    figures = {
+        "rate_hz": args.rate,
+        "duration_s": args.duration,
+        "cycle": args.cycle,
+        "lateness_us": ours["lateness_us"],
+        "compute_us": ours["compute_us"],
+        "overruns": ours["overruns"],
+        "skipped": ours["skipped"],
+        "cycles": ours["cycles"],
+        "cycle_errors": ours["cycle_errors"],
+        "achieved_rate_hz": ours["achieved_rate_hz"],
+        "max_overrun_streak": ours["max_overrun_streak"],
+        "timer": ours["timer"],
+        "histogram": ours["histogram"],
+        "realtime": {"sched_fifo_priority": rt.sched_fifo_priority,
+                     "cpu_affinity": list(rt.cpu_affinity), "messages": list(rt.messages)},
+        "loadavg_1min_at_start": load0[0],
+    }
+    if ours["last_error"]:
+        figures["last_error"] = ours["last_error"]
+    if naive is not None:
+        figures["naive_asyncio"] = naive
+    print(f"uvd bench loop: {args.rate:g} Hz, {args.duration:g} s, cycle '{args.cycle}', "
+          f"load {load0[0]:.2f}")
+    print(f"  lateness µs  ours  : {_fmt(ours['lateness_us'])}   overruns {ours['overruns']}"
+          f"  skipped {ours['skipped']}")
+    if naive is not None:
+        print(f"  lateness µs  naive : {_fmt(naive['lateness_us'])}   achieved "
+              f"{naive['achieved_rate_hz']:.1f} Hz")
+    print(f"  compute  µs  ours  : {_fmt(ours['compute_us'])}")
+    return figures
+
+
+BENCH = Bench(name="loop", summary="Fixed-rate loop deadline precision vs a naive asyncio.sleep "
+                                   "loop (lateness, compute, overruns)",
+              run=_run, add_arguments=_add)

@@ -1,0 +1,59 @@
+"""``uvd check-config [FILE] [--doc-out MD] [--print]``: validate a configuration, or write its
+reference.
+
+Validation is exactly what ``uvd run`` does at start (:func:`uvd.runtime.config.load_config`),
+without opening a port or a bus: on success it prints a one-line summary and exits 0; on
+failure every problem is printed as ``FILE: dotted.key: reason`` and it exits 2.
+``--doc-out`` writes ``docs/config.md`` generated from the schema.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("check-config", help="validate a configuration file (or write its "
+                                            "reference with --doc-out)",
+                       description=__doc__.split("\n\n")[0])
+    p.add_argument("file", nargs="?", type=Path, metavar="FILE",
+                   help="TOML configuration to validate")
+    p.add_argument("--doc-out", type=Path, metavar="MD",
+                   help="write the configuration reference generated from the schema "
+                        "(docs/config.md)")
+    p.add_argument("--print", dest="dump", action="store_true",
+                   help="print the validated configuration (defaults filled in) as JSON")
+    p.set_defaults(handler=_run, parser=p)
+
+
+def _run(args) -> int:
+    from uvd.runtime.config import ConfigValidationError, load_config, render_config_doc
+    from uvd.runtime.schema import as_dict
+
+    if args.file is None and args.doc_out is None:
+        args.parser.print_usage(sys.stderr)
+        print("uvd check-config: give a FILE to validate and/or --doc-out MD", file=sys.stderr)
+        return 2
+    if args.doc_out is not None:
+        args.doc_out.parent.mkdir(parents=True, exist_ok=True)
+        args.doc_out.write_text(render_config_doc() + "\n", encoding="utf-8")
+        print(f"uvd check-config: wrote {args.doc_out}")
+    if args.file is None:
+        return 0
+    try:
+        cfg = load_config(args.file)
+    except ConfigValidationError as exc:
+        n = len(exc.errors)
+        print(f"uvd check-config: {args.file}: {n} error{'s' if n != 1 else ''}",
+              file=sys.stderr)
+        print(str(exc), file=sys.stderr)
+        return 2
+    if args.dump:
+        print(json.dumps(as_dict(cfg), indent=2, default=str))
+    print(f"{args.file}: OK — vehicle {cfg.vehicle.name}, loop {cfg.loop.rate_hz:g} Hz, "
+          f"controller {cfg.control.controller}, INS {cfg.sensors.ins.port}, "
+          f"CAN {cfg.can.bus.interface}:{cfg.can.bus.channel} "
+          f"(nodes {', '.join(map(str, cfg.can.amplifiers.node_ids))})")
+    return 0

@@ -1,0 +1,375 @@
+"""The daemon's configuration: one TOML file validated at start into frozen dataclasses.
+
+:func:`load_config` parses the file and validates it against the schema of :class:`Config`
+(:mod:`uvd.runtime.schema`); any problem raises :class:`ConfigValidationError`, whose message
+has one line per problem naming the file, the dotted key and the reason::
+
+    config/bad.toml: control.kp: -5.0 is out of range (must be ≥ 0 and ≤ 100000)
+    config/bad.toml: sensors.ins.port: missing required key (string, device path …)
+
+``uvd check-config FILE`` does the same without starting anything, and
+``uvd check-config --doc-out docs/config.md`` writes the reference generated from the schema
+(:func:`render_config_doc`), so every key, unit and default is documented by construction.
+
+Sections and where their dataclass lives:
+
+===================  =========================================================================
+``[vehicle]``        :class:`VehicleSection` — built-in vehicle or vehicle file
+``[loop]``           :class:`uvd.runtime.loop.LoopSettings`
+``[control]``        :class:`ControlSection`
+``[failsafe]``       :class:`uvd.runtime.failsafe.Thresholds`
+``[sensors.*]``      :class:`InsSection`, :class:`DvlSection`, :class:`DepthSection`; the depth
+                     conversion is the driver's own :class:`drivers.digiquartz.DepthConverter`
+``[can]``            the CAN driver's :class:`drivers.can.config.CanConfig` (validated by its own
+                     ``from_mapping``; ``[can]`` bus keys, ``[can.amplifiers]``, ``[can.depth]``,
+                     ``[can.log]``)
+``[telemetry]``      :class:`TelemetrySection`
+``[daemon]``         :class:`DaemonSection` — start/stop timeouts, the shutdown sequence
+===================  =========================================================================
+
+**Plugging in a subsystem's own configuration.** Any frozen dataclass can be a section: put
+it in a :class:`Config` (or nested section) field with :func:`~uvd.runtime.schema.section`.
+Fields declared with :func:`~uvd.runtime.schema.setting` carry unit, range, doc and the
+reload flag; plain fields are validated by type and documented from the class's numpydoc
+``Attributes``/``Parameters``. A class with its own ``from_mapping(mapping, where)`` classmethod
+(like ``CanConfig``) validates itself; its :class:`~uvd.errors.ConfigError` messages are folded
+into the same report, and :data:`uvd.runtime.schema.TOML_LAYOUTS` says how its tables are laid
+out for the documentation.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from drivers.can.config import (
+    AmplifierConfig,
+    CanBusConfig,
+    CanConfig,
+    CanLogConfig,
+)
+from drivers.can.config import DepthConfig as CanDepthConfig
+from drivers.digiquartz import DepthConverter
+from uvd.errors import ConfigError
+from uvd.runtime import schema
+from uvd.runtime.failsafe import Thresholds
+from uvd.runtime.loop import LoopSettings
+from uvd.runtime.schema import section, setting
+
+__all__ = ["Config", "ConfigValidationError", "load_config", "parse_config",
+           "render_config_doc", "DEFAULT_CONFIG", "VehicleSection", "ControlSection",
+           "InsSection", "DvlSection", "DepthSection", "SensorsSection", "TelemetrySection",
+           "JsonlSection", "DaemonSection"]
+
+#: The embedded default: the simulated vehicle, everything local (``config/sim.toml``).
+DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim.toml"
+
+BAUD_RATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)
+_URL = re.compile(r"^(udp|tcp)://(?P<host>[^:/]+|\[[0-9a-fA-F:]+\]):(?P<port>\d{1,5})$")
+_PYSERIAL_URL = re.compile(r"^(socket|rfc2217|loop|spy|alt|hwgrep)://")
+
+
+class ConfigValidationError(ConfigError):
+    """A configuration file failed validation.
+
+    Attributes
+    ----------
+    source : str
+        The file (or ``<string>``).
+    errors : list of (str, str)
+        ``(dotted.key, reason)`` for every problem.
+    """
+
+    def __init__(self, source: str, errors: list[tuple[str, str]]) -> None:
+        self.source = source
+        self.errors = list(errors)
+        lines = [f"{source}: {k}: {r}" if k else f"{source}: {r}" for k, r in self.errors]
+        super().__init__("\n".join(lines))
+
+
+# ------------------------------------------------------------------------------ sections
+
+@dataclass(frozen=True)
+class VehicleSection:
+    """The vehicle model (``[vehicle]``)."""
+
+    name: str = setting("jhu-rov", doc="built-in vehicle (jhu-rov, jhu-rov-coupled) or a "
+                                       "vehicle TOML file, relative to this config file")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        from uvd.model.vehicle import builtin_vehicles
+        if self.name in builtin_vehicles():
+            return []
+        p = Path(self.name)
+        if p.suffix != ".toml":
+            return [("name", f"{self.name!r} is neither a built-in vehicle "
+                             f"({', '.join(builtin_vehicles())}) nor a .toml file")]
+        if not (p if p.is_absolute() else ctx.base_dir / p).is_file():
+            return [("name", f"vehicle file {self.name!r} not found (relative paths are taken "
+                             f"from {ctx.base_dir})")]
+        return []
+
+
+@dataclass(frozen=True)
+class ControlSection:
+    """The controller (``[control]``); gains apply to every controller's PD part (5.11)."""
+
+    controller: Literal["pdc", "ambc", "two-step-ambc"] = setting(
+        "pdc", doc="PD control (5.11), adaptive model-based control, or its two-step form "
+                   "(§5.3.5)")
+    kp: float = setting(300.0, unit="N/rad, N m/rad", min=0.0, max=100000.0, reload=True,
+                        doc="proportional gain k_p on Δψ (thesis §5.3.5.1: 300)")
+    kd: float = setting(100.0, unit="N s/m, N m s/rad", min=0.0, max=100000.0, reload=True,
+                        doc="derivative gain k_d on Δv (thesis §5.3.5.1: 100)")
+    robust_adaptation: bool = setting(
+        True, doc="robust (projection/σ) modification of the AMBC parameter update law")
+
+
+def _check_port(port: str | None, key: str = "port") -> list[tuple[str, str]]:
+    if port is None:
+        return []
+    if port.startswith("/") or _PYSERIAL_URL.match(port):
+        return []
+    m = _URL.match(port)
+    if m:
+        if not 1 <= int(m.group("port")) <= 65535:
+            return [(key, f"{port!r}: network port must be in 1..65535")]
+        return []
+    return [(key, f"{port!r} is neither an absolute device path (/dev/ttyUSB0, "
+                  "/dev/serial/by-id/…) nor udp://host:port / tcp://host:port")]
+
+
+@dataclass(frozen=True)
+class InsSection:
+    """The INS (PHINS) port (``[sensors.ins]``)."""
+
+    port: str = setting(doc="device path (/dev/serial/by-id/…, a pty) or udp://host:port / "
+                            "tcp://host:port for PHINS over Ethernet")
+    format: Literal["phins-stdbin", "phins-ascii"] = setting(
+        "phins-stdbin", doc="wire format (phins-ascii carries no rates: they are derived)")
+    baud: int = setting(115200, unit="bit/s", choices=BAUD_RATES, doc="serial line speed (8N1)")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        return _check_port(self.port)
+
+
+@dataclass(frozen=True)
+class DvlSection:
+    """The DVL (RDI Workhorse, PD0) port (``[sensors.dvl]``)."""
+
+    port: str = setting(doc="device path or udp://host:port / tcp://host:port")
+    format: Literal["pd0"] = setting("pd0", doc="wire format")
+    baud: int = setting(115200, unit="bit/s", choices=BAUD_RATES, doc="serial line speed (8N1)")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        return _check_port(self.port)
+
+
+@dataclass(frozen=True)
+class DepthSection:
+    """The depth sensor (``[sensors.depth]``): serial Digiquartz or the CAN transmitter."""
+
+    source: Literal["serial", "can"] = setting(
+        "serial", doc="serial Paroscientific Digiquartz, or the CiA 404 transmitter of "
+                      "[can.depth]")
+    port: str | None = setting(None, doc="device path (required when source = \"serial\")")
+    format: Literal["digiquartz"] = setting("digiquartz", doc="wire format")
+    baud: int = setting(9600, unit="bit/s", choices=BAUD_RATES, doc="serial line speed (8N1)")
+    conversion: DepthConverter = section(
+        DepthConverter, doc="pressure → depth (the driver's DepthConverter)")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        if self.source == "serial" and self.port is None:
+            return [("port", "missing required key (needed when source = \"serial\")")]
+        return _check_port(self.port)
+
+
+@dataclass(frozen=True)
+class SensorsSection:
+    """The navigation sensors."""
+
+    ins: InsSection = section(InsSection)
+    dvl: DvlSection = section(DvlSection)
+    depth: DepthSection = section(DepthSection)
+
+
+@dataclass(frozen=True)
+class JsonlSection:
+    """A JSON-lines telemetry file (``[telemetry.jsonl]``)."""
+
+    enabled: bool = setting(False, doc="record telemetry as one JSON object per line")
+    path: str = setting("uvd-telemetry.jsonl",
+                        doc="output file (relative to the working directory; under systemd "
+                            "$STATE_DIRECTORY)")
+    every_n_cycles: int = setting(1, min=1, max=100000, reload=True,
+                                  doc="record one cycle in N")
+
+
+@dataclass(frozen=True)
+class TelemetrySection:
+    """Telemetry fed off the loop (``[telemetry]``)."""
+
+    queue_size: int = setting(1024, min=16, max=1_000_000,
+                              doc="records buffered per sink; when full the oldest is dropped "
+                                  "and counted (the loop never waits)")
+    flush_interval_s: float = setting(0.05, unit="s", gt=0.0, max=10.0,
+                                      doc="how often each sink's queue is drained")
+    jsonl: JsonlSection = section(JsonlSection)
+
+
+@dataclass(frozen=True)
+class DaemonSection:
+    """Start and stop of the daemon (``[daemon]``)."""
+
+    start_timeout_s: float = setting(10.0, unit="s", gt=0.0, max=300.0,
+                                     doc="drivers must be up within this time, else exit 1")
+    shutdown_zero_cycles: int = setting(3, min=1, max=100,
+                                        doc="zero-current commands sent on shutdown")
+    shutdown_zero_period_s: float = setting(0.01, unit="s", min=0.0, max=0.5,
+                                            doc="interval between those commands")
+    step_timeout_s: float = setting(0.5, unit="s", gt=0.0, max=10.0,
+                                    doc="time allowed to each shutdown step (disable "
+                                        "amplifiers, stop a driver, close a sink)")
+    shutdown_timeout_s: float = setting(1.5, unit="s", gt=0.0, max=30.0,
+                                        doc="the whole shutdown sequence (systemd "
+                                            "TimeoutStopSec must be longer)")
+    gil_switch_interval_us: float = setting(
+        500.0, unit="µs", min=50.0, max=5000.0,
+        doc="sys.setswitchinterval: how long another Python thread may hold the GIL while "
+            "the loop waits for it")
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration file."""
+
+    vehicle: VehicleSection = section(VehicleSection)
+    loop: LoopSettings = section(LoopSettings)
+    control: ControlSection = section(ControlSection)
+    failsafe: Thresholds = section(Thresholds)
+    sensors: SensorsSection = section(SensorsSection)
+    can: CanConfig = section(CanConfig)
+    telemetry: TelemetrySection = section(TelemetrySection)
+    daemon: DaemonSection = section(DaemonSection)
+    source: str | None = field(default=None, init=False, compare=False)
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        out: list[tuple[str, str]] = []
+        try:
+            from can.interfaces import VALID_INTERFACES
+        except ImportError:  # pragma: no cover - python-can is a dependency
+            VALID_INTERFACES = ()
+        if VALID_INTERFACES and self.can.bus.interface not in VALID_INTERFACES:
+            out.append(("can.interface", f"{self.can.bus.interface!r} is not a python-can "
+                                         f"interface ({', '.join(sorted(VALID_INTERFACES))})"))
+        if self.sensors.depth.source == "can" and not self.can.depth.enabled:
+            out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
+        try:
+            vehicle = self.load_vehicle(ctx.base_dir)
+        except (ConfigError, ValueError, OSError) as exc:
+            out.append(("vehicle.name", f"cannot load the vehicle: {exc}"))
+        else:
+            n = len(self.can.amplifiers.node_ids)
+            if n != vehicle.n_thrusters:
+                out.append(("can.amplifiers.node_ids",
+                            f"{n} node ids for the {vehicle.n_thrusters} thrusters of "
+                            f"{vehicle.name!r} (one per thruster, in the vehicle's order)"))
+        return out
+
+    def vehicle_ref(self, base_dir: Path | None = None) -> str:
+        """Built-in vehicle name, or the vehicle file's path resolved against the config."""
+        from uvd.model.vehicle import builtin_vehicles
+        name = self.vehicle.name
+        if name in builtin_vehicles():
+            return name
+        p = Path(name)
+        if not p.is_absolute():
+            base = base_dir or (Path(self.source).parent if self.source else Path.cwd())
+            p = base / p
+        return str(p)
+
+    def load_vehicle(self, base_dir: Path | None = None):
+        """The :class:`uvd.model.vehicle.Vehicle` of ``[vehicle]``."""
+        from uvd.model.vehicle import load_vehicle
+        return load_vehicle(self.vehicle_ref(base_dir))
+
+
+schema.TOML_LAYOUTS[CanConfig] = (("", CanBusConfig), ("amplifiers", AmplifierConfig),
+                                  ("depth", CanDepthConfig), ("log", CanLogConfig))
+
+
+# ------------------------------------------------------------------------------ loading
+
+def parse_config(data: dict[str, Any], *, source: str | Path | None = None) -> Config:
+    """Validate an already parsed TOML mapping; raises :class:`ConfigValidationError`."""
+    where = str(source) if source is not None else "<config>"
+    ctx = schema.BuildContext(Path(source) if source is not None else None)
+    cfg, errors = schema.build(Config, data, ctx=ctx)
+    if errors or cfg is None:
+        raise ConfigValidationError(where, errors)
+    object.__setattr__(cfg, "source", str(source) if source is not None else None)
+    return cfg
+
+
+def load_config(path: str | Path | None = None) -> Config:
+    """Read and validate a TOML configuration file (default: :data:`DEFAULT_CONFIG`).
+
+    Raises
+    ------
+    ConfigValidationError
+        Unreadable file, TOML syntax error, or any schema violation — one line per problem
+        naming the file, the dotted key and the reason.
+    """
+    path = Path(path) if path is not None else DEFAULT_CONFIG
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigValidationError(str(path), [("", f"cannot read: {exc.strerror or exc}")]
+                                    ) from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigValidationError(str(path), [("", f"not valid TOML: {exc}")]) from exc
+    return parse_config(data, source=path)
+
+
+# ------------------------------------------------------------------------------ docs
+
+def _md(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def render_config_doc() -> str:
+    """``docs/config.md``: every table and key of :class:`Config`, generated from the schema."""
+    lines = [
+        "# Configuration reference",
+        "",
+        "<!-- GENERATED by `uvd check-config --doc-out docs/config.md` from the schema in",
+        "     uvd/runtime/config.py (and the sections it plugs in). Do not edit by hand. -->",
+        "",
+        "uvd reads one TOML file (`uvd run --config FILE`; the embedded default is",
+        "`config/sim.toml`). `uvd check-config FILE` validates it without starting anything;",
+        "every error names the file, the dotted key and the reason. Unknown keys are errors.",
+        "Keys marked *reload* may change on `SIGHUP` (`systemctl reload uvd`); changing any",
+        "other key needs a restart, and a reload says which ones it kept.",
+        "",
+        "Examples: `config/sim.toml` (simulated vehicle, everything local) and",
+        "`config/jhu-rov.toml` (the real vehicle; ports and CAN ids are placeholders).",
+        "",
+    ]
+    for table, doc, keys in schema.describe(Config):
+        lines.append(f"## `[{table}]`")
+        lines.append("")
+        if doc:
+            lines += [_md(doc), ""]
+        lines.append("| key | type | unit | default | allowed | reload | description |")
+        lines.append("| --- | --- | --- | --- | --- | --- | --- |")
+        for k in keys:
+            short = k.key.rsplit(".", 1)[-1]
+            lines.append(f"| `{short}` | {_md(k.type)} | {_md(k.unit)} | {_md(k.default)} | "
+                         f"{_md(k.constraint)} | {'yes' if k.reload else ''} | {_md(k.doc)} |")
+        lines.append("")
+    return "\n".join(lines)

@@ -1,0 +1,404 @@
+"""The fixed-rate control loop: absolute monotonic deadlines, no catch-up, statistics.
+
+:class:`FixedRateLoop` calls a plain function ``cycle(t_ns, dt)`` once per period, on deadlines
+``t₀ + k·T`` of the monotonic clock (never ``sleep(T)`` after the work, which drifts). Each
+wait has two phases (:mod:`uvd.runtime.clock`): a coarse wait in the event loop to
+``deadline − margin`` (a timerfd, so other tasks run meanwhile and there is no millisecond
+rounding), then a short fine wait (busy-wait by default) to the deadline itself. The cycle
+runs in the event-loop thread and must not await; anything slow (telemetry encoding, file or
+network I/O) is handed off through a bounded queue (:mod:`uvd.telemetry`) or a
+:class:`~uvd.runtime.mailbox.Mailbox`.
+
+**Overruns.** A cycle *overruns* when it ends after the next deadline (lateness + compute >
+T). The loop then skips every deadline already passed — counted in ``skipped`` — and resumes
+on the schedule; it never bursts several cycles to catch up. ``overrun_streak`` counts
+consecutive overrunning cycles; reaching ``LoopSettings.overrun_streak`` sets
+``streak_exceeded`` (an input of the failsafe arbiter).
+
+**Errors.** An exception from ``cycle`` is caught, counted (``cycle_errors``), remembered
+(``last_error``) and handed to ``on_error(exc, t_ns)`` — the application's zero-thrust path;
+the loop itself keeps its schedule. ``after_cycle`` hooks (the systemd watchdog) run after
+every cycle that *completed* (returned or raised — the loop is alive); a cycle that never
+returns stops them.
+
+**Statistics.** Lateness (wake-up minus deadline) and compute time (cycle return minus
+wake-up) go into constant-memory histograms (:class:`~uvd.runtime.stats.Histogram`);
+:meth:`FixedRateLoop.snapshot` returns a plain dict with p50/p99/p999/max in µs, and counts of
+cycles, overruns, skipped deadlines and errors. ``dt`` passed to the cycle is the *measured*
+time since the previous cycle's wake-up (the nominal period on the first cycle), as in
+ros2_control; ``t_ns`` is the wake-up time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import ctypes
+import errno
+import os
+import resource
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
+
+import numpy as np
+
+from uvd.runtime.clock import Clock, MonotonicClock
+from uvd.runtime.schema import setting
+from uvd.runtime.stats import Histogram
+
+__all__ = ["LoopSettings", "FixedRateLoop", "RealtimeReport", "apply_realtime",
+           "drop_realtime", "DEFAULT_MARGIN_US"]
+
+DEFAULT_MARGIN_US = {"timerfd": 200.0, "asyncio": 1100.0}
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """The fixed-rate control loop (``[loop]``)."""
+
+    rate_hz: float = setting(10.0, unit="Hz", gt=0.0, max=2000.0,
+                             doc="control rate; the thesis ran 10 Hz, the loop holds 1 kHz")
+    sched_fifo_priority: int = setting(
+        0, min=0, max=99,
+        doc="SCHED_FIFO priority of the loop thread, 0 = normal scheduling (needs "
+            "LimitRTPRIO= or CAP_SYS_NICE, see docs/runtime.md)")
+    cpu_affinity: tuple[int, ...] = setting(
+        (), min=0, max=1023, doc="CPUs the daemon may run on, empty = no restriction")
+    overrun_streak: int = setting(
+        5, min=1, max=100000, reload=True,
+        doc="consecutive overrunning cycles that trip the loop_overrun_streak failsafe")
+    timer: Literal["timerfd", "asyncio"] = setting(
+        "timerfd", doc="coarse wait in the event loop: timerfd (ns resolution) or asyncio "
+                       "(rounded up to 1 ms)")
+    fine: Literal["spin", "sleep"] = setting(
+        "spin", doc="the last stretch to the deadline: busy-wait or time.sleep")
+    fine_margin_us: float | None = setting(
+        None, unit="µs", min=0.0, max=5000.0,
+        doc="how long before the deadline the coarse wait ends (default 200 with timerfd, "
+            "1100 with asyncio)")
+
+    @property
+    def period_ns(self) -> int:
+        return int(round(1e9 / self.rate_hz))
+
+    @property
+    def margin_ns(self) -> int:
+        m = self.fine_margin_us if self.fine_margin_us is not None else \
+            DEFAULT_MARGIN_US[self.timer]
+        return int(round(m * 1e3))
+
+
+# ------------------------------------------------------------------------------ real time
+
+@dataclass(frozen=True)
+class RealtimeReport:
+    """What :func:`apply_realtime` did. ``messages`` explain every refusal."""
+
+    sched_fifo_priority: int = 0
+    cpu_affinity: tuple[int, ...] = ()
+    timer_slack_ns: int | None = None
+    messages: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return not self.messages
+
+
+_PR_SET_TIMERSLACK = 29
+
+
+def apply_realtime(priority: int = 0, cpus: Sequence[int] = (), *,
+                   os_module: Any = os) -> RealtimeReport:
+    """Ask for SCHED_FIFO ``priority`` and CPU ``cpus`` for the calling thread; never raises.
+
+    Also sets the thread's timer slack to 1 ns (finer wake-ups under normal scheduling).
+    Threads created *afterwards* inherit the policy; give worker pools
+    :func:`drop_realtime` as initializer. Each refusal becomes a clear message saying what
+    to change (``LimitRTPRIO=``, ``CAP_SYS_NICE``, ``RestrictRealtime=no``).
+
+    Parameters
+    ----------
+    priority : int
+        1–99 for SCHED_FIFO, 0 to leave scheduling alone.
+    cpus : sequence of int
+        CPU numbers; empty leaves the affinity alone.
+    os_module : module
+        Injected for tests (``sched_setscheduler``, ``sched_setaffinity``…).
+    """
+    msgs: list[str] = []
+    applied_prio = 0
+    applied_cpus: tuple[int, ...] = ()
+    slack: int | None = None
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(_PR_SET_TIMERSLACK, 1, 0, 0, 0) == 0:
+            slack = 1
+    except (OSError, AttributeError):
+        pass
+    if cpus:
+        want = tuple(sorted(set(int(c) for c in cpus)))
+        try:
+            os_module.sched_setaffinity(0, want)
+            applied_cpus = want
+        except OSError as exc:
+            have = sorted(os_module.sched_getaffinity(0)) if hasattr(
+                os_module, "sched_getaffinity") else "?"
+            msgs.append(f"CPU affinity {list(want)} refused ({exc.strerror or exc}); this "
+                        f"process may run on CPUs {have}")
+        except AttributeError:
+            msgs.append("CPU affinity is not supported on this platform")
+    if priority:
+        try:
+            os_module.sched_setscheduler(0, os_module.SCHED_FIFO,
+                                         os_module.sched_param(int(priority)))
+            applied_prio = int(priority)
+        except PermissionError:
+            try:
+                soft, _hard = resource.getrlimit(resource.RLIMIT_RTPRIO)
+            except (OSError, AttributeError, ValueError):
+                soft = "?"
+            msgs.append(f"SCHED_FIFO priority {priority} not permitted (RLIMIT_RTPRIO is "
+                        f"{soft}): running with normal scheduling. Under systemd set "
+                        f"LimitRTPRIO={priority} and RestrictRealtime=no (docs/runtime.md), "
+                        f"or grant CAP_SYS_NICE")
+        except OSError as exc:
+            reason = "invalid priority" if exc.errno == errno.EINVAL else exc.strerror
+            msgs.append(f"SCHED_FIFO priority {priority} refused ({reason}): running with "
+                        f"normal scheduling")
+        except AttributeError:
+            msgs.append("SCHED_FIFO is not supported on this platform")
+    return RealtimeReport(sched_fifo_priority=applied_prio, cpu_affinity=applied_cpus,
+                          timer_slack_ns=slack, messages=tuple(msgs))
+
+
+def drop_realtime() -> None:
+    """Return the calling thread to normal scheduling (worker-pool initializer; never raises)."""
+    with contextlib.suppress(OSError, AttributeError):
+        if os.sched_getscheduler(0) != os.SCHED_OTHER:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+# ------------------------------------------------------------------------------ the loop
+
+CycleFn = Callable[[int, float], None]
+
+
+@dataclass
+class _Trace:
+    lateness_ns: np.ndarray
+    compute_ns: np.ndarray
+    n: int = 0
+
+
+@dataclass
+class FixedRateLoop:
+    """Run ``cycle(t_ns, dt)`` at a fixed rate on absolute deadlines.
+
+    Parameters
+    ----------
+    cycle : callable
+        ``cycle(t_ns, dt) -> None``; plain function, must not await, should not block.
+    settings : LoopSettings
+        Rate, timer and overrun-streak threshold (scheduling is applied by
+        :func:`apply_realtime`, not here).
+    clock : Clock, optional
+        Time source and waits; a :class:`~uvd.runtime.clock.MonotonicClock` built from the
+        settings by default (closed by :meth:`close`).
+    on_error : callable, optional
+        ``on_error(exc, t_ns)`` after a cycle raised (the zero-thrust path). Its own
+        exceptions are swallowed and counted.
+    after_cycle : list of callables
+        ``hook(t_end_ns, ok)`` after each completed cycle (e.g. the watchdog ping).
+    trace_capacity : int
+        Keep the first N raw lateness/compute samples (benchmarks); 0 = none.
+    """
+
+    cycle: CycleFn
+    settings: LoopSettings = field(default_factory=LoopSettings)
+    clock: Clock | None = None
+    on_error: Callable[[BaseException, int], None] | None = None
+    after_cycle: list[Callable[[int, bool], None]] = field(default_factory=list)
+    trace_capacity: int = 0
+
+    def __post_init__(self) -> None:
+        self._own_clock = self.clock is None
+        if self.clock is None:
+            self.clock = MonotonicClock(coarse=self.settings.timer, fine=self.settings.fine)
+        self.period_ns = self.settings.period_ns
+        self.margin_ns = min(self.settings.margin_ns, self.period_ns)
+        self.lateness = Histogram()
+        self.compute = Histogram()
+        self.cycles = 0
+        self.overruns = 0
+        self.skipped = 0
+        self.overrun_streak = 0
+        self.max_overrun_streak = 0
+        self.cycle_errors = 0
+        self.consecutive_errors = 0
+        self.hook_errors = 0
+        self.last_error: str | None = None
+        self.last_cycle_ok = True
+        self.last_t_ns: int | None = None
+        self.running = False
+        self._stop = False
+        self.trace: _Trace | None = None
+        if self.trace_capacity > 0:
+            self.trace = _Trace(np.zeros(self.trace_capacity, dtype=np.int64),
+                                np.zeros(self.trace_capacity, dtype=np.int64))
+
+    # -- control
+
+    @property
+    def period_s(self) -> float:
+        return self.period_ns * 1e-9
+
+    @property
+    def streak_exceeded(self) -> bool:
+        """The overrun streak reached ``settings.overrun_streak``."""
+        return self.overrun_streak >= self.settings.overrun_streak
+
+    def stop(self) -> None:
+        """Ask the loop to return after the cycle in progress (or before the next one)."""
+        self._stop = True
+
+    def set_overrun_streak(self, n: int) -> None:
+        """Change the overrun-streak threshold (reloadable)."""
+        self.settings = replace(self.settings, overrun_streak=int(n))
+
+    def close(self) -> None:
+        """Release the clock's timer if the loop created it."""
+        if self._own_clock and hasattr(self.clock, "close"):
+            self.clock.close()
+
+    async def run(self, *, max_cycles: int | None = None,
+                  duration_s: float | None = None) -> dict[str, Any]:
+        """Run until :meth:`stop`, ``max_cycles`` cycles, or ``duration_s`` of schedule.
+
+        Returns the final :meth:`snapshot`. Cancellation (TaskGroup shutdown) propagates
+        from the coarse wait, never from inside a cycle.
+        """
+        clock = self.clock
+        period = self.period_ns
+        margin = self.margin_ns
+        cycle = self.cycle
+        lat_h, comp_h = self.lateness, self.compute
+        trace = self.trace
+        start = clock.monotonic_ns()
+        deadline = start + period
+        end_ns = start + int(duration_s * 1e9) if duration_s is not None else None
+        prev_t: int | None = None
+        self._stop = False
+        self.running = True
+        try:
+            while not self._stop:
+                if max_cycles is not None and self.cycles >= max_cycles:
+                    break
+                if end_ns is not None and deadline > end_ns:
+                    break
+                await clock.wait_until_ns(deadline - margin)
+                if self._stop:
+                    break
+                clock.sleep_until_ns(deadline)
+                t = clock.monotonic_ns()
+                dt = (t - prev_t) * 1e-9 if prev_t is not None else period * 1e-9
+                prev_t = t
+                ok = True
+                try:
+                    cycle(t, dt)
+                except Exception as exc:  # failure is data: never raises out of the loop
+                    ok = False
+                    self._cycle_failed(exc, t)
+                t_end = clock.monotonic_ns()
+                lateness = t - deadline
+                compute = t_end - t
+                lat_h.record(lateness)
+                comp_h.record(compute)
+                if trace is not None and trace.n < trace.lateness_ns.shape[0]:
+                    trace.lateness_ns[trace.n] = lateness
+                    trace.compute_ns[trace.n] = compute
+                    trace.n += 1
+                self.cycles += 1
+                self.last_t_ns = t
+                self.last_cycle_ok = ok
+                if ok:
+                    self.consecutive_errors = 0
+                deadline += period
+                if t_end > deadline:
+                    missed = (t_end - deadline) // period + 1
+                    self.overruns += 1
+                    self.skipped += missed
+                    deadline += missed * period
+                    self.overrun_streak += 1
+                    self.max_overrun_streak = max(self.max_overrun_streak,
+                                                  self.overrun_streak)
+                else:
+                    self.overrun_streak = 0
+                for hook in self.after_cycle:
+                    try:
+                        hook(t_end, ok)
+                    except Exception:
+                        self.hook_errors += 1
+        finally:
+            self.running = False
+        return self.snapshot()
+
+    def _cycle_failed(self, exc: BaseException, t_ns: int) -> None:
+        self.cycle_errors += 1
+        self.consecutive_errors += 1
+        tb = traceback.extract_tb(exc.__traceback__)
+        where = f" at {tb[-1].filename}:{tb[-1].lineno}" if tb else ""
+        self.last_error = f"{type(exc).__name__}: {exc}{where}"
+        if self.on_error is not None:
+            try:
+                self.on_error(exc, t_ns)
+            except Exception:
+                self.hook_errors += 1
+
+    # -- statistics
+
+    def snapshot(self) -> dict[str, Any]:
+        """Counters and latency percentiles as a plain dict (µs)."""
+        clock = self.clock
+        return {
+            "rate_hz": 1e9 / self.period_ns,
+            "period_us": self.period_ns / 1e3,
+            "cycles": self.cycles,
+            "overruns": self.overruns,
+            "skipped": self.skipped,
+            "overrun_streak": self.overrun_streak,
+            "max_overrun_streak": self.max_overrun_streak,
+            "streak_exceeded": self.streak_exceeded,
+            "cycle_errors": self.cycle_errors,
+            "last_error": self.last_error,
+            "hook_errors": self.hook_errors,
+            "lateness_us": self.lateness.summary_us(),
+            "compute_us": self.compute.summary_us(),
+            "timer": {"coarse": getattr(clock, "coarse", type(clock).__name__),
+                      "fine": getattr(clock, "fine", type(clock).__name__),
+                      "margin_us": self.margin_ns / 1e3},
+        }
+
+    def reset_stats(self) -> None:
+        """Start the histograms and counters afresh (e.g. after warm-up)."""
+        self.lateness.reset()
+        self.compute.reset()
+        self.overruns = self.skipped = self.max_overrun_streak = 0
+        self.cycles = 0
+
+
+async def run_loop_until_stopped(loop: FixedRateLoop, stop: asyncio.Event) -> dict[str, Any]:
+    """Run ``loop`` until ``stop`` is set (helper for a TaskGroup)."""
+
+    async def watcher() -> None:
+        await stop.wait()
+        loop.stop()
+
+    w = asyncio.ensure_future(watcher())
+    try:
+        return await loop.run()
+    finally:
+        w.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await w
