@@ -5,6 +5,7 @@ a second uvd or a stray terminal cannot take), non-blocking, and read in the eve
 callback. An unplugged USB adapter or a closed pseudo-terminal shows up as a read error; the
 reader closes the port, discards the partial frame, counts the reconnect and re-opens the same
 path with back-off (a udev symlink such as ``/dev/serial/by-id/…`` makes the path stable).
+Input that queued in the driver before the port was opened is discarded (stale stamps).
 See :class:`drivers.transport.FrameReader` for the consumer API.
 """
 
@@ -47,9 +48,12 @@ class SerialFrameReader(FrameReader):
     async def _open(self, protocol: _Protocol) -> None:
         loop = asyncio.get_running_loop()
         try:
-            await serial_asyncio_fast.create_serial_connection(
+            transport, _ = await serial_asyncio_fast.create_serial_connection(
                 loop, lambda: protocol, self.port, baudrate=self.baudrate,
                 exclusive=self.exclusive)
+            # bytes that waited in the driver while nobody listened are stale: their receive
+            # stamps would be wrong. Flushed before the first read callback runs.
+            transport.serial.reset_input_buffer()
         except (serial.SerialException, OSError, ValueError) as exc:
             raise TransportError(f"{self.name}: cannot open serial port {self.port}: {exc}") \
                 from exc
