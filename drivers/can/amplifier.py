@@ -291,7 +291,8 @@ class AmplifierGroup:
         self._last_hb_ns = 0
         self._fault_state: dict[int, frozenset[str]] = {}
         self.fault_log: deque[FaultEvent] = deque(maxlen=1000)
-        self.counters = {"cycles": 0, "lost_cycles": 0, "send_failed_cycles": 0,
+        self.counters = {"cycles": 0, "syncs_sent": 0, "lost_cycles": 0,
+                         "send_failed_cycles": 0,
                          "nonfinite_commands": 0, "clamped_commands": 0, "emcy_rx": 0,
                          "heartbeats_tx": 0, "feedback_missed": 0, "fault_events": 0}
         per_permille = cfg.thrust_per_permille_n or tuple(t.max_thrust_n / 1000.0
@@ -521,32 +522,33 @@ class AmplifierGroup:
         self._cycle += 1
         c = self.counters
         c["cycles"] += 1
-        bus_status = self.bus.poll()
-        bus_ok = bus_status.state not in (BUS_OFF, CLOSED)
-        over = np.abs(p) > self._max
-        clamped = int(over.sum())
-        targets = np.rint(np.clip(p, -self._max, self._max)).astype(np.int64)
+        bus_state = self.bus.poll_state()
+        bus_ok = bus_state not in (BUS_OFF, CLOSED)
+        clamped = int((np.abs(p) > self._max).sum())
+        targets = np.rint(np.clip(p, -self._max, self._max)).astype(np.int64).tolist()
         c["nonfinite_commands"] += nonfinite
         c["clamped_commands"] += clamped
-        faults = self._update_faults(t0)
+        faults = self._update_faults(t0, bus_state)
         group_fault = bool(faults.get(0))
+        enabled_goal = self._goal == cia402.GOAL_ENABLED
+        with self._lock:
+            snap = [(n.statusword, n.tpdo_count) for n in self.nodes]
         sent = dropped = 0
-        lost = False
-        out = np.zeros(len(self.nodes), dtype=np.int64)
+        late = False
+        out = [0] * len(self.nodes)
         for i, node in enumerate(self.nodes):
-            with self._lock:
-                state = cia402.state_from_statusword(node.statusword)
-                count = node.tpdo_count
+            sw, count = snap[i]
+            state = cia402.state_from_statusword(sw)
             if self._sync_sent and node.hb_state == NMT_OPERATIONAL:
                 if count == node.count_at_sync:
                     node.missed += 1
                     node.missed_total += 1
                     c["feedback_missed"] += 1
-                    lost = True
+                    late = True
                 else:
                     node.missed = 0
-            if state != cia402.FAULT:
-                if node.reset_cycles and node.last_cw & cia402.CW_FAULT_RESET:
+            if node.reset_cycles and state != cia402.FAULT:
+                if node.last_cw & cia402.CW_FAULT_RESET:
                     with self._lock:
                         node.emcy_active.clear()
                 node.reset_cycles = 0
@@ -554,10 +556,10 @@ class AmplifierGroup:
                                            previous=node.last_cw)
             if node.reset_cycles:
                 node.reset_cycles -= 1
-            allowed = (self._goal == cia402.GOAL_ENABLED and state == cia402.OPERATION_ENABLED
+            allowed = (enabled_goal and state == cia402.OPERATION_ENABLED
                        and cw == cia402.CW_ENABLE_OPERATION and bus_ok and not group_fault
-                       and not faults.get(node.node_id))
-            target = int(targets[i]) if allowed else 0
+                       and node.node_id not in faults)
+            target = targets[i] if allowed else 0
             node.var_cw.raw = cw
             node.var_target.raw = target
             node.last_cw = cw
@@ -572,6 +574,7 @@ class AmplifierGroup:
             self.network.sync.transmit()
             sent += 1
             self._sync_sent = True
+            c["syncs_sent"] += 1
         except FrameDropped:
             dropped += 1
             self._sync_sent = False
@@ -581,11 +584,11 @@ class AmplifierGroup:
             c["send_failed_cycles"] += 1
         else:
             self._failed_cycles = 0
-        if dropped or lost:
+        if dropped or late:
             c["lost_cycles"] += 1
         t1 = self.clock()
         return WriteStatus(self._cycle, t0, dropped == 0, sent, dropped, nonfinite, clamped,
-                           out, t1 - t0)
+                           np.array(out, dtype=np.int64), t1 - t0)
 
     def _heartbeat_if_due(self, now: int) -> None:
         period = self.cfg.heartbeat_period_ms
@@ -619,19 +622,19 @@ class AmplifierGroup:
             out.append("feedback_lost")
         return tuple(out)
 
-    def _update_faults(self, now: int) -> dict[int, tuple[str, ...]]:
+    def _update_faults(self, now: int, bus_state: str | None = None) -> dict[int, tuple[str, ...]]:
         faults: dict[int, tuple[str, ...]] = {}
         with self._lock:
             for node in self.nodes:
                 f = self._node_faults(node, now)
                 if f:
                     faults[node.node_id] = f
-        st = self.bus.status()
+        state = bus_state if bus_state is not None else self.bus.status().state
         g: list[str] = []
-        if st.state in (BUS_OFF, CLOSED):
-            g.append("bus_" + st.state if st.state == CLOSED else "bus_off")
-        elif st.state != ACTIVE:
-            g.append("error_" + st.state)
+        if state in (BUS_OFF, CLOSED):
+            g.append("bus_off" if state == BUS_OFF else "bus_closed")
+        elif state != ACTIVE:
+            g.append("error_" + state)
         if self._failed_cycles >= self.cfg.max_failed_cycles:
             g.append("send_failed")
         if g:
@@ -681,6 +684,7 @@ class AmplifierGroup:
         """Counters of the group and of the bus (for the daemon's telemetry)."""
         out = dict(self.counters)
         out["feedback_missed_by_node"] = {n.node_id: n.missed_total for n in self.nodes}
+        out["tpdo_rx_by_node"] = {n.node_id: n.tpdo_count for n in self.nodes}
         out["emcy_by_node"] = {n.node_id: n.emcy_count for n in self.nodes}
         out["bus"] = self.bus.status().counters
         return out

@@ -419,6 +419,7 @@ class CanBus:
         self.network = UvdNetwork(self)
         self.counters: dict[str, int] = dict.fromkeys(_RX_COUNTERS + _TX_COUNTERS, 0)
         self.malformed_by_id: dict[int, int] = {}
+        self.unknown_by_id: dict[int, int] = {}
         self.last_send_error = ""
         self.last_rx_error = ""
         self._bus: can.BusABC | None = None
@@ -521,10 +522,19 @@ class CanBus:
             self.last_send_error = "gated"
             return False
         msg.timestamp = time.time()  # wall time, for logs only
+        if self._echo_filter:
+            # before sending: the loopback may deliver the echo before send() returns
+            echo = (msg.arbitration_id, bytes(msg.data), msg.is_error_frame, now)
+            self._echo.append(echo)
         try:
             with self._send_lock:
                 bus.send(msg, timeout=self.cfg.send_timeout_s)
         except Exception as exc:  # noqa: BLE001 - every interface raises its own
+            if self._echo_filter:
+                try:
+                    self._echo.remove(echo)
+                except ValueError:
+                    pass
             full = _is_full_queue(exc)
             c["tx_full" if full else "tx_failed"] += 1
             self.last_send_error = f"{type(exc).__name__}: {exc}"
@@ -538,8 +548,6 @@ class CanBus:
         if self.monitor.state == BUS_OFF or self.monitor.send_failures_in_row:
             with self._state_lock:
                 self.monitor.on_send_ok(now)
-        if self._echo_filter:
-            self._echo.append((msg.arbitration_id, bytes(msg.data), msg.is_error_frame, now))
         if self.recorder is not None:
             self.recorder.record(msg, is_rx=False)
         return True
@@ -582,6 +590,8 @@ class CanBus:
             return
         if cob_id not in self.network.subscribers:
             c["rx_unknown"] += 1
+            if len(self.unknown_by_id) < 256 or cob_id in self.unknown_by_id:
+                self.unknown_by_id[cob_id] = self.unknown_by_id.get(cob_id, 0) + 1
             return
         try:
             self.network.notify(cob_id, bytearray(data), msg.timestamp)
@@ -616,6 +626,11 @@ class CanBus:
     # -- health --
     def poll(self) -> BusStatus:
         """Time-based health checks and the reopen policy; call once per cycle."""
+        self.poll_state()
+        return self.status()
+
+    def poll_state(self) -> str:
+        """:meth:`poll`, returning only the bus state (cheaper; the cycle uses it)."""
         now = self.clock()
         iface = None
         bus = self._bus
@@ -634,7 +649,7 @@ class CanBus:
                 or (self._tx_fail_since and now - self._tx_fail_since >= after)
             if failing:
                 self._reopen(now)
-        return self.status()
+        return self.monitor.state if self._bus is not None else CLOSED
 
     def _reopen(self, now: int) -> None:
         log.warning("reopening CAN bus %s/%s (rx: %s; tx: %s)", self.cfg.interface,
