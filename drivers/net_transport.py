@@ -28,7 +28,7 @@ class UdpFrameReader(FrameReader):
         self.where = f"udp://{host}:{port}"
         self.bound_port: int | None = None
 
-    async def _open(self, protocol: _Protocol) -> None:
+    async def _open(self, protocol: _Protocol):
         loop = asyncio.get_running_loop()
         try:
             transport, _ = await loop.create_datagram_endpoint(
@@ -37,6 +37,7 @@ class UdpFrameReader(FrameReader):
             raise TransportError(f"{self.name}: cannot bind {self.where}: {exc}") from exc
         self.bound_port = transport.get_extra_info("sockname")[1]
         self.where = f"udp://{self.host}:{self.bound_port}"
+        return transport
 
 
 class TcpFrameReader(FrameReader):
@@ -50,11 +51,13 @@ class TcpFrameReader(FrameReader):
         self.where = f"tcp://{host}:{port}"
         self.connect_timeout_s = connect_timeout_s
 
-    async def _open(self, protocol: _Protocol) -> None:
+    async def _open(self, protocol: _Protocol):
         loop = asyncio.get_running_loop()
         try:
-            await asyncio.wait_for(loop.create_connection(lambda: protocol, self.host,
-                                                          self.port), self.connect_timeout_s)
+            transport, _ = await asyncio.wait_for(
+                loop.create_connection(lambda: protocol, self.host, self.port),
+                self.connect_timeout_s)
         except (TimeoutError, OSError) as exc:
             raise TransportError(f"{self.name}: cannot connect to {self.where}: {exc}") \
                 from exc
+        return transport

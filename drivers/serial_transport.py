@@ -45,7 +45,7 @@ class SerialFrameReader(FrameReader):
         self.baudrate = int(baudrate)
         self.exclusive = exclusive
 
-    async def _open(self, protocol: _Protocol) -> None:
+    async def _open(self, protocol: _Protocol):
         loop = asyncio.get_running_loop()
         try:
             transport, _ = await serial_asyncio_fast.create_serial_connection(
@@ -54,6 +54,7 @@ class SerialFrameReader(FrameReader):
             # bytes that waited in the driver while nobody listened are stale: their receive
             # stamps would be wrong. Flushed before the first read callback runs.
             transport.serial.reset_input_buffer()
+            return transport
         except (serial.SerialException, OSError, ValueError) as exc:
             raise TransportError(f"{self.name}: cannot open serial port {self.port}: {exc}") \
                 from exc

@@ -98,8 +98,9 @@ class FrameReader:
         self._opened_once = False
 
     # ---- to implement ------------------------------------------------------------------------
-    async def _open(self, protocol: _Protocol) -> None:
-        """Open the byte source with ``protocol`` as its asyncio protocol (raise on failure)."""
+    async def _open(self, protocol: _Protocol):
+        """Open the byte source with ``protocol`` as its asyncio protocol; return the
+        asyncio transport (raise on failure)."""
         raise NotImplementedError
 
     # ---- callbacks (event loop) -------------------------------------------------------------
@@ -133,7 +134,7 @@ class FrameReader:
         while not self._closed:
             self._lost.clear()
             try:
-                await self._open(_Protocol(self))
+                transport = await self._open(_Protocol(self))
             except asyncio.CancelledError:
                 raise
             except Exception as exc:  # noqa: BLE001 - any open failure is a status, not a crash
@@ -141,6 +142,7 @@ class FrameReader:
                 await asyncio.sleep(delay)
                 delay = min(2.0 * delay, self.reconnect_max_s)
                 continue
+            self._transport = transport
             if self._opened_once:
                 self.counters.reconnects += 1
             self._opened_once = True
