@@ -59,9 +59,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from enum import IntEnum
-from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -90,9 +89,12 @@ class Action(IntEnum):
         return self.name.lower().replace("_", "-")
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Health:
     """Health signals of one cycle; the defaults mean "nothing known", which is not healthy.
+
+    Treat it as immutable once handed to the arbiter (it is a plain, non-frozen dataclass only
+    because building one every cycle must be cheap).
 
     Ages are seconds since the latest usable sample (``inf`` before the first one). Optional
     signals (``None``) belong to subsystems that are not fitted and never trigger.
@@ -131,7 +133,7 @@ class Health:
         The cycle callback raised during the last cycle.
     leak : bool or None
         Leak input asserted; None when no leak sensor is configured.
-    extra : mapping
+    extra : mapping or None
         Signals of plug-in triggers (e.g. ``operator_heartbeat_age_s``).
     """
 
@@ -154,7 +156,7 @@ class Health:
     overrun_streak_exceeded: bool = False
     cycle_failed: bool = False
     leak: bool | None = None
-    extra: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    extra: Mapping[str, Any] | None = None
 
 
 BUILTIN_NAMES = ("ins_stale", "ins_rates_degraded", "dvl_stale", "dvl_bottom_lock_lost",
@@ -253,6 +255,10 @@ class ArbiterState:
 
     triggers: Mapping[str, TriggerState]
     action: Action = Action.NONE
+    decision: Decision | None = None
+
+
+_IDLE = TriggerState()
 
 
 @dataclass(frozen=True, slots=True)
@@ -497,7 +503,7 @@ def nav_health(nav: Any) -> dict[str, Any]:
 
 def arbiter_init(registry: Sequence[TriggerDef]) -> ArbiterState:
     """Initial state: nothing active."""
-    return ArbiterState(triggers=MappingProxyType({d.name: TriggerState() for d in registry}))
+    return ArbiterState(triggers={d.name: _IDLE for d in registry})
 
 
 def _safe_condition(d: TriggerDef, h: Health, th: Thresholds, mem: Any
@@ -529,28 +535,40 @@ def evaluate(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState
     """
     t = health.t_ns
     clear_ns = int(th.clear_after_s * 1e9)
+    old = state.triggers
     new: dict[str, TriggerState] = {}
     events: list[FailsafeEvent] = []
     active: list[ActiveTrigger] = []
+    changed = False
     for d in registry:
-        ts = state.triggers.get(d.name) or TriggerState()
-        reason, mem = _safe_condition(d, health, th, ts.memory)
+        ts = old.get(d.name)
+        if ts is None:
+            ts = _IDLE
+            changed = True
+        try:
+            reason, mem = d.condition(health, th, ts.memory)
+        except Exception as exc:  # a broken condition is itself a reason to act
+            reason, mem = f"condition could not be evaluated ({type(exc).__name__}: {exc})", \
+                ts.memory
         if reason is not None:
             if not ts.active:
-                ts = TriggerState(active=True, since_ns=t, reason=reason, memory=mem)
+                ts = TriggerState(True, t, reason, None, mem)
                 events.append(FailsafeEvent(t, "fired", d.name, d.action, reason))
-            else:
-                ts = replace(ts, reason=reason, false_since_ns=None, memory=mem)
+                changed = True
+            elif reason != ts.reason or ts.false_since_ns is not None or mem is not ts.memory:
+                changed = changed or reason != ts.reason or ts.false_since_ns is not None
+                ts = TriggerState(True, ts.since_ns, reason, None, mem)
         elif ts.active:
             false_since = ts.false_since_ns if ts.false_since_ns is not None else t
             if not d.latch and t - false_since >= clear_ns:
                 events.append(FailsafeEvent(t, "cleared", d.name, d.action,
                                             f"condition false for {th.clear_after_s:g} s"))
                 ts = TriggerState(memory=mem)
-            else:
-                ts = replace(ts, false_since_ns=false_since, memory=mem)
-        else:
-            ts = replace(ts, memory=mem) if mem is not ts.memory else ts
+                changed = True
+            elif false_since != ts.false_since_ns or mem is not ts.memory:
+                ts = TriggerState(True, ts.since_ns, ts.reason, false_since, mem)
+        elif mem is not ts.memory:
+            ts = TriggerState(memory=mem)
         new[d.name] = ts
         if ts.active:
             active.append(ActiveTrigger(d.name, d.action, ts.reason, ts.since_ns, d.latch))
@@ -560,8 +578,13 @@ def evaluate(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState
         why = "; ".join(f"{a.name}: {a.reason}" for a in top) or "no trigger active"
         events.append(FailsafeEvent(t, "action", ",".join(a.name for a in top) or "-",
                                     action, why))
-    return (Decision(action=action, active=tuple(active), events=tuple(events)),
-            ArbiterState(triggers=MappingProxyType(new), action=action))
+    prev = state.decision
+    if not changed and not events and prev is not None and not prev.events \
+            and len(prev.active) == len(active):
+        decision = prev  # nothing changed: reuse it (cheap at 1 kHz)
+    else:
+        decision = Decision(action=action, active=tuple(active), events=tuple(events))
+    return decision, ArbiterState(triggers=new, action=action, decision=decision)
 
 
 def reset(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState,
@@ -602,5 +625,4 @@ def reset(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState,
             continue
         new[n] = TriggerState(memory=mem)
         events.append(FailsafeEvent(health.t_ns, "reset", n, d.action, "operator reset"))
-    return (ArbiterState(triggers=MappingProxyType(new), action=state.action), tuple(events),
-            tuple(refused))
+    return (ArbiterState(triggers=new, action=state.action), tuple(events), tuple(refused))

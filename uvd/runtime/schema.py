@@ -525,4 +525,10 @@ def reloadable_changes(old: Any, new: Any, prefix: str = ""
                 changes[f.name] = b
             else:
                 refused.append(key)
-    return (dataclasses.replace(old, **changes) if changes else old), applied, refused
+    if not changes:
+        return old, applied, refused
+    merged = dataclasses.replace(old, **changes)
+    for f in dataclasses.fields(old):  # carry non-init fields (e.g. the file name) over
+        if not f.init:
+            object.__setattr__(merged, f.name, getattr(old, f.name))
+    return merged, applied, refused

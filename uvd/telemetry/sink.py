@@ -1,0 +1,236 @@
+"""Telemetry sinks and the hub that feeds them off the control loop.
+
+The loop calls :meth:`TelemetryHub.publish` with a plain record (a dict of numbers, strings,
+numpy arrays…) once per cycle. ``publish`` only appends to one bounded deque per sink —
+O(number of sinks), no lock, no await, no I/O — and when a sink's queue is full the *oldest*
+record is dropped and counted, so the loop never waits for a slow consumer and the freshest
+data survives. A pump task per sink (owned by the application's TaskGroup through
+:meth:`TelemetryHub.run`) drains its queue every ``flush_interval_s`` and hands batches to the
+sink; a sink that fails is counted and retried with the next batch, never propagated.
+
+Records must not be mutated after they are published (the core returns new arrays every cycle,
+so this holds by construction).
+
+A sink implements :class:`TelemetrySink`. Zenoh, MAVLink and the black-box recorder plug in
+as further sinks; :class:`uvd.telemetry.jsonl.JsonLinesSink` is the one provided now.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections import deque
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+__all__ = ["TelemetrySink", "BoundedQueue", "TelemetryHub", "SinkStats"]
+
+
+@runtime_checkable
+class TelemetrySink(Protocol):
+    """Where telemetry records go. Every method runs in the event loop, off the loop's cycle.
+
+    ``write`` should not block the event loop for long: encode in small slices and hand file
+    or network I/O to a thread (see :class:`~uvd.telemetry.jsonl.JsonLinesSink`).
+    """
+
+    name: str
+
+    async def open(self) -> None:
+        """Acquire resources (file, session); called once before the first ``write``."""
+
+    async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
+        """Take a batch of records (oldest first)."""
+
+    async def flush(self) -> None:
+        """Push buffered data out (called on shutdown before ``aclose``)."""
+
+    async def aclose(self) -> None:
+        """Release resources; the sink is not used afterwards."""
+
+
+class BoundedQueue:
+    """A non-blocking bounded FIFO: ``put`` never waits; when full the oldest is dropped.
+
+    Safe to ``put`` from the loop's thread while the pump drains it in the same event loop.
+    """
+
+    __slots__ = ("_dq", "capacity", "published", "dropped")
+
+    def __init__(self, capacity: int) -> None:
+        if capacity < 1:
+            raise ValueError("capacity must be >= 1")
+        self.capacity = int(capacity)
+        self._dq: deque = deque(maxlen=self.capacity)
+        self.published = 0
+        self.dropped = 0
+
+    def put(self, item: Any) -> bool:
+        """Append ``item``; returns False when an older item had to be dropped for it."""
+        full = len(self._dq) == self.capacity
+        if full:
+            self.dropped += 1
+        self._dq.append(item)
+        self.published += 1
+        return not full
+
+    def drain(self, max_items: int | None = None) -> list:
+        """Remove and return up to ``max_items`` items, oldest first."""
+        dq = self._dq
+        n = len(dq) if max_items is None else min(len(dq), max_items)
+        return [dq.popleft() for _ in range(n)]
+
+    def __len__(self) -> int:
+        return len(self._dq)
+
+
+@dataclass
+class SinkStats:
+    """Counters of one sink."""
+
+    published: int = 0
+    dropped: int = 0
+    written: int = 0
+    batches: int = 0
+    errors: int = 0
+    last_error: str | None = None
+    queued: int = 0
+    close_s: float | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+class _Lane:
+    def __init__(self, sink: TelemetrySink, capacity: int) -> None:
+        self.sink = sink
+        self.queue = BoundedQueue(capacity)
+        self.stats = SinkStats()
+        self.opened = False
+        self.wake = asyncio.Event()
+        self.lock = asyncio.Lock()  # one drain at a time keeps batches in order
+
+
+class TelemetryHub:
+    """Fan-out from the loop to every sink, each through its own bounded queue.
+
+    Parameters
+    ----------
+    sinks : iterable of TelemetrySink
+    queue_size : int
+        Records buffered per sink.
+    flush_interval_s : float
+        How often the pumps drain their queues.
+    batch : int
+        Largest batch handed to a sink at once.
+    every_n : int
+        Publish one record in N (decimation for high loop rates); changeable at run time.
+    """
+
+    def __init__(self, sinks: Iterable[TelemetrySink] = (), *, queue_size: int = 1024,
+                 flush_interval_s: float = 0.05, batch: int = 256, every_n: int = 1) -> None:
+        self.queue_size = int(queue_size)
+        self.flush_interval_s = float(flush_interval_s)
+        self.batch = int(batch)
+        self.every_n = max(1, int(every_n))
+        self._count = 0
+        self._lanes: list[_Lane] = [_Lane(s, self.queue_size) for s in sinks]
+        self._closing = False
+
+    def add_sink(self, sink: TelemetrySink) -> None:
+        """Add a sink before :meth:`run` starts."""
+        self._lanes.append(_Lane(sink, self.queue_size))
+
+    @property
+    def sinks(self) -> list[TelemetrySink]:
+        return [lane.sink for lane in self._lanes]
+
+    def publish(self, record: Mapping[str, Any]) -> None:
+        """From the loop: enqueue ``record`` for every sink. Never blocks, never raises."""
+        self._count += 1
+        if self._count % self.every_n:
+            return
+        for lane in self._lanes:
+            lane.queue.put(record)
+
+    async def _pump(self, lane: _Lane) -> None:
+        try:
+            await lane.sink.open()
+            lane.opened = True
+        except Exception as exc:  # a sink that cannot open is reported, others go on
+            lane.stats.errors += 1
+            lane.stats.last_error = f"open: {type(exc).__name__}: {exc}"
+            return
+        while not self._closing:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(lane.wake.wait(), self.flush_interval_s)
+            lane.wake.clear()
+            await self._drain(lane)
+
+    async def _drain(self, lane: _Lane) -> None:
+        async with lane.lock:
+            await self._drain_locked(lane)
+
+    async def _drain_locked(self, lane: _Lane) -> None:
+        while len(lane.queue):
+            batch = lane.queue.drain(self.batch)
+            try:
+                await lane.sink.write(batch)
+                lane.stats.written += len(batch)
+                lane.stats.batches += 1
+            except Exception as exc:  # counted; the records of that batch are lost
+                lane.stats.errors += 1
+                lane.stats.last_error = f"write: {type(exc).__name__}: {exc}"
+                lane.stats.dropped += len(batch)
+                return
+
+    async def run(self) -> None:
+        """Pump every sink until :meth:`aclose` (run it as one task of the TaskGroup)."""
+        if not self._lanes:
+            return
+        async with asyncio.TaskGroup() as tg:
+            for lane in self._lanes:
+                tg.create_task(self._pump(lane), name=f"telemetry:{lane.sink.name}")
+
+    async def aclose(self, timeout_s: float = 0.5) -> dict[str, dict[str, Any]]:
+        """Stop the pumps, write what is queued, flush and close every sink.
+
+        Each sink gets ``timeout_s`` for its final drain + flush + close; a sink that does not
+        finish in time is abandoned (counted as an error). Returns :meth:`stats`.
+        """
+        self._closing = True
+        for lane in self._lanes:
+            lane.wake.set()
+
+        async def finish(lane: _Lane) -> None:
+            if lane.opened:
+                await self._drain(lane)
+                await lane.sink.flush()
+                await lane.sink.aclose()
+
+        for lane in self._lanes:
+            t0 = time.monotonic()
+            try:
+                await asyncio.wait_for(finish(lane), timeout_s)
+            except TimeoutError:
+                lane.stats.errors += 1
+                lane.stats.last_error = f"close: not finished within {timeout_s:g} s"
+            except Exception as exc:
+                lane.stats.errors += 1
+                lane.stats.last_error = f"close: {type(exc).__name__}: {exc}"
+            lane.stats.close_s = time.monotonic() - t0
+        return self.stats()
+
+    def stats(self) -> dict[str, dict[str, Any]]:
+        """Per-sink counters: published, dropped (queue full or failed write), written…"""
+        out = {}
+        for lane in self._lanes:
+            st = lane.stats
+            st.published = lane.queue.published
+            st.queued = len(lane.queue)
+            d = st.as_dict()
+            d["dropped"] = lane.queue.dropped + st.dropped
+            out[lane.sink.name] = d
+        return out
