@@ -91,11 +91,13 @@ class StreamDecoder:
         How many of the latest :class:`DecodeErrorRecord` to keep in ``errors``.
     keep_raw : bool
         Return ``(frame, raw_bytes)`` pairs from :meth:`feed` instead of frames.
+    keep_offset : bool
+        With ``keep_raw``: return ``(frame, raw_bytes, stream_offset)`` triples.
     """
 
     def __init__(self, codec: FrameCodec, max_buffer: int | None = None,
                  counters: Counters | None = None, keep_errors: int = 100,
-                 keep_raw: bool = False):
+                 keep_raw: bool = False, keep_offset: bool = False):
         self.codec = codec
         self.max_buffer = int(max_buffer or max(4096, 4 * codec.max_frame))
         if self.max_buffer < codec.max_frame:
@@ -104,6 +106,7 @@ class StreamDecoder:
         self.counters = counters if counters is not None else Counters()
         self.errors: deque[DecodeErrorRecord] = deque(maxlen=keep_errors)
         self.keep_raw = keep_raw
+        self.keep_offset = keep_offset
         self._buf = bytearray()
         self._base = 0  # stream offset of _buf[0]
         self._in_sync = True  # False while dropping bytes (one resync per lost-sync episode)
@@ -186,7 +189,12 @@ class StreamDecoder:
                     continue
                 c.frames += 1
                 self._in_sync = True
-                out.append((msg, frame) if self.keep_raw else msg)
+                if not self.keep_raw:
+                    out.append(msg)
+                elif self.keep_offset:
+                    out.append((msg, frame, self._base + pos))
+                else:
+                    out.append((msg, frame))
                 pos += n
         finally:
             if pos:
@@ -233,9 +241,11 @@ class StreamDecoder:
 
 
 def decode_bytes(codec: FrameCodec, data: bytes, counters: Counters | None = None,
-                 keep_raw: bool = False) -> tuple[list, StreamDecoder]:
+                 keep_raw: bool = False, keep_offset: bool = False
+                 ) -> tuple[list, StreamDecoder]:
     """Decode a whole byte string (e.g. a recorded file); returns (frames, decoder)."""
-    dec = StreamDecoder(codec, counters=counters, keep_raw=keep_raw,
+    dec = StreamDecoder(codec, counters=counters, keep_raw=keep_raw or keep_offset,
+                        keep_offset=keep_offset,
                         max_buffer=max(len(data) + 1, 4 * codec.max_frame))
     frames = dec.feed(data)
     frames.extend(dec.finish())
