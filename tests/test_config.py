@@ -1,0 +1,233 @@
+"""Configuration: TOML → frozen dataclasses; every error names the file, the key and the reason;
+``docs/config.md`` is generated from the schema; ``uvd check-config``; reloadable keys."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from uvd.cli import main
+from uvd.runtime.config import (
+    DEFAULT_CONFIG,
+    Config,
+    ConfigValidationError,
+    load_config,
+    parse_config,
+    render_config_doc,
+)
+from uvd.runtime.schema import describe, reloadable_changes
+
+ROOT = Path(__file__).resolve().parents[1]
+
+MINIMAL = """
+[sensors.ins]
+port = "/dev/ttyUSB0"
+[sensors.dvl]
+port = "/dev/ttyUSB1"
+[sensors.depth]
+port = "/dev/ttyUSB2"
+"""
+
+
+def write(tmp_path: Path, text: str, name="uvd.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def errors_of(tmp_path, text) -> tuple[ConfigValidationError, dict[str, str]]:
+    p = write(tmp_path, text)
+    with pytest.raises(ConfigValidationError) as ei:
+        load_config(p)
+    exc = ei.value
+    assert exc.source == str(p)
+    for line in str(exc).splitlines():
+        assert line.startswith(f"{p}: "), line  # every line names the file
+    return exc, dict(exc.errors)
+
+
+def test_example_configs_are_valid_and_frozen():
+    sim = load_config(ROOT / "config" / "sim.toml")
+    assert sim.vehicle.name == "jhu-rov" and sim.loop.rate_hz == 10.0
+    assert sim.control.controller == "two-step-ambc" and sim.control.robust_adaptation
+    assert sim.can.bus.interface == "udp_multicast" and sim.can.depth.enabled
+    assert sim.sensors.ins.port.startswith("/tmp/") and sim.source.endswith("sim.toml")
+    rov = load_config(ROOT / "config" / "jhu-rov.toml")
+    assert rov.loop.sched_fifo_priority == 50 and rov.loop.cpu_affinity == (1,)
+    assert rov.can.bus.interface == "socketcan" and rov.can.amplifiers.node_ids == (1, 2, 3, 4,
+                                                                                    5, 6)
+    assert DEFAULT_CONFIG == ROOT / "config" / "sim.toml"
+    assert load_config().source == str(DEFAULT_CONFIG)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        sim.control.kp = 1.0
+
+
+def test_defaults_fill_in():
+    cfg = parse_config(__import__("tomllib").loads(MINIMAL))
+    assert cfg.loop.rate_hz == 10.0 and cfg.control.kp == 300.0 and cfg.control.kd == 100.0
+    assert cfg.control.robust_adaptation is True
+    assert cfg.failsafe.ins_stale_s == 0.1 and cfg.failsafe.dvl_stale_s == 1.0
+    assert cfg.failsafe.depth_stale_s == 0.5 and cfg.failsafe.depth_stuck_s == 2.0
+    assert cfg.sensors.depth.baud == 9600 and cfg.sensors.depth.conversion.water == "fresh"
+
+
+def test_the_four_classic_mistakes_name_their_keys(tmp_path):
+    exc, errs = errors_of(tmp_path, """
+[loop]
+rate_hz = 100.0
+turbo = true                      # unknown key
+[control]
+kp = -5.0                         # out of range
+kd = "high"                       # wrong type
+[sensors.ins]
+format = "phins-stdbin"           # port missing
+[sensors.dvl]
+port = "/dev/ttyUSB1"
+[sensors.depth]
+port = "/dev/ttyUSB2"
+""")
+    assert set(errs) == {"loop.turbo", "control.kp", "control.kd", "sensors.ins.port"}
+    assert errs["loop.turbo"].startswith("unknown key")
+    assert "out of range" in errs["control.kp"] and "≥ 0" in errs["control.kp"]
+    assert errs["control.kd"] == "expected a number, got string 'high'"
+    assert errs["sensors.ins.port"].startswith("missing required key")
+    assert f"{tmp_path / 'uvd.toml'}: control.kp: -5.0 is out of range" in str(exc)
+
+
+@pytest.mark.parametrize("snippet,key,words", [
+    ("[loop]\nrate_hz = 0", "loop.rate_hz", "out of range"),
+    ("[loop]\nrate_hz = true", "loop.rate_hz", "expected a number"),
+    ("[loop]\nsched_fifo_priority = 1.5", "loop.sched_fifo_priority", "expected an integer"),
+    ("[loop]\ncpu_affinity = [0, \"x\"]", "loop.cpu_affinity[1]", "expected an integer"),
+    ("[loop]\ntimer = \"hrtimer\"", "loop.timer", "not one of"),
+    ("[control]\ncontroller = \"lqr\"", "control.controller", "not one of"),
+    ("[control]\nkp = 1e9", "control.kp", "out of range"),
+    ("[failsafe]\nins_stale_s = 0", "failsafe.ins_stale_s", "out of range"),
+    ("[failsafe]\ndisabled = [\"ins_stale\", \"warp\"]", "failsafe.disabled", "unknown trigger"),
+    ("[sensors.gps]\nport = \"/dev/ttyS0\"", "sensors.gps", "unknown key"),
+    ("[can.log]\nmax_bytes = -1", "can.log.max_bytes", "expected an integer >= 0"),
+    ("[telemetry]\nqueue_size = 2", "telemetry.queue_size", "out of range"),
+    ("vehicle = \"jhu-rov\"", "vehicle", "expected a table"),
+    ("[vehicle]\nname = \"submarine\"", "vehicle.name", "neither a built-in vehicle"),
+    ("[vehicle]\nname = \"missing.toml\"", "vehicle.name", "not found"),
+])
+def test_single_mistakes(tmp_path, snippet, key, words):
+    _, errs = errors_of(tmp_path, snippet + "\n" + MINIMAL)
+    assert key in errs, errs
+    assert words in errs[key]
+
+
+def test_port_forms(tmp_path):
+    ok = MINIMAL.replace('"/dev/ttyUSB0"', '"udp://0.0.0.0:8110"').replace(
+        '"/dev/ttyUSB1"', '"tcp://10.0.0.5:8112"')
+    cfg = load_config(write(tmp_path, ok))
+    assert cfg.sensors.ins.port == "udp://0.0.0.0:8110"
+    _, errs = errors_of(tmp_path, MINIMAL.replace('"/dev/ttyUSB0"', '"ttyUSB0"'))
+    assert "absolute device path" in errs["sensors.ins.port"]
+    _, errs = errors_of(tmp_path, MINIMAL.replace('"/dev/ttyUSB0"', '"udp://h:70000"'))
+    assert "1..65535" in errs["sensors.ins.port"]
+
+
+def test_depth_source_rules(tmp_path):
+    no_port = MINIMAL.replace('[sensors.depth]\nport = "/dev/ttyUSB2"\n', "[sensors.depth]\n")
+    _, errs = errors_of(tmp_path, no_port)
+    assert "source = \"serial\"" in errs["sensors.depth.port"]
+    can_src = no_port.replace("[sensors.depth]\n", "[sensors.depth]\nsource = \"can\"\n")
+    _, errs = errors_of(tmp_path, can_src)
+    assert "[can.depth] enabled = true" in errs["sensors.depth.source"]
+    cfg = load_config(write(tmp_path, can_src + "\n[can.depth]\nenabled = true\n"))
+    assert cfg.sensors.depth.source == "can" and cfg.sensors.depth.port is None
+
+
+def test_driver_sections_plug_in_and_their_errors_name_keys(tmp_path):
+    # the CAN driver's own validation (drivers/can/config.py) is folded into the same report
+    _, errs = errors_of(tmp_path, MINIMAL + "[can.amplifiers]\nnode_ids = [1, 2, 200]\n")
+    assert "can.amplifiers.node_ids" in errs and "1..127" in errs["can.amplifiers.node_ids"]
+    _, errs = errors_of(tmp_path, MINIMAL + "[can]\ninterface = \"udp_multicast\"\n"
+                                            "channel = \"239.1.1.1\"\n")
+    assert "can.channel" in errs and "could leave this machine" in errs["can.channel"]
+    _, errs = errors_of(tmp_path, MINIMAL + "[can]\ninterface = \"socketcann\"\n")
+    assert "not a python-can interface" in errs["can.interface"]
+    _, errs = errors_of(tmp_path, MINIMAL + "[can.amplifiers]\nnode_ids = [1, 2, 3, 4, 5]\n")
+    assert "5 node ids for the 6 thrusters" in errs["can.amplifiers.node_ids"]
+    # the Digiquartz driver's DepthConverter is a plain dataclass section
+    _, errs = errors_of(tmp_path, MINIMAL + "[sensors.depth.conversion]\nwater = \"brine\"\n")
+    assert "fresh" in errs["sensors.depth.conversion"]
+
+
+def test_vehicle_file_relative_to_the_config(tmp_path):
+    src = Path(sys.modules["uvd.model.vehicle"].__file__).resolve().parents[2] / \
+        "sim_bridge" / "vehicles" / "jhu-rov.toml"
+    (tmp_path / "v").mkdir()
+    (tmp_path / "v" / "mine.toml").write_text(src.read_text())
+    cfg = load_config(write(tmp_path, "[vehicle]\nname = \"v/mine.toml\"\n" + MINIMAL))
+    assert cfg.vehicle_ref() == str(tmp_path / "v" / "mine.toml")
+    assert cfg.load_vehicle().n_thrusters == 6
+
+
+def test_unreadable_and_invalid_toml(tmp_path):
+    with pytest.raises(ConfigValidationError, match="cannot read"):
+        load_config(tmp_path / "nope.toml")
+    p = write(tmp_path, "[loop\nrate_hz = 1")
+    with pytest.raises(ConfigValidationError, match="not valid TOML"):
+        load_config(p)
+
+
+def test_docs_config_md_is_generated_from_the_schema():
+    doc = render_config_doc()
+    committed = (ROOT / "docs" / "config.md").read_text()
+    assert committed == doc + "\n", "docs/config.md is stale: run " \
+                                    "`uvd check-config --doc-out docs/config.md`"
+    # every key of every table is documented with its default
+    n_keys = 0
+    for table, _doc, keys in describe(Config):
+        assert f"## `[{table}]`" in doc
+        for k in keys:
+            n_keys += 1
+            assert f"| `{k.key.rsplit('.', 1)[-1]}` |" in doc
+    assert n_keys > 60
+    for unit in ("| Hz |", "| s |", "| µs |", "| bit/s |"):
+        assert unit in doc
+
+
+def test_reloadable_changes(tmp_path):
+    old = load_config(ROOT / "config" / "sim.toml")
+    text = (ROOT / "config" / "sim.toml").read_text()
+    text = text.replace("kp = 300.0", "kp = 250.0").replace("rate_hz = 10.0", "rate_hz = 20.0")
+    text = text.replace("ins_stale_s = 0.1", "ins_stale_s = 0.2")
+    new = load_config(write(tmp_path, text))
+    merged, applied, refused = reloadable_changes(old, new)
+    assert sorted(applied) == ["control.kp", "failsafe.ins_stale_s"]
+    assert refused == ["loop.rate_hz"]
+    assert merged.control.kp == 250.0 and merged.loop.rate_hz == 10.0
+    assert merged.failsafe.ins_stale_s == 0.2 and merged.source == old.source
+    same, a, r = reloadable_changes(old, old)
+    assert same is old and a == [] and r == []
+
+
+def test_check_config_command(tmp_path, capsys):
+    assert main(["check-config", str(ROOT / "config" / "sim.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "OK" in out and "two-step-ambc" in out
+    bad = write(tmp_path, MINIMAL + "[control]\nkp = -1\n")
+    assert main(["check-config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"{bad}: control.kp: -1.0 is out of range" in err and "1 error" in err
+    doc = tmp_path / "config.md"
+    assert main(["check-config", "--doc-out", str(doc)]) == 0
+    assert doc.read_text() == render_config_doc() + "\n"
+    assert main(["check-config"]) == 2
+    assert main(["check-config", "--print", str(ROOT / "config" / "sim.toml")]) == 0
+    assert '"rate_hz": 10.0' in capsys.readouterr().out
+
+
+def test_check_config_as_a_process(tmp_path):
+    bad = write(tmp_path, "[loop]\nrate_hz = \"fast\"\n" + MINIMAL)
+    r = subprocess.run([sys.executable, "-m", "uvd", "check-config", str(bad)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2
+    assert f"{bad}: loop.rate_hz: expected a number, got string 'fast'" in r.stderr
