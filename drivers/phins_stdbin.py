@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from drivers import frames
-from drivers._layout import Layout
+from drivers._layout import Layout, byte_sum
 from drivers.samples import DepthSample, DvlSample, InsSample
 from uvd.errors import ChecksumError, FrameError
 
@@ -306,9 +306,7 @@ def _parse_masks(buf, start: int, version: int) -> tuple[int, int, int, int]:
 
 def checksum(data: bytes | memoryview) -> int:
     """STDBIN checksum: 32-bit sum of the bytes."""
-    if len(data) > 256:
-        return int(np.frombuffer(data, np.uint8).sum(dtype=np.uint64)) & 0xFFFFFFFF
-    return sum(data) & 0xFFFFFFFF
+    return byte_sum(data) & 0xFFFFFFFF
 
 
 def decode_frame(frame: bytes) -> StdbinFrame:
@@ -361,9 +359,7 @@ def decode_frame(frame: bytes) -> StdbinFrame:
                 if off + lay.size > end:
                     raise FrameError(f"phins-stdbin: {section} block {name} (bit {bit}) runs "
                                      f"past the end of the {n} B frame")
-                d = lay.decode(frame, off)
-                del d["_extra"]
-                blocks[name] = d
+                blocks[name] = lay.decode(frame, off)
                 off += lay.size
             m >>= 1
             bit += 1

@@ -62,8 +62,7 @@ def layout_values(lay: Layout, fixed: dict | None = None, prefix: bool = False):
 
     def build(args):
         raw, k, extra = args
-        d = lay.decode(raw)
-        del d["_extra"]
+        d = dict(lay.decode(raw))
         d = {n: (tuple(_finite(x) for x in v) if isinstance(v, tuple) else _finite(v))
              for n, v in d.items()}
         if fixed:
@@ -116,7 +115,7 @@ def stdbin_frames(draw) -> phins_stdbin.StdbinFrame:
         for bit in draw(st.lists(st.sampled_from(sorted(table)), unique=True, max_size=6)):
             name, lay = table[bit]
             d = draw(layout_values(lay))
-            del d["_extra"]
+            d.pop("_extra", None)
             blocks[name] = d
     nav_size = draw(st.integers(0, 0xFFFF)) if version >= 4 else None
     return phins_stdbin.StdbinFrame(version, 0, 0, 0, draw(st.integers(0, 0xFFFFFFFF)),

@@ -135,3 +135,11 @@ def test_stream_decoder_partial_frames_across_feeds():
             got += dec.feed(raw[i:i + chunk])
         assert [f.counter for f in got] == [f.counter for f in whole] == list(range(5))
         assert dec.buffered == 0
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=3000))
+def test_byte_sum_is_the_plain_sum(data):
+    from drivers._layout import byte_sum
+
+    assert byte_sum(data) == sum(data)
