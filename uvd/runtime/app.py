@@ -66,6 +66,7 @@ from uvd.runtime.loop import FixedRateLoop, RealtimeReport, apply_realtime, drop
 from uvd.runtime.notify import SdNotifier, WatchdogPinger
 from uvd.runtime.schema import reloadable_changes
 from uvd.runtime.supervisor import Supervisor
+from uvd.telemetry._worker import run_in_daemon_thread
 from uvd.telemetry.jsonl import JsonLinesSink
 from uvd.telemetry.sink import TelemetryHub, TelemetrySink
 
@@ -94,8 +95,9 @@ class Component(Protocol):
 class ShutdownStep:
     """One step of the shutdown sequence.
 
-    ``fn`` is a plain function (run in a worker thread, so its timeout holds even if it
-    blocks) or a coroutine function; it is called ``repeat`` times ``interval_s`` apart.
+    ``fn`` is a plain function (run in a daemon thread, so its timeout holds even if it
+    blocks, and a call that never returns cannot keep the process from exiting) or a
+    coroutine function; it is called ``repeat`` times ``interval_s`` apart.
     """
 
     name: str
@@ -386,8 +388,8 @@ class App:
         async def once() -> None:
             if inspect.iscoroutinefunction(step.fn):
                 await step.fn()
-            else:
-                result = await asyncio.to_thread(step.fn)
+            else:  # a daemon thread: a call that hangs is abandoned, never joined at exit
+                result = await run_in_daemon_thread(step.fn, name=f"uvd-{step.name}")
                 if inspect.isawaitable(result):
                     await result
 

@@ -2,7 +2,8 @@
 
 Records are encoded in the event loop in time-bounded slices (the sink yields every
 ``slice_s`` of encoding, so a large batch never holds the event loop for long) and written by
-a worker thread (``asyncio.to_thread``), so a slow disk never stalls the event loop either.
+the sink's own daemon thread, so a slow disk never stalls the event loop, and a hung disk
+cannot keep the daemon from exiting.
 Numpy arrays become lists, NaN/inf become ``null`` (:func:`uvd.jsonio.to_jsonable`); anything
 else JSON cannot represent is written as its ``str``. On close the file is flushed and
 ``fsync``-ed, so a clean shutdown leaves only complete lines.
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from uvd.jsonio import to_jsonable
+from uvd.telemetry._worker import DaemonWorker
 
 __all__ = ["JsonLinesSink"]
 
@@ -49,6 +51,7 @@ class JsonLinesSink:
         self.fsync_on_close = fsync_on_close
         self.lines = 0
         self._fh = None
+        self._worker = DaemonWorker(f"uvd-sink-{name}")
 
     def _open(self):
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -57,7 +60,7 @@ class JsonLinesSink:
 
     async def open(self) -> None:
         if self._fh is None:
-            self._fh = await asyncio.to_thread(self._open)
+            self._fh = await self._worker.submit(self._open)
 
     async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
         if self._fh is None:
@@ -71,12 +74,12 @@ class JsonLinesSink:
                 await asyncio.sleep(0)
                 t0 = time.perf_counter()
         if parts:
-            await asyncio.to_thread(self._fh.write, "\n".join(parts) + "\n")
+            await self._worker.submit(self._fh.write, "\n".join(parts) + "\n")
             self.lines += len(parts)
 
     async def flush(self) -> None:
         if self._fh is not None:
-            await asyncio.to_thread(self._fh.flush)
+            await self._worker.submit(self._fh.flush)
 
     def _close(self) -> None:
         fh, self._fh = self._fh, None
@@ -90,4 +93,7 @@ class JsonLinesSink:
             fh.close()
 
     async def aclose(self) -> None:
-        await asyncio.to_thread(self._close)
+        try:
+            await self._worker.submit(self._close)
+        finally:
+            self._worker.close()

@@ -109,6 +109,8 @@ class _Lane:
         self.queue = BoundedQueue(capacity)
         self.stats = SinkStats()
         self.opened = False
+        self.open_failed = False
+        self.open_lock = asyncio.Lock()
         self.wake = asyncio.Event()
         self.lock = asyncio.Lock()  # one drain at a time keeps batches in order
 
@@ -155,13 +157,20 @@ class TelemetryHub:
         for lane in self._lanes:
             lane.queue.put(record)
 
+    async def _ensure_open(self, lane: _Lane) -> bool:
+        async with lane.open_lock:
+            if not lane.opened and not lane.open_failed:
+                try:
+                    await lane.sink.open()
+                    lane.opened = True
+                except Exception as exc:  # a sink that cannot open is reported, others go on
+                    lane.open_failed = True
+                    lane.stats.errors += 1
+                    lane.stats.last_error = f"open: {type(exc).__name__}: {exc}"
+        return lane.opened
+
     async def _pump(self, lane: _Lane) -> None:
-        try:
-            await lane.sink.open()
-            lane.opened = True
-        except Exception as exc:  # a sink that cannot open is reported, others go on
-            lane.stats.errors += 1
-            lane.stats.last_error = f"open: {type(exc).__name__}: {exc}"
+        if not await self._ensure_open(lane):
             return
         while not self._closing:
             with contextlib.suppress(TimeoutError):
@@ -205,7 +214,7 @@ class TelemetryHub:
             lane.wake.set()
 
         async def finish(lane: _Lane) -> None:
-            if lane.opened:
+            if await self._ensure_open(lane):
                 await self._drain(lane)
                 await lane.sink.flush()
                 await lane.sink.aclose()

@@ -1,0 +1,213 @@
+"""Telemetry fed off the loop: bounded non-blocking queues (drop oldest, count), per-sink pumps,
+the JSON-lines sink, and the latest-value mailbox."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import time
+
+import numpy as np
+
+from uvd.runtime.mailbox import Mailbox
+from uvd.telemetry import BoundedQueue, JsonLinesSink, TelemetryHub
+from uvd.telemetry._worker import DaemonWorker, run_in_daemon_thread
+
+
+def run(coro, timeout=20.0):
+    async def bounded():
+        return await asyncio.wait_for(coro, timeout)
+    return asyncio.run(bounded())
+
+
+class ListSink:
+    def __init__(self, name="list", delay_s=0.0, fail_every=0, hang_close=False):
+        self.name = name
+        self.delay_s = delay_s
+        self.fail_every = fail_every
+        self.hang_close = hang_close
+        self.records = []
+        self.calls = 0
+        self.closed = self.flushed = self.opened = False
+
+    async def open(self):
+        self.opened = True
+
+    async def write(self, records):
+        self.calls += 1
+        if self.fail_every and self.calls % self.fail_every == 0:
+            raise OSError("link down")
+        if self.delay_s:
+            await asyncio.sleep(self.delay_s)
+        self.records.extend(records)
+
+    async def flush(self):
+        self.flushed = True
+
+    async def aclose(self):
+        if self.hang_close:
+            await asyncio.sleep(60)
+        self.closed = True
+
+
+def test_bounded_queue_drops_the_oldest_and_counts():
+    q = BoundedQueue(3)
+    assert [q.put(i) for i in range(5)] == [True, True, True, False, False]
+    assert q.dropped == 2 and q.published == 5 and len(q) == 3
+    assert q.drain(2) == [2, 3] and q.drain() == [4] and q.drain() == []
+
+
+def test_hub_delivers_everything_to_a_fast_sink_in_order():
+    sink = ListSink()
+
+    async def main():
+        hub = TelemetryHub([sink], queue_size=10_000, flush_interval_s=0.01)
+        pump = asyncio.create_task(hub.run())
+        for i in range(500):
+            hub.publish({"i": i})
+            if i % 50 == 0:
+                await asyncio.sleep(0.005)
+        stats = await hub.aclose(1.0)
+        await asyncio.wait_for(pump, 2.0)
+        return stats
+
+    stats = run(main())["list"]
+    assert [r["i"] for r in sink.records] == list(range(500))
+    assert stats["published"] == 500 and stats["written"] == 500 and stats["dropped"] == 0
+    assert sink.opened and sink.flushed and sink.closed
+
+
+def test_a_slow_sink_loses_the_oldest_records_and_never_blocks_the_publisher():
+    slow, fast = ListSink("slow", delay_s=0.05), ListSink("fast")
+
+    async def main():
+        hub = TelemetryHub([slow, fast], queue_size=64, flush_interval_s=0.005, batch=32)
+        pump = asyncio.create_task(hub.run())
+        for i in range(3000):
+            hub.publish({"i": i})          # a burst: no await in between, like the loop
+            if i % 100 == 99:
+                await asyncio.sleep(0.002)
+        stats = await hub.aclose(2.0)
+        await asyncio.wait_for(pump, 2.0)
+        return stats
+
+    stats = run(main())
+    s = stats["slow"]
+    assert s["dropped"] > 0
+    assert s["written"] + s["dropped"] == s["published"] == 3000
+    got = [r["i"] for r in slow.records]
+    assert got == sorted(got) and got[-1] == 2999   # the freshest survive, order kept
+    f = stats["fast"]
+    assert f["written"] + f["dropped"] == 3000 and f["written"] > s["written"]
+
+
+def test_a_failing_sink_is_counted_and_others_carry_on():
+    bad, good = ListSink("bad", fail_every=2), ListSink("good")
+
+    async def main():
+        hub = TelemetryHub([bad, good], queue_size=1000, flush_interval_s=0.005, batch=10)
+        pump = asyncio.create_task(hub.run())
+        for i in range(100):
+            hub.publish({"i": i})
+            await asyncio.sleep(0)
+        await asyncio.sleep(0.05)
+        stats = await hub.aclose(1.0)
+        await asyncio.wait_for(pump, 2.0)
+        return stats
+
+    stats = run(main())
+    assert stats["bad"]["errors"] >= 1 and "link down" in stats["bad"]["last_error"]
+    assert stats["bad"]["written"] + stats["bad"]["dropped"] == 100
+    assert len(good.records) == 100 and stats["good"]["errors"] == 0
+
+
+def test_closing_is_bounded_even_if_a_sink_hangs():
+    hang, ok = ListSink("hang", hang_close=True), ListSink("ok")
+
+    async def main():
+        hub = TelemetryHub([hang, ok], flush_interval_s=0.01)
+        pump = asyncio.create_task(hub.run())
+        hub.publish({"x": 1})
+        await asyncio.sleep(0.03)
+        t0 = time.monotonic()
+        stats = await hub.aclose(0.2)
+        took = time.monotonic() - t0
+        await asyncio.wait_for(pump, 2.0)
+        return stats, took
+
+    stats, took = run(main())
+    assert stats["hang"]["errors"] == 1 and "not finished" in stats["hang"]["last_error"]
+    assert ok.closed and took < 1.0
+
+
+def test_decimation():
+    sink = ListSink()
+
+    async def main():
+        hub = TelemetryHub([sink], every_n=10, flush_interval_s=0.01)
+        pump = asyncio.create_task(hub.run())
+        for i in range(100):
+            hub.publish({"i": i})
+        await hub.aclose(1.0)
+        await asyncio.wait_for(pump, 2.0)
+
+    run(main())
+    assert [r["i"] for r in sink.records] == list(range(9, 100, 10))
+
+
+def test_jsonl_sink_writes_complete_lines(tmp_path):
+    path = tmp_path / "sub" / "t.jsonl"
+
+    async def main():
+        sink = JsonLinesSink(path, truncate=True, slice_s=1e-6)
+        hub = TelemetryHub([sink], flush_interval_s=0.01)
+        pump = asyncio.create_task(hub.run())
+        for i in range(200):
+            hub.publish({"i": i, "thrust": np.array([1.0, np.nan, -np.inf]),
+                         "flag": np.bool_(True), "n": np.int64(i), "obj": object})
+        stats = await hub.aclose(2.0)
+        await asyncio.wait_for(pump, 2.0)
+        return sink, stats
+
+    sink, stats = run(main())
+    lines = path.read_text().splitlines()
+    assert len(lines) == 200 == sink.lines == stats["jsonl"]["written"]
+    rec = json.loads(lines[7])
+    assert rec["i"] == 7 and rec["thrust"] == [1.0, None, None] and rec["flag"] is True
+    assert rec["n"] == 7 and "object" in rec["obj"]
+
+    async def append():
+        sink = JsonLinesSink(path)
+        await sink.open()
+        await sink.write([{"again": math.pi}])
+        await sink.aclose()
+
+    run(append())
+    assert json.loads(path.read_text().splitlines()[-1]) == {"again": math.pi}
+
+
+def test_daemon_threads():
+    async def main():
+        w = DaemonWorker("t")
+        out = [await w.submit(lambda x: x * 2, 21)]
+        try:
+            await w.submit(lambda: 1 / 0)
+        except ZeroDivisionError:
+            out.append("raised")
+        w.close()
+        out.append(await run_in_daemon_thread(lambda: "done"))
+        return out
+
+    assert run(main()) == [42, "raised", "done"]
+
+
+def test_mailbox_keeps_the_newest_untaken_item():
+    m: Mailbox[int] = Mailbox("ins")
+    assert m.take() is None
+    m.put(1)
+    m.put(2)
+    assert m.peek() == 2 and m.take() == 2 and m.take() is None
+    m.put(3)
+    assert m.take() == 3
+    assert m.stats() == {"puts": 3, "takes": 2, "overwritten": 1}
