@@ -19,8 +19,8 @@ def register(sub) -> None:
     p.add_argument("--json", type=Path, metavar="OUT", help="write the MAE to this file")
     p.add_argument("--plots", type=Path, metavar="DIR",
                    help="write figures in the style of Figs. 4.5-4.7 into this folder")
-    p.add_argument("--substeps", type=int, default=5,
-                   help="integration steps per recorded period (default 5)")
+    p.add_argument("--substeps", type=int, default=2,
+                   help="integration steps per recorded period (default 2)")
     p.set_defaults(handler=_run)
 
 

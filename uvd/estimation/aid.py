@@ -74,6 +74,7 @@ __all__ = [
 ]
 
 _INTERP = ("linear", "hold")
+_SAMPLING = ("euler", "midpoint")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -97,12 +98,14 @@ def _min_max_eig(A):
 
 
 @numba.njit(cache=True)
-def _aid6_kernel(theta, vhat, v, r, u, dt, a, g1, g2, g3, g4, adapt, theta_out, vhat_out,
-                 diag):
-    """One Euler step of (4.23)–(4.27) from (θ̂, v̂, v, Rᵀe₃ = r, u).
+def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, g4, adapt,
+                 theta_out, vhat_out, diag):
+    """One Euler step of (4.23)–(4.27).
 
-    Writes θ̂⁺ and v̂⁺; ``diag`` receives [λ_min(M̂⁺), λ_max(M̂⁺)] (of M̂ if not adapting).
-    Returns 0 on success, 1 if M̂ itself is not positive definite (nothing written).
+    The model and regressor terms use the signals (v, Rᵀe₃ = r, u); v̂ is propagated with
+    ∆v = v̂ − v_prev; the parameter laws use that ∆v, or with ``fresh`` the new error
+    v̂⁺ − v_now. Writes θ̂⁺ and v̂⁺; ``diag`` receives [λ_min(M̂⁺), λ_max(M̂⁺)] (of M̂ if not
+    adapting). Returns 0 on success, 1 if M̂ itself is not positive definite (nothing written).
     """
     M = np.empty((6, 6))
     _sym_from_upper(theta, 6, M)
@@ -155,9 +158,11 @@ def _aid6_kernel(theta, vhat, v, r, u, dt, a, g1, g2, g3, g4, adapt, theta_out, 
         for k in range(i + 1, 6):
             s -= L[k, i] * psi2[k]
         psi2[i] = s / L[i, i]
-    dv = vhat - v
+    dv = vhat - v_prev
     for i in range(6):
         vhat_out[i] = vhat[i] + dt * (psi2[i] - a * dv[i])
+    if fresh:
+        dv = vhat_out - v_now
     for i in range(N_THETA_UV):
         theta_out[i] = theta[i]
     if not adapt:
@@ -204,7 +209,8 @@ def _aid6_kernel(theta, vhat, v, r, u, dt, a, g1, g2, g3, g4, adapt, theta_out, 
 
 
 @numba.njit(cache=True)
-def _aid3_kernel(theta, what, w, r, tau, dt, a, g1, g2, g3, adapt, theta_out, what_out, diag):
+def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3, adapt,
+                 theta_out, what_out, diag):
     """One Euler step of (4.10)–(4.13); the 3-DOF analogue of :func:`_aid6_kernel`."""
     I = np.empty((3, 3))
     _sym_from_upper(theta, 3, I)
@@ -250,9 +256,11 @@ def _aid3_kernel(theta, what, w, r, tau, dt, a, g1, g2, g3, adapt, theta_out, wh
         for k in range(i + 1, 3):
             s -= L[k, i] * psi3[k]
         psi3[i] = s / L[i, i]
-    dw = what - w
+    dw = what - w_prev
     for i in range(3):
         what_out[i] = what[i] + dt * (psi3[i] - a * dw[i])
+    if fresh:
+        dw = what_out - w_now
     for i in range(N_THETA_UVR):
         theta_out[i] = theta[i]
     if not adapt:
@@ -288,6 +296,109 @@ def _aid3_kernel(theta, what, w, r, tau, dt, a, g1, g2, g3, adapt, theta_out, wh
     lo, hi = _min_max_eig(I)
     diag[0], diag[1] = lo, hi
     return 0
+
+
+@numba.njit(cache=True)
+def _finite(x):
+    for i in range(x.shape[0]):
+        if not np.isfinite(x[i]):
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, dt, a, g1, g2, g3, g4,
+           linear, midpoint, adapt, pd_floor, theta_out, vhat_out, v_out, r_out, u_out, diag):
+    """Everything numeric of one AID step (n_v = 6: Theorem 4.3.1, 3: Theorem 4.2.1).
+
+    Copies the new sample into (v_out, r_out, u_out), builds the interval signals and runs the
+    kernel. Returns 0 adapted, 4 propagated only (frozen), 2 non-finite input (nothing done),
+    1 M̂ not positive definite, 3 update rejected: M̂⁺ lost positive definiteness or something
+    became non-finite (θ̂ kept, v̂ propagated if finite else reset to v).
+    """
+    off = 6 - n_v
+    for i in range(n_v):
+        v_out[i] = v_in[off + i]
+        u_out[i] = u_in[off + i]
+    for i in range(3):
+        r_out[i] = H[2, i]
+    if not (_finite(v_out) and _finite(r_out) and _finite(u_out)):
+        return 2
+    u = np.empty(n_v)
+    vs = np.empty(n_v)
+    rs = np.empty(3)
+    for i in range(n_v):
+        u[i] = 0.5 * (u_prev[i] + u_out[i]) if linear else u_out[i]
+        vs[i] = 0.5 * (v_prev[i] + v_out[i]) if midpoint else v_prev[i]
+    for i in range(3):
+        rs[i] = 0.5 * (r_prev[i] + r_out[i]) if midpoint else r_prev[i]
+    if n_v == 6:
+        status = _aid6_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, a, g1, g2,
+                              g3, g4, adapt, theta_out, vhat_out, diag)
+    else:
+        status = _aid3_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, a, g1, g2,
+                              g3, adapt, theta_out, vhat_out, diag)
+    if status != 0:
+        return 1
+    ok = _finite(theta_out) and _finite(vhat_out) and diag[0] > pd_floor * diag[1]
+    if not ok:
+        for i in range(theta.shape[0]):
+            theta_out[i] = theta[i]
+        if not _finite(vhat_out):
+            for i in range(n_v):
+                vhat_out[i] = v_out[i]
+        return 3
+    return 0 if adapt else 4
+
+
+def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
+    """The Python side of :func:`aid6_step`/:func:`aid3_step` (state bookkeeping only)."""
+    v_out = np.empty(n_v)
+    r_out = np.empty(3)
+    u_out = np.empty(n_v)
+    H = vs.H
+    v_in = vs.v
+    u_in = u_applied
+    if st.v_prev is None or not (0.0 < dt <= params.max_dt):  # t₀ (v̂ = v) or a gap
+        z = np.zeros(n_v)
+        status = _drive(n_v, st.theta, z, z, np.zeros(3), z, H, v_in, u_in, 0.0, 0.0, 0.0,
+                        0.0, 0.0, 0.0, False, False, False, 0.0, np.empty(st.theta.shape[0]),
+                        np.empty(n_v), v_out, r_out, u_out, np.empty(2))
+        if status == 2:
+            return replace(st, skipped=st.skipped + 1)
+        return replace(st, v_hat=v_out.copy(), dv=z, v_prev=v_out, r_prev=r_out, u_prev=u_out,
+                       resyncs=st.resyncs + (st.v_prev is not None))
+    gn = params.gains
+    theta_out = np.empty(st.theta.shape[0])
+    vhat_out = np.empty(n_v)
+    diag = np.empty(2)
+    g4 = gn.gamma4 if n_v == 6 else 0.0
+    status = _drive(n_v, st.theta, st.v_hat, st.v_prev, st.r_prev, st.u_prev, H, v_in, u_in,
+                    float(dt), gn.a, gn.gamma1, gn.gamma2, gn.gamma3, g4,
+                    params.input_interp == "linear", params.sampling == "midpoint",
+                    not st.frozen, params.pd_floor, theta_out, vhat_out, v_out, r_out, u_out,
+                    diag)
+    if status == 2:
+        return replace(st, skipped=st.skipped + 1)
+    t_s = st.t_s + dt
+    frozen, reason, steps = st.frozen, st.freeze_reason, st.steps
+    lo, hi = float(diag[0]), float(diag[1])
+    theta_new = st.theta
+    if status == 0:
+        steps += 1
+        theta_out.setflags(write=False)
+        theta_new = theta_out
+    elif status in (1, 3):
+        frozen = True
+        reason = (f"t={t_s:.1f}s after {steps} steps: {what} lost positive definiteness "
+                  f"(λ_min {lo:.4g}, λ_max {hi:.4g}); θ̂ frozen at its last PD value")
+        lo, hi = st.m_min_eig, st.m_max_eig
+        if status == 1:
+            vhat_out = v_out.copy()
+    return state_cls(theta=theta_new, v_hat=vhat_out, dv=vhat_out - v_out, v_prev=v_out,
+                     r_prev=r_out, u_prev=u_out, m_min_eig=lo, m_max_eig=hi, frozen=frozen,
+                     freeze_reason=reason, steps=steps, skipped=st.skipped,
+                     resyncs=st.resyncs, t_s=t_s)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -331,12 +442,15 @@ class AID6Params:
 
     gains: AID6Gains = field(default_factory=AID6Gains)
     input_interp: str = "linear"
+    sampling: str = "midpoint"
     pd_floor: float = 1e-9
     max_dt: float = 1.0
 
     def __post_init__(self) -> None:
         if self.input_interp not in _INTERP:
             raise ValueError(f"input_interp must be one of {_INTERP}, got {self.input_interp!r}")
+        if self.sampling not in _SAMPLING:
+            raise ValueError(f"sampling must be one of {_SAMPLING}, got {self.sampling!r}")
         if not (0.0 <= self.pd_floor < 1.0):
             raise ValueError(f"pd_floor must be in [0, 1), got {self.pd_floor!r}")
         if not self.max_dt > 0.0:
@@ -400,10 +514,6 @@ def aid6_init(theta0: np.ndarray | UVParams) -> AID6State:
                      m_max_eig=float(lam[-1]))
 
 
-def _finite_all(*arrays) -> bool:
-    return all(math.isfinite(float(np.sum(a))) for a in arrays)
-
-
 def aid6_step(vs, u_applied: np.ndarray, params: AID6Params, st: AID6State,
               dt: float) -> AID6State:
     """One Euler step of Theorem 4.3.1 (4.23)–(4.27); returns the new state.
@@ -419,51 +529,8 @@ def aid6_step(vs, u_applied: np.ndarray, params: AID6Params, st: AID6State,
 
     Never raises on bad data: a non-finite input is counted in ``skipped`` and ignored.
     """
-    v = np.asarray(vs.v, dtype=float)
-    r = np.ascontiguousarray(vs.H[2, :3], dtype=float)  # Rᵀe₃ = third row of R
-    u = np.asarray(u_applied, dtype=float)
-    if not _finite_all(v, r, u):
-        return replace(st, skipped=st.skipped + 1)
-    if st.v_prev is None:  # t₀: v̂(t₀) = v(t₀)
-        return replace(st, v_hat=v.copy(), dv=np.zeros(6), v_prev=v.copy(), r_prev=r,
-                       u_prev=u.copy())
-    if not (dt > 0.0 and dt <= params.max_dt and math.isfinite(dt)):
-        return replace(st, v_hat=v.copy(), dv=np.zeros(6), v_prev=v.copy(), r_prev=r,
-                       u_prev=u.copy(), resyncs=st.resyncs + 1)
-    u_int = 0.5 * (st.u_prev + u) if params.input_interp == "linear" else u
-    gn = params.gains
-    theta_out = np.empty(N_THETA_UV)
-    vhat_out = np.empty(6)
-    diag = np.empty(2)
-    adapt = not st.frozen
-    status = _aid6_kernel(st.theta, st.v_hat, st.v_prev, st.r_prev, u_int, float(dt), gn.a,
-                          gn.gamma1, gn.gamma2, gn.gamma3, gn.gamma4, adapt, theta_out,
-                          vhat_out, diag)
-    t_s = st.t_s + dt
-    if status != 0:  # cannot happen for a state built here, kept as a guard
-        return replace(st, frozen=True, freeze_reason=f"t={t_s:.1f}s: M̂ not positive definite",
-                       v_hat=v.copy(), dv=np.zeros(6), v_prev=v.copy(), r_prev=r,
-                       u_prev=u.copy(), t_s=t_s)
-    frozen, reason = st.frozen, st.freeze_reason
-    lo, hi = float(diag[0]), float(diag[1])
-    healthy = (math.isfinite(float(np.sum(theta_out))) and math.isfinite(float(np.sum(vhat_out)))
-               and lo > params.pd_floor * hi)
-    steps = st.steps
-    if adapt and not healthy:
-        frozen = True
-        reason = (f"t={t_s:.1f}s after {steps} steps: M̂ lost positive definiteness "
-                  f"(λ_min {lo:.4g}, λ_max {hi:.4g}); θ̂ frozen at its last PD value")
-        theta_out = st.theta
-        lo, hi = st.m_min_eig, st.m_max_eig
-        if not math.isfinite(float(np.sum(vhat_out))):
-            vhat_out = v.copy()
-    elif adapt:
-        steps += 1
-        theta_out.setflags(write=False)
-    return AID6State(theta=theta_out, v_hat=vhat_out, dv=vhat_out - v, v_prev=v.copy(),
-                     r_prev=r, u_prev=u.copy(), m_min_eig=lo, m_max_eig=hi, frozen=frozen,
-                     freeze_reason=reason, steps=steps, skipped=st.skipped,
-                     resyncs=st.resyncs, t_s=t_s)
+    return _step(6, vs, np.asarray(u_applied, dtype=float), params, st, float(dt), AID6State,
+                 "M̂")
 
 
 def aid6_params(st: AID6State) -> UVParams:
@@ -511,12 +578,15 @@ class AID3Params:
 
     gains: AID3Gains = field(default_factory=AID3Gains)
     input_interp: str = "linear"
+    sampling: str = "midpoint"
     pd_floor: float = 1e-9
     max_dt: float = 1.0
 
     def __post_init__(self) -> None:
         if self.input_interp not in _INTERP:
             raise ValueError(f"input_interp must be one of {_INTERP}, got {self.input_interp!r}")
+        if self.sampling not in _SAMPLING:
+            raise ValueError(f"sampling must be one of {_SAMPLING}, got {self.sampling!r}")
         if not (0.0 <= self.pd_floor < 1.0):
             raise ValueError(f"pd_floor must be in [0, 1), got {self.pd_floor!r}")
         if not self.max_dt > 0.0:
@@ -562,50 +632,8 @@ def aid3_step(vs, u_applied: np.ndarray, params: AID3Params, st: AID3State,
 
     Same contract as :func:`aid6_step`; ``v_hat``/``dv`` are ω̂ and ∆ω (rad/s).
     """
-    w = np.asarray(vs.v, dtype=float)[3:]
-    r = np.ascontiguousarray(vs.H[2, :3], dtype=float)
-    tau = np.asarray(u_applied, dtype=float)[3:]
-    if not _finite_all(w, r, tau):
-        return replace(st, skipped=st.skipped + 1)
-    if st.v_prev is None:
-        return replace(st, v_hat=w.copy(), dv=np.zeros(3), v_prev=w.copy(), r_prev=r,
-                       u_prev=tau.copy())
-    if not (dt > 0.0 and dt <= params.max_dt and math.isfinite(dt)):
-        return replace(st, v_hat=w.copy(), dv=np.zeros(3), v_prev=w.copy(), r_prev=r,
-                       u_prev=tau.copy(), resyncs=st.resyncs + 1)
-    tau_int = 0.5 * (st.u_prev + tau) if params.input_interp == "linear" else tau
-    gn = params.gains
-    theta_out = np.empty(N_THETA_UVR)
-    what_out = np.empty(3)
-    diag = np.empty(2)
-    adapt = not st.frozen
-    status = _aid3_kernel(st.theta, st.v_hat, st.v_prev, st.r_prev, tau_int, float(dt), gn.a,
-                          gn.gamma1, gn.gamma2, gn.gamma3, adapt, theta_out, what_out, diag)
-    t_s = st.t_s + dt
-    if status != 0:
-        return replace(st, frozen=True, freeze_reason=f"t={t_s:.1f}s: Î not positive definite",
-                       v_hat=w.copy(), dv=np.zeros(3), v_prev=w.copy(), r_prev=r,
-                       u_prev=tau.copy(), t_s=t_s)
-    frozen, reason = st.frozen, st.freeze_reason
-    lo, hi = float(diag[0]), float(diag[1])
-    healthy = (math.isfinite(float(np.sum(theta_out))) and math.isfinite(float(np.sum(what_out)))
-               and lo > params.pd_floor * hi)
-    steps = st.steps
-    if adapt and not healthy:
-        frozen = True
-        reason = (f"t={t_s:.1f}s after {steps} steps: Î lost positive definiteness "
-                  f"(λ_min {lo:.4g}, λ_max {hi:.4g}); θ̂ frozen at its last PD value")
-        theta_out = st.theta
-        lo, hi = st.m_min_eig, st.m_max_eig
-        if not math.isfinite(float(np.sum(what_out))):
-            what_out = w.copy()
-    elif adapt:
-        steps += 1
-        theta_out.setflags(write=False)
-    return AID3State(theta=theta_out, v_hat=what_out, dv=what_out - w, v_prev=w.copy(),
-                     r_prev=r, u_prev=tau.copy(), m_min_eig=lo, m_max_eig=hi, frozen=frozen,
-                     freeze_reason=reason, steps=steps, skipped=st.skipped,
-                     resyncs=st.resyncs, t_s=t_s)
+    return _step(3, vs, np.asarray(u_applied, dtype=float), params, st, float(dt), AID3State,
+                 "Î")
 
 
 def aid3_params(st: AID3State) -> RotParams:

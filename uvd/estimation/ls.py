@@ -371,53 +371,27 @@ def project_consistent(model: str, theta: np.ndarray, eps_mass: float, eps_drag:
     return theta, changed
 
 
-_PROBLEMS: dict = {}
-
-
-def _cvx_problem(model: str):
-    """The cached (DPP) cvxpy problem: min ‖A x − z‖ (+ tiny ridge) over the consistent set,
-    θ = c ∘ x (column equilibration), with A, z, c, ε_M, ε_D parameters."""
-    if model in _PROBLEMS:
-        return _PROBLEMS[model]
+def _solve_consistent(model: str, Rs: np.ndarray, z: np.ndarray, c: np.ndarray,
+                      eps_mass: float, eps_drag: float) -> tuple[np.ndarray | None, str, str]:
+    """min ‖Rs x − z‖ (+ a 1e-7 ridge for strict convexity) over the consistent set with
+    θ = c ∘ x (column equilibration), by cvxpy; returns (θ or None, solver, status)."""
     import cvxpy as cp
 
     if model == "6dof":
-        p, n, P, n_m, sl_d = N_THETA_UV, 6, P_M, 21, (21, 237)
+        p, n, P, n_m, d0 = N_THETA_UV, 6, P_M, 21, 21
     else:
-        p, n, P, n_m, sl_d = N_THETA_UVR, 3, P_I, 6, (6, 33)
-    A = cp.Parameter((p, p), name="A")
-    z = cp.Parameter(p, name="z")
-    c = cp.Parameter(p, nonneg=True, name="c")
-    eps_m = cp.Parameter(nonneg=True, name="eps_m")
-    eps_d = cp.Parameter(nonneg=True, name="eps_d")
+        p, n, P, n_m, d0 = N_THETA_UVR, 3, P_I, 6, 6
+    scale = float(np.linalg.norm(Rs, 2)) or 1.0
     x = cp.Variable(p, name="x")
     theta = cp.multiply(c, x)
     M = cp.reshape(P @ theta[:n_m], (n, n), order="F")
     I_n = np.eye(n)
-    cons = [0.5 * (M + M.T) - eps_m * I_n >> 0]
+    cons = [0.5 * (M + M.T) - eps_mass * I_n >> 0]
     for i in range(n):
-        Dv = theta[sl_d[0] + n * n * i: sl_d[0] + n * n * (i + 1)]
-        D = cp.reshape(Dv, (n, n), order="F")
-        cons.append(-0.5 * (D + D.T) - eps_d * I_n >> 0)
-    ridge = 1e-7
-    obj = cp.Minimize(cp.norm(cp.hstack([A @ x - z, ridge * x]), 2))
+        D = cp.reshape(theta[d0 + n * n * i: d0 + n * n * (i + 1)], (n, n), order="F")
+        cons.append(-0.5 * (D + D.T) - eps_drag * I_n >> 0)
+    obj = cp.Minimize(cp.norm(cp.hstack([(Rs / scale) @ x - z / scale, 1e-7 * x]), 2))
     prob = cp.Problem(obj, cons)
-    _PROBLEMS[model] = (prob, A, z, c, eps_m, eps_d, x)
-    return _PROBLEMS[model]
-
-
-def _solve_consistent(model: str, Rs: np.ndarray, z: np.ndarray, c: np.ndarray,
-                      eps_mass: float, eps_drag: float) -> tuple[np.ndarray | None, str, str]:
-    """Solve the constrained problem on the equilibrated triangular factor; θ or None."""
-    import cvxpy as cp
-
-    prob, A, zp, cp_c, em, ed, x = _cvx_problem(model)
-    scale = float(np.linalg.norm(Rs, 2)) or 1.0
-    A.value = Rs / scale
-    zp.value = z / scale
-    cp_c.value = c
-    em.value = eps_mass
-    ed.value = eps_drag
     last = "not run"
     for solver in ("CLARABEL", "SCS"):
         if solver not in cp.installed_solvers():

@@ -17,7 +17,8 @@ state key       meaning
 ==============  ==============================
 
 Simulation: the RKMK4 kernel of the plant (:mod:`uvd.model.integrate`, compiled) with
-``substeps`` steps per recorded period; over each period the wrench follows the run's
+``substeps`` steps per recorded period (default 2: RK4 at 20 Hz, far finer than the
+vehicle's time scales of seconds); over each period the wrench follows the run's
 ``input_interp`` — "linear" interpolation between the samples at both ends, or "hold" of the
 sample that ends the period. A rotational parameter set (2.40) is simulated exactly by the same
 kernel through an embedding whose translational part stays at rest (ν ≡ 0, see
@@ -117,7 +118,7 @@ def _simulate(M, M_inv, D_flat, g, b, H0, v0, U, substeps, dt, linear, vlim, Rs,
     return -1
 
 
-def simulate_run(params: UVParams | RotParams, run, *, substeps: int = 5
+def simulate_run(params: UVParams | RotParams, run, *, substeps: int = 2
                  ) -> tuple[np.ndarray, np.ndarray, int | None]:
     """Simulate ``params`` open loop with the run's wrench from its first measured state.
 
@@ -177,7 +178,7 @@ class XvalResult:
     diverged_at_s: float | None
 
 
-def cross_validate(params: UVParams | RotParams, run, *, substeps: int = 5,
+def cross_validate(params: UVParams | RotParams, run, *, substeps: int = 2,
                    states=None) -> XvalResult:
     """App. A.2: simulate ``params`` with the run's inputs and return the MAE per state."""
     if states is None:

@@ -234,28 +234,31 @@ class Recording:
     run: RunLog
     aid_theta: np.ndarray | None = None
     hist: dict = field(default_factory=dict)
+    extra_theta: dict = field(default_factory=dict)
     wall_s: float = 0.0
     cycles_not_ok: int = 0
     saturated_fraction: float = 0.0
 
 
-def _core_config(vehicle, ds: Dataset, estimator, controller: str) -> core.CoreConfig:
+def _core_config(vehicle, ds: Dataset, estimators, controller: str) -> core.CoreConfig:
     if controller == "pdc":
         ctrl = core.ControllerSpec("pdc", pdc_step, PDGains(kp=300.0, kd=100.0), PDState())
     else:
         ctrl = core.ControllerSpec("depth-hold", depth_hold_step, DepthHoldGains(), None)
     return core.CoreConfig(nav=NavConfig(), controller=ctrl, reference=MixedReference(ds),
                            allocator=Allocator.from_vehicle(vehicle), k_thrust=vehicle.k_thrust,
-                           estimators=() if estimator is None else (estimator,))
+                           estimators=tuple(estimators))
 
 
 def record(ds: Dataset, *, kind: str, seed: int, minutes: float | None = None,
-           estimator=None, ideal: bool = False, controller: str = "pdc",
+           estimator=None, extra_estimators=(), ideal: bool = False, controller: str = "pdc",
            progress=None) -> Recording:
     """Simulate one data set in lockstep and record what a logger on the vehicle would.
 
-    ``kind`` is "6dof" or "rot" (which AID history to keep); ``ideal`` switches off sensor
-    noise and thruster lag/stiction and samples every instrument at the plant rate.
+    ``kind`` is "6dof" or "rot" (which AID history to keep); ``estimator`` is the AID whose
+    history is kept, ``extra_estimators`` more estimators run side by side (final θ̂ only, by
+    name); ``ideal`` switches off sensor noise and thruster lag/stiction and samples every
+    instrument at the plant rate.
     """
     vehicle = load_vehicle(VEHICLE)
     true_theta = vehicle.params.theta
@@ -270,7 +273,8 @@ def record(ds: Dataset, *, kind: str, seed: int, minutes: float | None = None,
             seed=seed)
     else:
         lcfg = LockstepConfig(plant_rate_hz=100.0, control_rate_hz=10.0, seed=seed)
-    cfg = _core_config(vehicle, ds, estimator, controller)
+    ests = ([] if estimator is None else [estimator]) + list(extra_estimators)
+    cfg = _core_config(vehicle, ds, ests, controller)
     ref0 = cfg.reference.at(0.0)
     sim = Lockstep(vehicle, cfg, lcfg, H0=ref0.H, v0=np.zeros(6))
     n = int(round(minutes * 60.0 / sim.dt_control))
@@ -330,6 +334,8 @@ def record(ds: Dataset, *, kind: str, seed: int, minutes: float | None = None,
     if track:
         st = sim.state.est[0]
         rec.aid_theta = np.array(st.theta)
+        for spec, est_state in zip(ests[1:], sim.state.est[1:], strict=True):
+            rec.extra_theta[spec.name] = np.array(est_state.theta)
         rec.hist = {"dv": dv, "v_hat": vhat, "theta_err": th_err,
                     "theta_norms": np.array([np.linalg.norm(ref_theta[b]) for b in blocks]),
                     "min_eig": lam, "frozen": frozen, "freeze_reason": st.freeze_reason,
@@ -340,12 +346,16 @@ def record(ds: Dataset, *, kind: str, seed: int, minutes: float | None = None,
 def _record_job(args):
     """Process-pool entry point (module level so it pickles)."""
     ds, kwargs, est_kind = args
-    est = None
+    est, extra = None, ()
     if est_kind == "aid6":
         est = aid6_estimator(INITP_6DOF, AID6Params(gains=AID6Gains()))
+        extra = (aid6_estimator(INITP_6DOF, AID6Params(gains=AID6Gains(), sampling="euler"),
+                                name="AIDPM_euler"),)
     elif est_kind == "aid3":
         est = aid3_estimator(INITP_ROT, AID3Params(gains=AID3Gains()))
-    return record(ds, estimator=est, **kwargs)
+        extra = (aid3_estimator(INITP_ROT, AID3Params(gains=AID3Gains(), sampling="euler"),
+                                name="AIDPM_euler"),)
+    return record(ds, estimator=est, extra_estimators=extra, **kwargs)
 
 
 def _run_jobs(jobs, progress):
@@ -454,7 +464,8 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
     lsc = ls_identify(iddat.run, "6dof", consistent=True, reduced=red)
     t_ls = time.perf_counter() - t1
     models = {"AIDPM": aidp, "LSPM": ls.params, "LSPM_consistent": lsc.params,
-              "INITPM": INITP_6DOF}
+              "INITPM": INITP_6DOF,
+              "AIDPM_euler": UVParams.from_theta(iddat.extra_theta["AIDPM_euler"])}
     runs = {"IDDAT": iddat.run, "CROSS": cross.run}
     mae, diverged, sims = {}, {}, {}
     for m, prm in models.items():
@@ -604,7 +615,8 @@ def run_aid_rot(opts: ExperimentOptions) -> dict:
     ls = ls_identify(iddat.run, "rot", reduced=red)
     lsc = ls_identify(iddat.run, "rot", consistent=True, reduced=red)
     models = {"AIDPM": aidp, "LSPM": ls.params, "LSPM_consistent": lsc.params,
-              "INITPM": INITP_ROT}
+              "INITPM": INITP_ROT,
+              "AIDPM_euler": RotParams.from_theta(iddat.extra_theta["AIDPM_euler"])}
     runs = {"IDDAT": iddat.run, "CROSS": cross.run}
     mae, diverged, sims = {}, {}, {}
     for m, prm in models.items():
