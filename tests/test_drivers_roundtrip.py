@@ -15,10 +15,10 @@ from _drivers_strategies import (
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers import digiquartz, pd0, phins_ascii, phins_stdbin
+from drivers import digiquartz, frames, pd0, phins_ascii, phins_stdbin
 from drivers.framing import StreamDecoder, decode_bytes
 
-RT = settings(max_examples=300, deadline=None)
+RT = settings(max_examples=200, deadline=None)
 
 
 @RT
@@ -143,3 +143,59 @@ def test_byte_sum_is_the_plain_sum(data):
     from drivers._layout import byte_sum
 
     assert byte_sum(data) == sum(data)
+
+
+def _beam_ensemble(v_vehicle_body, bad_beam=None, angle=30):
+    """A beam-coordinate ensemble for a vehicle velocity (inverse RDI Janus geometry)."""
+    ens = pd0.from_dvl_velocity(np.zeros(3), 5.0, beam_angle_deg=angle)
+    # bottom motion in RDI instrument axes (X stbd, Y fwd, Z up) = −vehicle motion
+    x, y, z = (-v_vehicle_body[1], -v_vehicle_body[0], v_vehicle_body[2])
+    th = math.radians(angle)
+    beams = [x * math.sin(th) + z * math.cos(th), -x * math.sin(th) + z * math.cos(th),
+             -y * math.sin(th) + z * math.cos(th), y * math.sin(th) + z * math.cos(th)]
+    vel = [round(b * 1000) for b in beams]
+    rng = list(ens.bottom_track["range_cm"])
+    if bad_beam is not None:
+        vel[bad_beam] = pd0.BAD_VELOCITY
+        rng[bad_beam] = 0
+    fixed = {**ens.fixed, "coord_transform": 0b00000}  # EX00000: beam coordinates
+    bt = {**ens.bottom_track, "velocity_mm_s": tuple(vel), "range_cm": tuple(rng)}
+    return pd0.decode_ensemble(pd0.encode_ensemble(
+        pd0.Pd0Ensemble(fixed, ens.variable, bt, {}, {}, ens.order)))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(-2, 2), min_size=3, max_size=3), st.sampled_from([None, 0, 1, 2, 3]))
+def test_pd0_beam_coordinates_to_body_velocity(v, bad):
+    ens = _beam_ensemble(np.array(v), bad)
+    assert ens.coord_frame == "beam"
+    s = pd0.to_dvl_sample(ens, 0)
+    assert s.bottom_lock and s.good_beams == (4 if bad is None else 3)
+    np.testing.assert_allclose(s.velocity_body, v, atol=3e-3)  # 1 mm/s per beam, ×1/sin θ
+
+
+def test_pd0_two_bad_beams_is_no_lock():
+    ens = _beam_ensemble(np.array([0.5, 0.0, 0.0]), 0)
+    bt = dict(ens.bottom_track)
+    bt["velocity_mm_s"] = (pd0.BAD_VELOCITY, pd0.BAD_VELOCITY) + bt["velocity_mm_s"][2:]
+    bt["range_cm"] = (0, 0) + bt["range_cm"][2:]
+    s = pd0.to_dvl_sample(pd0.Pd0Ensemble(ens.fixed, ens.variable, bt, {}, {}, ens.order), 0)
+    assert not s.bottom_lock and s.good_beams == 2 and np.all(np.isnan(s.velocity_body))
+
+
+def test_pd0_earth_coordinates_need_the_attitude():
+    from drivers.samples import euler_to_R
+
+    v_body = np.array([0.4, -0.1, 0.05])
+    R = euler_to_R(0.05, -0.1, 2.0)
+    east, north, up = frames.ned_to_enu(-(R @ v_body))  # the bottom's motion, ENU
+    ens = pd0.from_dvl_velocity(np.zeros(3), 5.0)
+    fixed = {**ens.fixed, "coord_transform": 0b11111}
+    bt = {**ens.bottom_track, "velocity_mm_s": (round(east * 1e3), round(north * 1e3),
+                                                round(up * 1e3), 0)}
+    ens = pd0.Pd0Ensemble(fixed, ens.variable, bt, {}, {}, ens.order)
+    assert ens.coord_frame == "earth"
+    assert not pd0.to_dvl_sample(ens, 0).bottom_lock  # no attitude: cannot rotate to body
+    s = pd0.to_dvl_sample(ens, 0, R_body_to_world=R)
+    assert s.bottom_lock
+    np.testing.assert_allclose(s.velocity_body, v_body, atol=2e-3)
