@@ -23,6 +23,7 @@ A bottom lock is valid when the three velocity components are present and at lea
 
 from __future__ import annotations
 
+import calendar
 import math
 import struct
 from dataclasses import dataclass, field
@@ -102,9 +103,10 @@ class Pd0Ensemble:
 
     Attributes
     ----------
-    fixed, variable, bottom_track : dict or None
+    fixed, variable, bottom_track : Mapping or None
         Fields of the fixed leader, variable leader and bottom-track data types (see the
-        ``Layout`` tables above), each with ``_extra`` = any bytes past the known fields.
+        ``Layout`` tables above; a :class:`~drivers._layout.Record` when decoded, any mapping
+        when built), ``_extra`` = any bytes past the known fields.
     profiles : dict
         ``{type id: ndarray (cells, beams)}`` for velocity (int16 mm/s), correlation, echo
         intensity, percent good and status (uint8).
@@ -182,7 +184,6 @@ class Pd0Ensemble:
         """RTC time as Unix seconds (UTC assumed; RDI years 00–99 → 2000–2099); NaN if bad."""
         v = self.variable or {}
         try:
-            import calendar
             t = calendar.timegm((2000 + v["rtc_year"], v["rtc_month"], v["rtc_day"],
                                  v["rtc_hour"], v["rtc_minute"], v["rtc_second"], 0, 0, 0))
             if not (1 <= v["rtc_month"] <= 12 and 1 <= v["rtc_day"] <= 31):

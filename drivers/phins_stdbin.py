@@ -482,16 +482,17 @@ def to_dvl_sample(fr: StdbinFrame, t_ns: int) -> DvlSample | None:
                      good_beams=4 if ok else 0, source="phins-stdbin")
 
 
-def from_state(R_or_euler, omega_body: np.ndarray, v_body: np.ndarray | None = None,
+def from_state(euler: tuple[float, float, float], omega_body: np.ndarray,
+               v_body: np.ndarray | None = None,
                validity_time_100us: int = 0, counter: int = 0, version: int = 3,
                depth_m: float | None = None) -> StdbinFrame:
     """A navigation frame (attitude, rates, rotation rate, speeds, status) from our state.
 
-    ``R_or_euler`` is (roll, pitch, heading) in radians (App. A); ``omega_body`` rad/s and
+    ``euler`` is (roll, pitch, heading) in radians (App. A); ``omega_body`` rad/s and
     ``v_body`` m/s in the body frame. The inverse of :func:`to_ins_sample` up to float32.
     Used by the INS emulator of ``sim_bridge``.
     """
-    roll, pitch, heading = R_or_euler
+    roll, pitch, heading = euler
     w1, w2, w3 = frames.body_to_phins_vessel(np.degrees(np.asarray(omega_body, float)))
     blocks: dict = {
         "attitudeHeading": {"heading_deg": frames.ours_heading_to_phins(heading),
@@ -507,7 +508,6 @@ def from_state(R_or_euler, omega_body: np.ndarray, v_body: np.ndarray | None = N
     if depth_m is not None:
         blocks["depth"] = {"validityTime_100us": validity_time_100us & 0xFFFFFFFF,
                            "depth_m": float(depth_m), "depth_stddev_m": 0.01}
-    # keep iXblue's mask order (the dict order is irrelevant to the encoder)
     return StdbinFrame(version, 0, 0, 0, validity_time_100us, counter, blocks)
 
 

@@ -128,30 +128,39 @@ class FrameReader:
 
     # ---- lifecycle ---------------------------------------------------------------------------
     async def run(self) -> None:
-        """Open, read until lost, re-open with back-off; returns only when closed."""
+        """Open, read until lost, re-open with back-off; returns only when closed.
+
+        Cancelling the task closes the source (structured use: a TaskGroup may own it).
+        """
         delay = self.reconnect_min_s
         self._lost = asyncio.Event()
-        while not self._closed:
-            self._lost.clear()
-            try:
-                transport = await self._open(_Protocol(self))
-            except asyncio.CancelledError:
-                raise
-            except Exception as exc:  # noqa: BLE001 - any open failure is a status, not a crash
-                self.last_error = f"{self.name}: cannot open {self.where}: {exc}"
-                await asyncio.sleep(delay)
-                delay = min(2.0 * delay, self.reconnect_max_s)
-                continue
-            self._transport = transport
-            if self._opened_once:
-                self.counters.reconnects += 1
-            self._opened_once = True
-            self.connected = True
-            delay = self.reconnect_min_s
-            await self._lost.wait()
-            self.decoder.reset()  # a partial frame cannot continue on a new connection
-            if not self._closed:
-                await asyncio.sleep(delay)
+        try:
+            while not self._closed:
+                self._lost.clear()
+                try:
+                    transport = await self._open(_Protocol(self))
+                except asyncio.CancelledError:
+                    raise
+                except Exception as exc:  # noqa: BLE001 - an open failure is a status
+                    self.last_error = f"{self.name}: cannot open {self.where}: {exc}"
+                    await asyncio.sleep(delay)
+                    delay = min(2.0 * delay, self.reconnect_max_s)
+                    continue
+                self._transport = transport
+                if self._opened_once:
+                    self.counters.reconnects += 1
+                self._opened_once = True
+                self.connected = True
+                delay = self.reconnect_min_s
+                await self._lost.wait()
+                self.decoder.reset()  # a partial frame cannot continue on a new connection
+                if not self._closed:
+                    await asyncio.sleep(delay)
+        finally:
+            tr = self._transport
+            if tr is not None:
+                tr.close()
+            self.connected = False
 
     def start(self) -> asyncio.Task:
         """Start :meth:`run` as a task of the running loop (idempotent)."""
@@ -162,19 +171,15 @@ class FrameReader:
         return self._task
 
     async def close(self) -> None:
-        """Stop reading and close the source."""
+        """Stop reading and close the source (waits up to 2 s for the reader task)."""
         self._closed = True
         tr = self._transport
         if tr is not None:
             tr.close()
-        if self._task is not None:
-            self._task.cancel()
-            try:
-                await asyncio.wait_for(asyncio.shield(self._task), 2.0)
-            except (TimeoutError, asyncio.CancelledError):
-                pass
-            except Exception as exc:  # noqa: BLE001
-                self.last_error = f"{self.name}: {exc}"
+        task = self._task
+        if task is not None and not task.done():
+            task.cancel()
+            await asyncio.wait({task}, timeout=2.0)
         self.connected = False
 
     async def __aenter__(self) -> FrameReader:

@@ -230,10 +230,10 @@ class InstrumentEmulators:
 
     async def stop(self) -> None:
         self._stop = True
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, TimeoutError):
-                await asyncio.wait_for(self._task, 2.0)
+        task = self._task
+        if task is not None and not task.done():
+            task.cancel()
+            await asyncio.wait({task}, timeout=2.0)
         self.close()
 
     async def __aenter__(self) -> InstrumentEmulators:
