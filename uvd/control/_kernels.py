@@ -246,7 +246,7 @@ def _sym_eig_clip_min(A, floor):
     """Symmetric part of A with its eigenvalues raised to at least ``floor`` (Frobenius
     projection onto {S = Sᵀ : S ⪰ floor·I}); returns (S, clipped?)."""
     S = 0.5 * (A + A.T)
-    if _pd_above(S, floor):
+    if _pd_above(S, floor - 1e-9 * max(1.0, abs(floor))):  # at the floor counts as inside
         return S, False
     w, V = np.linalg.eigh(S)
     for i in range(w.shape[0]):

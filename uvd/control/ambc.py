@@ -143,14 +143,14 @@ class RobustAdaptation:
 
     enabled: bool = False
     mass_floor: float | np.ndarray = 10.0
-    drag_ceiling: float | np.ndarray = 1.0
+    drag_ceiling: float | np.ndarray = 0.0
     dead_zone: float = 0.0
     freeze_on_saturation: bool = True
     reversal_hold_s: float = 0.0
     stiction_band_n: float = 5.0
 
 
-ROBUST_DAEMON_DEFAULT = RobustAdaptation(enabled=True, mass_floor=10.0, drag_ceiling=1.0,
+ROBUST_DAEMON_DEFAULT = RobustAdaptation(enabled=True, mass_floor=10.0, drag_ceiling=0.0,
                                          dead_zone=0.002, freeze_on_saturation=True,
                                          reversal_hold_s=1.0, stiction_band_n=5.0)
 """The robust adaptation the daemon runs with (see ``docs/experiments.md``, ``ambc-robust``)."""

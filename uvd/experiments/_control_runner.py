@@ -1,0 +1,269 @@
+"""Shared machinery of the control experiments (``uvd/experiments/control.py``).
+
+:func:`run_control` drives :class:`uvd.experiments.lockstep.Lockstep` (plant + instruments +
+the one core) for a duration and records, every control cycle, the true state and the measured
+(navigation) state against the reference, the commands and the applied wrench, and, every
+``theta_every_s``, the controller's parameter estimate. Two kinds of tracking error are kept:
+
+* **measured** — navigation solution vs reference, what the thesis reports (§5.3.1: "error
+  between the measured and reference values"); the controller acts on this;
+* **true** — plant state vs reference. x and y of the true error also contain the drift of the
+  dead-reckoned navigation (DVLNAV-like, Table A.1), which no controller can remove.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numba
+import numpy as np
+
+from sim_bridge.instruments.models import InstrumentConfig
+from sim_bridge.plant import PlantConfig
+from sim_bridge.thrusters import ThrusterEffects
+from uvd import core
+from uvd.control import _kernels
+from uvd.control.allocation import Allocator
+from uvd.estimation.navigation import NavConfig
+from uvd.experiments.lockstep import DOF_NAMES, VEL_NAMES, Lockstep, LockstepConfig
+from uvd.model.vehicle import Vehicle
+
+
+@numba.njit(cache=True)
+def _eta(H, out):
+    """[x, y, z, roll, pitch, heading] of H (App. A Euler angles, as drivers.samples)."""
+    out[0], out[1], out[2] = H[0, 3], H[1, 3], H[2, 3]
+    s = -H[2, 0]
+    s = min(max(s, -1.0), 1.0)
+    out[4] = math.asin(s)
+    out[3] = math.atan2(H[2, 1], H[2, 2])
+    out[5] = math.atan2(H[1, 0], H[0, 0])
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def errors_of(ctrl: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(Δψ, Δv) the controller saw last (PD, MBC, AMBC and two-step states all carry them)."""
+    inner = getattr(ctrl, "ambc", ctrl)
+    return inner.dpsi, inner.dv
+
+
+def theta_of_ctrl(ctrl: Any) -> np.ndarray | None:
+    inner = getattr(ctrl, "ambc", ctrl)
+    return getattr(inner, "theta", None)
+
+
+def theta_dot_of_ctrl(ctrl: Any) -> np.ndarray | None:
+    inner = getattr(ctrl, "ambc", ctrl)
+    return getattr(inner, "theta_dot", None)
+
+
+@dataclass
+class ControlRun:
+    """Per-cycle records of one run (arrays of length n_cycles unless said otherwise)."""
+
+    t: np.ndarray
+    eta_true: np.ndarray
+    eta_nav: np.ndarray
+    eta_ref: np.ndarray
+    v_true: np.ndarray
+    dpsi_true: np.ndarray
+    dv_true: np.ndarray
+    dpsi_meas: np.ndarray
+    dv_meas: np.ndarray
+    u_cmd: np.ndarray
+    u_applied: np.ndarray
+    thrust_cmd: np.ndarray
+    saturated: np.ndarray       # any thruster saturated this cycle
+    not_ok: int
+    theta_t: np.ndarray         # times of the θ̂ samples
+    theta: np.ndarray           # (n_samples, n_params) or (0, 0)
+    rates: np.ndarray           # θ̂̇ of the selected indices, every cycle
+    H0: np.ndarray
+    v0: np.ndarray
+    final_ctrl: Any = None
+    wall_s: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+def make_core(vehicle: Vehicle, controller: core.ControllerSpec, reference) -> core.CoreConfig:
+    return core.CoreConfig(nav=NavConfig(), controller=controller, reference=reference,
+                           allocator=Allocator.from_vehicle(vehicle), k_thrust=vehicle.k_thrust)
+
+
+def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, duration_s: float,
+                *, seed: int = 0, noise: bool = True,
+                thrusters: ThrusterEffects | None = None, control_rate_hz: float = 10.0,
+                plant_rate_hz: float = 100.0, theta_every_s: float = 10.0,
+                rate_indices: tuple[int, ...] = (), H0: np.ndarray | None = None,
+                v0: np.ndarray | None = None,
+                progress: Callable[[str], None] | None = None, label: str = "",
+                progress_every_s: float = 1800.0,
+                on_theta: Callable[[float, np.ndarray], None] | None = None) -> ControlRun:
+    """Run ``duration_s`` simulated seconds of ``controller`` tracking ``reference``.
+
+    The plant starts on the reference (zero initial error) unless H0/v0 are given. Thruster
+    lag, reversal stiction (§5.3.4) and saturation are on, and Table A.1 sensor noise, unless
+    ``thrusters``/``noise`` say otherwise.
+    """
+    thrusters = ThrusterEffects() if thrusters is None else thrusters
+    cfg = make_core(vehicle, controller, reference)
+    if H0 is None or v0 is None:
+        r0 = reference.at(0.0)
+        H0 = r0.H if H0 is None else H0
+        v0 = r0.v if v0 is None else v0
+    sim = Lockstep(vehicle, cfg, LockstepConfig(
+        plant_rate_hz=plant_rate_hz, control_rate_hz=control_rate_hz,
+        plant=PlantConfig(rate_hz=plant_rate_hz, thrusters=thrusters),
+        instruments=InstrumentConfig(noise=noise), seed=seed), H0=H0, v0=v0)
+    n = int(round(duration_s * control_rate_hz))
+    nthr = vehicle.n_thrusters
+    rec = {k: np.empty((n, 6)) for k in ("eta_true", "eta_nav", "eta_ref", "v_true", "dpsi_true",
+                                         "dv_true", "dpsi_meas", "dv_meas", "u_cmd",
+                                         "u_applied")}
+    thrust = np.empty((n, nthr))
+    sat = np.zeros(n, dtype=bool)
+    rates = np.zeros((n, len(rate_indices)))
+    ridx = np.asarray(rate_indices, dtype=np.int64)
+    theta_every = max(1, int(round(theta_every_s * control_rate_hz)))
+    th_t: list[float] = []
+    th: list[np.ndarray] = []
+    err = np.empty((5, 6))
+    not_ok = 0
+    dt = 1.0 / control_rate_hz
+    t_wall = time.perf_counter()
+    next_report = progress_every_s
+    e_true, e_nav, e_ref = rec["eta_true"], rec["eta_nav"], rec["eta_ref"]
+    for k in range(n):
+        H = sim.plant.H.copy()
+        v = sim.plant.v.copy()
+        out = sim.cycle()
+        ref = out.reference
+        _eta(H, e_true[k])
+        _eta(out.nav.H, e_nav[k])
+        _eta(ref.H, e_ref[k])
+        rec["v_true"][k] = v
+        _kernels.error_state(H, v, ref.H, ref.v, ref.vdot, err)
+        rec["dpsi_true"][k] = err[0]
+        rec["dv_true"][k] = err[1]
+        dpsi_m, dv_m = errors_of(sim.state.ctrl)
+        rec["dpsi_meas"][k] = dpsi_m
+        rec["dv_meas"][k] = dv_m
+        rec["u_cmd"][k] = out.u_cmd
+        rec["u_applied"][k] = out.u_applied
+        thrust[k] = out.thrust_n
+        sat[k] = bool(out.saturated.any())
+        if out.status != "ok":
+            not_ok += 1
+        if ridx.size:
+            td = theta_dot_of_ctrl(sim.state.ctrl)
+            if td is not None and td.shape[0] > ridx.max():
+                rates[k] = td[ridx]
+        if k % theta_every == 0 or k == n - 1:
+            theta = theta_of_ctrl(sim.state.ctrl)
+            if theta is not None:
+                th_t.append((k + 1) * dt)
+                th.append(theta.copy())
+                if on_theta is not None:
+                    on_theta((k + 1) * dt, theta)
+        if progress is not None and (k + 1) * dt >= next_report:
+            next_report += progress_every_s
+            progress(f"  {label}simulated {(k + 1) * dt / 60:.0f} / {duration_s / 60:.0f} min "
+                     f"({time.perf_counter() - t_wall:.0f} s wall)")
+    return ControlRun(t=np.arange(n) * dt, thrust_cmd=thrust, saturated=sat, not_ok=not_ok,
+                      theta_t=np.array(th_t), theta=np.array(th) if th else np.zeros((0, 0)),
+                      rates=rates, H0=np.array(H0), v0=np.array(v0), final_ctrl=sim.state.ctrl,
+                      wall_s=time.perf_counter() - t_wall, **rec)
+
+
+# ---------------------------------------------------------------------------------------------
+# statistics
+# ---------------------------------------------------------------------------------------------
+def tracking_stats(run: ControlRun, start_s: float = 0.0, end_s: float | None = None) -> dict:
+    """Per-DOF MAE and the MNE of §5.3.1 over [start_s, end_s), measured and true.
+
+    ``position_mae`` (m, rad) per DOF of [x, y, z, roll, pitch, heading] and ``velocity_mae``
+    (m/s, rad/s) per body-velocity component of Δv; ``position_mne`` = mean ‖Δψ‖,
+    ``velocity_mne`` = mean ‖Δv‖ — measured (navigation vs reference) at the top level, plant
+    truth under ``true``.
+    """
+    sel = run.t >= start_s
+    if end_s is not None:
+        sel &= run.t < end_s
+
+    def block(eta: np.ndarray, dpsi: np.ndarray, dv: np.ndarray) -> dict:
+        e = eta[sel] - run.eta_ref[sel]
+        e[:, 3:] = _wrap(e[:, 3:])
+        return {
+            "position_mae": {nm: float(np.mean(np.abs(e[:, i])))
+                             for i, nm in enumerate(DOF_NAMES)},
+            "velocity_mae": {nm: float(np.mean(np.abs(dv[sel, i])))
+                             for i, nm in enumerate(VEL_NAMES)},
+            "position_mne": float(np.mean(np.linalg.norm(dpsi[sel], axis=1))),
+            "velocity_mne": float(np.mean(np.linalg.norm(dv[sel], axis=1))),
+        }
+
+    out = block(run.eta_nav, run.dpsi_meas, run.dv_meas)
+    out["true"] = block(run.eta_true, run.dpsi_true, run.dv_true)
+    out["samples"] = int(np.count_nonzero(sel))
+    out["window_s"] = [float(start_s), float(end_s if end_s is not None else run.t[-1] + 1e-9)]
+    return out
+
+
+def windows(run: ControlRun, window_s: float = 900.0, start_s: float = 0.0,
+            end_s: float | None = None) -> list[dict]:
+    """:func:`tracking_stats` of consecutive windows (15 minutes: Table 5.6, Fig. 5.4)."""
+    end = run.t[-1] + 1e-9 if end_s is None else end_s
+    out = []
+    a = start_s
+    while a + window_s <= end + 1e-6:
+        s = tracking_stats(run, a, a + window_s)
+        s["start_min"] = (a - start_s) / 60.0
+        s["end_min"] = (a - start_s + window_s) / 60.0
+        out.append(s)
+        a += window_s
+    return out
+
+
+def format_windows(rows: list[dict], title: str, *, pdc: dict | None = None) -> str:
+    """Table 5.6 layout: one row per window, position MAE (m, rad) and velocity MAE."""
+    hdr = (f"{'block (min)':>12} " + " ".join(f"{n:>7}" for n in ("PosX", "PosY", "PosZ", "Hea",
+                                                                 "Pit", "Rol"))
+           + " " + " ".join(f"{n:>8}" for n in ("BodVelX", "BodVelY", "BodVelZ", "AngVelX",
+                                                "AngVelY", "AngVelZ"))
+           + f" {'MNE psi':>8} {'MNE v':>8}")
+    lines = [title, hdr]
+    order = ("x", "y", "z", "heading", "pitch", "roll")
+
+    def row(label: str, s: dict) -> str:
+        pm, vm = s["position_mae"], s["velocity_mae"]
+        return (f"{label:>12} " + " ".join(f"{pm[d]:7.4f}" for d in order) + " "
+                + " ".join(f"{vm[d]:8.4f}" for d in VEL_NAMES)
+                + f" {s['position_mne']:8.4f} {s['velocity_mne']:8.4f}")
+
+    if pdc is not None:
+        lines.append(row("PDC", pdc))
+    for s in rows:
+        lines.append(row(f"{s['start_min']:.0f}-{s['end_min'] - 1:.0f}", s))
+    return "\n".join(lines)
+
+
+def series_summary(t: np.ndarray, x: np.ndarray, names: list[str], every_s: float) -> dict:
+    """A thinned time series {"t": [...], name: [...]} sampled every ``every_s``."""
+    if t.size == 0:
+        return {"t": []}
+    step = max(1, int(round(every_s / max(float(t[1] - t[0]) if t.size > 1 else every_s,
+                                          1e-9))))
+    idx = np.arange(0, t.size, step)
+    if idx[-1] != t.size - 1:
+        idx = np.append(idx, t.size - 1)
+    out = {"t": [round(float(v), 3) for v in t[idx]]}
+    for j, nm in enumerate(names):
+        out[nm] = [float(v) for v in x[idx, j]]
+    return out
