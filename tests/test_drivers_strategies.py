@@ -1,4 +1,4 @@
-"""Hypothesis strategies and sample frames shared by the driver property tests."""
+"""Hypothesis strategies and sample frames shared by the driver property tests (no tests here)."""
 
 from __future__ import annotations
 
