@@ -140,7 +140,8 @@ class App:
     sinks : sequence of TelemetrySink
         In addition to the JSON-lines sink of ``[telemetry.jsonl]`` when enabled.
     supervisor : Supervisor, optional
-        Built from ``config.failsafe`` by default.
+        Built from ``config.failsafe`` by default. Its ``on_event``/``on_transition``
+        listeners are kept and called after the App's own (log, STATUS=, telemetry).
     notifier : SdNotifier, optional
         From ``$NOTIFY_SOCKET`` by default.
     clock : Clock, optional
@@ -162,6 +163,8 @@ class App:
         self.components = list(components)
         self.notifier = notifier if notifier is not None else SdNotifier()
         self.supervisor = supervisor or Supervisor(config.failsafe)
+        self._user_on_event = self.supervisor.on_event
+        self._user_on_transition = self.supervisor.on_transition
         self.supervisor.on_event = self._on_failsafe_event
         self.supervisor.on_transition = self._on_transition
         tel = config.telemetry
@@ -220,11 +223,15 @@ class App:
             ev.action.value <= 1 else logging.WARNING
         log.log(level, "%s", ev)
         self.hub.publish({"type": "failsafe", **ev.as_dict()})
+        if self._user_on_event is not None:
+            self._user_on_event(ev)
 
     def _on_transition(self, tr: Transition, decision: Decision | None) -> None:
         log.info("lifecycle %s", tr)
         self.notifier.status(self.supervisor.status_text())
         self.hub.publish({"type": "lifecycle", **tr.as_dict()})
+        if self._user_on_transition is not None:
+            self._user_on_transition(tr, decision)
 
     def _on_cycle_error(self, exc: BaseException, t_ns: int) -> None:
         """A cycle raised: zero thrust now, and latch the cycle_exception failsafe."""

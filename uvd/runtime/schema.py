@@ -19,8 +19,12 @@ Cross-field rules go in an optional method ``_check(self, ctx) -> list[tuple[str
 returning ``(relative key, reason)`` pairs.
 
 Supported field types: ``bool``, ``int``, ``float`` (an integer is accepted), ``str``,
-``typing.Literal[...]`` (choices), ``X | None`` (absent means ``None``; TOML has no null),
-``tuple[T, ...]`` of the scalar types, and nested dataclasses.
+``pathlib.Path``, ``typing.Literal[...]`` (choices), ``X | None`` (absent means ``None``; TOML
+has no null), ``tuple[T, ...]`` and fixed ``tuple[T, T]`` of the scalar types, mappings (a
+free-form table), and nested dataclasses. A dataclass with a ``from_mapping(mapping, where)``
+classmethod validates itself; its ``ConfigError``/``ValueError`` messages of the form
+``[table] key: reason`` are folded into the report under ``table.key``, and
+:data:`TOML_LAYOUTS` says how its tables are laid out for :func:`describe`.
 """
 
 from __future__ import annotations
