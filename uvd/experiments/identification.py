@@ -161,17 +161,17 @@ def truth_dataset(minutes: float = 60.0) -> Dataset:
     and the attitude terms of W_UV carry different spectral lines: no fixed θ ≠ 0 has
     W_UV θ ≡ 0 along the trajectory, i.e. the regressor is persistently exciting for all 241
     parameters (checked numerically: the LS regressor of a run has full rank 241 with a
-    condition number reported in the result). Amplitudes keep every thruster below ~60 % of
-    its limit and roll/pitch within ±15°, inside the model's validated range.
+    condition number reported in the result). Amplitudes are chosen so that no thruster
+    saturates (the result reports the saturated fraction of cycles).
     """
     w = [0.113, 0.173, 0.229, 0.311, 0.347, 0.419, 0.467, 0.523, 0.587, 0.631, 0.673, 0.739,
          0.797, 0.853, 0.911, 0.967, 1.031, 1.087, 1.129, 1.193, 1.249, 0.283, 0.379, 0.557]
     traj = CosineTrajectory(center=CENTER, terms=(
-        _terms((0.45, w[0], 0.0), (0.20, w[6], 1.0), (0.08, w[12], 2.0)),
-        _terms((0.45, w[1], 0.5), (0.20, w[7], 1.5), (0.08, w[13], 2.5)),
-        _terms((0.35, w[2], 1.1), (0.15, w[8], 0.2), (0.06, w[14], 2.9)),
+        _terms((0.40, w[0], 0.0), (0.15, w[6], 1.0), (0.06, w[12], 2.0)),
+        _terms((0.40, w[1], 0.5), (0.15, w[7], 1.5), (0.06, w[13], 2.5)),
+        _terms((0.35, w[2], 1.1), (0.12, w[8], 0.2), (0.05, w[14], 2.9)),
         (), (),
-        _terms((50 * _DEG, w[3], 0.3), (20 * _DEG, w[9], 1.3), (8 * _DEG, w[15], 2.3)),
+        _terms((35 * _DEG, w[3], 0.3), (12 * _DEG, w[9], 1.3), (5 * _DEG, w[15], 2.3)),
     ), name="aid-truth")
     wrench = (
         _terms((25.0, w[16], 0.4)), _terms((25.0, w[17], 1.4)), _terms((25.0, w[18], 2.4)),
@@ -706,10 +706,12 @@ def run_aid_rot(opts: ExperimentOptions) -> dict:
 # ---------------------------------------------------------------------------------------------
 # aid-truth
 # ---------------------------------------------------------------------------------------------
-TRUTH_GAINS = AID6Gains(a=10.0, gamma1=20000.0, gamma2=100000.0, gamma3=10000.0,
-                        gamma4=10000.0)
-"""aid-truth gains: the thesis's ratios raised (γ₁ ×4, γ₂ ×5, γ₃, γ₄ ×5) — noise-free data
-tolerates faster adaptation; the discrete loop gain dt²γ‖W‖²/λ(M) stays far below 2."""
+TRUTH_GAINS = AID6Gains(a=10.0, gamma1=10000.0, gamma2=100000.0, gamma3=2000.0,
+                        gamma4=5000.0)
+"""aid-truth gains: §4.6's raised for noise-free data (γ₁ ×2, γ₂ ×5, γ₃ ×1, γ₄ ×2.5). Chosen by
+replaying a recorded ideal run offline: the drag block converges slowest, so γ₂ gains most;
+γ₂ ≥ 1.5·10⁵ made the 10 Hz discrete loop erratic on that run (M, D, b errors growing), and a
+larger γ₃ only makes ĝ chase the transient drag errors."""
 
 
 def run_aid_truth(opts: ExperimentOptions) -> dict:
@@ -780,6 +782,7 @@ def run_aid_truth(opts: ExperimentOptions) -> dict:
                 "M_min_eigenvalue_min": float(np.min(h["min_eig"])),
                 "parameters": _param_summary(aidp)},
         "true_parameters": _param_summary(true_p),
+        "saturated_fraction": rec.saturated_fraction, "cycles_not_ok": rec.cycles_not_ok,
         "wall_seconds_lockstep": t_sim,
     }
 
