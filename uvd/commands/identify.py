@@ -70,17 +70,18 @@ def _parse_gains(text):
 
 
 def _run(args) -> int:
+    from uvd.commands.xval import _load_params
     from uvd.estimation.aid import INITP_6DOF, aid6_params
     from uvd.estimation.ls import DiffFilter, ls_identify
     from uvd.estimation.runlog import RunLog
     from uvd.jsonio import write_json
-    from uvd.model.params import params_from_toml, save_params
+    from uvd.model.params import save_params
 
     run = RunLog.load(args.log)
     summary: dict = {"log": str(args.log), "method": args.method, "samples": len(run.t),
                      "duration_s": float(len(run.t) * run.dt)}
     if args.method == "aid":
-        init = params_from_toml(args.init) if args.init else INITP_6DOF
+        init = _load_params(args.init) if args.init else INITP_6DOF
         try:
             st = identify_aid(run, init.theta, _parse_gains(args.gains))
         except ValueError as exc:

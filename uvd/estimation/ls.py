@@ -37,6 +37,7 @@ succeeds), so the result *always* has M positive definite and dissipative drag a
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -397,7 +398,9 @@ def _solve_consistent(model: str, Rs: np.ndarray, z: np.ndarray, c: np.ndarray,
         if solver not in cp.installed_solvers():
             continue
         try:
-            prob.solve(solver=solver)
+            with warnings.catch_warnings():  # the status says it; no stderr noise
+                warnings.simplefilter("ignore", UserWarning)
+                prob.solve(solver=solver)
         except (cp.error.SolverError, ValueError, ArithmeticError) as exc:
             last = f"{solver}: {type(exc).__name__}: {exc}"
             continue
@@ -418,7 +421,8 @@ def ls_solve(model: str, Rfac: np.ndarray, z: np.ndarray, colnorm: np.ndarray, *
                                          check_finite=False)
     theta = c * xs
     sv = np.asarray(sv)
-    cond = float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else math.inf
+    full = int(rank) == Rfac.shape[1] and sv.size and sv[-1] > 0
+    cond = float(sv[0] / sv[-1]) if full else math.inf  # rank deficient: singular
     solver, status, projected = "scipy.linalg.lstsq (gelsd)", "optimal", False
     if consistent:
         th_c, solver, status = _solve_consistent(model, Rs, z, c, eps_mass, eps_drag)
