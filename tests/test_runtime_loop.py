@@ -287,3 +287,15 @@ def test_histogram_buckets_are_contiguous_and_negative_values_counted():
     assert set(s) >= {"p50", "p99", "p999", "max", "mean", "n"}
     h.reset()
     assert h.count == 0 and np.isnan(h.percentile(50))
+
+
+def test_fine_margin_defaults_scale_with_the_period():
+    assert LoopSettings(rate_hz=1000.0).margin_ns == 200_000       # 20 % of 1 ms
+    assert LoopSettings(rate_hz=100.0).margin_ns == 1_000_000      # capped at 1 ms
+    assert LoopSettings(rate_hz=10.0).margin_ns == 1_000_000
+    assert LoopSettings(rate_hz=10.0, timer="asyncio").margin_ns == 1_100_000
+    assert LoopSettings(rate_hz=10.0, fine_margin_us=50.0).margin_ns == 50_000
+    # never more than a period
+    loop = FixedRateLoop(lambda t, dt: None, LoopSettings(rate_hz=1000.0, timer="asyncio"),
+                         clock=FakeClock())
+    assert loop.margin_ns == loop.period_ns == 1_000_000

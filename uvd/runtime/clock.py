@@ -9,8 +9,8 @@ measurements behind the choice):
    ``CLOCK_MONOTONIC`` deadline and waits for it to become readable (nanosecond resolution,
    the event loop is woken by the file descriptor, not by its timeout). Where no timerfd exists
    it falls back to ``asyncio.sleep`` (millisecond rounding: give it a larger margin).
-2. **fine**, :meth:`Clock.sleep_until_ns`, a short blocking wait from ~0.2 ms before the
-   deadline to the deadline itself: a busy-wait on ``time.monotonic_ns`` (``"spin"``) or
+2. **fine**, :meth:`Clock.sleep_until_ns`, a short blocking wait from the margin before the
+   deadline (0.2–1 ms) to the deadline itself: a busy-wait on ``time.monotonic_ns`` (``"spin"``) or
    ``time.sleep`` (``"sleep"``, ``clock_nanosleep`` underneath).
 
 :class:`FakeClock` implements the same protocol on a simulated time line, so tests of the loop

@@ -51,7 +51,7 @@ from uvd.runtime.stats import Histogram
 __all__ = ["LoopSettings", "FixedRateLoop", "RealtimeReport", "apply_realtime",
            "drop_realtime", "DEFAULT_MARGIN_US"]
 
-DEFAULT_MARGIN_US = {"timerfd": 200.0, "asyncio": 1100.0}
+DEFAULT_MARGIN_US = {"timerfd": 1000.0, "asyncio": 1100.0}
 
 
 @dataclass(frozen=True)
@@ -76,8 +76,8 @@ class LoopSettings:
         "spin", doc="the last stretch to the deadline: busy-wait or time.sleep")
     fine_margin_us: float | None = setting(
         None, unit="µs", min=0.0, max=5000.0,
-        doc="how long before the deadline the coarse wait ends (default 200 with timerfd, "
-            "1100 with asyncio)")
+        doc="how long before the deadline the coarse wait ends (default: 20 % of the period "
+            "up to 1000 with timerfd — 200 at 1 kHz; 1100 with asyncio)")
 
     @property
     def period_ns(self) -> int:
@@ -85,8 +85,15 @@ class LoopSettings:
 
     @property
     def margin_ns(self) -> int:
-        m = self.fine_margin_us if self.fine_margin_us is not None else \
-            DEFAULT_MARGIN_US[self.timer]
+        """The fine-wait margin: as configured, else 20 % of the period up to 1 ms (timerfd;
+        a wake-up after a long sleep is sometimes a few hundred µs late) or 1.1 ms (asyncio,
+        whose timers are rounded up to whole milliseconds)."""
+        if self.fine_margin_us is not None:
+            m = self.fine_margin_us
+        elif self.timer == "timerfd":
+            m = min(DEFAULT_MARGIN_US["timerfd"], 0.2 * 1e6 / self.rate_hz)
+        else:
+            m = DEFAULT_MARGIN_US["asyncio"]
         return int(round(m * 1e3))
 
 
