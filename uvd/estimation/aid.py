@@ -28,12 +28,23 @@ V̇ = −a∆vᵀM∆v (4.33) exactly (the extracted text of (4.14) lost a sign;
 
 **Discretisation.** Explicit Euler at the loop period ``dt`` (§4.5–4.6: 100 ms). The core calls
 an estimator at cycle k with (R_k, v_k) and u_k, the wrench produced during the *previous*
-cycle [t_{k−1}, t_k]; so the step integrates the interval [t_{k−1}, t_k] from the stored
-(v_{k−1}, R_{k−1}, v̂_{k−1}) with that interval's wrench — ``input_interp="linear"`` (u_k is the
-instantaneous wrench at t_k, e.g. from measured propeller speeds, f = kω|ω|, App. A.1; the
-interval wrench is ½(u_{k−1} + u_k)) or ``"hold"`` (u_k was held over the interval: ideal
-actuators, wrench = previous command). Then ∆v_k = v̂_k − v_k. v̂(t₀) = v(t₀) on the first call,
-as both theorems require.
+cycle [t_{k−1}, t_k]; so the step integrates that interval from the stored (v_{k−1}, R_{k−1},
+v̂_{k−1}) with that interval's wrench — ``input_interp="linear"`` (u_k is the instantaneous
+wrench at t_k, e.g. from measured propeller speeds, f = kω|ω|, App. A.1; the interval uses
+½(u_{k−1} + u_k)) or ``"hold"`` (u_k was held over the interval: ideal actuators, wrench =
+previous command). Where the exogenous signals (v, R) are sampled is ``sampling``:
+
+* ``"midpoint"`` (default): the right-hand sides of (4.23)/(4.10) and the regressor terms of the
+  parameter laws use the interval's mid signals ½(v_{k−1} + v_k), ½(r_{k−1} + r_k); v̂ is
+  propagated with ∆v_{k−1}, and the parameter laws use the fresh error ∆v_k = v̂_k − v_k.
+  This is Euler for v̂ and θ̂ with signals that are second-order accurate over the step;
+* ``"euler"``: the thesis-literal scheme, every signal at the interval start and the laws
+  driven by ∆v_{k−1}.
+
+At 10 Hz the start-of-interval sampling biases θ̂ by O(dt), as much as the damping itself
+(noise-free, at the true θ, the one-step ∆v is ≈50× larger with ``"euler"``); at the daemon's
+1 kHz both schemes agree. ∆v_k = v̂_k − v_k is reported either way. v̂(t₀) = v(t₀) on the first
+call, as both theorems require.
 
 **Symmetry and definiteness.** M̂ (and Î) are never stored as matrices: θ̂ holds θ_M, the 21
 unique entries (2.45), and M̂ = unstack(P_M θ_M) (2.46)–(2.47) is symmetric by construction;
@@ -45,8 +56,8 @@ last positive-definite value, ``frozen=True`` and ``freeze_reason`` set) and fro
 propagates v̂ with the frozen θ̂. :func:`aid6_unfreeze` resumes adaptation explicitly.
 
 Hot loop: one compiled (numba) kernel per step, no regressor matrix is formed — the blocks of
-W_UVᵀ∆v are the structured products above (the drag block is −|vᵢ|(v ⊗ ∆v)); ~10 µs per
-6-DOF step (``uvd bench estimation``).
+W_UVᵀ∆v are the structured products above (the drag block is −|vᵢ|(v ⊗ ∆v)); ~15 µs median per
+6-DOF step including the Python state bookkeeping (``uvd bench estimation``).
 """
 
 from __future__ import annotations
@@ -432,6 +443,8 @@ class AID6Params:
         How the wrench u_k handed over at cycle k covers [t_{k−1}, t_k]: "linear" — u_k is the
         instantaneous wrench at t_k (measured propeller speeds); the interval uses
         ½(u_{k−1} + u_k). "hold" — u_k was held over the interval (ideal actuators).
+    sampling : {"midpoint", "euler"}
+        Where (v, R) enter the right-hand sides over a step (module docstring).
     pd_floor : float
         M̂ counts as no longer positive definite when λ_min(M̂) ≤ pd_floor · λ_max(M̂)
         (a condition number above 1/pd_floor); the estimator then freezes.
