@@ -141,19 +141,26 @@ def test_closing_is_bounded_even_if_a_sink_hangs():
     assert ok.closed and took < 1.0
 
 
-def test_decimation():
-    sink = ListSink()
+def test_decimation_is_per_sink_and_events_are_never_decimated():
+    every10, every1 = ListSink("ten"), ListSink("one")
 
     async def main():
-        hub = TelemetryHub([sink], every_n=10, flush_interval_s=0.01)
+        hub = TelemetryHub([every10], every_n=10, flush_interval_s=0.01)
+        hub.add_sink(every1)
         pump = asyncio.create_task(hub.run())
         for i in range(100):
             hub.publish({"i": i})
+            if i == 42:
+                hub.publish({"event": "fired"}, always=True)
+            if i == 49:
+                hub.set_every_n("ten", 25)
         await hub.aclose(1.0)
         await asyncio.wait_for(pump, 2.0)
 
     run(main())
-    assert [r["i"] for r in sink.records] == list(range(9, 100, 10))
+    got = [r.get("i", r.get("event")) for r in every10.records]
+    assert got == [9, 19, 29, 39, "fired", 49, 74, 99]
+    assert len(every1.records) == 101
 
 
 def test_jsonl_sink_writes_complete_lines(tmp_path):

@@ -168,12 +168,10 @@ class App:
         self.supervisor.on_event = self._on_failsafe_event
         self.supervisor.on_transition = self._on_transition
         tel = config.telemetry
-        all_sinks = list(sinks)
+        self.hub = TelemetryHub(sinks, queue_size=tel.queue_size,
+                                flush_interval_s=tel.flush_interval_s)
         if tel.jsonl.enabled:
-            all_sinks.append(JsonLinesSink(tel.jsonl.path))
-        self.hub = TelemetryHub(all_sinks, queue_size=tel.queue_size,
-                                flush_interval_s=tel.flush_interval_s,
-                                every_n=tel.jsonl.every_n_cycles)
+            self.hub.add_sink(JsonLinesSink(tel.jsonl.path), every_n=tel.jsonl.every_n_cycles)
         self.loop = FixedRateLoop(cycle, config.loop, clock=clock, on_error=self._on_cycle_error)
         self.watchdog = WatchdogPinger.from_env(self.notifier)
         if self.watchdog is not None:
@@ -222,14 +220,14 @@ class App:
         level = logging.INFO if ev.kind in ("cleared", "reset") or \
             ev.action.value <= 1 else logging.WARNING
         log.log(level, "%s", ev)
-        self.hub.publish({"type": "failsafe", **ev.as_dict()})
+        self.hub.publish({"type": "failsafe", **ev.as_dict()}, always=True)
         if self._user_on_event is not None:
             self._user_on_event(ev)
 
     def _on_transition(self, tr: Transition, decision: Decision | None) -> None:
         log.info("lifecycle %s", tr)
         self.notifier.status(self.supervisor.status_text())
-        self.hub.publish({"type": "lifecycle", **tr.as_dict()})
+        self.hub.publish({"type": "lifecycle", **tr.as_dict()}, always=True)
         if self._user_on_transition is not None:
             self._user_on_transition(tr, decision)
 
@@ -280,7 +278,7 @@ class App:
         self.config = merged
         self.loop.set_overrun_streak(merged.loop.overrun_streak)
         self.supervisor.set_thresholds(merged.failsafe)
-        self.hub.every_n = merged.telemetry.jsonl.every_n_cycles
+        self.hub.set_every_n("jsonl", merged.telemetry.jsonl.every_n_cycles)
         for hook in self.reload_hooks:
             try:
                 hook(merged, applied)

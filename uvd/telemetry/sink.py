@@ -104,8 +104,9 @@ class SinkStats:
 
 
 class _Lane:
-    def __init__(self, sink: TelemetrySink, capacity: int) -> None:
+    def __init__(self, sink: TelemetrySink, capacity: int, every_n: int = 1) -> None:
         self.sink = sink
+        self.every_n = max(1, int(every_n))
         self.queue = BoundedQueue(capacity)
         self.stats = SinkStats()
         self.opened = False
@@ -128,7 +129,9 @@ class TelemetryHub:
     batch : int
         Largest batch handed to a sink at once.
     every_n : int
-        Publish one record in N (decimation for high loop rates); changeable at run time.
+        Default decimation: a sink takes one cycle record in N (events published with
+        ``always=True`` are never decimated). Per sink with :meth:`add_sink` /
+        :meth:`set_every_n`.
     """
 
     def __init__(self, sinks: Iterable[TelemetrySink] = (), *, queue_size: int = 1024,
@@ -136,26 +139,36 @@ class TelemetryHub:
         self.queue_size = int(queue_size)
         self.flush_interval_s = float(flush_interval_s)
         self.batch = int(batch)
-        self.every_n = max(1, int(every_n))
         self._count = 0
-        self._lanes: list[_Lane] = [_Lane(s, self.queue_size) for s in sinks]
+        self._lanes: list[_Lane] = [_Lane(s, self.queue_size, every_n) for s in sinks]
         self._closing = False
 
-    def add_sink(self, sink: TelemetrySink) -> None:
-        """Add a sink before :meth:`run` starts."""
-        self._lanes.append(_Lane(sink, self.queue_size))
+    def add_sink(self, sink: TelemetrySink, every_n: int = 1) -> None:
+        """Add a sink (taking one cycle record in ``every_n``) before :meth:`run` starts."""
+        self._lanes.append(_Lane(sink, self.queue_size, every_n))
+
+    def set_every_n(self, name: str, every_n: int) -> None:
+        """Change a sink's decimation at run time (reload)."""
+        for lane in self._lanes:
+            if lane.sink.name == name:
+                lane.every_n = max(1, int(every_n))
 
     @property
     def sinks(self) -> list[TelemetrySink]:
         return [lane.sink for lane in self._lanes]
 
-    def publish(self, record: Mapping[str, Any]) -> None:
-        """From the loop: enqueue ``record`` for every sink. Never blocks, never raises."""
-        self._count += 1
-        if self._count % self.every_n:
-            return
+    def publish(self, record: Mapping[str, Any], *, always: bool = False) -> None:
+        """From the loop: enqueue ``record`` for every sink. Never blocks, never raises.
+
+        Cycle records are decimated per sink; ``always=True`` (failsafe events, lifecycle
+        transitions) goes to every sink regardless.
+        """
+        if not always:
+            self._count += 1
+        n = self._count
         for lane in self._lanes:
-            lane.queue.put(record)
+            if always or lane.every_n == 1 or n % lane.every_n == 0:
+                lane.queue.put(record)
 
     async def _ensure_open(self, lane: _Lane) -> bool:
         async with lane.open_lock:
