@@ -1,0 +1,70 @@
+"""Smoke tests of the Chapter 5 experiments and of ``uvd bench control``: each runs shortened
+(``--hours 0.02``, ~70 simulated seconds) and must produce its documented JSON keys and a
+summary. The figures themselves come from the full-length runs (docs/RESULTS.md)."""
+
+import argparse
+import json
+import math
+
+import pytest
+
+from uvd import experiments
+from uvd.cli import main as uvd_main
+
+SHORT = 0.02
+
+KEYS = {
+    "ambc-6dof-unstable": ["parameters", "true", "initial", "final", "series",
+                           "min_mass_eigenvalue", "m4_m5", "final_relative_error"],
+    "pitch-reversal": ["cases"],
+    "two-step": ["final", "true", "step1", "windows", "masses_drags_within_10pct",
+                 "g_b_within_5pct", "theta_after_s"],
+    "pdc-vs-ambc": ["pdc", "ambc", "position_ratio", "velocity_ratio"],
+    "xval-two-step": ["models", "states", "adaptation_times_s"],
+    "ambc-robust": ["min_mass_eigenvalue", "final", "masses_drags_within_25pct"],
+    "ambc-full": ["pdc", "ambc", "position_ratio", "velocity_ratio",
+                  "relative_parameter_error", "min_mass_eigenvalue"],
+}
+
+
+@pytest.mark.parametrize("name", sorted(KEYS))
+def test_experiment_runs_shortened(name):
+    exp = experiments.get(name)
+    msgs = []
+    res = exp.run(experiments.ExperimentOptions(seed=0, hours=SHORT, progress=msgs.append))
+    for key in KEYS[name]:
+        assert key in res, f"{name}: missing {key}"
+    assert isinstance(res["summary"], str) and res["summary"]
+    assert msgs  # progress is reported
+    json.dumps(res)  # JSON-serialisable as is
+    if name in ("pdc-vs-ambc", "ambc-full"):
+        for k in ("position_mne", "velocity_mne"):
+            assert math.isfinite(res["pdc"][k]) and res["pdc"][k] > 0
+            assert math.isfinite(res["ambc"][k]) and res["ambc"][k] > 0
+        assert res["position_ratio"] == pytest.approx(res["ambc"]["position_mne"]
+                                                      / res["pdc"]["position_mne"])
+    if name == "pitch-reversal":
+        rev, none = res["cases"]["reversals"], res["cases"]["no_reversals"]
+        # about 0° the pitch thrusters reverse; about 5° ± 3° they do not
+        assert rev["reversals"] > 0
+        assert none["reversals"] < rev["reversals"]
+    if name == "xval-two-step":
+        assert set(res["models"]) == {"250s", "1000s", "5000s", "true"}
+
+
+def test_experiment_command_writes_json(tmp_path, capsys):
+    out = tmp_path / "r.json"
+    rc = uvd_main(["experiment", "ambc-robust", "--hours", "0.005", "--json", str(out)])
+    assert rc == 0
+    data = json.loads(out.read_text())
+    assert data["experiment"] == "ambc-robust" and data["seed"] == 0
+    assert "ambc-robust" in capsys.readouterr().out
+
+
+def test_bench_control_reports_median_and_p99():
+    from uvd.bench.control import BENCH
+
+    figs = BENCH.run(argparse.Namespace(cycles=300, lockstep_seconds=20.0))
+    for key in ("pdc", "ambc_full_241", "ambc_full_241_robust", "ambc_decoupled_16"):
+        assert figs[key]["p50"] > 0 and figs[key]["p99"] >= figs[key]["p50"]
+    assert figs["lockstep_two_step"]["extrapolated_wall_s_for_6_h"] > 0

@@ -1,0 +1,152 @@
+"""``make results`` (``python -m uvd.experiments.results``): run the experiments and regenerate
+``docs/RESULTS.md``.
+
+Every registered experiment (:func:`uvd.experiments.registry` — the control experiments of
+Chapter 5 and the identification ones of Chapter 4, whichever modules are present) is run with
+its default duration and seed 0; its JSON goes to ``docs/results/NAME.json`` and, when the
+result has a ``"summary"``, the page shows it next to the thesis figure or table it reproduces,
+with the command that produced it. Long: the Chapter 5 experiments alone simulate ~30 hours
+(several minutes of wall time); progress goes to stderr.
+
+Options: ``--only NAME …`` runs a subset, ``--reuse`` takes the JSON already in
+``docs/results/`` instead of running (regenerates the page only), ``--out DIR`` moves
+everything (default: ``docs``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from uvd import experiments
+from uvd.jsonio import write_json
+
+# what each experiment reproduces in the thesis (experiments not listed here show their own
+# one-line summary; an experiment may also say it in its result under "thesis_reference")
+THESIS = {
+    "ambc-6dof-unstable": "§5.3.2 — Tables 5.2 and 5.3 (initial and final parameters) and "
+                          "Fig. 5.1 (m₄, m₅ drifting negative) — single-step AMBC diverging "
+                          "under unmodelled thruster dynamics.",
+    "pitch-reversal": "§5.3.4 — Figs. 5.2 and 5.3: pitch-only AMBC with and without thrust "
+                      "reversals; large negative spikes of ṁ₅ after each reversal.",
+    "two-step": "§5.3.5 — Table 5.4 (g, b after the quasi-static step 1), Table 5.5 (masses and "
+                "drags after step 2), Table 5.6 (per-15-minute MAE per DOF).",
+    "pdc-vs-ambc": "§5.3.5.1 — Fig. 5.4: position and velocity MNE of PDC and two-step AMBC; "
+                   "thesis: AMBC 30 % better in position (ratio 0.70), 8 % worse in velocity "
+                   "(ratio 1.08).",
+    "xval-two-step": "§5.3.5.2 — Figs. 5.5–5.7: forward simulation of RefTraj2 with the models "
+                     "after 250, 1000 and 5000 s of adaptation; MAE of the eight open-loop-"
+                     "stable states.",
+    "ambc-robust": "Beyond the thesis: §5.3.2's single-step AMBC with robust adaptation "
+                   "(projection, dead zone, freezes) — must not diverge.",
+    "ambc-full": "Beyond the thesis's experiments: Theorem 5.2.2 with all 241 parameters on "
+                 "the coupled model of Tables 4.8/4.9, against PDC.",
+}
+
+ORDER = ("ambc-6dof-unstable", "pitch-reversal", "two-step", "pdc-vs-ambc", "xval-two-step",
+         "ambc-robust", "ambc-full")
+
+
+def _progress(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _thesis_text(name: str, result: dict, exp) -> str:
+    if name in THESIS:
+        return THESIS[name]
+    ref = result.get("thesis_reference")
+    return str(ref) if ref else exp.summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m uvd.experiments.results",
+                                 description=__doc__.split("\n\n")[0])
+    ap.add_argument("--only", nargs="*", metavar="NAME", help="run only these experiments")
+    ap.add_argument("--reuse", action="store_true",
+                    help="do not run: use the JSON already in OUT/results/")
+    ap.add_argument("--out", type=Path, default=Path("docs"), help="output folder (docs)")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+
+    reg = experiments.registry()
+    names = [n for n in ORDER if n in reg] + sorted(n for n in reg if n not in ORDER)
+    if args.only:
+        unknown = set(args.only) - set(reg)
+        if unknown:
+            ap.error(f"unknown experiment(s) {sorted(unknown)}; known: {sorted(reg)}")
+        names = [n for n in names if n in args.only]
+    res_dir = args.out / "results"
+    res_dir.mkdir(parents=True, exist_ok=True)
+    results: dict[str, dict] = {}
+    t_all = time.perf_counter()
+    for i, name in enumerate(names, 1):
+        path = res_dir / f"{name}.json"
+        if args.reuse:
+            if path.exists():
+                results[name] = json.loads(path.read_text())
+            continue
+        _progress(f"[results] ({i}/{len(names)}) uvd experiment {name} --json {path}")
+        t0 = time.perf_counter()
+        opts = experiments.ExperimentOptions(seed=args.seed, progress=_progress)
+        try:
+            result = reg[name].run(opts)
+        except Exception as exc:  # one broken experiment must not lose the others' results
+            _progress(f"[results] {name} FAILED: {exc!r}")
+            results[name] = {"experiment": name, "error": repr(exc)}
+            continue
+        result.setdefault("experiment", name)
+        result.setdefault("seed", args.seed)
+        result["wall_seconds"] = round(time.perf_counter() - t0, 3)
+        write_json(path, result)
+        results[name] = result
+        _progress(f"[results] {name} done in {result['wall_seconds']:.0f} s")
+    # keep the results of experiments not run this time on the page
+    for name in names:
+        path = res_dir / f"{name}.json"
+        if name not in results and path.exists():
+            results[name] = json.loads(path.read_text())
+    page = render(results, reg)
+    (args.out / "RESULTS.md").write_text(page)
+    _progress(f"[results] wrote {args.out / 'RESULTS.md'} ({time.perf_counter() - t_all:.0f} s)")
+    return 0
+
+
+def render(results: dict[str, dict], reg: dict) -> str:
+    lines = [
+        "# Results",
+        "",
+        "Generated by `make results` (`python -m uvd.experiments.results`) — do not edit by hand.",
+        "Each section is one lockstep experiment, run with its default duration and seed 0; the",
+        "JSON it wrote is in `docs/results/` (keys: [experiments.md](experiments.md) and",
+        "[experiments-identification.md](experiments-identification.md)). Our figures are in the",
+        "code blocks; the thesis's are quoted beside them.",
+        "",
+    ]
+    for name, result in results.items():
+        if name not in reg:
+            continue
+        lines.append(f"## {name}")
+        lines.append("")
+        lines.append(f"*Thesis:* {_thesis_text(name, result, reg[name])}")
+        lines.append("")
+        lines.append(f"*Command:* `uvd experiment {name} --json docs/results/{name}.json`"
+                     + (f" — {result['wall_seconds']:.0f} s wall" if "wall_seconds" in result
+                        else ""))
+        lines.append("")
+        if "error" in result:
+            lines.append(f"**Failed:** `{result['error']}`")
+        elif result.get("summary"):
+            lines.append("```")
+            lines.append(str(result["summary"]).rstrip())
+            lines.append("```")
+        else:
+            lines.append("(this experiment's result has no summary; see its JSON)")
+        lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
