@@ -101,7 +101,8 @@ def core_init(cfg: CoreConfig, *, north_m: float = 0.0, east_m: float = 0.0) -> 
 
 
 def _finite(a: np.ndarray) -> bool:
-    return math.isfinite(float(np.sum(a)))
+    """All entries finite (a NaN or ±inf anywhere makes the sum non-finite)."""
+    return math.isfinite(float(np.asarray(a).sum()))
 
 
 def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
