@@ -19,7 +19,6 @@ the previous command.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -101,8 +100,8 @@ def core_init(cfg: CoreConfig, *, north_m: float = 0.0, east_m: float = 0.0) -> 
 
 
 def _finite(a: np.ndarray) -> bool:
-    """All entries finite (a NaN or ±inf anywhere makes the sum non-finite)."""
-    return math.isfinite(float(np.asarray(a).sum()))
+    """All entries finite (no NaN, no ±inf)."""
+    return bool(np.isfinite(a).all())
 
 
 def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
