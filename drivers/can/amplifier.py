@@ -466,16 +466,13 @@ class AmplifierGroup:
         """Request a fault reset on every drive in FAULT for the next ``cycles`` cycles.
 
         The controlword toggles bit 7 so that the drive sees rising edges; a drive whose
-        fault persists stays in FAULT. Active EMCY faults are cleared once it leaves FAULT;
-        on a drive that is not in FAULT they are acknowledged (cleared) at once.
+        fault persists stays in FAULT. Active EMCY faults are cleared once the drive leaves
+        FAULT; on a drive that is not in FAULT, EMCYs older than its latest statusword are
+        acknowledged (cleared) during those cycles.
         """
         with self._lock:
             for node in self.nodes:
-                state = cia402.state_from_statusword(node.statusword)
-                if state in (cia402.FAULT, cia402.FAULT_REACTION_ACTIVE):
-                    node.reset_cycles = cycles
-                else:
-                    node.emcy_active.clear()
+                node.reset_cycles = cycles
 
     @property
     def goal(self) -> str:
@@ -548,10 +545,13 @@ class AmplifierGroup:
                 else:
                     node.missed = 0
             if node.reset_cycles and state != cia402.FAULT:
-                if node.last_cw & cia402.CW_FAULT_RESET:
-                    with self._lock:
+                with self._lock:
+                    if node.last_cw & cia402.CW_FAULT_RESET:  # it left FAULT on our reset
                         node.emcy_active.clear()
-                node.reset_cycles = 0
+                        node.reset_cycles = 1
+                    else:  # acknowledge EMCYs that a later statusword shows were no fault
+                        for code in [k for k, t in node.emcy_active.items() if t < node.tpdo_ns]:
+                            del node.emcy_active[code]
             cw = cia402.master_controlword(state, self._goal, fault_reset=node.reset_cycles > 0,
                                            previous=node.last_cw)
             if node.reset_cycles:
@@ -679,6 +679,27 @@ class AmplifierGroup:
         return GroupFeedback(now, tuple(nodes), omega, self._k * omega * np.abs(omega),
                              np.array([n.torque_permille for n in nodes]), valid, enabled,
                              faults, self.bus.status().state)
+
+    def error_codes(self, only_faulted: bool = True) -> dict[int, tuple[int, str]]:
+        """Read each drive's error code (0x603F) by SDO — outside the cycle, bounded.
+
+        For a drive that reports FAULT but whose EMCY was lost (it was cut off, or the bus
+        was off), this tells why. Nodes that do not answer are left out.
+        """
+        out: dict[int, tuple[int, str]] = {}
+        for node in self.nodes:
+            with self._lock:
+                state = cia402.state_from_statusword(node.statusword)
+            if only_faulted and state not in (cia402.FAULT, cia402.FAULT_REACTION_ACTIVE):
+                continue
+            try:
+                raw = node.remote.sdo.upload(0x603F, 0)
+                code = struct.unpack("<H", raw[:2])[0]
+            except Exception as exc:  # noqa: BLE001 - diagnostics are best effort
+                log.info("amplifier %d: no error code: %s", node.node_id, exc)
+                continue
+            out[node.node_id] = (code, cia402.emcy_fault_name(code) if code else "none")
+        return out
 
     def stats(self) -> dict:
         """Counters of the group and of the bus (for the daemon's telemetry)."""

@@ -243,7 +243,7 @@ EMCY_FAULTS: Mapping[int, str] = {
     0x7305: "encoder_fault",
     0x8110: "can_overrun",
     0x8120: "can_error_passive",
-    0x8130: "heartbeat_lost",
+    0x8130: "daemon_heartbeat_lost",  # the drive lost the heartbeat it consumes
     0x8140: "bus_off_recovered",
     0x8210: "pdo_length_error",
     0x8220: "pdo_length_exceeded",

@@ -46,6 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--depth", type=float, default=1.0, help="transmitter depth (m)")
     p.add_argument("--no-dynamics", action="store_true",
                    help="thrusters without lag and stiction (steady state at once)")
+    p.add_argument("--realtime", action="store_true",
+                   help="run at SCHED_FIFO priority 10 if permitted (a drive answers on time)")
     p.add_argument("--control", action="store_true",
                    help="read JSON commands on stdin, answer on stdout; exit when stdin closes")
     return p
@@ -55,6 +57,13 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # answer a SYNC within ~1 ms even while the tick thread holds the GIL (default 5 ms)
     sys.setswitchinterval(0.0005)
+    realtime = False
+    if args.realtime:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+            realtime = True
+        except (OSError, AttributeError):
+            pass  # not permitted: normal priority, reported in the ready line
     out_lock = threading.Lock()
 
     def emit(obj: dict) -> None:
@@ -101,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         threading.Thread(target=control, name="control", daemon=True).start()
     emit({"event": "ready", "pid": os.getpid(), "interface": args.interface,
           "channel": args.channel, "port": args.port, "nodes": list(nodes),
-          "pressure_node": args.pressure_node})
+          "pressure_node": args.pressure_node, "realtime": realtime})
     deadline = time.monotonic() + args.duration
     while not stop.is_set() and time.monotonic() < deadline:
         stop.wait(min(0.1, max(0.0, deadline - time.monotonic())))

@@ -4,7 +4,7 @@
 thruster on a python-can bus (``virtual`` in-process, ``udp_multicast`` across processes, or a
 real interface), drives a :class:`sim_bridge.thrusters.ThrusterBank` with their outputs
 (propeller lag, reversal stiction, saturation) and reports the bank's propeller speeds as the
-amplifiers' velocity feedback. A tick thread (2 ms) advances the bank, produces heartbeats,
+amplifiers' velocity feedback. A tick thread (5 ms) advances the bank, produces heartbeats,
 runs the heartbeat consumers and the **command timeout**: an amplifier in OPERATION ENABLED
 that has received no RPDO for ``0x1400:05`` ms (200 by default) zeroes its output, reports
 EMCY 0x8250 (``command_timeout``, with the measured milliseconds in its manufacturer bytes)
@@ -89,7 +89,7 @@ class CanEmulators:
                  pressure_node: int | None = None, depth_m: float | Callable[[], float] = 0.0,
                  depth_cfg: DepthConfig | None = None, pressure_noise_pa: float = 0.0,
                  rng: np.random.Generator | None = None,
-                 tick_s: float = 0.002, clock: Callable[[], int] = time.monotonic_ns) -> None:
+                 tick_s: float = 0.005, clock: Callable[[], int] = time.monotonic_ns) -> None:
         if len(node_ids) != len(thrusters):
             raise ConfigError(f"emulators: {len(node_ids)} node ids for {len(thrusters)} "
                               "thrusters")

@@ -195,7 +195,7 @@ class EmulatedNode:
 
     def on_heartbeat_lost(self, now: int) -> None:
         """The consumed heartbeat (the daemon's) is late: EMCY 0x8130."""
-        self.emcy(cia402.FAULT_CODES["heartbeat_lost"])
+        self.emcy(cia402.FAULT_CODES["daemon_heartbeat_lost"])
 
 
 class EmulatedAmplifier(EmulatedNode):
@@ -340,7 +340,7 @@ class EmulatedAmplifier(EmulatedNode):
     def on_heartbeat_lost(self, now: int) -> None:
         if self.state in (cia402.OPERATION_ENABLED, cia402.SWITCHED_ON,
                           cia402.READY_TO_SWITCH_ON, cia402.QUICK_STOP_ACTIVE):
-            self.fault(cia402.FAULT_CODES["heartbeat_lost"], now)
+            self.fault(cia402.FAULT_CODES["daemon_heartbeat_lost"], now)
         else:
             super().on_heartbeat_lost(now)
 
