@@ -16,6 +16,9 @@ amplifier is a CiA 402 drive in cyclic synchronous torque (or profile torque) mo
   FAULT stays there until :meth:`reset_faults` is called.
 * **feedback** — each drive answers the SYNC with its TPDO: statusword, torque actual and
   velocity actual (propeller speed ω, from which thrust is estimated as f = k ω|ω|, App. A.1).
+* **safety** — a target is non-zero only for a drive in OPERATION ENABLED with no fault of
+  its own while the bus has none of ``bus_off``, ``bus_closed``, ``send_failed``
+  (``error_passive``/``error_warning`` are reported, but frames still get through);
 * **faults** — EMCY codes are named (:data:`drivers.can.cia402.EMCY_FAULTS`); heartbeats are
   consumed (``heartbeat_lost``) and produced by the daemon from :meth:`write` itself;
   ``max_failed_cycles`` cycles in a row without a drive's feedback raise ``feedback_lost`` on
@@ -63,6 +66,8 @@ log = logging.getLogger(__name__)
 NMT_OPERATIONAL = 5
 NMT_PRE_OPERATIONAL = 127
 _NMT_NAMES = {0: "boot_up", 4: "stopped", 5: "operational", 127: "pre_operational"}
+#: Bus faults on which every target is zeroed (``error_passive``/``error_warning`` are not).
+_ZEROING_BUS_FAULTS = frozenset({"bus_off", "bus_closed", "send_failed"})
 
 OD_CONTROLWORD = 0x6040
 OD_STATUSWORD = 0x6041
@@ -355,6 +360,7 @@ class AmplifierGroup:
         self.bus.expect(0x80 + nid, 8)
         self.bus.expect(0x700 + nid, 1)
         self.bus.expect(0x580 + nid, 8)
+        self.bus.expect(0x000, 2)  # NMT (canopen mirrors NMT commands it hears)
         return node
 
     # -- notifier thread --
@@ -526,7 +532,8 @@ class AmplifierGroup:
         c["nonfinite_commands"] += nonfinite
         c["clamped_commands"] += clamped
         faults = self._update_faults(t0, bus_state)
-        group_fault = bool(faults.get(0))
+        # error-passive/warning are reported but the frames still get through: keep driving
+        group_fault = bool(set(faults.get(0, ())) & _ZEROING_BUS_FAULTS)
         enabled_goal = self._goal == cia402.GOAL_ENABLED
         with self._lock:
             snap = [(n.statusword, n.tpdo_count) for n in self.nodes]

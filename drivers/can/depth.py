@@ -98,6 +98,8 @@ class CanDepthSensor:
         bus.expect(pdo.cob_id, (pdo.length + 7) // 8)
         bus.expect(0x80 + cfg.node_id, 8)
         bus.expect(0x700 + cfg.node_id, 1)
+        bus.expect(0x580 + cfg.node_id, 8)
+        bus.expect(0x000, 2)
         pdo.add_callback(self._on_tpdo)
         self.remote.nmt.add_heartbeat_callback(self._on_heartbeat)
         self.remote.emcy.add_callback(self._on_emcy)

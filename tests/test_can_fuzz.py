@@ -1,0 +1,157 @@
+"""Fuzz: random and malformed CAN frames never raise out of the driver, and are counted."""
+
+from __future__ import annotations
+
+import time
+import uuid
+
+import can
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from drivers.can import cia402
+from drivers.can.amplifier import AmplifierGroup
+from drivers.can.bus import CAN_ERR_PROT, CanBus, make_error_frame
+from drivers.can.config import AmplifierConfig, CanBusConfig, DepthConfig
+from drivers.can.depth import CanDepthSensor
+from sim_bridge.amplifiers.harness import run_cycles, start_rig
+from uvd.model.vehicle import load_vehicle
+
+VEHICLE = load_vehicle("jhu-rov")
+NODES = (1, 2, 3, 4, 5, 6)
+# every COB-ID the driver listens to, plus neighbours
+KNOWN = sorted({base + n for n in (*NODES, 32) for base in (0x80, 0x180, 0x580, 0x700)}
+               | {0x000, 0x080, 0x181 + 0x100, 0x7E5})
+BUCKETS = ("rx_error_frames", "rx_remote", "rx_extended", "rx_fd", "rx_malformed", "rx_unknown")
+
+
+@pytest.fixture(scope="module")
+def driver():
+    cfg = CanBusConfig(interface="virtual", channel=f"uvd-fuzz-{uuid.uuid4().hex[:8]}")
+    bus = CanBus(cfg).open()
+    group = AmplifierGroup(bus, AmplifierConfig(), VEHICLE.thrusters)
+    depth = CanDepthSensor(bus, DepthConfig(enabled=True))
+    yield bus, group, depth
+    bus.close()
+
+
+frames = st.one_of(
+    st.builds(lambda cid, data: can.Message(arbitration_id=cid, data=data, is_extended_id=False),
+              st.sampled_from(KNOWN), st.binary(max_size=8)),
+    st.builds(lambda cid, data: can.Message(arbitration_id=cid, data=data, is_extended_id=False),
+              st.integers(0, 0x7FF), st.binary(max_size=8)),
+    st.builds(lambda cid, data: can.Message(arbitration_id=cid, data=data, is_extended_id=True),
+              st.integers(0, 0x1FFFFFFF), st.binary(max_size=8)),
+    st.builds(lambda cid, dlc: can.Message(arbitration_id=cid, is_remote_frame=True, dlc=dlc,
+                                           is_extended_id=False),
+              st.sampled_from(KNOWN), st.integers(0, 8)),
+    st.builds(lambda cid, data: can.Message(arbitration_id=cid, data=data, is_error_frame=True),
+              st.integers(0, 0x1FFFFFFF), st.binary(max_size=8)),
+    st.builds(lambda cid, data: can.Message(arbitration_id=cid, data=data, is_fd=True,
+                                            is_extended_id=False),
+              st.sampled_from(KNOWN), st.binary(min_size=9, max_size=64)),
+)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(batch=st.lists(frames, min_size=1, max_size=30))
+def test_random_frames_never_raise_and_every_frame_is_counted(driver, batch):
+    bus, group, depth = driver
+    before = bus.status().counters
+    for msg in batch:
+        bus._on_rx(msg)  # the dispatcher the notifier thread calls
+    after = bus.status().counters
+    assert after["rx_frames"] - before["rx_frames"] == len(batch)
+    assert after["rx_callback_errors"] == 0
+    dropped = sum(after[k] - before[k] for k in BUCKETS)
+    wellformed = [m for m in batch if not (m.is_error_frame or m.is_remote_frame
+                                           or m.is_extended_id or m.is_fd)]
+    assert dropped >= len(batch) - len(wellformed)
+    # the driver still answers, whatever it was fed
+    fb = group.read()
+    assert fb.omega_rad_s.shape == (6,) and np.isfinite(fb.omega_rad_s).all()
+    assert group.write(np.full(6, 1.0)).cycle > 0
+    assert depth.latest() is None or np.isfinite(depth.latest().pressure_pa)
+
+
+def test_malformed_frames_are_dropped_before_decoding(driver):
+    bus, group, _ = driver
+    node = group.nodes[2]  # node 3
+    with group._lock:
+        sw_before = node.statusword
+    base = dict(bus.malformed_by_id)
+    for data in (b"", b"\x27", b"\x27\x02\x00", b"\x27\x02\x00\x00\x00\x00\x00\x00\x00"[:7]):
+        bus._on_rx(can.Message(arbitration_id=0x183, data=data, is_extended_id=False))
+    bus._on_rx(can.Message(arbitration_id=0x83, data=b"\x10\x23", is_extended_id=False))  # EMCY
+    bus._on_rx(can.Message(arbitration_id=0x703, data=b"", is_extended_id=False))  # heartbeat
+    assert bus.malformed_by_id[0x183] - base.get(0x183, 0) == 4
+    assert bus.malformed_by_id[0x83] - base.get(0x83, 0) == 1
+    assert bus.malformed_by_id[0x703] - base.get(0x703, 0) == 1
+    assert node.statusword == sw_before  # nothing half-decoded reached the state
+    good = cia402.statusword_for(cia402.FAULT).to_bytes(2, "little") + bytes(6)
+    bus._on_rx(can.Message(arbitration_id=0x183, data=good, is_extended_id=False))
+    assert group.read().nodes[2].state == cia402.FAULT
+
+
+@pytest.mark.timeout(60)
+def test_junk_on_a_live_bus_does_not_disturb_the_exchange():
+    """A third node floods the bus with junk while the driver commands the emulators."""
+    rig = start_rig("virtual", pressure_node=None)
+    bus = CanBus(rig.bus_cfg).open()
+    junk = can.Bus(interface="virtual", channel=rig.bus_cfg.channel)
+    try:
+        group = AmplifierGroup(bus, AmplifierConfig(), VEHICLE.thrusters)
+        assert group.start().ok and group.wait_enabled(2.0)
+        rng = np.random.default_rng(7)
+        sent = {"n": 0}
+
+        def spray(i, _st):
+            for _ in range(5):
+                kind = rng.integers(5)
+                if kind == 0:
+                    m = can.Message(arbitration_id=int(rng.choice([0x181, 0x182, 0x83])),
+                                    data=rng.integers(0, 256, int(rng.integers(0, 5)),
+                                                      dtype=np.uint8).tobytes(),
+                                    is_extended_id=False)  # wrong DLC on known ids
+                elif kind == 1:
+                    m = can.Message(arbitration_id=int(rng.integers(0x600, 0x680)),
+                                    data=bytes(8), is_extended_id=False)  # unknown to us
+                elif kind == 2:
+                    m = make_error_frame(CAN_ERR_PROT)
+                elif kind == 3:
+                    m = can.Message(arbitration_id=int(rng.integers(0, 0x1FFFFFFF)),
+                                    data=b"\x01", is_extended_id=True)
+                else:
+                    m = can.Message(arbitration_id=0x183, is_remote_frame=True, dlc=8,
+                                    is_extended_id=False)
+                junk.send(m)
+                sent["n"] += 1
+
+        cmd = np.array([30.0, -30.0, 20.0, -20.0, 10.0, -10.0])
+        c0 = bus.status().counters
+        run_cycles(group, 150, cmd, on_cycle=spray)
+
+        def junk_counted():
+            c = bus.status().counters
+            return sum(c[k] - c0[k] for k in BUCKETS)
+
+        deadline = time.monotonic() + 2.0
+        while junk_counted() < sent["n"] and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert junk_counted() == sent["n"], str(bus.status().counters)
+        c = bus.status().counters
+        assert c["rx_malformed"] > 0 and c["rx_error_frames"] > 0 and c["rx_extended"] > 0
+        assert c["rx_remote"] > 0 and c["rx_unknown"] > 0 and c["rx_callback_errors"] == 0
+        fb = group.read()
+        # 150 bus-error frames in 1.5 s: the bus is (rightly) error-passive; still working
+        assert fb.faults.get(0) in (None, ("error_passive",))
+        assert set(fb.faults) <= {0}
+        np.testing.assert_array_equal(fb.torque_permille, np.rint(cmd / 0.3))
+        assert group.stats()["tpdo_rx_by_node"] == {n: group.counters["syncs_sent"]
+                                                    for n in NODES}
+    finally:
+        junk.shutdown()
+        bus.close()
+        rig.close()
