@@ -318,82 +318,103 @@ def _finite(x):
 
 
 @numba.njit(cache=True)
-def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, dt, a, g1, g2, g3, g4,
-           linear, midpoint, adapt, pd_floor, theta_out, vhat_out, v_out, r_out, u_out, diag):
+def _drive(n_v, theta, prev, H, v_in, u_in, cfg, theta_out, out):
     """Everything numeric of one AID step (n_v = 6: Theorem 4.3.1, 3: Theorem 4.2.1).
 
-    Copies the new sample into (v_out, r_out, u_out), builds the interval signals and runs the
-    kernel. Returns 0 adapted, 4 propagated only (frozen), 2 non-finite input (nothing done),
-    1 M̂ not positive definite, 3 update rejected: M̂⁺ lost positive definiteness or something
-    became non-finite (θ̂ kept, v̂ propagated if finite else reset to v).
+    Arguments are packed to keep the call cheap: ``prev`` = [v̂, v_prev, r_prev, u_prev],
+    ``cfg`` = [dt, a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint, adapt], ``out`` receives
+    [v̂⁺, v, r, u, ∆v, λ_min, λ_max] (v, r = Rᵀe₃, u: the new sample). With dt = 0 only the
+    sample is copied (t₀ or a gap: v̂ = v). Returns 0 adapted, 4 propagated only (frozen),
+    2 non-finite input (nothing done), 1 M̂ not positive definite, 3 update rejected: M̂⁺ lost
+    positive definiteness or something became non-finite (θ̂ kept, v̂ propagated if finite
+    else reset to v).
     """
-    off = 6 - n_v
-    for i in range(n_v):
+    n = n_v
+    vhat = prev[0:n]
+    v_prev = prev[n:2 * n]
+    r_prev = prev[2 * n:2 * n + 3]
+    u_prev = prev[2 * n + 3:3 * n + 3]
+    vhat_out = out[0:n]
+    v_out = out[n:2 * n]
+    r_out = out[2 * n:2 * n + 3]
+    u_out = out[2 * n + 3:3 * n + 3]
+    dv_out = out[3 * n + 3:4 * n + 3]
+    diag = out[4 * n + 3:4 * n + 5]
+    off = 6 - n
+    for i in range(n):
         v_out[i] = v_in[off + i]
         u_out[i] = u_in[off + i]
     for i in range(3):
         r_out[i] = H[2, i]
     if not (_finite(v_out) and _finite(r_out) and _finite(u_out)):
         return 2
-    u = np.empty(n_v)
-    vs = np.empty(n_v)
+    dt = cfg[0]
+    if dt == 0.0:
+        for i in range(n):
+            vhat_out[i] = v_out[i]
+            dv_out[i] = 0.0
+        return 4
+    linear, midpoint, adapt = cfg[7] != 0.0, cfg[8] != 0.0, cfg[9] != 0.0
+    u = np.empty(n)
+    vs = np.empty(n)
     rs = np.empty(3)
-    for i in range(n_v):
+    for i in range(n):
         u[i] = 0.5 * (u_prev[i] + u_out[i]) if linear else u_out[i]
         vs[i] = 0.5 * (v_prev[i] + v_out[i]) if midpoint else v_prev[i]
     for i in range(3):
         rs[i] = 0.5 * (r_prev[i] + r_out[i]) if midpoint else r_prev[i]
-    if n_v == 6:
-        status = _aid6_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, a, g1, g2,
-                              g3, g4, adapt, theta_out, vhat_out, diag)
+    if n == 6:
+        status = _aid6_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[1],
+                              cfg[2], cfg[3], cfg[4], cfg[5], adapt, theta_out, vhat_out, diag)
     else:
-        status = _aid3_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, a, g1, g2,
-                              g3, adapt, theta_out, vhat_out, diag)
+        status = _aid3_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[1],
+                              cfg[2], cfg[3], cfg[4], adapt, theta_out, vhat_out, diag)
     if status != 0:
+        for i in range(n):
+            vhat_out[i] = v_out[i]
+            dv_out[i] = 0.0
         return 1
-    ok = _finite(theta_out) and _finite(vhat_out) and diag[0] > pd_floor * diag[1]
+    ok = _finite(theta_out) and _finite(vhat_out) and diag[0] > cfg[6] * diag[1]
     if not ok:
         for i in range(theta.shape[0]):
             theta_out[i] = theta[i]
         if not _finite(vhat_out):
-            for i in range(n_v):
+            for i in range(n):
                 vhat_out[i] = v_out[i]
+    for i in range(n):
+        dv_out[i] = vhat_out[i] - v_out[i]
+    if not ok:
         return 3
     return 0 if adapt else 4
 
 
 def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
     """The Python side of :func:`aid6_step`/:func:`aid3_step` (state bookkeeping only)."""
-    v_out = np.empty(n_v)
-    r_out = np.empty(3)
-    u_out = np.empty(n_v)
-    H = vs.H
-    v_in = vs.v
-    u_in = u_applied
-    if st.v_prev is None or not (0.0 < dt <= params.max_dt):  # t₀ (v̂ = v) or a gap
-        z = np.zeros(n_v)
-        status = _drive(n_v, st.theta, z, z, np.zeros(3), z, H, v_in, u_in, 0.0, 0.0, 0.0,
-                        0.0, 0.0, 0.0, False, False, False, 0.0, np.empty(st.theta.shape[0]),
-                        np.empty(n_v), v_out, r_out, u_out, np.empty(2))
-        if status == 2:
-            return replace(st, skipped=st.skipped + 1)
-        return replace(st, v_hat=v_out.copy(), dv=z, v_prev=v_out, r_prev=r_out, u_prev=u_out,
-                       resyncs=st.resyncs + (st.v_prev is not None))
-    gn = params.gains
+    n = n_v
+    out = np.empty(4 * n + 5)
     theta_out = np.empty(st.theta.shape[0])
-    vhat_out = np.empty(n_v)
-    diag = np.empty(2)
-    g4 = gn.gamma4 if n_v == 6 else 0.0
-    status = _drive(n_v, st.theta, st.v_hat, st.v_prev, st.r_prev, st.u_prev, H, v_in, u_in,
-                    float(dt), gn.a, gn.gamma1, gn.gamma2, gn.gamma3, g4,
-                    params.input_interp == "linear", params.sampling == "midpoint",
-                    not st.frozen, params.pd_floor, theta_out, vhat_out, v_out, r_out, u_out,
-                    diag)
+    gap = st.v_prev is None or not (0.0 < dt <= params.max_dt)  # t₀ (v̂ = v) or a gap
+    if gap:
+        prev = np.zeros(3 * n + 3)
+        cfg = np.zeros(10)
+    else:
+        prev = np.concatenate((st.v_hat, st.v_prev, st.r_prev, st.u_prev))
+        gn = params.gains
+        cfg = np.array([dt, gn.a, gn.gamma1, gn.gamma2, gn.gamma3,
+                        gn.gamma4 if n == 6 else 0.0, params.pd_floor,
+                        params.input_interp == "linear", params.sampling == "midpoint",
+                        not st.frozen], dtype=float)
+    status = _drive(n, st.theta, prev, vs.H, vs.v, u_applied, cfg, theta_out, out)
     if status == 2:
         return replace(st, skipped=st.skipped + 1)
+    vhat_out, v_out, r_out = out[0:n], out[n:2 * n], out[2 * n:2 * n + 3]
+    u_out, dv = out[2 * n + 3:3 * n + 3], out[3 * n + 3:4 * n + 3]
+    if gap:
+        return replace(st, v_hat=vhat_out, dv=dv, v_prev=v_out, r_prev=r_out, u_prev=u_out,
+                       resyncs=st.resyncs + (st.v_prev is not None))
     t_s = st.t_s + dt
     frozen, reason, steps = st.frozen, st.freeze_reason, st.steps
-    lo, hi = float(diag[0]), float(diag[1])
+    lo, hi = float(out[4 * n + 3]), float(out[4 * n + 4])
     theta_new = st.theta
     if status == 0:
         steps += 1
@@ -404,10 +425,8 @@ def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
         reason = (f"t={t_s:.1f}s after {steps} steps: {what} lost positive definiteness "
                   f"(λ_min {lo:.4g}, λ_max {hi:.4g}); θ̂ frozen at its last PD value")
         lo, hi = st.m_min_eig, st.m_max_eig
-        if status == 1:
-            vhat_out = v_out.copy()
-    return state_cls(theta=theta_new, v_hat=vhat_out, dv=vhat_out - v_out, v_prev=v_out,
-                     r_prev=r_out, u_prev=u_out, m_min_eig=lo, m_max_eig=hi, frozen=frozen,
+    return state_cls(theta=theta_new, v_hat=vhat_out, dv=dv, v_prev=v_out, r_prev=r_out,
+                     u_prev=u_out, m_min_eig=lo, m_max_eig=hi, frozen=frozen,
                      freeze_reason=reason, steps=steps, skipped=st.skipped,
                      resyncs=st.resyncs, t_s=t_s)
 
