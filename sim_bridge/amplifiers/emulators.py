@@ -120,6 +120,7 @@ class CanEmulators:
         self._bus_off_until = 0
         self._bus_off_nodes: list = []
         self.counters = {"sync_rx": 0, "ticks": 0, "late_ticks": 0, "bus_off_events": 0}
+        self.peak_omega = np.zeros(len(self.thrusters))  # largest |ω| since the last reset
         self._last_tick_ns = 0
 
     # -- lifecycle --
@@ -227,6 +228,7 @@ class CanEmulators:
             if dt > 0:
                 cmd = np.array([a.thrust_command_n() for a in self.amps])
                 self.bank.step(cmd, min(dt, 0.05))
+                np.maximum(self.peak_omega, np.abs(self.bank.omega), out=self.peak_omega)
 
     # -- fault injection --
     def amp(self, node_id: int) -> EmulatedAmplifier:
@@ -305,6 +307,7 @@ class CanEmulators:
             self._bus_off_nodes = []
             self.bank.reset()
             self.bank.health[:] = 1.0
+            self.peak_omega[:] = 0.0
             for node in self._nodes():
                 node.silent = False
                 node.silent_until_ns = 0
@@ -327,6 +330,7 @@ class CanEmulators:
                 "nodes": {str(a.node_id): a.snapshot(self.bank) for a in self.amps},
                 "bus": self.bus.status().counters if self.bus is not None else {},
                 "bus_off": bool(self._bus_off_until),
+                "peak_omega_rad_s": [float(x) for x in self.peak_omega],
             }
             if self.pressure is not None:
                 out["pressure"] = self.pressure.snapshot()
