@@ -385,8 +385,9 @@ class AmplifierGroup:
                 node.emcy_active.clear()
             elif err.code != cia402.FAULT_CODES["bus_off_recovered"]:
                 node.emcy_active[err.code] = now
-        log.warning("amplifier %d (%s) EMCY 0x%04X %s", node.node_id, node.name, err.code,
-                    cia402.emcy_fault_name(err.code))
+        log.log(logging.INFO if err.code & 0xFF00 == 0 else logging.WARNING,
+                "amplifier %d (%s) EMCY 0x%04X %s", node.node_id, node.name, err.code,
+                cia402.emcy_fault_name(err.code))
         del node.remote.emcy.log[:-16]  # canopen keeps every EMCY; keep memory bounded
 
     def _on_heartbeat(self, node: _Node, state: int) -> None:
