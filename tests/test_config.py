@@ -198,7 +198,7 @@ def test_reloadable_changes(tmp_path):
     old = load_config(ROOT / "config" / "sim.toml")
     text = (ROOT / "config" / "sim.toml").read_text()
     text = text.replace("kp = 300.0", "kp = 250.0").replace("rate_hz = 10.0", "rate_hz = 20.0")
-    text = text.replace("ins_stale_s = 0.1", "ins_stale_s = 0.2")
+    text = text.replace("ins_stale_s = 0.25", "ins_stale_s = 0.2")
     new = load_config(write(tmp_path, text))
     merged, applied, refused = reloadable_changes(old, new)
     assert sorted(applied) == ["control.kp", "failsafe.ins_stale_s"]

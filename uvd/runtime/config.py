@@ -18,6 +18,8 @@ Sections and where their dataclass lives:
 ``[loop]``           :class:`uvd.runtime.loop.LoopSettings`
 ``[control]``        :class:`ControlSection`
 ``[failsafe]``       :class:`uvd.runtime.failsafe.Thresholds`
+``[navigation]``     :class:`NavigationSection` — the dead-reckoning start fix
+``[estimation]``     :class:`EstimationSection` — online identification (AID)
 ``[sensors.*]``      :class:`InsSection`, :class:`DvlSection`, :class:`DepthSection`; the depth
                      conversion is the driver's own :class:`drivers.digiquartz.DepthConverter`
 ``[can]``            the CAN driver's :class:`drivers.can.config.CanConfig` (validated by its own
@@ -62,7 +64,7 @@ from uvd.runtime.schema import section, setting
 __all__ = ["Config", "ConfigValidationError", "load_config", "parse_config",
            "render_config_doc", "DEFAULT_CONFIG", "VehicleSection", "ControlSection",
            "InsSection", "DvlSection", "DepthSection", "SensorsSection", "TelemetrySection",
-           "JsonlSection", "DaemonSection"]
+           "JsonlSection", "DaemonSection", "NavigationSection", "EstimationSection"]
 
 #: The embedded default: the simulated vehicle, everything local (``config/sim.toml``).
 DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim.toml"
@@ -126,6 +128,42 @@ class ControlSection:
                         doc="derivative gain k_d on Δv (thesis §5.3.5.1: 100)")
     robust_adaptation: bool = setting(
         True, doc="robust (projection/σ) modification of the AMBC parameter update law")
+    reference: Literal["hold", "reftraj1", "reftraj2"] = setting(
+        "hold", doc="what the armed vehicle tracks: hold the pose it had when armed, or "
+                    "RefTraj1/RefTraj2 of Table 5.1 (about the start pose's centre, time "
+                    "counted from arming)")
+    model: Literal["decoupled", "full"] = setting(
+        "decoupled", doc="AMBC parameter model: the 16-parameter decoupled view (§5.3.1) or "
+                         "the full θ_UV ∈ R²⁴¹ (2.48)")
+    eps: float = setting(1.0, min=0.0, max=100.0,
+                         doc="ε of the AMBC update law (5.28) (the thesis does not report it; "
+                             "docs/experiments.md)")
+    theta0: Literal["zero", "vehicle-gb", "vehicle"] = setting(
+        "zero", doc="initial θ̂ of AMBC: zero (§5.3.5 step 1), the vehicle file's g and b with "
+                    "M and D zero (the start of §5.3.5 step 2), or every vehicle-file value")
+    step1_duration_s: float = setting(
+        5400.0, unit="s", min=0.0, max=1e6,
+        doc="two-step AMBC: length of step 1 (g, b on the quasi-static trajectory); 0 starts "
+            "in step 2 with g, b from theta0")
+
+
+@dataclass(frozen=True)
+class NavigationSection:
+    """Dead reckoning (``[navigation]``)."""
+
+    initial_north_m: float = setting(0.0, unit="m", min=-1e6, max=1e6,
+                                     doc="north of the dead-reckoned position at start (the "
+                                         "fix the run starts from)")
+    initial_east_m: float = setting(0.0, unit="m", min=-1e6, max=1e6,
+                                    doc="east of the dead-reckoned position at start")
+
+
+@dataclass(frozen=True)
+class EstimationSection:
+    """Online identification (``[estimation]``), running whoever drives the vehicle."""
+
+    aid: bool = setting(False, doc="run 6-DOF adaptive identification (Theorem 4.3.1, INITP "
+                                   "of §4.6 as θ̂(0)) every cycle")
 
 
 def _check_port(port: str | None, key: str = "port") -> list[tuple[str, str]]:
@@ -250,6 +288,8 @@ class Config:
     loop: LoopSettings = section(LoopSettings)
     control: ControlSection = section(ControlSection)
     failsafe: Thresholds = section(Thresholds)
+    navigation: NavigationSection = section(NavigationSection)
+    estimation: EstimationSection = section(EstimationSection)
     sensors: SensorsSection = section(SensorsSection)
     can: CanConfig = section(CanConfig)
     telemetry: TelemetrySection = section(TelemetrySection)
