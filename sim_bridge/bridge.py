@@ -1,0 +1,571 @@
+"""``sim-bridge``: the simulated vehicle behind the daemon's real wire protocols, in real time.
+
+:class:`SimBridge` runs, in one process,
+
+* the **plant** (:class:`sim_bridge.plant.Plant`, RKMK4 at 100 Hz on absolute deadlines of the
+  monotonic clock) — its :class:`~sim_bridge.thrusters.ThrusterBank` is the only one: the
+  emulated amplifiers' commands drive it, and the amplifiers report its propeller speeds;
+* the **instruments** (:class:`~sim_bridge.instruments.pty_emulators.InstrumentEmulators`):
+  PHINS (STDBIN or ASCII, per ``[sensors.ins] format``), PD0 DVL and Digiquartz on
+  pseudo-terminals linked at the configured ``[sensors.*] port`` paths, with Table A.1 rates
+  and noise from a seeded generator;
+* the **CAN nodes** (:class:`~sim_bridge.amplifiers.emulators.CanEmulators`): the six CiA 402
+  amplifiers of ``[can.amplifiers]`` and, with ``[can.depth] enabled``, the CiA 404 pressure
+  transmitter, on the configured bus (``udp_multicast`` on an interface-local ``ff11::`` group:
+  it never leaves this machine).
+
+So ``uvd run`` with the same configuration connects to it exactly as to the vehicle.
+
+**Hold.** With ``hold=True`` the vehicle sits in its cradle at the start pose until the first
+non-zero thrust command arrives (the thrusters spin, the body does not move): a run armed at
+any moment then starts exactly where a lockstep simulation of the same configuration starts.
+
+**Fault injection** (:meth:`SimBridge.call`, also over the JSON control channel of
+``sim-bridge --control``): per instrument ``silence`` (no frames), ``garbage`` (random bytes
+instead of each frame), ``nan`` (NaN attitude / depth in otherwise valid frames), ``stuck``
+(the value frozen) — for ``seconds`` or until ``ok``; every amplifier fault of
+:meth:`CanEmulators.call` (``fault``, ``silence``, ``unsilence``, ``health``, ``bus_off``,
+``reset``, …); the plant's ``hold``/``release``/``place``. Every answer carries the bridge's
+monotonic time ``t_ns`` (the same clock as the daemon's on this machine).
+
+**Truth.** ``truth_log`` receives one row per plant step: monotonic time (s), the true
+[x, y, z, roll, pitch, heading], body velocity [ν; ω] and the thrust produced (float64,
+``TRUTH_COLUMNS``), for the demo's tracking errors.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import os
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.samples import R_to_euler
+from sim_bridge.instruments.models import InstrumentConfig, Instruments
+from sim_bridge.instruments.pty_emulators import EmulatorConfig, InstrumentEmulators, PtyPort
+from sim_bridge.plant import Plant, PlantConfig
+from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
+
+__all__ = ["SimBridge", "SensorFaults", "TRUTH_COLUMNS", "read_truth", "write_local_config",
+           "dump_toml", "BridgeProcess", "SENSOR_MODES"]
+
+log = logging.getLogger("sim_bridge")
+
+SENSOR_MODES = ("ok", "silence", "garbage", "nan", "stuck")
+TRUTH_COLUMNS = ("t_s", "x", "y", "z", "roll", "pitch", "heading", "u", "v", "w", "p", "q",
+                 "r", "f1", "f2", "f3", "f4", "f5", "f6")
+
+
+# ----------------------------------------------------------------------------- fault injection
+
+class SensorFaults:
+    """The injected fault of each instrument: a mode and when it ends (monotonic ns, 0 =
+    until cleared). Written by the control channel, read by the emulators (plain attribute
+    swaps, safe across threads)."""
+
+    def __init__(self, clock: Callable[[], int] = time.monotonic_ns) -> None:
+        self.clock = clock
+        self.mode: dict[str, str] = {"ins": "ok", "dvl": "ok", "depth": "ok"}
+        self.until: dict[str, int] = {"ins": 0, "dvl": 0, "depth": 0}
+        self.since: dict[str, int] = {"ins": 0, "dvl": 0, "depth": 0}
+        self.stuck_value: dict[str, Any] = {}
+
+    def set(self, name: str, mode: str, seconds: float | None = None) -> int:
+        if name not in self.mode:
+            raise KeyError(f"unknown instrument {name!r}; have {sorted(self.mode)}")
+        if mode not in SENSOR_MODES:
+            raise ValueError(f"unknown mode {mode!r}; known: {', '.join(SENSOR_MODES)}")
+        now = self.clock()
+        self.stuck_value.pop(name, None)
+        self.until[name] = now + int(seconds * 1e9) if seconds else 0
+        self.since[name] = now
+        self.mode[name] = mode
+        return now
+
+    def get(self, name: str) -> str:
+        m = self.mode[name]
+        if m != "ok" and self.until[name] and self.clock() >= self.until[name]:
+            self.mode[name] = m = "ok"
+            self.stuck_value.pop(name, None)
+        return m
+
+
+class FaultyInstruments(Instruments):
+    """The instrument models with the injected faults applied to their samples."""
+
+    def __init__(self, config: InstrumentConfig, rng: np.random.Generator,
+                 faults: SensorFaults) -> None:
+        super().__init__(config, rng)
+        self.faults = faults
+
+    def sample(self, t_ns, H, v):
+        ins, dvl, depth = super().sample(t_ns, H, v)
+        f = self.faults
+        out = []
+        for name, s in (("ins", ins), ("dvl", dvl), ("depth", depth)):
+            mode = f.get(name) if s is not None else "ok"
+            if mode == "silence":
+                s = None
+            elif mode == "nan":
+                if name == "ins":
+                    s = replace(s, heading=float("nan"))
+                elif name == "depth":
+                    s = replace(s, depth_m=float("nan"))
+                else:
+                    s = replace(s, velocity_body=np.full(3, np.nan))
+            elif mode == "stuck":
+                held = f.stuck_value.setdefault(name, s)
+                s = replace(held, t_ns=s.t_ns)
+            out.append(s)
+        return tuple(out)
+
+
+class FaultyPort(PtyPort):
+    """A pty whose frames are replaced by random bytes of the same length in ``garbage``."""
+
+    def __init__(self, link, name: str, faults: SensorFaults, rng: np.random.Generator) -> None:
+        super().__init__(link)
+        self.name = name
+        self.faults = faults
+        self.rng = rng
+        self.garbage_written = 0
+        self.last_write_end_ns = 0
+
+    def write(self, data: bytes) -> bool:
+        if self.faults.get(self.name) == "garbage":
+            data = self.rng.integers(0, 256, len(data), dtype=np.uint8).tobytes()
+            self.garbage_written += 1
+        ok = super().write(data)
+        self.last_write_end_ns = time.monotonic_ns()
+        return ok
+
+
+class _PlantBank:
+    """What :class:`CanEmulators` reads from a thruster bank, backed by the plant's own bank.
+
+    The emulators' tick thread calls ``step``: a no-op here, because the plant steps its bank
+    with the amplifiers' commands at its own rate. ``omega`` (the amplifiers' velocity
+    feedback), ``thrust`` and ``health`` are the plant bank's arrays.
+    """
+
+    def __init__(self, bank: ThrusterBank) -> None:
+        self.bank = bank
+
+    @property
+    def omega(self) -> np.ndarray:
+        return self.bank.omega
+
+    @property
+    def thrust(self) -> np.ndarray:
+        return self.bank.thrust
+
+    @property
+    def health(self) -> np.ndarray:
+        return self.bank.health
+
+    def step(self, command_n, dt: float) -> np.ndarray:
+        return self.bank.thrust
+
+    def reset(self) -> None:
+        self.bank.reset()
+
+
+# ----------------------------------------------------------------------------- the bridge
+
+class SimBridge:
+    """Plant + instruments + CAN nodes in real time (module docstring).
+
+    Parameters
+    ----------
+    config : uvd.runtime.config.Config
+        The daemon's configuration (ports, bus, vehicle, start pose).
+    seed : int
+        Seed of every random number (instrument noise, garbage bytes).
+    hold : bool
+        Keep the vehicle in its cradle until the first non-zero thrust command.
+    truth_log : path, optional
+        Binary file of ``TRUTH_COLUMNS`` rows (float64), one per plant step.
+    plant_rate_hz : float
+        Plant integration rate.
+    """
+
+    def __init__(self, config, *, seed: int = 0, hold: bool = False,
+                 truth_log: str | Path | None = None, plant_rate_hz: float = 100.0,
+                 clock: Callable[[], int] = time.monotonic_ns) -> None:
+        from uvd.runtime.daemon import start_pose
+        self.config = config
+        self.clock = clock
+        self.vehicle = config.load_vehicle()
+        self.H0, self.v0 = start_pose(config)
+        self.plant = Plant(self.vehicle, PlantConfig(rate_hz=plant_rate_hz), H0=self.H0,
+                           v0=self.v0)
+        self.rng = np.random.default_rng(seed)
+        self.faults = SensorFaults(clock)
+        self.hold = hold
+        self.held = hold
+        self.released_at_ns: int | None = None
+        self.truth_path = Path(truth_log) if truth_log is not None else None
+        self._truth_fh = None
+        self._truth_buf: list[np.ndarray] = []
+        self.counters = {"plant_steps": 0, "late_steps": 0, "skipped_steps": 0,
+                         "rpdo_rx": 0, "rpdo_out_of_range": 0, "rpdo_max_abs_permille": 0}
+        self._stop: asyncio.Event | None = None
+        self._pending: list[tuple[str, Any]] = []
+        self._links = self._links_from(config)
+        ins_protocol = "ascii" if config.sensors.ins.format == "phins-ascii" else "stdbin"
+        self.instruments = FaultyInstruments(InstrumentConfig(), self.rng, self.faults)
+        self.instruments.dr_north, self.instruments.dr_east = self.H0[0, 3], self.H0[1, 3]
+        self.emulators = InstrumentEmulators(
+            self._truth_now, self._links, self.instruments,
+            EmulatorConfig(ins_protocol=ins_protocol, depth=config.sensors.depth.conversion),
+            clock=clock)
+        self.emulators.ports = {name: FaultyPort(path, name, self.faults, self.rng)
+                                for name, path in self._links.items()}
+        self.can = None
+
+    @staticmethod
+    def _links_from(config) -> dict[str, Path]:
+        s = config.sensors
+        links = {}
+        for name, port in (("ins", s.ins.port), ("dvl", s.dvl.port),
+                           ("depth", s.depth.port if s.depth.source == "serial" else None)):
+            if port is None:
+                continue
+            if not port.startswith("/"):
+                raise ValueError(f"sim-bridge emulates serial instruments on pseudo-terminals: "
+                                 f"sensors.{name}.port must be a path, not {port!r}")
+            links[name] = Path(port)
+        return links
+
+    def _truth_now(self, t_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        return self.plant.H.copy(), self.plant.v.copy()
+
+    # -- CAN --
+    def _open_can(self) -> None:
+        from sim_bridge.amplifiers.emulators import CanEmulators
+        c = self.config.can
+        a = c.amplifiers
+        plant = self.plant
+        d = c.depth
+        self.can = CanEmulators(
+            c.bus, self.vehicle.thrusters, a.node_ids, eds=a.eds, effects=ThrusterEffects(),
+            thrust_per_permille_n=a.thrust_per_permille_n,
+            velocity_rad_s_per_count=a.velocity_rad_s_per_count,
+            pressure_node=d.node_id if d.enabled else None,
+            depth_m=lambda: float(plant.H[2, 3]), depth_cfg=d,
+            pressure_noise_pa=0.00075 * d.density_kg_m3 * d.gravity_m_s2, rng=self.rng,
+            clock=self.clock)
+        self.can.bank = _PlantBank(plant.thrusters)  # one bank: the plant's
+        self.can.open()
+        for amp in self.can.amps:
+            for m in amp.rpdo_maps:
+                m.add_callback(lambda pdo, amp=amp: self._on_rpdo(amp, pdo))
+
+    def _on_rpdo(self, amp, pdo) -> None:
+        """Watch every target torque on the wire (before the drive clamps it)."""
+        try:
+            target = int(pdo[0x6071].raw)
+        except Exception:  # noqa: BLE001 - malformed: the node counts it
+            return
+        c = self.counters
+        c["rpdo_rx"] += 1
+        a = abs(target)
+        if a > c["rpdo_max_abs_permille"]:
+            c["rpdo_max_abs_permille"] = a
+        if a > self.config.can.amplifiers.max_torque_permille:
+            c["rpdo_out_of_range"] += 1
+
+    def thrust_commands(self) -> np.ndarray:
+        """What each amplifier drives now, as thrust (N)."""
+        return np.array([a.thrust_command_n() for a in self.can.amps])
+
+    # -- plant --
+    def _plant_step(self, t_ns: int) -> None:
+        plant = self.plant
+        with self.can.lock:
+            cmd = self.thrust_commands()
+            if self.held:
+                if np.any(cmd != 0.0):
+                    self.held = False
+                    self.released_at_ns = t_ns
+                    log.info("released from the cradle by the first thrust command")
+            if self.held:
+                plant.thrusters.step(cmd, plant.dt)
+            else:
+                plant.step(cmd)
+        self.counters["plant_steps"] += 1
+        if self.truth_path is not None:
+            roll, pitch, heading = R_to_euler(plant.H[:3, :3])
+            row = np.empty(len(TRUTH_COLUMNS))
+            row[0] = t_ns * 1e-9
+            row[1:4] = plant.H[:3, 3]
+            row[4:7] = (roll, pitch, heading)
+            row[7:13] = plant.v
+            nthr = min(6, plant.thrusters.thrust.shape[0])
+            row[13:] = 0.0
+            row[13:13 + nthr] = plant.thrusters.thrust[:nthr]
+            self._truth_buf.append(row)
+            if len(self._truth_buf) >= 100:
+                self._flush_truth()
+
+    def _flush_truth(self) -> None:
+        if self._truth_fh is not None and self._truth_buf:
+            self._truth_fh.write(np.asarray(self._truth_buf).tobytes())
+            self._truth_fh.flush()
+        self._truth_buf.clear()
+
+    def place(self, H: np.ndarray | None = None, hold: bool | None = None) -> None:
+        """Put the vehicle back at ``H`` (the start pose by default), at rest."""
+        with self.can.lock:
+            self.plant.H = np.array(self.H0 if H is None else H, dtype=float)
+            self.plant.v = np.zeros(6)
+            self.plant.thrusters.reset()
+            if hold is not None:
+                self.hold = hold
+            self.held = self.hold
+            self.released_at_ns = None
+
+    async def _plant_loop(self) -> None:
+        period = int(round(1e9 * self.plant.dt))
+        t0 = self.clock()
+        k = 0
+        while not self._stop.is_set():
+            k += 1
+            target = t0 + k * period
+            delay = (target - self.clock()) * 1e-9
+            if delay > 0:
+                await asyncio.sleep(delay)
+            else:
+                self.counters["late_steps"] += 1
+                behind = (self.clock() - target) // period
+                if behind > 20:  # suspended: do not replay seconds of physics in a burst
+                    k += behind
+                    self.counters["skipped_steps"] += behind
+                    target = t0 + k * period
+                await asyncio.sleep(0)
+            self._plant_step(target)
+
+    # -- control --
+    def call(self, op: str, **kw) -> dict:
+        """One control command; never raises (``{"ok": false, "error": …}``)."""
+        try:
+            now = self.clock()
+            if op == "ping":
+                return {"ok": True, "t_ns": now}
+            if op == "sensor":
+                t = self.faults.set(str(kw["name"]), str(kw.get("mode", "ok")),
+                                    kw.get("seconds"))
+                return {"ok": True, "t_ns": t,
+                        "last_write_ns": self.emulators.ports[kw["name"]].last_write_end_ns
+                        if kw["name"] in self.emulators.ports else 0}
+            if op == "truth":
+                H, v = self.plant.H.copy(), self.plant.v.copy()
+                roll, pitch, heading = R_to_euler(H[:3, :3])
+                return {"ok": True, "t_ns": now, "eta": [*H[:3, 3], roll, pitch, heading],
+                        "v": v.tolist(), "held": self.held,
+                        "thrust_command_n": self.thrust_commands().tolist()}
+            if op == "release":
+                self.held = False
+                return {"ok": True, "t_ns": now}
+            if op == "place":
+                self.place(hold=kw.get("hold"))
+                return {"ok": True, "t_ns": now}
+            if op == "stats":
+                return {"ok": True, "t_ns": now, **self.stats(bool(kw.get("history")))}
+            if op == "reset":
+                for name in self.faults.mode:
+                    self.faults.set(name, "ok")
+                ans = self.can.call("reset")
+                return {**ans, "t_ns": now}
+            ans = self.can.call(op, **kw)
+            ans.setdefault("t_ns", now)
+            return ans
+        except (KeyError, ValueError, TypeError) as exc:
+            return {"ok": False, "error": f"{op}: {exc}"}
+
+    def stats(self, history: bool = False) -> dict:
+        ports = {n: {"device": p.device, "frames_written": p.frames_written,
+                     "frames_dropped": p.frames_dropped, "garbage": p.garbage_written}
+                 for n, p in self.emulators.ports.items()}
+        return {"counters": dict(self.counters), "ports": ports,
+                "faults": dict(self.faults.mode), "held": self.held,
+                "released_at_ns": self.released_at_ns,
+                "can": self.can.stats(history) if self.can is not None else {}}
+
+    # -- running --
+    async def run(self, *, duration_s: float | None = None,
+                  on_ready: Callable[[dict], None] | None = None,
+                  stop: asyncio.Event | None = None) -> dict:
+        """Run until ``stop`` is set or ``duration_s`` passed; returns the final stats."""
+        self._stop = stop or asyncio.Event()
+        await asyncio.to_thread(self._open_can)
+        if self.truth_path is not None:
+            self.truth_path.parent.mkdir(parents=True, exist_ok=True)
+            self._truth_fh = self.truth_path.open("wb")
+        try:
+            self.emulators.start()
+            plant_task = asyncio.get_running_loop().create_task(self._plant_loop(),
+                                                                name="plant")
+            if on_ready is not None:
+                on_ready(self.ready_info())
+            try:
+                if duration_s is not None:
+                    await asyncio.wait_for(self._stop.wait(), duration_s)
+                else:
+                    await self._stop.wait()
+            except TimeoutError:
+                pass
+            self._stop.set()
+            plant_task.cancel()
+            await asyncio.wait({plant_task}, timeout=1.0)
+            return self.stats(history=False)
+        finally:
+            await self.emulators.stop()
+            await asyncio.to_thread(self.can.close)
+            self._flush_truth()
+            if self._truth_fh is not None:
+                self._truth_fh.close()
+                self._truth_fh = None
+
+    def ready_info(self) -> dict:
+        b = self.config.can.bus
+        roll, pitch, heading = R_to_euler(self.H0[:3, :3])
+        return {"event": "ready", "pid": os.getpid(),
+                "ports": {n: {"link": str(p.link), "device": p.device}
+                          for n, p in self.emulators.ports.items()},
+                "can": {"interface": b.interface, "channel": b.channel, "port": b.port,
+                        "nodes": list(self.config.can.amplifiers.node_ids),
+                        "pressure_node": self.config.can.depth.node_id
+                        if self.config.can.depth.enabled else None},
+                "start_eta": [*self.H0[:3, 3], roll, pitch, heading], "held": self.held}
+
+
+def read_truth(path: str | Path) -> np.ndarray:
+    """The truth log as an (n, len(TRUTH_COLUMNS)) array."""
+    raw = np.fromfile(path, dtype=np.float64)
+    n = raw.size // len(TRUTH_COLUMNS)
+    return raw[:n * len(TRUTH_COLUMNS)].reshape(n, len(TRUTH_COLUMNS))
+
+
+# ----------------------------------------------------------------------------- local setup
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ValueError("TOML has no NaN/inf here")
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def dump_toml(data: dict, _prefix: str = "") -> str:
+    """TOML text of nested tables of scalars and arrays (what a uvd configuration holds)."""
+    lines: list[str] = []
+    tables = []
+    for k, v in data.items():
+        if isinstance(v, dict):
+            tables.append((k, v))
+        else:
+            lines.append(f"{k} = {_toml_value(v)}")
+    out = []
+    if lines:
+        if _prefix:
+            out.append(f"[{_prefix}]")
+        out.extend(lines)
+        out.append("")
+    for k, v in tables:
+        out.append(dump_toml(v, f"{_prefix}.{k}" if _prefix else k))
+    return "\n".join(out)
+
+
+def free_udp_port() -> int:
+    """A UDP port nobody on this machine is bound to right now."""
+    with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
+        s.bind(("::1", 0))
+        return s.getsockname()[1]
+
+
+def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
+                       changes: dict | None = None) -> Path:
+    """A configuration for one local simulated run, isolated from any other.
+
+    Takes ``base`` (the embedded ``config/sim.toml`` by default), points the instruments at
+    pseudo-terminal links in ``run_dir``, picks a fresh interface-local multicast group and
+    a free UDP port for the CAN bus, records telemetry to ``run_dir/telemetry.jsonl``, and
+    applies ``changes`` (``{"loop": {"rate_hz": 100.0}, …}``, merged table by table).
+    Returns the path of the written ``run_dir/uvd.toml``.
+    """
+    import tomllib
+
+    from uvd.runtime.config import DEFAULT_CONFIG
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    base = Path(base) if base is not None else DEFAULT_CONFIG
+    data = tomllib.loads(base.read_text(encoding="utf-8"))
+    vehicle = data.get("vehicle", {}).get("name")
+    if vehicle and vehicle.endswith(".toml") and not Path(vehicle).is_absolute():
+        data["vehicle"]["name"] = str((base.parent / vehicle).resolve())
+    sensors = data.setdefault("sensors", {})
+    for name in ("ins", "dvl", "depth"):
+        sensors.setdefault(name, {})["port"] = str(run_dir / name)
+    a, b = (int(x) for x in np.random.default_rng().integers(1, 0xFFFF, 2))
+    can = data.setdefault("can", {})
+    can.update(interface="udp_multicast", channel=f"ff11::7576:{a:x}:{b:x}",
+               port=free_udp_port(), loopback_only=True)
+    tel = data.setdefault("telemetry", {})
+    tel.setdefault("jsonl", {}).update(enabled=True, path=str(run_dir / "telemetry.jsonl"))
+
+    def merge(dst: dict, src: dict) -> None:
+        for k, v in src.items():
+            if isinstance(v, dict) and isinstance(dst.get(k), dict):
+                merge(dst[k], v)
+            else:
+                dst[k] = v
+    merge(data, changes or {})
+    path = run_dir / "uvd.toml"
+    path.write_text(f"# generated by sim_bridge.bridge.write_local_config from {base}\n"
+                    + dump_toml(data), encoding="utf-8")
+    return path
+
+
+def _emulator_process_base():
+    from sim_bridge.amplifiers.process import EmulatorProcess
+    return EmulatorProcess
+
+
+class BridgeProcess(_emulator_process_base()):
+    """``sim-bridge --control`` as a second process, with the JSON control channel.
+
+    The same interface as :class:`sim_bridge.amplifiers.process.EmulatorProcess` (``start``,
+    ``call``, ``stop``, ``kill``): the child exits when its standard input closes, and is
+    bounded by ``duration_s`` anyway.
+    """
+
+    def __init__(self, config_path: str | Path, *, duration_s: float = 120.0, seed: int = 0,
+                 hold: bool = True, truth_log: str | Path | None = None,
+                 extra: list[str] | None = None) -> None:
+        import sys
+        super().__init__("unused", 0, duration_s=duration_s)
+        self.argv = [sys.executable, "-m", "sim_bridge.cli", "--config", str(config_path),
+                     "--control", "--duration", str(duration_s), "--seed", str(seed),
+                     *(["--hold"] if hold else []),
+                     *(["--truth-log", str(truth_log)] if truth_log is not None else []),
+                     *(extra or [])]
+
+    @property
+    def pid(self) -> int | None:
+        return self.proc.pid if self.proc is not None else None

@@ -1,0 +1,119 @@
+"""``sim-bridge --config FILE``: the simulated vehicle on the daemon's real wire protocols.
+
+Runs :class:`sim_bridge.bridge.SimBridge` until SIGTERM/SIGINT, ``--duration`` or (with
+``--control``) the end of standard input. With ``--control`` it reads JSON commands on
+standard input, one per line (``{"op": "sensor", "name": "ins", "mode": "silence", "id": 1}``;
+see :meth:`SimBridge.call`), and answers each with one JSON line on standard output; the
+first line is ``{"event": "ready", …}`` once the pseudo-terminals and CAN nodes are up, the
+last ``{"event": "exit", "stats": …}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import os
+import signal
+import sys
+import threading
+from pathlib import Path
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sim-bridge", description=__doc__.split("\n\n")[0])
+    p.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="the daemon's configuration (default: the embedded config/sim.toml)")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="end by itself after S seconds (default: until signalled)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the instrument noise")
+    p.add_argument("--hold", action="store_true",
+                   help="keep the vehicle at its start pose until the first thrust command")
+    p.add_argument("--truth-log", type=Path, default=None, metavar="FILE",
+                   help="write the true state at every plant step (float64 rows)")
+    p.add_argument("--control", action="store_true",
+                   help="JSON commands on stdin, answers on stdout; exit when stdin closes")
+    p.add_argument("--realtime", action="store_true",
+                   help="SCHED_FIFO priority 10 if permitted (the devices answer on time)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(levelname)s %(name)s: %(message)s")
+    logging.getLogger("canopen").setLevel(logging.WARNING)
+    sys.setswitchinterval(0.0005)  # answer a SYNC promptly while other threads hold the GIL
+    out_lock = threading.Lock()
+
+    def emit(obj: dict) -> None:
+        with out_lock:
+            sys.stdout.write(json.dumps(obj, default=float) + "\n")
+            sys.stdout.flush()
+
+    from uvd.errors import UvdError
+    from uvd.runtime.config import ConfigValidationError, load_config
+    try:
+        cfg = load_config(args.config)
+    except ConfigValidationError as exc:
+        print(f"sim-bridge: invalid configuration:\n{exc}", file=sys.stderr)
+        emit({"event": "error", "error": str(exc)})
+        return 2
+    realtime = False
+    if args.realtime:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+            realtime = True
+        except (OSError, AttributeError):
+            pass
+    from sim_bridge.bridge import SimBridge
+    try:
+        bridge = SimBridge(cfg, seed=args.seed, hold=args.hold, truth_log=args.truth_log)
+    except (UvdError, ValueError, OSError) as exc:
+        emit({"event": "error", "error": str(exc)})
+        return 2
+
+    async def run() -> dict:
+        loop = asyncio.get_running_loop()
+        stop = asyncio.Event()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, stop.set)
+
+        def control() -> None:
+            for line in sys.stdin:
+                line = line.strip()
+                if not line:
+                    continue
+                try:
+                    cmd = json.loads(line)
+                    op = cmd.pop("op")
+                    rid = cmd.pop("id", None)
+                except (ValueError, KeyError, AttributeError) as exc:
+                    emit({"ok": False, "error": f"bad command {line[:80]!r}: {exc}"})
+                    continue
+                if op == "quit":
+                    emit({"id": rid, "ok": True})
+                    break
+                emit({"id": rid, **bridge.call(op, **cmd)})
+            loop.call_soon_threadsafe(stop.set)  # stdin closed: the parent is gone or done
+
+        def ready(info: dict) -> None:
+            info["realtime"] = realtime
+            emit(info)
+            if args.control:
+                threading.Thread(target=control, name="control", daemon=True).start()
+
+        return await bridge.run(duration_s=args.duration, on_ready=ready, stop=stop)
+
+    try:
+        stats = asyncio.run(run())
+    except (UvdError, OSError) as exc:
+        emit({"event": "error", "error": f"{type(exc).__name__}: {exc}"})
+        return 2
+    emit({"event": "exit", "stats": stats})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
