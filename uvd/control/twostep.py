@@ -120,13 +120,19 @@ def two_step_step(state: VehicleState, reference: Reference, params: TwoStepPara
 
 
 def two_step_params(model: str = "decoupled", *, kp: float = 300.0, kd: float = 100.0,
-                    eps: float = 0.1, gamma_m: float = 1000.0, gamma_d: float = 5000.0,
+                    eps: float = 0.1, kd1: float | None = None, kd2: float | None = None,
+                    eps1: float | None = None, eps2: float | None = None,
+                    gamma_m: float = 1000.0, gamma_d: float = 5000.0,
                     gamma_g: float = 0.5, gamma_b=(0.5, 0.5, 10.0),
                     theta0: np.ndarray | None = None, step2_theta0: np.ndarray | None = None,
                     step1_duration_s: float = STEP1_DURATION_S,
                     robust: RobustAdaptation | None = None, allocator=None) -> TwoStepParams:
     """Two-step AMBC with the thesis's gains (§5.3.5): k_p = 300, γ_g = γ_b1 = γ_b2 = 0.5,
     γ_b3 = 10 in step 1; γ_mi = 1000, γ_di = 5000 in step 2. θ̂ starts at zero (or ``theta0``).
+
+    ``kd``/``eps`` apply to both steps unless ``kd1``/``eps1`` (step 1) or ``kd2``/``eps2``
+    (step 2) say otherwise — the thesis ran the steps as two trials, with k_d = 100 in step 1
+    and (in the text) k_d = 1000 in step 2.
     """
     K = adaptation_gains(model, gamma_m=gamma_m, gamma_d=gamma_d, gamma_g=gamma_g,
                          gamma_b=gamma_b)
@@ -135,9 +141,11 @@ def two_step_params(model: str = "decoupled", *, kp: float = 300.0, kd: float = 
     K1[gi] = K[gi]
     K2 = K.copy()
     K2[gi] = 0.0
-    common = {"kp": kp, "kd": kd, "eps": eps, "robust": robust, "allocator": allocator}
-    p1 = ambc_params(model, K=K1, **common)
-    p2 = ambc_params(model, K=K2, **common)
+    common = {"kp": kp, "robust": robust, "allocator": allocator}
+    p1 = ambc_params(model, K=K1, kd=kd if kd1 is None else kd1,
+                     eps=eps if eps1 is None else eps1, **common)
+    p2 = ambc_params(model, K=K2, kd=kd if kd2 is None else kd2,
+                     eps=eps if eps2 is None else eps2, **common)
     th0 = np.zeros(p1.n) if theta0 is None else theta0
     return TwoStepParams(step1=p1, step2=p2, theta0=th0, step2_theta0=step2_theta0,
                          step1_duration_s=step1_duration_s)
