@@ -11,9 +11,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
-from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
+from sim_bridge.thrusters import ThrusterBank, ThrusterEffects, _thruster_step
 from uvd.model.dynamics import UVModel
 from uvd.model.integrate import _rkmk4
 from uvd.model.vehicle import Vehicle
@@ -42,7 +43,7 @@ class Plant:
         self.steps = 0
         self.H = np.eye(4) if H0 is None else np.array(H0, dtype=float)
         self.v = np.zeros(6) if v0 is None else np.array(v0, dtype=float)
-        self.u = np.zeros(6)  # body wrench applied during the last step
+        self.u = np.zeros(6)  # body wrench applied during the last step (u = B f)
         self._H_next = np.empty((4, 4))
         self._v_next = np.empty(6)
 
@@ -56,15 +57,21 @@ class Plant:
 
     def step(self, thrust_command_n: np.ndarray) -> None:
         """Advance one step of 1/rate_hz with the thruster commands (N) held."""
-        f = self.thrusters.step(thrust_command_n, self.dt)
-        self.step_wrench(self.B @ f)
+        m = self.model
+        _thrusters_then_rigid_body(self.thrusters.kernel_args(thrust_command_n, self.dt), self.B,
+                                   m.M, m.M_inv, m.D_flat, m.g, m.b, self.H, self.v, self.dt,
+                                   self.u, self._H_next, self._v_next)
+        self.H, self._H_next = self._H_next, self.H
+        self.v, self._v_next = self._v_next, self.v
+        self.steps += 1
+        self.t = self.steps * self.dt
 
     def step_wrench(self, u: np.ndarray) -> None:
         """Advance one step with the body wrench u = [f; τ] applied directly (ideal actuators)."""
         u = np.asarray(u, dtype=float)
         if not math.isfinite(float(u.sum())):  # a NaN/inf wrench is no wrench
             u = np.zeros(6)
-        self.u = u
+        self.u[:] = u
         m = self.model
         _rkmk4(m.M, m.M_inv, m.D_flat, m.g, m.b, self.H, self.v, u, self.dt,
                self._H_next, self._v_next)
@@ -72,3 +79,16 @@ class Plant:
         self.v, self._v_next = self._v_next, self.v
         self.steps += 1
         self.t = self.steps * self.dt
+
+
+@numba.njit(cache=True)
+def _thrusters_then_rigid_body(thr_args, B, M, M_inv, D_flat, g, b, H, v, dt, u, H_out, v_out):
+    """One plant step in one compiled call: thruster effects, u = B f, then RKMK4 (2.44)."""
+    _thruster_step(*thr_args)
+    f = thr_args[-1]
+    for i in range(6):
+        acc = 0.0
+        for j in range(f.shape[0]):
+            acc += B[i, j] * f[j]
+        u[i] = acc
+    _rkmk4(M, M_inv, D_flat, g, b, H, v, u, dt, H_out, v_out)

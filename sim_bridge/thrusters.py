@@ -65,12 +65,15 @@ class ThrusterBank:
 
     def step(self, command_n: np.ndarray, dt: float) -> np.ndarray:
         """Advance by dt with the thrust commands held; return the thrust produced (N)."""
-        cmd = np.asarray(command_n, dtype=float)
-        e = self.effects
-        _thruster_step(cmd, self._alpha(dt), self.k, self.max_thrust, self.stiction, self.health,
-                       e.saturation, e.stiction, e.lag, self.omega, self._last_sign, self._stuck,
-                       self.thrust)
+        _thruster_step(*self.kernel_args(command_n, dt))
         return self.thrust
+
+    def kernel_args(self, command_n: np.ndarray, dt: float) -> tuple:
+        """Arguments of :func:`_thruster_step` (the plant fuses it with its integrator)."""
+        e = self.effects
+        return (np.asarray(command_n, dtype=float), self._alpha(dt), self.k, self.max_thrust,
+                self.stiction, self.health, e.saturation, e.stiction, e.lag, self.omega,
+                self._last_sign, self._stuck, self.thrust)
 
 
 @numba.njit(cache=True)

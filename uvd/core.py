@@ -78,6 +78,7 @@ class CoreState:
     ctrl: Any
     est: tuple
     t0_ns: int | None = None
+    est_t_ns: int | None = None  # when the estimators last ran (they skip invalid navigation)
     cycles: int = 0
     u_last: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
@@ -121,9 +122,14 @@ def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
         u_applied = state.u_last
 
     est = state.est
+    est_t_ns = state.est_t_ns
     if nav_ok:
-        est = tuple(e.step(vs, u_applied, e.params, s, dt)
+        # the time since the estimators last ran, not one period: after a navigation outage
+        # an estimator sees the gap (AID re-synchronises v̂ = v after one, Theorem 4.3.1's t₀)
+        dt_est = dt if est_t_ns is None else (inputs.t_ns - est_t_ns) * 1e-9
+        est = tuple(e.step(vs, u_applied, e.params, s, dt_est)
                     for e, s in zip(cfg.estimators, state.est, strict=True))
+        est_t_ns = inputs.t_ns
 
     status = "ok"
     ctrl = state.ctrl
@@ -149,6 +155,6 @@ def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
     u_cmd = cfg.allocator.B @ thrust
     out = CoreOutputs(thrust_n=thrust, u_cmd=u_cmd, u_applied=u_applied, nav=nav,
                       reference=ref, saturated=saturated, status=status)
-    new_state = CoreState(nav=nav_mem, ctrl=ctrl, est=est, t0_ns=t0, cycles=state.cycles + 1,
-                          u_last=u_cmd)
+    new_state = CoreState(nav=nav_mem, ctrl=ctrl, est=est, t0_ns=t0, est_t_ns=est_t_ns,
+                          cycles=state.cycles + 1, u_last=u_cmd)
     return out, new_state

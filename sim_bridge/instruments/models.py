@@ -67,11 +67,13 @@ class _Periodic:
     def __init__(self, rate_hz: float) -> None:
         self.rate_hz = rate_hz
         self.k = 0
+        self.next_ns = 0
 
     def due(self, t_ns: int) -> bool:
-        if t_ns >= round(self.k * 1e9 / self.rate_hz):
+        if t_ns >= self.next_ns:
             # skip the due times already passed (a coarse caller never gets a burst)
             self.k = max(self.k + 1, math.floor(t_ns * self.rate_hz / 1e9) + 1)
+            self.next_ns = round(self.k * 1e9 / self.rate_hz)
             return True
         return False
 
@@ -104,6 +106,8 @@ class Instruments:
     def sample(self, t_ns: int, H: np.ndarray, v: np.ndarray
                ) -> tuple[InsSample | None, DvlSample | None, DepthSample | None]:
         """Samples due at t_ns from the true pose H (4×4) and body velocity v = [ν; ω]."""
+        if t_ns < self._ins.next_ns and t_ns < self._dvl.next_ns and t_ns < self._depth.next_ns:
+            return None, None, None
         c = self.config
         ins = dvl = depth = None
         if self._ins.due(t_ns):
