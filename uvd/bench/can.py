@@ -18,12 +18,15 @@
 
 By default the process asks for SCHED_FIFO priority (as a vehicle's daemon would run) and so
 do the emulators; ``--no-realtime`` measures at normal priority. ``scheduling`` in the output
-says which applied.
+says which applied. Both freeze the garbage collector's view of their start-up objects
+(``gc.freeze()``), as a real-time daemon should: a full collection of the ~60 000 objects the
+libraries leave behind takes ~50 ms, five cycles.
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 import time
@@ -116,6 +119,11 @@ def _exchange(duration_s: float, rate_hz: float, realtime: bool) -> dict:
         t0 = time.monotonic()
         out["enabled"] = group.wait_enabled(2.0)
         out["enable_s"] = time.monotonic() - t0
+        # what a real-time daemon does after start-up: the ~60k long-lived objects of the
+        # libraries leave the collector's view, so that no full collection (~50 ms) stalls
+        # a cycle
+        gc.collect()
+        gc.freeze()
         # -- the exchange --
         period = 1.0 / rate_hz
         cycles = int(duration_s * rate_hz)
@@ -211,6 +219,7 @@ def _exchange(duration_s: float, rate_hz: float, realtime: bool) -> dict:
         out["fault_detection"] = seen
         group.shutdown()
     finally:
+        gc.unfreeze()
         bus.close()
         rig.close()
     return out
