@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/uvd demo
+	$(VENV)/bin/uvd demo --duration 60
 
 test: $(STAMP)
 	$(PY) -m pytest -q

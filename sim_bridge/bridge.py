@@ -415,6 +415,9 @@ class SimBridge:
             self.emulators.start()
             plant_task = asyncio.get_running_loop().create_task(self._plant_loop(),
                                                                 name="plant")
+            import gc
+            gc.collect()
+            gc.freeze()  # a full collection of this heap stalls every thread for ~70 ms
             if on_ready is not None:
                 on_ready(self.ready_info())
             try:

@@ -1,13 +1,35 @@
-"""``uvd demo``: the main job on the embedded default, the simulated ``jhu-rov``.
+"""``uvd demo``: the hardware-in-the-loop demo on the embedded default configuration.
 
-Until the daemon exists this is a closed-loop lockstep simulation: the PD part of (5.11)
-(k_p = 300, k_d = 100, §5.3.5.1) tracking RefTraj1 (Table 5.1) for 120 simulated seconds with
-thruster dynamics and Table A.1 sensor noise on; it prints a per-DOF tracking-error table.
+Two processes, as on the vehicle: ``sim-bridge`` (the simulated JHU ROV in real time — plant,
+INS/DVL/Digiquartz on pseudo-terminals, six CiA 402 amplifiers and a CiA 404 pressure
+transmitter on a ``udp_multicast`` CAN bus that never leaves this machine) and ``uvd run``
+(the daemon, connecting to them exactly as to hardware). The daemon arms as soon as its
+arming checks pass and tracks RefTraj1 (Table 5.1) with two-step AMBC, robust adaptation on
+(``config/sim.toml``). Afterwards the demo prints the tracking error per DOF (true state vs
+reference), the loop statistics, the failsafe events and the memory of both processes, and
+compares the tracking error with a lockstep simulation of the same configuration (the same
+core, no I/O, simulated clock).
+
+Every process is bounded in time and killed in all cases. ``--record DIR`` keeps the run:
+configuration, telemetry, truth log, CAN log, both processes' logs and the figures.
 """
 
 from __future__ import annotations
 
+import contextlib
+import json
+import math
+import os
+import queue
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -15,58 +37,385 @@ from uvd.jsonio import write_json
 
 
 def register(sub) -> None:
-    p = sub.add_parser("demo", help="run the simulated vehicle closed loop, print tracking errors")
-    p.add_argument("--duration", type=float, default=120.0, help="simulated seconds (default 120)")
-    p.add_argument("--vehicle", default="jhu-rov", help="built-in vehicle or TOML file")
-    p.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("demo", help="hardware-in-the-loop demo: sim-bridge + uvd run, "
+                                    "RefTraj1 with two-step AMBC",
+                       description=__doc__.split("\n\n")[0])
+    p.add_argument("--duration", type=float, default=60.0, metavar="S",
+                   help="seconds of armed tracking (default 60)")
     p.add_argument("--json", type=Path, metavar="OUT", help="write the figures to this file")
+    p.add_argument("--record", type=Path, metavar="DIR",
+                   help="keep the run's files (config, telemetry, truth, CAN log, logs)")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="base configuration (default: the embedded config/sim.toml)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated instruments")
     p.set_defaults(handler=_run)
 
 
-def pd_reftraj1_lockstep(vehicle_name: str, seed: int, kp: float = 300.0, kd: float = 100.0):
-    """The demo's simulation: PDC on RefTraj1, plant started on the reference."""
-    from uvd import core
-    from uvd.control.allocation import Allocator
-    from uvd.control.pdc import PDGains, PDState, pdc_step
-    from uvd.control.trajectory import reftraj1
-    from uvd.estimation.navigation import NavConfig
-    from uvd.experiments.lockstep import Lockstep, LockstepConfig
-    from uvd.model.vehicle import load_vehicle
+# ----------------------------------------------------------------------------- helpers
 
-    vehicle = load_vehicle(vehicle_name)
-    traj = reftraj1()
-    ref0 = traj.at(0.0)
-    cfg = core.CoreConfig(
-        nav=NavConfig(),
-        controller=core.ControllerSpec("pdc", pdc_step, PDGains(kp=kp, kd=kd), PDState()),
-        reference=traj, allocator=Allocator.from_vehicle(vehicle), k_thrust=vehicle.k_thrust)
-    return Lockstep(vehicle, cfg, LockstepConfig(seed=seed), H0=ref0.H,
-                    v0=ref0.v)
+def _rss_mb(pid: int | None) -> tuple[float, float]:
+    """(VmRSS, VmHWM) of a process in MB (NaN when gone)."""
+    if pid is None:
+        return math.nan, math.nan
+    try:
+        text = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return math.nan, math.nan
+    vals = {}
+    for line in text.splitlines():
+        if line.startswith(("VmRSS:", "VmHWM:")):
+            k, v = line.split(":", 1)
+            vals[k] = int(v.split()[0]) / 1024.0
+    return vals.get("VmRSS", math.nan), vals.get("VmHWM", math.nan)
+
+
+def _wrap(a):
+    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
+
+
+def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
+    """Tracking error of the armed cycles: the true state (truth log, interpolated at each
+    cycle's time) against the reference the daemon used — the same measures as
+    :func:`uvd.experiments.lockstep.tracking_errors`."""
+    from drivers.samples import euler_to_R
+    from uvd.control.errors import error_coordinates
+    from uvd.experiments.lockstep import DOF_NAMES, VEL_NAMES
+
+    t, ref_eta, ref_v = [], [], []
+    with telemetry.open(encoding="utf-8") as fh:
+        for line in fh:
+            try:
+                r = json.loads(line)
+            except ValueError:
+                continue
+            if r.get("type") != "cycle" or r.get("state") not in ("ARMED", "FAILSAFE") \
+                    or "eta_ref" not in r:
+                continue
+            t.append(r["t_ns"] * 1e-9)
+            ref_eta.append(r["eta_ref"])
+            ref_v.append(r["v_ref"])
+    if len(t) < 2 or truth.shape[0] < 2:
+        return {"samples": 0}
+    t = np.asarray(t)
+    # the first armed cycle ends with arming; the reference clock starts on the next one
+    t, ref_eta, ref_v = t[1:], np.asarray(ref_eta)[1:], np.asarray(ref_v)[1:]
+    tt = truth[:, 0]
+    keep = (t >= tt[0]) & (t <= tt[-1])
+    t, ref_eta, ref_v = t[keep], ref_eta[keep], ref_v[keep]
+    eta = np.empty((t.size, 6))
+    for i in range(6):
+        col = truth[:, 1 + i]
+        if i >= 3:
+            col = np.unwrap(col)
+        eta[:, i] = np.interp(t, tt, col)
+    v = np.stack([np.interp(t, tt, truth[:, 7 + i]) for i in range(6)], axis=1)
+    e = eta - ref_eta
+    e[:, 3:] = _wrap(e[:, 3:])
+    dpsi = np.empty((t.size, 6))
+    dv = np.empty((t.size, 6))
+    for k in range(t.size):
+        H = np.eye(4)
+        H[:3, :3] = euler_to_R(*eta[k, 3:])
+        H[:3, 3] = eta[k, :3]
+        Hr = np.eye(4)
+        Hr[:3, :3] = euler_to_R(*ref_eta[k, 3:])
+        Hr[:3, 3] = ref_eta[k, :3]
+        _, dpsi[k], dv[k], _ = error_coordinates(H, v[k], Hr, ref_v[k])
+    return {
+        "position_mae": {n: float(np.mean(np.abs(e[:, i]))) for i, n in enumerate(DOF_NAMES)},
+        "velocity_mae": {n: float(np.mean(np.abs(dv[:, i]))) for i, n in enumerate(VEL_NAMES)},
+        "position_mne": float(np.mean(np.linalg.norm(dpsi, axis=1))),
+        "velocity_mne": float(np.mean(np.linalg.norm(dv, axis=1))),
+        "samples": int(t.size),
+        "duration_s": float(t[-1] - t[0]),
+    }
+
+
+def lockstep_tracking(cfg, duration_s: float, seed: int) -> dict[str, Any]:
+    """The same configuration (same core, same controller) in lockstep simulation."""
+    from uvd.experiments.lockstep import Lockstep, LockstepConfig, run, tracking_errors
+    from uvd.runtime.daemon import build_core, start_pose
+
+    vehicle = cfg.load_vehicle()
+    H0, v0 = start_pose(cfg)
+    sim = Lockstep(vehicle, build_core(cfg, vehicle),
+                   LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=seed), H0=H0, v0=v0)
+    log = run(sim, duration_s)
+    out = tracking_errors(log)
+    out["wall_s"] = log.wall_s
+    out["cycles_not_ok"] = int(sum(s != "ok" for s in log.status))
+    return out
+
+
+def _memory(samples: list[tuple[float, float, float]], duration_s: float) -> dict[str, Any]:
+    """Growth of the daemon's RSS: over the last 8 minutes of a run of ≥ 10 minutes, else over
+    the last 80 % of the run; each end is the median of the samples within 5 s of it."""
+    if not samples:
+        return {}
+    a = np.asarray(samples, dtype=float)
+    t_end = a[-1, 0]
+    if duration_s >= 600.0:
+        window, note = 480.0, "growth over the last 8 minutes"
+    else:
+        window = 0.8 * duration_s
+        note = "run shorter than 10 min: growth over the last 80 % of it"
+    t0 = t_end - window
+
+    def around(t: float, col: int) -> float:
+        sel = np.abs(a[:, 0] - t) <= 5.0
+        vals = a[sel, col]
+        vals = vals[np.isfinite(vals)]
+        return float(np.median(vals)) if vals.size else math.nan
+
+    return {"daemon_rss_growth_mb": around(t_end, 1) - around(t0, 1),
+            "bridge_rss_growth_mb": around(t_end, 2) - around(t0, 2),
+            "growth_window_s": window, "growth_note": note,
+            "daemon_rss_end_mb": around(t_end, 1)}
+
+
+class _LineTail:
+    """Collects a child's stderr lines into a file and a queue (a daemon thread)."""
+
+    def __init__(self, stream, path: Path) -> None:
+        self.q: queue.Queue[str] = queue.Queue()
+        self.lines: list[str] = []
+        self._fh = path.open("w", encoding="utf-8")
+        self._t = threading.Thread(target=self._run, args=(stream,), daemon=True)
+        self._t.start()
+
+    def _run(self, stream) -> None:
+        for raw in stream:
+            line = raw.rstrip("\n")
+            self._fh.write(line + "\n")
+            self._fh.flush()
+            self.lines.append(line)
+            del self.lines[:-200]
+            self.q.put(line)
+        self._fh.close()
+
+    def tail(self, n: int = 15) -> str:
+        return "\n".join(self.lines[-n:])
+
+
+# ----------------------------------------------------------------------------- the demo
+
+def _fmt_table(hil: dict, lock: dict) -> str:
+    from uvd.experiments.lockstep import DOF_NAMES, VEL_NAMES
+    lines = [f"{'DOF':>8} {'position MAE':>14} {'lockstep':>12} {'ratio':>6}   "
+             f"{'velocity MAE':>14}"]
+    for i, (pn, vn) in enumerate(zip(DOF_NAMES, VEL_NAMES, strict=True)):
+        pe, le = hil["position_mae"][pn], lock["position_mae"][pn]
+        ve = hil["velocity_mae"][vn]
+        ratio = pe / le if le > 0 else math.nan
+        if i < 3:
+            lines.append(f"{pn:>8} {pe:>11.4f} m  {le:>9.4f} m  {ratio:>5.2f}   "
+                         f"{ve:>9.4f} m/s")
+        else:
+            lines.append(f"{pn:>8} {math.degrees(pe):>9.3f} deg  {math.degrees(le):>7.3f} deg  "
+                         f"{ratio:>5.2f}   {math.degrees(ve):>7.3f} deg/s")
+    return "\n".join(lines)
+
+
+def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path | None = None,
+             seed: int = 0, progress=print) -> tuple[dict[str, Any], int]:
+    """Run the demo; returns (figures, exit code). See the module docstring."""
+    from sim_bridge.bridge import BridgeProcess, read_truth, write_local_config
+    from uvd.runtime.config import load_config
+
+    tmp = None
+    if record is not None:
+        run_dir = Path(record)
+        run_dir.mkdir(parents=True, exist_ok=True)
+    else:
+        tmp = tempfile.mkdtemp(prefix="uvd-demo-")
+        run_dir = Path(tmp)
+    bridge = daemon = None
+    try:
+        # Real-time priority as on the vehicle (config/jhu-rov.toml): on a shared machine a
+        # normally scheduled loop is sometimes descheduled for tens of ms. Refused without
+        # the privilege: both processes then say so and run with normal scheduling.
+        changes: dict[str, Any] = {"loop": {"sched_fifo_priority": 50}}
+        if record:
+            changes["can"] = {"log": {"path": str(run_dir / "can.log")}}
+        cfg_path = write_local_config(run_dir, base=base, changes=changes)
+        cfg = load_config(cfg_path)
+        c = cfg.control
+        progress(f"uvd demo: {c.controller} ({c.model}, robust adaptation "
+                 f"{'on' if c.robust_adaptation else 'off'}) tracking {c.reference} on "
+                 f"'{cfg.vehicle.name}' at {cfg.loop.rate_hz:g} Hz for {duration_s:g} s, "
+                 "hardware in the loop")
+        t0 = time.monotonic()
+        lock = lockstep_tracking(cfg, duration_s, seed)
+        progress(f"  lockstep simulation of the same configuration: {lock['wall_s']:.1f} s wall "
+                 f"({time.monotonic() - t0:.1f} s with compiling)")
+
+        # -- the two processes --
+        truth_path = run_dir / "truth.bin"
+        bound = duration_s + 90.0
+        bridge = BridgeProcess(cfg_path, duration_s=bound, seed=seed, hold=True,
+                               truth_log=truth_path, extra=["--realtime"])
+        bridge.start(timeout_s=120.0)
+        rt = "SCHED_FIFO 10" if (bridge.ready or {}).get("realtime") else "normal scheduling"
+        progress(f"  sim-bridge up (pid {bridge.pid}, {rt}): ptys in {run_dir}, CAN "
+                 f"{cfg.can.bus.interface} {cfg.can.bus.channel} port {cfg.can.bus.port}")
+        summary_path = run_dir / "daemon-summary.json"
+        daemon = subprocess.Popen(
+            [sys.executable, "-m", "uvd", "run", "--config", str(cfg_path), "--arm",
+             "--duration", str(bound), "--summary-json", str(summary_path)],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+            text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+        tail = _LineTail(daemon.stderr, run_dir / "daemon.log")
+        events: list[str] = []
+
+        def pump(wait_s: float = 0.0) -> None:
+            deadline = time.monotonic() + wait_s
+            while True:
+                try:
+                    line = tail.q.get(timeout=max(0.0, deadline - time.monotonic()))
+                except queue.Empty:
+                    return
+                if "failsafe fired" in line or "lifecycle" in line or "ERROR" in line \
+                        or "SCHED_FIFO" in line:
+                    events.append(line)
+                    progress(f"  daemon: {line.split(': ', 1)[-1]}")
+
+        t_start = time.monotonic()
+        armed_at = None
+        while armed_at is None:
+            pump(0.2)
+            if any("→ ARMED" in e for e in events):
+                armed_at = time.monotonic()
+            elif daemon.poll() is not None or time.monotonic() - t_start > 180.0:
+                progress("uvd demo: the daemon did not arm:\n" + tail.tail())
+                return {"error": "the daemon did not arm", "daemon_log": tail.tail(40)}, 1
+        progress(f"  armed {armed_at - t_start:.1f} s after start; tracking for "
+                 f"{duration_s:g} s")
+
+        samples: list[tuple[float, float, float]] = []
+        next_report = 10.0
+        while True:
+            el = time.monotonic() - armed_at
+            if el >= duration_s:
+                break
+            pump(min(1.0, duration_s - el))
+            rd, _ = _rss_mb(daemon.pid)
+            rb, _ = _rss_mb(bridge.pid)
+            samples.append((time.monotonic() - armed_at, rd, rb))
+            if daemon.poll() is not None:
+                progress("uvd demo: the daemon exited during the run:\n" + tail.tail())
+                break
+            if el >= next_report:
+                next_report += 10.0
+                n_fs = sum("failsafe fired" in e for e in events)
+                progress(f"  {el:5.0f} / {duration_s:g} s   daemon RSS {rd:6.1f} MB   sim-bridge "
+                         f"RSS {rb:6.1f} MB   failsafe events {n_fs}")
+        _, daemon_hwm = _rss_mb(daemon.pid)
+        _, bridge_hwm = _rss_mb(bridge.pid)
+
+        # -- stop: SIGTERM as systemd would --
+        t_sig = time.monotonic()
+        if daemon.poll() is None:
+            daemon.send_signal(signal.SIGTERM)
+        try:
+            code = daemon.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            daemon.kill()
+            code = daemon.wait(timeout=5.0)
+        stop_s = time.monotonic() - t_sig
+        pump(0.5)
+        bridge_stats = bridge.stop(timeout_s=10.0) or {}
+        bridge.kill()
+
+        # -- figures --
+        summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+        loop = summary.get("loop", {})
+        fs_events = [e for e in summary.get("failsafe_events", []) if e.get("type") == "failsafe"]
+        lifecycle = [e for e in summary.get("failsafe_events", [])
+                     if e.get("type") == "lifecycle"]
+        hil = hil_tracking(run_dir / "telemetry.jsonl", read_truth(truth_path)) \
+            if truth_path.is_file() and (run_dir / "telemetry.jsonl").is_file() \
+            else {"samples": 0}
+        mem = _memory(samples, duration_s)
+        mem["daemon_peak_rss_mb"] = daemon_hwm
+        mem["bridge_peak_rss_mb"] = bridge_hwm
+        figures: dict[str, Any] = {
+            "duration_s": duration_s,
+            "config": {"controller": c.controller, "model": c.model,
+                       "robust_adaptation": c.robust_adaptation, "reference": c.reference,
+                       "rate_hz": cfg.loop.rate_hz, "vehicle": cfg.vehicle.name, "seed": seed},
+            "loop": {k: loop.get(k) for k in ("rate_hz", "cycles", "overruns", "skipped",
+                                               "max_overrun_streak", "cycle_errors",
+                                               "lateness_us", "compute_us", "timer")},
+            "tracking": hil,
+            "failsafe_events": fs_events,
+            "lifecycle": lifecycle,
+            "memory": mem,
+            "daemon": {"exit_code": code, "stop_s": stop_s,
+                       "shutdown": summary.get("shutdown", {}).get("steps"),
+                       "counters": summary.get("daemon"),
+                       "warm_up_and_start_s": armed_at - t_start},
+            "sim_bridge": {"counters": bridge_stats.get("counters"),
+                           "ports": bridge_stats.get("ports")},
+        }
+        if hil.get("samples"):
+            ratio = {k: hil["position_mae"][k] / v if v > 0 else math.nan
+                     for k, v in lock["position_mae"].items()}
+            figures["lockstep"] = {"position_mae": lock["position_mae"],
+                                   "velocity_mae": lock["velocity_mae"],
+                                   "position_mne": lock["position_mne"],
+                                   "velocity_mne": lock["velocity_mne"],
+                                   "ratio": ratio,
+                                   "within_25pct": {k: bool(abs(r - 1.0) <= 0.25)
+                                                    for k, r in ratio.items()},
+                                   "cycles_not_ok": lock["cycles_not_ok"]}
+        _report(figures, progress)
+        ok = code == 0 and bool(hil.get("samples")) and not fs_events
+        return figures, 0 if ok else 1
+    finally:
+        if daemon is not None and daemon.poll() is None:
+            daemon.kill()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                daemon.wait(timeout=5.0)
+        if bridge is not None:
+            bridge.kill()
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _report(f: dict, progress) -> None:
+    hil = f["tracking"]
+    if hil.get("samples"):
+        progress(f"Tracking error, true state vs reference ({hil['samples']} cycles, "
+                 f"{hil['duration_s']:.0f} s), against lockstep simulation of the same "
+                 "configuration:")
+        progress(_fmt_table(hil, {"position_mae": f["lockstep"]["position_mae"]}))
+        progress(f"MNE: position {hil['position_mne']:.4f} (lockstep "
+                 f"{f['lockstep']['position_mne']:.4f}), velocity {hil['velocity_mne']:.4f} "
+                 f"(lockstep {f['lockstep']['velocity_mne']:.4f})")
+    else:
+        progress("no armed cycles recorded: no tracking figures")
+    lp = f["loop"]
+    lat, comp = lp.get("lateness_us") or {}, lp.get("compute_us") or {}
+    if lat:
+        progress(f"Loop {lp['rate_hz']:g} Hz: {lp['cycles']} cycles, {lp['overruns']} overruns; "
+                 f"lateness µs p50 {lat['p50']:.1f} p99 {lat['p99']:.1f} max {lat['max']:.1f}; "
+                 f"compute µs p50 {comp['p50']:.0f} p99 {comp['p99']:.0f} (core + CAN sends)")
+    fs = f["failsafe_events"]
+    progress(f"Failsafe events: {len(fs)}" + "".join(
+        f"\n  {e['kind']}: {e['trigger']} → {e['action']} ({e['reason']})" for e in fs))
+    m = f["memory"]
+    progress(f"Memory: daemon peak RSS {m.get('daemon_peak_rss_mb', math.nan):.1f} MB, growth "
+             f"{m.get('daemon_rss_growth_mb', math.nan):+.2f} MB ({m.get('growth_note', '')}); "
+             f"sim-bridge peak RSS {m.get('bridge_peak_rss_mb', math.nan):.1f} MB")
+    d = f["daemon"]
+    progress(f"SIGTERM → daemon exit code {d['exit_code']} in {d['stop_s']:.2f} s")
 
 
 def _run(args) -> int:
-    import time
-
-    from uvd.experiments.lockstep import format_tracking_table, run, tracking_errors
-
-    t0 = time.perf_counter()
-    run(pd_reftraj1_lockstep(args.vehicle, args.seed), 0.5)  # compiles/loads the numeric kernels
-    warm = time.perf_counter() - t0
-    if warm > 2.0:
-        print(f"(compiled the numeric kernels in {warm:.0f} s; they are cached for later runs)")
-    sim = pd_reftraj1_lockstep(args.vehicle, args.seed)
-    print(f"uvd demo: PD control (k_p=300, k_d=100) tracking RefTraj1 on '{args.vehicle}' for "
-          f"{args.duration:.0f} simulated s (lockstep, thruster dynamics and Table A.1 noise on)")
-    log = run(sim, args.duration)
-    errs = tracking_errors(log)
-    print(format_tracking_table(errs, title="Tracking error (true state vs reference):"))
-    sat = float(np.mean(log.saturated.any(axis=1)))
-    bad = sum(s != "ok" for s in log.status)
-    rtf = args.duration / max(log.wall_s, 1e-9)
-    print(f"cycles not ok: {bad}; cycles with a saturated thruster: {100 * sat:.1f} %; "
-          f"peak |thrust| {np.abs(log.thrust).max():.0f} N; "
-          f"{log.wall_s:.2f} s wall ({rtf:.0f}x real time)")
+    figures, code = run_demo(args.duration, record=args.record, base=args.config,
+                             seed=args.seed)
     if args.json:
-        write_json(args.json, {"tracking": errs, "cycles_not_ok": bad,
-                               "saturated_fraction": sat, "wall_s": log.wall_s})
-    return 0 if bad == 0 else 1
+        write_json(args.json, figures)
+    if args.record:
+        write_json(Path(args.record) / "demo.json", figures)
+    return code
