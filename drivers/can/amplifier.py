@@ -294,7 +294,7 @@ class AmplifierGroup:
         self._failed_cycles = 0
         self._sync_sent = False
         self._last_hb_ns = 0
-        self._fault_state: dict[int, frozenset[str]] = {}
+        self._fault_state: dict[int, tuple[str, ...]] = {}
         self.fault_log: deque[FaultEvent] = deque(maxlen=1000)
         self.counters = {"cycles": 0, "syncs_sent": 0, "lost_cycles": 0,
                          "send_failed_cycles": 0,

@@ -25,6 +25,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -121,6 +122,8 @@ class CanEmulators:
         self._bus_off_nodes: list = []
         self.counters = {"sync_rx": 0, "ticks": 0, "late_ticks": 0, "bus_off_events": 0}
         self.peak_omega = np.zeros(len(self.thrusters))  # largest |ω| since the last reset
+        # per SYNC: (receive → handler, handler → last TPDO sent), seconds
+        self._sync_timing: deque[tuple[float, float]] = deque(maxlen=20_000)
         self._last_tick_ns = 0
 
     # -- lifecycle --
@@ -190,12 +193,14 @@ class CanEmulators:
 
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         now = self.clock()
+        wait_s = time.time() - timestamp if timestamp else 0.0  # kernel receive -> here
         with self.lock:
             self.counters["sync_rx"] += 1
             omega = self.bank.omega
             for amp in self.amps:
                 amp.omega = float(omega[amp.index])
                 amp.on_sync(now)
+            self._sync_timing.append((wait_s, (self.clock() - now) / 1e9))
 
     # -- time --
     def _run(self) -> None:
@@ -308,6 +313,7 @@ class CanEmulators:
             self.bank.reset()
             self.bank.health[:] = 1.0
             self.peak_omega[:] = 0.0
+            self._sync_timing.clear()
             for node in self._nodes():
                 node.silent = False
                 node.silent_until_ns = 0
@@ -332,6 +338,15 @@ class CanEmulators:
                 "bus_off": bool(self._bus_off_until),
                 "peak_omega_rad_s": [float(x) for x in self.peak_omega],
             }
+            if self._sync_timing:
+                t = np.array(self._sync_timing) * 1e3
+                out["sync_ms"] = {
+                    "wait_p50": float(np.percentile(t[:, 0], 50)),
+                    "wait_p99": float(np.percentile(t[:, 0], 99)),
+                    "wait_max": float(t[:, 0].max()),
+                    "answer_p50": float(np.percentile(t[:, 1], 50)),
+                    "answer_p99": float(np.percentile(t[:, 1], 99)),
+                    "answer_max": float(t[:, 1].max())}
             if self.pressure is not None:
                 out["pressure"] = self.pressure.snapshot()
             if history:

@@ -186,6 +186,7 @@ def _exchange(duration_s: float, rate_hz: float, realtime: bool) -> dict:
             "period_ms": percentiles(periods, 1e3),
         }
         out["round_trip_ms"] = percentiles(rtt_s, 1e3)
+        out["emulator_sync_ms"] = emu.get("sync_ms", {})
         out["command_timeout"] = {
             "configured_ms": group.cfg.command_timeout_ms,
             "emulator_zeroed_after_ms": {k: v["last_timeout_ms"] for k, v in emu_nodes.items()},
@@ -229,7 +230,12 @@ def run(args: argparse.Namespace) -> dict:
     sched = _realtime(getattr(args, "realtime", True))
     sys.setswitchinterval(0.0005)
     figures: dict = {"scheduling": sched}
-    figures.update(_encode_decode(int(getattr(args, "samples", 2000))))
+    gc.collect()
+    gc.freeze()
+    try:
+        figures.update(_encode_decode(int(getattr(args, "samples", 2000))))
+    finally:
+        gc.unfreeze()
     figures.update(_exchange(float(getattr(args, "duration", 60.0)),
                              float(getattr(args, "rate", 100.0)),
                              realtime=getattr(args, "realtime", True)))
