@@ -61,8 +61,13 @@ from uvd.model.integrate import simulate
 from uvd.model.vehicle import load_vehicle
 
 KP = 300.0
-KD = 100.0
-EPS = 1.0
+KD = 100.0          # §5.3.2, §5.3.4, step 1 of §5.3.5, Fig. 5.4's caption
+EPS = 1.0           # ε with k_d = 100 (single-step AMBC)
+EPS_STEP1 = 2.0     # ε of step 1 (quasi-static: the position error carries g and b)
+KD_STEP2 = 1000.0   # step 2 of §5.3.5 as the text gives it; also PDC's in pdc-vs-ambc
+EPS_STEP2 = 2.0     # ε of step 2
+KD_FULL = 1000.0    # ambc-full (and its PDC): from zero, k_d = 100 tracks worse than PDC
+EPS_FULL = 2.0
 DEC_NAMES = [f"m{i}" for i in range(1, 7)] + [f"d{i}" for i in range(1, 7)] + ["g", "b1", "b2",
                                                                                 "b3"]
 PDC_MINUTES = 10.0  # §5.3.5.1: the PDC MNE/MAE come from 10 minutes of data
@@ -120,8 +125,9 @@ def _write_csv(opts: ExperimentOptions, name: str, header: list[str], cols: np.n
     plt.close(fig)
 
 
-def _pdc_run(vehicle, traj, seconds: float, seed: int, progress=None) -> ControlRun:
-    spec = core.ControllerSpec("pdc", pdc_step, PDGains(kp=KP, kd=KD), PDState())
+def _pdc_run(vehicle, traj, seconds: float, seed: int, progress=None,
+             kd: float = KD) -> ControlRun:
+    spec = core.ControllerSpec("pdc", pdc_step, PDGains(kp=KP, kd=kd), PDState())
     return run_control(vehicle, spec, traj, seconds, seed=seed, theta_every_s=1e9,
                        progress=progress, label="PDC: ")
 
@@ -303,8 +309,8 @@ def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label
                   theta_times_s: tuple[float, ...] = ()) -> tuple[ControlRun, dict]:
     veh = _vehicle()
     alloc = Allocator.from_vehicle(veh)
-    params = two_step_params("decoupled", kp=KP, kd=KD, eps=EPS, allocator=alloc,
-                             step1_duration_s=step1_s)
+    params = two_step_params("decoupled", kp=KP, kd1=KD, eps1=EPS_STEP1, kd2=KD_STEP2,
+                             eps2=EPS_STEP2, allocator=alloc, step1_duration_s=step1_s)
     ref = two_step_reference(step1_duration_s=step1_s)
     spec = core.ControllerSpec("two-step-ambc", two_step_step, params, two_step_init(params))
     opts.progress(f"[{label}] two-step AMBC: step 1 {step1_s / 60:.0f} min (g, b; quasi-static "
@@ -336,9 +342,11 @@ def run_two_step(opts: ExperimentOptions) -> dict:
     win = windows(run, 900.0, start_s=step1_s)
     pdc = None
     out = {
-        "vehicle": veh.name, "gains": {"kp": KP, "kd": KD, "eps": EPS,
-                                       "step1": {"gamma_g": 0.5, "gamma_b": [0.5, 0.5, 10.0]},
-                                       "step2": {"gamma_m": 1000.0, "gamma_d": 5000.0}},
+        "vehicle": veh.name, "gains": {"kp": KP,
+                                       "step1": {"kd": KD, "eps": EPS_STEP1, "gamma_g": 0.5,
+                                                 "gamma_b": [0.5, 0.5, 10.0]},
+                                       "step2": {"kd": KD_STEP2, "eps": EPS_STEP2,
+                                                 "gamma_m": 1000.0, "gamma_d": 5000.0}},
         "step1_s": step1_s, "step2_s": step2_s,
         "parameters": DEC_NAMES, "true": truth.tolist(), "final": final.tolist(),
         "final_relative_error": rel.tolist(),
@@ -360,8 +368,8 @@ def run_two_step(opts: ExperimentOptions) -> dict:
     _write_csv(opts, "two-step-parameters", ["t_s"] + DEC_NAMES,
                np.column_stack([run.theta_t, run.theta]))
     out["summary"] = "\n".join([
-        f"two-step: step 1 {step1_s / 60:.0f} min + step 2 {step2_s / 3600:.2f} h, k_p={KP:g}, "
-        f"k_d={KD:g}, eps={EPS:g}",
+        f"two-step: step 1 {step1_s / 60:.0f} min (k_d={KD:g}, eps={EPS_STEP1:g}) + step 2 "
+        f"{step2_s / 3600:.2f} h (k_d={KD_STEP2:g}, eps={EPS_STEP2:g}), k_p={KP:g}",
         _param_table(DEC_NAMES, {"true": truth, "final": final, "rel.err %": 100 * rel}),
         f"masses/drags within 10 %: {out['masses_drags_within_10pct']} (worst "
         f"{100 * out['worst_mass_drag_relative_error']:.1f} %); g, b within 5 %: "
@@ -383,9 +391,9 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
     ambc = tracking_stats(run, step1_s + step2_s - win_s)  # last window: converged
     pdc_s = min(PDC_MINUTES * 60.0, max(60.0, step2_s))
     opts.progress(f"[pdc-vs-ambc] PDC on RefTraj1, {pdc_s / 60:.0f} min")
-    prun = _pdc_run(veh, reftraj1(), pdc_s, opts.seed, opts.progress)
+    prun = _pdc_run(veh, reftraj1(), pdc_s, opts.seed, opts.progress, kd=KD_STEP2)
     pdc = tracking_stats(prun, 0.0)
-    out = {"vehicle": veh.name, "gains": {"kp": KP, "kd": KD, "eps": EPS},
+    out = {"vehicle": veh.name, "gains": {"kp": KP, "kd": KD_STEP2, "eps_step2": EPS_STEP2},
            "ambc_window_s": [step1_s + step2_s - win_s, step1_s + step2_s],
            "pdc_duration_s": pdc_s, **_ratio_block(pdc, ambc),
            "ambc_windows": [{"start_min": w["start_min"], "position_mne": w["position_mne"],
@@ -399,7 +407,8 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
                np.array([[w["start_min"], w["position_mne"], w["velocity_mne"],
                           pdc["position_mne"], pdc["velocity_mne"]] for w in win]))
     out["summary"] = "\n".join([
-        f"pdc-vs-ambc (Fig. 5.4): RefTraj1, k_p={KP:g}, k_d={KD:g}; PDC {pdc_s / 60:.0f} min, "
+        f"pdc-vs-ambc (Fig. 5.4): RefTraj1, k_p={KP:g}, k_d={KD_STEP2:g}; PDC "
+        f"{pdc_s / 60:.0f} min, "
         f"two-step AMBC last {win_s / 60:.0f} min of step 2",
         f"{'':>10} {'pos MNE':>9} {'vel MNE':>9}   (measured; true state in parentheses)",
         f"{'PDC':>10} {pdc['position_mne']:9.4f} {pdc['velocity_mne']:9.4f}   "
@@ -510,7 +519,8 @@ def run_ambc_full(opts: ExperimentOptions) -> dict:
     alloc = Allocator.from_vehicle(veh)
     truth = theta_of(veh.params, "full")
     seconds = _hours(opts, 4.0) * 3600.0
-    p = ambc_params("full", kp=KP, kd=KD, eps=EPS, allocator=alloc, robust=ROBUST_DAEMON_DEFAULT)
+    p = ambc_params("full", kp=KP, kd=KD_FULL, eps=EPS_FULL, allocator=alloc,
+                    robust=ROBUST_DAEMON_DEFAULT)
     theta0 = np.zeros(truth.size)
     st0 = ambc_init(p, theta0)
     spec = core.ControllerSpec("ambc-full", ambc_step, p, st0)
@@ -522,13 +532,13 @@ def run_ambc_full(opts: ExperimentOptions) -> dict:
     ambc = tracking_stats(run, seconds - win_s)
     pdc_s = min(PDC_MINUTES * 60.0, seconds)
     opts.progress(f"[ambc-full] PDC on the coupled plant, {pdc_s / 60:.0f} min")
-    prun = _pdc_run(veh, reftraj1(), pdc_s, opts.seed, opts.progress)
+    prun = _pdc_run(veh, reftraj1(), pdc_s, opts.seed, opts.progress, kd=KD_FULL)
     pdc = tracking_stats(prun, 0.0)
     nrm = float(np.linalg.norm(truth))
     rel_err = np.linalg.norm(run.theta - truth, axis=1) / nrm
     lam = np.array([params_of(th, "full").mass_min_eigenvalue() for th in run.theta])
     blocks = {"M": slice(0, 21), "D": slice(21, 237), "g_b": slice(237, 241)}
-    out = {"vehicle": veh.name, "gains": {"kp": KP, "kd": KD, "eps": EPS,
+    out = {"vehicle": veh.name, "gains": {"kp": KP, "kd": KD_FULL, "eps": EPS_FULL,
                                           "gamma_m": 1000.0, "gamma_d": 5000.0,
                                           "gamma_g": 0.5, "gamma_b": [0.5, 0.5, 10.0]},
            "robust_settings": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
@@ -555,7 +565,7 @@ def run_ambc_full(opts: ExperimentOptions) -> dict:
                np.column_stack([run.theta_t, rel_err, lam]))
     out["summary"] = "\n".join([
         f"ambc-full: 241-parameter AMBC + robust adaptation on jhu-rov-coupled, RefTraj1, "
-        f"{seconds / 3600:.2f} h, vs PDC (k_p={KP:g}, k_d={KD:g})",
+        f"{seconds / 3600:.2f} h, vs PDC (k_p={KP:g}, k_d={KD_FULL:g}, eps={EPS_FULL:g})",
         f"{'':>10} {'pos MNE':>9} {'vel MNE':>9}",
         f"{'PDC':>10} {pdc['position_mne']:9.4f} {pdc['velocity_mne']:9.4f}",
         f"{'AMBC':>10} {ambc['position_mne']:9.4f} {ambc['velocity_mne']:9.4f}",
