@@ -136,6 +136,7 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     th: list[np.ndarray] = []
     err = np.empty((5, 6))
     not_ok = 0
+    frozen = 0
     dt = 1.0 / control_rate_hz
     t_wall = time.perf_counter()
     next_report = progress_every_s
@@ -161,6 +162,8 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
         sat[k] = bool(out.saturated.any())
         if out.status != "ok":
             not_ok += 1
+        if getattr(getattr(sim.state.ctrl, "ambc", sim.state.ctrl), "frozen", False):
+            frozen += 1
         if ridx.size:
             td = theta_dot_of_ctrl(sim.state.ctrl)
             if td is not None and td.shape[0] > ridx.max():
@@ -179,7 +182,8 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     return ControlRun(t=np.arange(n) * dt, thrust_cmd=thrust, saturated=sat, not_ok=not_ok,
                       theta_t=np.array(th_t), theta=np.array(th) if th else np.zeros((0, 0)),
                       rates=rates, H0=np.array(H0), v0=np.array(v0), final_ctrl=sim.state.ctrl,
-                      wall_s=time.perf_counter() - t_wall, **rec)
+                      wall_s=time.perf_counter() - t_wall,
+                      extra={"frozen_fraction": frozen / max(n, 1)}, **rec)
 
 
 # ---------------------------------------------------------------------------------------------
