@@ -68,3 +68,19 @@ def test_bench_control_reports_median_and_p99():
     for key in ("pdc", "ambc_full_241", "ambc_full_241_robust", "ambc_decoupled_16"):
         assert figs[key]["p50"] > 0 and figs[key]["p99"] >= figs[key]["p50"]
     assert figs["lockstep_two_step"]["extrapolated_wall_s_for_6_h"] > 0
+
+
+def test_results_page_puts_each_summary_next_to_its_thesis_figure(tmp_path):
+    from uvd.experiments import results
+
+    reg = experiments.registry()
+    page = results.render({"two-step": {"summary": "TABLE", "wall_seconds": 3.0},
+                           "pdc-vs-ambc": {"error": "RuntimeError('x')"}}, reg)
+    assert "## two-step" in page and "Table 5.5" in page and "TABLE" in page
+    assert "uvd experiment two-step --json docs/results/two-step.json" in page
+    assert "**Failed:**" in page
+    # --reuse renders from JSON files without running anything
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "two-step.json").write_text(json.dumps({"summary": "REUSED"}))
+    assert results.main(["--reuse", "--out", str(tmp_path), "--only", "two-step"]) == 0
+    assert "REUSED" in (tmp_path / "RESULTS.md").read_text()
