@@ -256,8 +256,25 @@ class SerialSensor:
                 self.samples += 1
                 self.box.put(sample)
 
-    async def stop(self) -> None:
+    async def stop(self, timeout_s: float = 0.3) -> None:
         await self.reader.close()
+        # pyserial-asyncio-fast closes the port in a background task (flush and close in the
+        # default executor); wait for it, bounded, so the exclusive lock is released before
+        # the App shuts its executor down
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while self.reader._transport is not None and loop.time() < deadline:
+            await asyncio.sleep(0.005)
+
+    def force_close(self) -> None:
+        """Close the port under the transport if its graceful close never completed."""
+        tr = self.reader._transport
+        ser = getattr(tr, "serial", None) if tr is not None else None
+        if ser is not None:
+            try:
+                ser.close()
+            except OSError:
+                pass
 
     def stats(self) -> dict[str, Any]:
         return {"samples": self.samples, "rejected": self.rejected,
@@ -463,6 +480,10 @@ class Daemon:
                                     east_m=config.navigation.initial_east_m)
         self.allocator = self.core_cfg.allocator
         self.max_thrust = np.asarray(self.allocator.max_thrust_n, dtype=float)
+        B = np.asarray(self.allocator.B, dtype=float)
+        self._vertical = np.all(np.abs(B[[0, 1, 5], :]) < 1e-9, axis=0)
+        self._vertical_pinv = np.linalg.pinv(B[2:5][:, self._vertical]) \
+            if self._vertical.any() else np.zeros((0, 3))
         self.pd_gains = PDGains(kp=config.control.kp, kd=config.control.kd)
         self.ins_box: Mailbox = Mailbox("ins")
         self.dvl_box: Mailbox = Mailbox("dvl")
@@ -665,7 +686,7 @@ class Daemon:
                "eta": _eta(nav.H).tolist(), "v": nav.v.tolist(),
                "thrust": thrust.tolist(),
                "ins_rx_ns": ins.t_ns if ins is not None else None,
-               "ages": [h.ins_age_s, h.dvl_age_s, h.depth_age_s]}
+               "ages": [h.ins_age_s, h.dvl_age_s, h.depth_age_s, fb_age]}
         if ref is not None:
             rec["eta_ref"] = _eta(ref.H).tolist()
             rec["v_ref"] = np.asarray(ref.v).tolist()
@@ -674,7 +695,7 @@ class Daemon:
         self.app.hub.publish(rec)
 
     def _hold_depth(self, nav, dt: float) -> np.ndarray:
-        """PD on depth, roll and pitch only (closed-loop mask), zero surge/sway/yaw.
+        """PD on depth, roll and pitch only (closed-loop mask), zero surge/sway/yaw thrust.
 
         The setpoint is the depth at entry, level; without a valid DVL the body translational
         velocity is not known, so only the attitude rates feed the derivative term.
@@ -699,8 +720,13 @@ class Daemon:
             v[:3] = 0.0
         u, _ = pdc_step(VehicleState(H=H, v=v), replace(ref, H=ref_H), self.pd_gains,
                         PDState(), dt)
-        u = np.where(HOLD_DEPTH_MASK, u, 0.0)
-        thrust, _, _ = allocate(self.allocator, u)
+        # heave, roll and pitch from the thrusters that produce no surge, sway or yaw; the
+        # others get exactly zero
+        thrust = np.zeros(self.allocator.n_thrusters)
+        if self._vertical.any():
+            f = self._vertical_pinv @ u[2:5]
+            scale = float(np.max(np.abs(f) / self.max_thrust[self._vertical], initial=0.0))
+            thrust[self._vertical] = f / scale if scale > 1.0 else f
         return thrust
 
     def _fallback(self, nav, reference, dt: float) -> np.ndarray:
@@ -716,8 +742,20 @@ class Daemon:
     # -- running --
 
     async def run(self) -> int:
-        """Run until stopped (SIGTERM/SIGINT or :meth:`stop`); returns the exit code."""
-        return await self.app.run()
+        """Run until stopped (SIGTERM/SIGINT or :meth:`stop`); returns the exit code.
+
+        After the App's bounded shutdown, anything it had no time left to close (a serial
+        port, the bus) is closed here, so that a daemon run inside a longer-lived process
+        (tests, tools) leaves no port locked.
+        """
+        try:
+            return await self.app.run()
+        finally:
+            for s in self.sensors:
+                if s.reader.connected or s.reader._transport is not None:
+                    s.force_close()
+            if self.can.bus is not None and self.can.bus.is_open:
+                await self.can.stop()
 
     def stop(self, reason: str = "requested") -> None:
         self.app.request_stop(reason)
