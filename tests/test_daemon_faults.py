@@ -120,7 +120,8 @@ async def call(proc, op, **kw) -> dict:
 
 def events(d, kind=None, trigger=None) -> list[dict]:
     return [e for e in d.supervisor.failsafe_events() if e["type"] == "failsafe"
-            and (kind is None or e["kind"] == kind) and (trigger is None or e["trigger"] == trigger)]
+            and (kind is None or e["kind"] == kind)
+            and (trigger is None or e["trigger"] == trigger)]
 
 
 def fired(d, trigger) -> dict:
