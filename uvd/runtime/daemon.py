@@ -234,7 +234,12 @@ class SerialSensor:
 
     async def start(self) -> None:
         self.reader.start()
-        await self.reader.wait_connected(self.connect_timeout_s)
+        try:
+            await self.reader.wait_connected(self.connect_timeout_s)
+        except BaseException:  # the App's start timeout cancels us: say which port it was
+            log.error("%s: %s did not open%s", self.name, self.reader.where,
+                      f" ({self.reader.last_error})" if self.reader.last_error else "")
+            raise
         if self.on_connect is not None:
             self.on_connect(self.reader)
 

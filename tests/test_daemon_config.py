@@ -1,0 +1,83 @@
+"""``uvd run`` with a wrong configuration fails fast, naming the key; the daemon's settings
+come from one source of truth."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from uvd.cli import main
+from uvd.runtime.config import DEFAULT_CONFIG, load_config
+from uvd.runtime.daemon import build_core, nav_config, start_pose
+
+SIM = DEFAULT_CONFIG.read_text()
+
+
+def bad(tmp_path: Path, old: str, new: str) -> Path:
+    assert old in SIM, old
+    p = tmp_path / "bad.toml"
+    p.write_text(SIM.replace(old, new, 1))
+    return p
+
+
+@pytest.mark.parametrize("old,new,key,reason", [
+    ("kd = 100.0", "kd = 100.0\nkpp = 1.0", "control.kpp", "unknown key"),
+    ("kp = 300.0", 'kp = "high"', "control.kp", "expected a number"),
+    ("kp = 300.0", "kp = -5.0", "control.kp", "out of range"),
+    ('port = "/tmp/uvd-sim/ins"', "", "sensors.ins.port", "missing required key"),
+])
+def test_a_wrong_config_fails_fast_naming_the_key(tmp_path, capsys, old, new, key, reason):
+    path = bad(tmp_path, old, new)
+    t0 = time.monotonic()
+    assert main(["run", "--config", str(path)]) == 2
+    assert time.monotonic() - t0 < 2.0  # validation only: nothing was started
+    err = capsys.readouterr().err
+    assert "nothing started" in err
+    line = next(x for x in err.splitlines() if f": {key}:" in x)
+    assert line.startswith(f"{path}: {key}: ") and reason in line
+
+
+def test_the_real_process_exits_2_before_opening_anything(tmp_path):
+    path = bad(tmp_path, "kp = 300.0", "kp = -5.0")
+    r = subprocess.run([sys.executable, "-m", "uvd", "run", "--config", str(path), "--arm"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2
+    assert f"{path}: control.kp: -5.0 is out of range" in r.stderr
+    assert not Path("/tmp/uvd-sim/ins").exists() or "BOOT" not in r.stderr
+
+
+def test_sim_bridge_refuses_a_wrong_config_too(tmp_path):
+    path = bad(tmp_path, 'interface = "udp_multicast"', 'interface = "no-such-bus"')
+    r = subprocess.run([sys.executable, "-m", "sim_bridge.cli", "--config", str(path)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "can.interface" in r.stderr
+
+
+def test_an_absent_device_stops_the_start_with_exit_1(tmp_path):
+    """A port that does not exist is not a configuration error (the adapter may be plugged
+    later) but the drivers cannot come up: the start times out, exit 1, naming the port."""
+    from sim_bridge.bridge import write_local_config
+    cfg = write_local_config(tmp_path, changes={"daemon": {"start_timeout_s": 1.0}})
+    r = subprocess.run([sys.executable, "-m", "uvd", "run", "--config", str(cfg)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1
+    assert "start failed" in r.stderr and str(tmp_path / "ins") in r.stderr
+
+
+def test_navigation_timeouts_are_the_failsafe_thresholds():
+    cfg = load_config(DEFAULT_CONFIG)
+    nav = nav_config(cfg)
+    assert (nav.ins_timeout_s, nav.dvl_timeout_s, nav.depth_timeout_s) == (
+        cfg.failsafe.ins_stale_s, cfg.failsafe.dvl_stale_s, cfg.failsafe.depth_stale_s)
+    assert cfg.failsafe.ins_stale_s == 0.25  # 2.5 periods of the 10 Hz PHINS
+    core_cfg = build_core(cfg)
+    assert core_cfg.nav.ins_timeout_s == nav.ins_timeout_s
+    assert core_cfg.controller.name == "two-step-ambc"
+    assert core_cfg.controller.params.step1_duration_s == 0.0
+    H0, v0 = start_pose(cfg)
+    ref0 = core_cfg.reference.at(0.0)
+    assert abs(H0 - ref0.H).max() < 1e-12 and not v0.any()  # the run starts on RefTraj1
