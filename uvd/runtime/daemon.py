@@ -383,11 +383,19 @@ class CanComponent:
         self.start_report = None
         self.last_can_depth = None
 
-    def _open(self) -> None:
-        from drivers.can import AmplifierGroup, CanBus, CanDepthSensor, CanRecorder
+    def _open_bus(self) -> None:
+        """Open the bus from the event loop's thread: its receive thread inherits that
+        thread's scheduling (SCHED_FIFO when configured). A normally scheduled thread that
+        holds the GIL while other processes preempt it would delay the loop by
+        milliseconds (priority inversion through the GIL)."""
+        from drivers.can import CanBus, CanRecorder
         c = self.cfg.can
         self.recorder = CanRecorder.from_config(c.log)
         self.bus = CanBus(c.bus, recorder=self.recorder).open()
+
+    def _open(self) -> None:
+        from drivers.can import AmplifierGroup, CanDepthSensor
+        c = self.cfg.can
         self.group = AmplifierGroup.from_config(self.bus, c.amplifiers, self.vehicle.thrusters)
         if c.depth.enabled:
             use = self.cfg.sensors.depth.source == "can" and self.depth_box is not None
@@ -407,7 +415,8 @@ class CanComponent:
             log.warning("CAN depth sensor %d: no sample within 1 s", c.depth.node_id)
 
     async def start(self) -> None:
-        await asyncio.to_thread(self._open)
+        self._open_bus()
+        await asyncio.to_thread(self._open)  # SDO configuration: blocking, bounded
 
     async def run(self) -> None:
         return None
