@@ -25,7 +25,8 @@ any moment then starts exactly where a lockstep simulation of the same configura
 instead of each frame), ``nan`` (NaN attitude / depth in otherwise valid frames), ``stuck``
 (the value frozen) — for ``seconds`` or until ``ok``; every amplifier fault of
 :meth:`CanEmulators.call` (``fault``, ``silence``, ``unsilence``, ``health``, ``bus_off``,
-``reset``, …); the plant's ``hold``/``release``/``place``. Every answer carries the bridge's
+``reset``, …); the plant's ``release``/``place``; ``writes`` (when each frame of an
+instrument was written, for ``uvd bench latency``). Every answer carries the bridge's
 monotonic time ``t_ns`` (the same clock as the daemon's on this machine).
 
 **Truth.** ``truth_log`` receives one row per plant step: monotonic time (s), the true
@@ -42,6 +43,7 @@ import math
 import os
 import socket
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -139,6 +141,8 @@ class FaultyPort(PtyPort):
         self.rng = rng
         self.garbage_written = 0
         self.last_write_end_ns = 0
+        #: monotonic time each frame's last byte was handed to the pty (``uvd bench latency``)
+        self.write_times: deque[int] = deque(maxlen=100_000)
 
     def write(self, data: bytes) -> bool:
         if self.faults.get(self.name) == "garbage":
@@ -146,6 +150,8 @@ class FaultyPort(PtyPort):
             self.garbage_written += 1
         ok = super().write(data)
         self.last_write_end_ns = time.monotonic_ns()
+        if ok:
+            self.write_times.append(self.last_write_end_ns)
         return ok
 
 
@@ -373,6 +379,9 @@ class SimBridge:
                 return {"ok": True, "t_ns": now, "eta": [*H[:3, 3], roll, pitch, heading],
                         "v": v.tolist(), "held": self.held,
                         "thrust_command_n": self.thrust_commands().tolist()}
+            if op == "writes":
+                port = self.emulators.ports[str(kw.get("name", "ins"))]
+                return {"ok": True, "t_ns": now, "write_end_ns": list(port.write_times)}
             if op == "release":
                 self.held = False
                 return {"ok": True, "t_ns": now}
