@@ -18,7 +18,7 @@ from drivers.can.amplifier import AmplifierGroup
 from drivers.can.bus import CanBus
 from drivers.can.config import AmplifierConfig, DepthConfig
 from drivers.can.depth import CanDepthSensor
-from sim_bridge.amplifiers.harness import KINDS, run_cycles, start_rig
+from sim_bridge.amplifiers.harness import KINDS, realtime_priority, run_cycles, start_rig
 from uvd.model.vehicle import load_vehicle
 
 pytestmark = pytest.mark.timeout(120)
@@ -29,9 +29,12 @@ N = VEHICLE.n_thrusters
 
 @pytest.fixture(scope="module", params=KINDS)
 def rig(request):
-    r = start_rig(request.param, pressure_node=32, depth_m=1.25, duration_s=240)
-    yield r
-    r.close()
+    # the daemon runs at real-time priority; so do these tests (and the threads they start),
+    # when permitted, so that a busy test machine does not stall a cycle by 200 ms
+    with realtime_priority():
+        r = start_rig(request.param, pressure_node=32, depth_m=1.25, duration_s=240)
+        yield r
+        r.close()
 
 
 class Driver:
@@ -68,6 +71,18 @@ def wait_for(pred, timeout_s: float, step_s: float = 0.005):
         time.sleep(step_s)
 
 
+def cycle_until(group, pred, timeout_s: float, thrust=None):
+    """Keep cycling (zero thrust) as the daemon would, until ``pred()``; bounded."""
+    thrust = np.zeros(N) if thrust is None else thrust
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        group.write(thrust)
+        time.sleep(0.01)
+        if pred():
+            return True
+    return False
+
+
 def test_enable_reaches_operation_enabled_on_every_node(drv, rig):
     report = drv.group.start(timeout_s=2.0)
     assert report.ok, report.nodes
@@ -89,14 +104,15 @@ def test_cyclic_commands_and_feedback_every_cycle(drv, rig):
     cmd = np.array([60.0, -45.0, 30.0, 80.0, -20.0, 15.0])
     n = 250  # 2.5 s at 100 Hz
     statuses = run_cycles(drv.group, n, cmd)
-    time.sleep(0.05)
+    syncs = drv.group.counters["syncs_sent"]
+    # every SYNC answered by every amplifier (none lost), every command received
+    answered, _ = wait_for(lambda: set(drv.group.stats()["tpdo_rx_by_node"].values())
+                           == {syncs}, 1.0)
+    assert answered, drv.group.stats()["tpdo_rx_by_node"]
     fb = drv.group.read()
     st = drv.group.stats()
     emu = rig.call("stats")
     assert all(s.ok for s in statuses)
-    # every SYNC answered by every amplifier (none lost), every command received
-    syncs = st["syncs_sent"]
-    assert all(v == syncs for v in st["tpdo_rx_by_node"].values()), st["tpdo_rx_by_node"]
     rpdo_rx = [emu["nodes"][str(i)]["rpdo_rx"] for i in rig.node_ids]
     assert min(rpdo_rx) >= n, rpdo_rx
     # feedback in time for the next cycle in most cycles; how many depends on the OS scheduler
@@ -106,15 +122,24 @@ def test_cyclic_commands_and_feedback_every_cycle(drv, rig):
     # the commanded current is what the drive applies, exactly
     expected = np.rint(cmd / (VEHICLE.max_thrust_n / 1000.0))
     np.testing.assert_array_equal(fb.torque_permille, expected)
-    # the thrusters spun up: steady state k ω|ω| = commanded thrust (lag τ = 0.15 s ≪ 2.5 s)
-    np.testing.assert_allclose(fb.thrust_est_n, expected * VEHICLE.max_thrust_n / 1000.0,
-                               rtol=0.02, atol=0.05)
-    assert fb.valid.all() and fb.ok
+    # the thrusters spin up to the steady state k ω|ω| = commanded thrust (lag τ = 0.15 s;
+    # keep commanding while the emulators' clock catches up on a loaded machine)
+    want = expected * VEHICLE.max_thrust_n / 1000.0
+    assert cycle_until(drv.group, lambda: np.allclose(drv.group.read().thrust_est_n, want,
+                                                      rtol=0.02, atol=0.05), 3.0, cmd), \
+        drv.group.read().thrust_est_n
+    fb = drv.group.read()
+    assert fb.valid.all() and fb.ok, fb.faults
 
 
 def test_command_stop_zeroes_every_thruster_within_200ms_and_emcy(drv, rig):
     drv.enable()
-    statuses = run_cycles(drv.group, 40, np.full(N, 50.0))
+    for _attempt in range(3):  # a loaded test machine may stall this process > 200 ms
+        statuses = run_cycles(drv.group, 40, np.full(N, 50.0))
+        if drv.group.read().all_enabled:
+            break
+        drv.group.reset_faults()
+        assert drv.group.wait_enabled(timeout_s=2.0)
     t_last = statuses[-1].t_ns + statuses[-1].duration_ns  # the daemon "hangs" here
     emcy_t = {}
 
@@ -122,7 +147,7 @@ def test_command_stop_zeroes_every_thruster_within_200ms_and_emcy(drv, rig):
         for node in drv.group.nodes:
             with drv.group._lock:
                 t = node.emcy_active.get(0x8250)
-            if node.node_id not in emcy_t and t is not None:
+            if node.node_id not in emcy_t and t is not None and t > t_last:
                 emcy_t[node.node_id] = t
         return len(emcy_t) == N
 
@@ -200,28 +225,17 @@ def test_weak_and_dead_thrusters_change_thrust_not_feedback(drv, rig):
     drv.enable()
     rig.call("health", node=1, value=0.5)
     rig.call("health", node=4, value=0.0)
-    run_cycles(drv.group, 120, np.full(N, 40.0))
-    emu = rig.call("stats")["nodes"]
-    thrust = {k: v["thrust_n"] for k, v in emu.items()}
-    assert thrust["1"] == pytest.approx(20.0, rel=0.03)
-    assert thrust["4"] == 0.0
-    assert thrust["2"] == pytest.approx(40.0, rel=0.03)
-    fb = drv.group.read()
-    # the amplifier only sees the propeller speed: the fault is for fault detection to find
-    np.testing.assert_allclose(fb.thrust_est_n, 40.0, rtol=0.03)
-    assert fb.ok
-
-
-def cycle_until(group, pred, timeout_s: float, thrust=None):
-    """Keep cycling (zero thrust) as the daemon would, until ``pred()``; bounded."""
-    thrust = np.zeros(N) if thrust is None else thrust
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        group.write(thrust)
-        time.sleep(0.01)
-        if pred():
-            return True
-    return False
+    def settled():
+        t = {k: v["thrust_n"] for k, v in rig.call("stats")["nodes"].items()}
+        healthy = all(abs(t[k] - 40.0) < 1.2 for k in ("2", "3", "5", "6"))
+        est = np.allclose(drv.group.read().thrust_est_n, 40.0, rtol=0.03)
+        return healthy and abs(t["1"] - 20.0) < 0.6 and est and t
+    assert cycle_until(drv.group, settled, 4.0, np.full(N, 40.0)), drv.group.read()
+    thrust = settled()
+    assert thrust and thrust["4"] == 0.0
+    # the amplifier only sees the propeller speed: the estimate k ω|ω| says 40 N for all six
+    # (the weak and dead thrusters included) — that fault is for fault detection to find
+    assert drv.group.read().ok
 
 
 def test_bus_off_detected_and_recovered(drv, rig):

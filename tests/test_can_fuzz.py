@@ -149,8 +149,12 @@ def test_junk_on_a_live_bus_does_not_disturb_the_exchange():
         assert fb.faults.get(0) in (None, ("error_passive",))
         assert set(fb.faults) <= {0}
         np.testing.assert_array_equal(fb.torque_permille, np.rint(cmd / 0.3))
-        assert group.stats()["tpdo_rx_by_node"] == {n: group.counters["syncs_sent"]
-                                                    for n in NODES}
+        syncs = group.counters["syncs_sent"]
+        deadline = time.monotonic() + 1.0
+        while set(group.stats()["tpdo_rx_by_node"].values()) != {syncs} \
+                and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert group.stats()["tpdo_rx_by_node"] == dict.fromkeys(NODES, syncs)
     finally:
         junk.shutdown()
         bus.close()

@@ -285,6 +285,8 @@ def open_bus(cfg: CanBusConfig) -> can.BusABC:
     except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
         raise BusOpenError(f"cannot open CAN interface {cfg.interface!r} channel "
                            f"{cfg.channel!r}: {exc}") from exc
+    if cfg.interface == "udp_multicast":
+        _enlarge_receive_buffer(bus)
     if cfg.interface == "udp_multicast" and cfg.loopback_only:
         hops = udp_hop_limit(bus)
         if hops != 0:
@@ -306,6 +308,22 @@ def udp_hop_limit(bus: can.BusABC) -> int | None:
         if sock.family == socket.AF_INET6:
             return sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS)
         return sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL)
+
+
+def _enlarge_receive_buffer(bus: can.BusABC, size: int = 4 << 20) -> None:
+    """Give a ``udp_multicast`` socket room for ~a second of traffic (best effort).
+
+    The kernel's default (~200 kB, a few hundred datagrams) overflows — and drops frames —
+    if the receive thread is held up for a fraction of a second on a busy machine.
+    """
+    try:
+        with socket.socket(fileno=_dup(bus.fileno())) as sock:
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, getattr(socket, "SO_RCVBUFFORCE", 33), size)
+            except OSError:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size)
+    except (OSError, NotImplementedError, AttributeError, TypeError) as exc:
+        log.debug("could not enlarge the receive buffer: %s", exc)
 
 
 def _dup(fd: int) -> int:

@@ -12,6 +12,8 @@ interface whichever way the emulators run:
 
 from __future__ import annotations
 
+import contextlib
+import os
 import socket
 import time
 import uuid
@@ -25,6 +27,24 @@ from sim_bridge.amplifiers.process import EmulatorProcess
 from uvd.model.vehicle import load_vehicle
 
 KINDS = ("virtual", "udp_multicast")
+
+
+@contextlib.contextmanager
+def realtime_priority(priority: int = 10):
+    """Run this thread, and threads it starts, at SCHED_FIFO (best effort), as a daemon would.
+
+    Yields whether it applied; restores normal scheduling on exit.
+    """
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        applied = True
+    except (OSError, AttributeError):
+        applied = False
+    try:
+        yield applied
+    finally:
+        if applied:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
 def free_udp_port() -> int:
