@@ -277,3 +277,16 @@ def test_mbc_with_wrong_parameters_does_not_reach_1e_3():
                                0.5 * ROV.params.decoupled_view()[6:12], 0.0, (0, 0, 150.0))
     dpsi = _mbc_closed_loop(ROV, 1000.0, 20.0, params=wrong)
     assert np.abs(dpsi[5000:]).max() > 1e-2
+
+
+def test_mbc_with_noise_and_thruster_dynamics_stays_bounded():
+    """The full lockstep loop (10 Hz, Table A.1 noise, propeller lag, stiction): bounded."""
+    from uvd import core
+    from uvd.experiments._control_runner import run_control, tracking_stats
+
+    spec = core.ControllerSpec("mbc", mbc_step, MBCParams.from_params(ROV.params), MBCState())
+    run = run_control(ROV, spec, reftraj1(), 120.0, seed=3)
+    assert run.not_ok == 0
+    s = tracking_stats(run, 20.0)
+    assert np.abs(run.dpsi_meas[200:]).max() < 0.1
+    assert s["position_mne"] < 0.05 and s["velocity_mne"] < 0.05
