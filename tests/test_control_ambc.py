@@ -280,13 +280,18 @@ def test_mbc_with_wrong_parameters_does_not_reach_1e_3():
 
 
 def test_mbc_with_noise_and_thruster_dynamics_stays_bounded():
-    """The full lockstep loop (10 Hz, Table A.1 noise, propeller lag, stiction): bounded."""
+    """The full lockstep loop (10 Hz, Table A.1 noise, propeller lag, stiction): bounded.
+
+    k_d = 1000 (step 2 of §5.3.5): MBC cancels the hydrodynamic damping, and with k_d = 100 the
+    surge loop is left with ζ ≈ 0.1, which the 0.15 s propeller lag and the 10 Hz hold turn
+    into a ~0.5 m limit cycle."""
     from uvd import core
     from uvd.experiments._control_runner import run_control, tracking_stats
 
-    spec = core.ControllerSpec("mbc", mbc_step, MBCParams.from_params(ROV.params), MBCState())
+    spec = core.ControllerSpec("mbc", mbc_step, MBCParams.from_params(ROV.params, kd=1000.0),
+                               MBCState())
     run = run_control(ROV, spec, reftraj1(), 120.0, seed=3)
     assert run.not_ok == 0
     s = tracking_stats(run, 20.0)
-    assert np.abs(run.dpsi_meas[200:]).max() < 0.1
-    assert s["position_mne"] < 0.05 and s["velocity_mne"] < 0.05
+    assert np.abs(run.dpsi_meas[200:]).max() < 0.05
+    assert s["position_mne"] < 0.03 and s["velocity_mne"] < 0.03
