@@ -34,8 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write the true state at every plant step (float64 rows)")
     p.add_argument("--control", action="store_true",
                    help="JSON commands on stdin, answers on stdout; exit when stdin closes")
-    p.add_argument("--realtime", action="store_true",
-                   help="SCHED_FIFO priority 10 if permitted (the devices answer on time)")
+    p.add_argument("--realtime", type=int, nargs="?", const=10, default=0, metavar="PRIO",
+                   help="SCHED_FIFO priority (10 without a value) if permitted: the emulated "
+                        "devices answer on time whatever else the machine runs")
     return p
 
 
@@ -63,8 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     realtime = False
     if args.realtime:
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
-            realtime = True
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.realtime))
+            realtime = args.realtime
         except (OSError, AttributeError):
             pass
     from sim_bridge.bridge import SimBridge

@@ -278,6 +278,34 @@ def test_stuck_depth_latches_until_operator_reset(hil):
     commands_were_safe(d, cycles, proc)
 
 
+def test_parameter_divergence_falls_back_to_pdc_with_adaptation_frozen(hil):
+    """θ̂ leaving its configured bounds (here a bound the adapting masses soon cross) freezes
+    adaptation and hands control to PDC; latched."""
+    cfg, proc = hil
+    cfg = replace(cfg, failsafe=replace(cfg.failsafe, theta_abs_max=320.0))
+    info = {}
+
+    async def scenario(d):
+        await _until(lambda: events(d, "fired", "parameter_divergence"), 30.0,
+                     "parameter_divergence")
+        info["theta"] = d.state.ctrl.ambc.theta.copy()
+        await asyncio.sleep(1.0)
+        info["theta_after"] = d.state.ctrl.ambc.theta.copy()
+        info["state"] = d.supervisor.state
+
+    d, cycles = run_scenario(cfg, scenario)
+    ev = fired(d, "parameter_divergence")
+    assert ev["action"] == "fallback" and "θ̂" in ev["reason"]
+    assert info["state"] is State.ARMED  # FALLBACK keeps the vehicle armed, degraded
+    assert np.array_equal(info["theta"], info["theta_after"])  # frozen
+    cur, prev = cycle_at(cycles, ev["t_ns"])
+    assert prev["mode"] == "control" and cur["mode"] == "pdc-fallback"
+    after = [r for r in cycles if r["t_ns"] >= ev["t_ns"] and r["state"] == "ARMED"]
+    assert len(after) >= 8 and all(r["mode"] == "pdc-fallback" for r in after)
+    assert any(r["thrust"] != [0.0] * 6 for r in after)
+    commands_were_safe(d, cycles, proc)
+
+
 # ----------------------------------------------------------------------------- amplifiers, bus
 
 def test_amplifier_fault_disarms_and_latches(hil):

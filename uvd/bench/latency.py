@@ -81,7 +81,7 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
         cfg = load_config(cfg_path)
         node = cfg.can.amplifiers.node_ids[0]
         bridge = BridgeProcess(cfg_path, duration_s=duration_s + 120.0, hold=True,
-                               extra=["--realtime"]).start(timeout_s=120.0)
+                               extra=["--realtime", "60"]).start(timeout_s=120.0)
         seen, done, th = _observer(cfg.can.bus, 0x200 + node, time.monotonic() + duration_s + 90)
         log = (run_dir / "daemon.log").open("w")
         daemon = subprocess.Popen(
