@@ -182,6 +182,8 @@ def _exchange(duration_s: float, rate_hz: float, realtime: bool) -> dict:
             "commands_lost": int(sum(cycles - v for v in rpdo_rx.values())),
             "emulator_syncs_without_command": int(sum(no_cmd.values())),
             "send_failed_cycles": stats["send_failed_cycles"],
+            "driver_bus": {k: v for k, v in stats["bus"].items() if v},
+            "emulator_bus": {k: v for k, v in emu.get("bus", {}).items() if v},
             "encode_send_udp_us": percentiles(write_s),
             "period_ms": percentiles(periods, 1e3),
         }
