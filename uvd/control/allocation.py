@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from uvd.model.thrusters import speed_from_thrust, thrust_from_speed
@@ -67,19 +68,41 @@ def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarra
     return np.ascontiguousarray(Wi @ B.T @ np.linalg.inv(B @ Wi @ B.T))
 
 
+@numba.njit(cache=True)
+def _allocate(B_pinv, f_max, u):
+    n = B_pinv.shape[0]
+    f = np.empty(n)
+    ratio = np.empty(n)
+    worst = 0.0
+    for j in range(n):
+        x = 0.0
+        for i in range(6):
+            x += B_pinv[j, i] * u[i]
+        f[j] = x
+        ratio[j] = abs(x) / f_max[j]
+        worst = max(worst, ratio[j])
+    sat = np.zeros(n, dtype=np.bool_)
+    scale = 1.0
+    if worst > 1.0:
+        scale = 1.0 / worst
+        for j in range(n):
+            f[j] *= scale
+            sat[j] = ratio[j] >= worst * (1.0 - 1e-12)
+    return f, sat, scale
+
+
 def allocate(alloc: Allocator, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """(f, saturated mask, scale) for the wrench u; scale ≤ 1 is the factor applied.
 
     Unsaturated: B f = u exactly. Saturated: f = B⁺u / max_i(|fᵢ|/f_max,i), so B f = scale·u
-    (same direction) and the thrusters at their limit are flagged.
+    (same direction) and the thrusters at their limit are flagged. A non-finite u gives a
+    non-finite f (the core then commands zero thrust).
     """
-    f = alloc.B_pinv @ u
-    ratio = np.abs(f) / alloc.max_thrust_n
-    worst = float(ratio.max()) if ratio.size else 0.0
-    if worst > 1.0:
-        f = f / worst
-        return f, ratio >= worst * (1.0 - 1e-12), 1.0 / worst
-    return f, np.zeros(f.shape, dtype=bool), 1.0
+    u = np.asarray(u, dtype=float)
+    if not np.isfinite(u).all():
+        f = alloc.B_pinv @ u
+        return f, np.zeros(f.shape, dtype=bool), 1.0
+    return _allocate(alloc.B_pinv, alloc.max_thrust_n, u)
 
 
 def speed_command(alloc: Allocator, f: np.ndarray) -> np.ndarray:

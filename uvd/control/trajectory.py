@@ -237,7 +237,9 @@ class SequenceTrajectory:
         return self._locate(t)[0]
 
     def dof(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        i, tau = self._locate(t)
+        return self._dof(*self._locate(t))
+
+    def _dof(self, i: int, tau: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         traj = self.segments[i][1]
         eta, d1, d2 = traj.dof(tau)
         if i == 0 or self.blend_s <= 0.0 or tau >= self.blend_s:
@@ -255,7 +257,7 @@ class SequenceTrajectory:
     def at(self, t: float) -> Reference:
         i, tau = self._locate(t)
         traj = self.segments[i][1]
-        eta, d1, d2 = self.dof(t)
+        eta, d1, d2 = self._dof(i, tau)
         mask = traj.closed_loop_mask
         return reference_from_euler(eta, d1, d2, open_loop_wrench=traj.open_loop_wrench(tau),
                                     closed_loop=None if mask is None else mask > 0.5)

@@ -44,6 +44,20 @@ def _eta(H, out):
     out[5] = math.atan2(H[1, 0], H[0, 0])
 
 
+@numba.njit(cache=True)
+def _record(k, H, v, H_nav, H_ref, v_ref, vdot_ref, err, eta_true, eta_nav, eta_ref, v_true,
+            dpsi_true, dv_true):
+    """One cycle's true/measured/reference pose and true error coordinates, into row k."""
+    _eta(H, eta_true[k])
+    _eta(H_nav, eta_nav[k])
+    _eta(H_ref, eta_ref[k])
+    _kernels.error_state(H, v, H_ref, v_ref, vdot_ref, err)
+    for i in range(6):
+        v_true[k, i] = v[i]
+        dpsi_true[k, i] = err[0, i]
+        dv_true[k, i] = err[1, i]
+
+
 def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
@@ -141,25 +155,22 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     t_wall = time.perf_counter()
     next_report = progress_every_s
     e_true, e_nav, e_ref = rec["eta_true"], rec["eta_nav"], rec["eta_ref"]
+    v_true, dpsi_true, dv_true = rec["v_true"], rec["dpsi_true"], rec["dv_true"]
+    dpsi_meas, dv_meas, u_cmd, u_app = (rec["dpsi_meas"], rec["dv_meas"], rec["u_cmd"],
+                                        rec["u_applied"])
+    plant = sim.plant
     for k in range(n):
-        H = sim.plant.H.copy()
-        v = sim.plant.v.copy()
+        H = plant.H.copy()
+        v = plant.v.copy()
         out = sim.cycle()
         ref = out.reference
-        _eta(H, e_true[k])
-        _eta(out.nav.H, e_nav[k])
-        _eta(ref.H, e_ref[k])
-        rec["v_true"][k] = v
-        _kernels.error_state(H, v, ref.H, ref.v, ref.vdot, err)
-        rec["dpsi_true"][k] = err[0]
-        rec["dv_true"][k] = err[1]
-        dpsi_m, dv_m = errors_of(sim.state.ctrl)
-        rec["dpsi_meas"][k] = dpsi_m
-        rec["dv_meas"][k] = dv_m
-        rec["u_cmd"][k] = out.u_cmd
-        rec["u_applied"][k] = out.u_applied
+        _record(k, H, v, out.nav.H, ref.H, ref.v, ref.vdot, err, e_true, e_nav, e_ref, v_true,
+                dpsi_true, dv_true)
+        dpsi_meas[k], dv_meas[k] = errors_of(sim.state.ctrl)
+        u_cmd[k] = out.u_cmd
+        u_app[k] = out.u_applied
         thrust[k] = out.thrust_n
-        sat[k] = bool(out.saturated.any())
+        sat[k] = out.saturated.any()
         if out.status != "ok":
             not_ok += 1
         if getattr(getattr(sim.state.ctrl, "ambc", sim.state.ctrl), "frozen", False):
