@@ -34,6 +34,9 @@ THESIS = {
                       "reversals; large negative spikes of ṁ₅ after each reversal.",
     "two-step": "§5.3.5 — Table 5.4 (g, b after the quasi-static step 1), Table 5.5 (masses and "
                 "drags after step 2), Table 5.6 (per-15-minute MAE per DOF).",
+    "two-step-no-lag": "Diagnostic for Table 5.5: `two-step` with the plant's 0.15 s propeller "
+                       "lag switched off (stiction, saturation, noise on) — the part of the "
+                       "parameter error that the unmodelled thruster lag causes.",
     "pdc-vs-ambc": "§5.3.5.1 — Fig. 5.4: position and velocity MNE of PDC and two-step AMBC; "
                    "thesis: AMBC 30 % better in position (ratio 0.70), 8 % worse in velocity "
                    "(ratio 1.08).",
@@ -46,8 +49,8 @@ THESIS = {
                  "the coupled model of Tables 4.8/4.9, against PDC.",
 }
 
-ORDER = ("ambc-6dof-unstable", "pitch-reversal", "two-step", "pdc-vs-ambc", "xval-two-step",
-         "ambc-robust", "ambc-full")
+ORDER = ("ambc-6dof-unstable", "pitch-reversal", "two-step", "two-step-no-lag", "pdc-vs-ambc",
+         "xval-two-step", "ambc-robust", "ambc-full")
 
 
 def _progress(msg: str) -> None:
