@@ -19,6 +19,7 @@ KEYS = {
     "pitch-reversal": ["cases"],
     "two-step": ["final", "true", "step1", "windows", "masses_drags_within_10pct",
                  "g_b_within_5pct", "theta_after_s"],
+    "two-step-no-lag": ["final", "true", "step1", "windows", "thruster_effects"],
     "pdc-vs-ambc": ["pdc", "ambc", "position_ratio", "velocity_ratio"],
     "xval-two-step": ["models", "states", "adaptation_times_s"],
     "ambc-robust": ["min_mass_eigenvalue", "final", "masses_drags_within_25pct"],
