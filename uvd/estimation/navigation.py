@@ -16,8 +16,13 @@ How the state is assembled (thesis App. A.1, Table A.1):
 * **ν** from the latest DVL sample with bottom lock (6 Hz): ν = R_mount v_dvl − ω × r with the
   configured mounting rotation and lever arm (:func:`drivers.frames.dvl_mount_to_body`; the
   defaults make it the identity, which is what the lockstep instrument models deliver).
-* **x, y (north, east)** by dead reckoning, as the thesis's DVLNAV did: between two calls the
-  position advances by the trapezoid of the world-frame velocities R ν at both calls.
+* **x, y (north, east)** by dead reckoning, as the thesis's DVLNAV did: each locked DVL sample's
+  velocity is rotated into the world frame once, with the attitude at the sample's time (the
+  INS attitude propagated by its body rate across the gap between the two stamps), and that
+  world velocity is held until the next sample (the interval is split exactly at the sample's
+  time). Rotating the *held body* velocity by the *current* attitude instead would turn the
+  correlation of yaw rate and sway (RefTraj1 drives both at 0.21 rad/s) into a steady drift —
+  R(ω × ν)·age has a non-zero mean — where the world-frame hold only delays the position.
 * **z (depth)** from the latest valid depth sample (Digiquartz, 7 Hz).
 
 Validity and ages: a source is valid when its latest usable sample is at most its timeout old
@@ -49,6 +54,7 @@ import numpy as np
 
 from drivers.frames import dvl_mount_to_body
 from drivers.samples import euler_to_R
+from uvd.model.lie import exp_so3
 
 if TYPE_CHECKING:  # the sample types are plain dataclasses; only their attributes are read
     from drivers.samples import DepthSample, DvlSample, InsSample
@@ -183,7 +189,8 @@ class NavMemory:
     nu : (3,) ndarray
         Latest (held) body translational velocity of the origin.
     v_world_prev : (3,) ndarray or None
-        World velocity R ν at the previous call if the DVL was valid then (for the trapezoid).
+        World velocity of the last locked DVL sample, held until the next one (None when the
+        DVL is invalid).
     ins_t_ns, dvl_t_ns, depth_t_ns : int or None
         Stamp of each source's latest usable sample.
     rates_degraded, bottom_lock : bool
@@ -331,17 +338,31 @@ def nav_step(cfg: NavConfig, mem: NavMemory, t_ns: int, ins: InsSample | None,
     dvl_valid = dvl_age <= cfg.dvl_timeout_s
     depth_valid = depth_age <= cfg.depth_timeout_s
 
-    # --- dead reckoning (DVLNAV): trapezoid of world velocities while the DVL is valid -------
+    # --- dead reckoning (DVLNAV): each DVL sample's world velocity, held until the next ------
     north, east = mem.north_m, mem.east_m
-    v_world_prev = None
-    if dvl_valid:
-        v_world_prev = R @ nu
-        prev = mem.v_world_prev
-        t_prev = mem.t_ns
-        if prev is not None and t_prev is not None and t_ns > t_prev:
-            half_dt = (t_ns - t_prev) * 0.5e-9
-            north += (float(prev[0]) + float(v_world_prev[0])) * half_dt
-            east += (float(prev[1]) + float(v_world_prev[1])) * half_dt
+    v_hold = mem.v_world_prev if dvl_valid else None
+    t_prev = mem.t_ns
+    if new_dvl and dvl_valid:
+        # rotated once, with the attitude at the sample's own time: the INS attitude propagated
+        # by its body rate over the (< one INS period) gap, R(t_dvl) ≈ R(t_ins) e^{J(ω)Δt}
+        R_dvl = R
+        if ins_t is not None and dvl_t != ins_t and _finite3(omega):
+            gap_s = (dvl_t - ins_t) * 1e-9
+            if abs(gap_s) <= cfg.ins_timeout_s:
+                R_dvl = R @ exp_so3(omega * gap_s)
+        v_new = R_dvl @ nu
+        if t_prev is not None and t_ns > t_prev:
+            t_split = min(max(dvl_t, t_prev), t_ns)  # the old velocity holds until the sample
+            if v_hold is not None:
+                north += float(v_hold[0]) * (t_split - t_prev) * 1e-9
+                east += float(v_hold[1]) * (t_split - t_prev) * 1e-9
+            north += float(v_new[0]) * (t_ns - t_split) * 1e-9
+            east += float(v_new[1]) * (t_ns - t_split) * 1e-9
+        v_hold = v_new
+    elif v_hold is not None and t_prev is not None and t_ns > t_prev:
+        north += float(v_hold[0]) * (t_ns - t_prev) * 1e-9
+        east += float(v_hold[1]) * (t_ns - t_prev) * 1e-9
+    v_world_prev = v_hold
 
     H = np.empty((4, 4))
     H[:3, :3] = R
