@@ -37,6 +37,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--realtime", type=int, nargs="?", const=10, default=0, metavar="PRIO",
                    help="SCHED_FIFO priority (10 without a value) if permitted: the emulated "
                         "devices answer on time whatever else the machine runs")
+    p.add_argument("--cpu", type=int, action="append", default=[], metavar="N",
+                   help="run on this CPU (repeatable): keep the emulated devices off the "
+                        "daemon's CPU, as separate hardware would be")
     return p
 
 
@@ -61,6 +64,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sim-bridge: invalid configuration:\n{exc}", file=sys.stderr)
         emit({"event": "error", "error": str(exc)})
         return 2
+    if args.cpu:
+        try:
+            os.sched_setaffinity(0, set(args.cpu))
+        except (OSError, ValueError) as exc:
+            print(f"sim-bridge: CPU affinity {args.cpu} refused: {exc}", file=sys.stderr)
     realtime = False
     if args.realtime:
         try:

@@ -68,20 +68,21 @@ def _observer(bus_cfg, cob: int, stop_at: float):
 def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fifo: int = 50,
             base: Path | None = None) -> dict[str, Any]:
     """Run the three processes and return the figures (see the module docstring)."""
-    from sim_bridge.bridge import BridgeProcess, write_local_config
+    from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
     from uvd.runtime.config import load_config
 
     run_dir = Path(tempfile.mkdtemp(prefix="uvd-latency-"))
     bridge = daemon = None
     try:
-        changes: dict[str, Any] = {"loop": {"sched_fifo_priority": sched_fifo}}
+        bridge_args, changes = cpu_split()
+        changes["loop"]["sched_fifo_priority"] = sched_fifo
         if rate_hz is not None:
             changes["loop"]["rate_hz"] = rate_hz
         cfg_path = write_local_config(run_dir, base=base, changes=changes)
         cfg = load_config(cfg_path)
         node = cfg.can.amplifiers.node_ids[0]
         bridge = BridgeProcess(cfg_path, duration_s=duration_s + 120.0, hold=True,
-                               extra=["--realtime", "60"]).start(timeout_s=120.0)
+                               extra=bridge_args).start(timeout_s=120.0)
         seen, done, th = _observer(cfg.can.bus, 0x200 + node, time.monotonic() + duration_s + 90)
         log = (run_dir / "daemon.log").open("w")
         daemon = subprocess.Popen(
@@ -145,6 +146,8 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
         "wait_for_cycle_ms": percentiles(np.asarray(wait) * s, 1e3),
         "cycle_to_bus_ms": percentiles(np.asarray(out) * s, 1e3),
         "can_interface": cfg.can.bus.interface,
+        "daemon_cpu_affinity": list(cfg.loop.cpu_affinity),
+        "sim_bridge_args": bridge_args,
     }
 
 

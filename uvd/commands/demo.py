@@ -224,7 +224,7 @@ def _fmt_table(hil: dict, lock: dict) -> str:
 def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path | None = None,
              seed: int = 0, progress=print) -> tuple[dict[str, Any], int]:
     """Run the demo; returns (figures, exit code). See the module docstring."""
-    from sim_bridge.bridge import BridgeProcess, read_truth, write_local_config
+    from sim_bridge.bridge import BridgeProcess, cpu_split, read_truth, write_local_config
     from uvd.runtime.config import load_config
 
     tmp = None
@@ -238,10 +238,10 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
     try:
         # Real-time priority as on the vehicle (config/jhu-rov.toml): on a shared machine a
         # normally scheduled loop is sometimes descheduled for tens of ms. The simulated
-        # devices run above the daemon (60 > 50): real ones are separate hardware, never
-        # late because the vehicle computer is busy. Refused without the privilege: both
-        # processes then say so and run with normal scheduling.
-        changes: dict[str, Any] = {"loop": {"sched_fifo_priority": 50}}
+        # devices run above the daemon and on another CPU (sim_bridge.bridge.cpu_split):
+        # real ones are separate hardware. Refused without the privilege: both processes
+        # then say so and run with normal scheduling.
+        bridge_args, changes = cpu_split()
         if record:
             changes["can"] = {"log": {"path": str(run_dir / "can.log")}}
         cfg_path = write_local_config(run_dir, base=base, changes=changes)
@@ -260,7 +260,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         truth_path = run_dir / "truth.bin"
         bound = duration_s + 90.0
         bridge = BridgeProcess(cfg_path, duration_s=bound, seed=seed, hold=True,
-                               truth_log=truth_path, extra=["--realtime", "60"])
+                               truth_log=truth_path, extra=bridge_args)
         bridge.start(timeout_s=120.0)
         prio = (bridge.ready or {}).get("realtime")
         rt = f"SCHED_FIFO {prio}" if prio else "normal scheduling"
