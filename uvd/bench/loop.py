@@ -29,7 +29,7 @@ from collections.abc import Callable
 import numpy as np
 
 from uvd.bench import Bench, percentiles
-from uvd.runtime.loop import FixedRateLoop, LoopSettings, apply_realtime
+from uvd.runtime.loop import CpuLatencyRequest, FixedRateLoop, LoopSettings, apply_realtime
 
 CycleFactory = Callable[[], Callable[[int, float], None]]
 
@@ -235,6 +235,10 @@ def _run(args) -> dict:
     rt = apply_realtime(args.sched_fifo, args.cpu)
     for m in rt.messages:
         print(f"uvd bench loop: {m}")
+    # with real-time priority, keep idle CPUs from halting (as the daemon does)
+    cpu_latency = CpuLatencyRequest(0).open() if args.sched_fifo else None
+    if cpu_latency is not None and cpu_latency.message:
+        print(f"uvd bench loop: {cpu_latency.message}")
     cycle = CYCLES[args.cycle]()
     load0 = os.getloadavg()
     ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup))
@@ -254,9 +258,12 @@ def _run(args) -> dict:
         "timer": ours["timer"],
         "histogram": ours["histogram"],
         "realtime": {"sched_fifo_priority": rt.sched_fifo_priority,
-                     "cpu_affinity": list(rt.cpu_affinity), "messages": list(rt.messages)},
+                     "cpu_affinity": list(rt.cpu_affinity), "messages": list(rt.messages),
+                     "cpu_dma_latency_held": bool(cpu_latency and cpu_latency.held)},
         "loadavg_1min_at_start": load0[0],
     }
+    if cpu_latency is not None:
+        cpu_latency.close()
     if ours["last_error"]:
         figures["last_error"] = ours["last_error"]
     if naive is not None:

@@ -51,6 +51,7 @@ from uvd.runtime.app import App
 from uvd.runtime.config import Config
 from uvd.runtime.failsafe import Action, Health, nav_health
 from uvd.runtime.lifecycle import State
+from uvd.runtime.loop import CpuLatencyRequest
 from uvd.runtime.mailbox import Mailbox
 from uvd.runtime.supervisor import Supervisor
 
@@ -762,9 +763,18 @@ class Daemon:
         port, the bus) is closed here, so that a daemon run inside a longer-lived process
         (tests, tools) leaves no port locked.
         """
+        cpu_latency = None
+        if self.config.loop.sched_fifo_priority > 0 and self.app.realtime:
+            # real-time loop: keep idle CPUs from halting (wake-up latency of a halted vCPU
+            # is hundreds of µs)
+            cpu_latency = CpuLatencyRequest(0).open()
+            if cpu_latency.message:
+                log.warning("%s", cpu_latency.message)
         try:
             return await self.app.run()
         finally:
+            if cpu_latency is not None:
+                cpu_latency.close()
             for s in self.sensors:
                 if s.reader.connected or s.reader._transport is not None:
                     s.force_close()
