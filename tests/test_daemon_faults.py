@@ -16,17 +16,19 @@ from __future__ import annotations
 
 import asyncio
 import math
+import os
 import time
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from sim_bridge.bridge import BridgeProcess, write_local_config
+from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.failsafe import Action
 from uvd.runtime.lifecycle import State
+from uvd.runtime.loop import drop_realtime
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -60,8 +62,14 @@ class ListSink:
 @pytest.fixture(scope="module")
 def bridge(tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("hil")
-    cfg_path = write_local_config(run_dir, changes={"telemetry": {"jsonl": {"enabled": False}}})
-    proc = BridgeProcess(cfg_path, duration_s=300.0, hold=True).start(timeout_s=90.0)
+    # as the demo runs them: the devices at SCHED_FIFO 60 on one CPU, the daemon's loop at 50
+    # on the other — the machine also runs other test suites, and a 200 ms stall of either
+    # side would trip the drives' command timeout in the middle of a test
+    bridge_args, changes = cpu_split()
+    changes["telemetry"] = {"jsonl": {"enabled": False}}
+    cfg_path = write_local_config(run_dir, changes=changes)
+    proc = BridgeProcess(cfg_path, duration_s=300.0, hold=True,
+                         extra=bridge_args).start(timeout_s=90.0)
     try:
         yield cfg_path, proc
     finally:
@@ -93,7 +101,7 @@ def run_scenario(cfg, scenario, *, daemon_cls=Daemon, tracking_s: float = 1.0,
     out = {}
 
     async def main():
-        d = daemon_cls(cfg, auto_arm=True, sinks=[sink], realtime=False)
+        d = daemon_cls(cfg, auto_arm=True, sinks=[sink])
         out["daemon"] = d
         task = asyncio.get_running_loop().create_task(d.run())
         try:
@@ -105,7 +113,12 @@ def run_scenario(cfg, scenario, *, daemon_cls=Daemon, tracking_s: float = 1.0,
             d.stop("test done")
             out["code"] = await asyncio.wait_for(task, 10.0)
 
-    asyncio.run(asyncio.wait_for(main(), timeout_s))
+    affinity = os.sched_getaffinity(0)
+    try:
+        asyncio.run(asyncio.wait_for(main(), timeout_s))
+    finally:  # the daemon made this thread real-time: back to normal for the next tests
+        drop_realtime()
+        os.sched_setaffinity(0, affinity)
     assert out["code"] == 0
     print("shutdown:", out["daemon"].app.shutdown_report.get("steps"),
           f"{out['daemon'].app.shutdown_report.get('duration_s', 0):.3f} s")

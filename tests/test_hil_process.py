@@ -21,7 +21,7 @@ import time
 import pytest
 
 from drivers.can.bus import open_bus
-from sim_bridge.bridge import BridgeProcess, write_local_config
+from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
 from uvd.runtime.config import load_config
 
 pytestmark = pytest.mark.timeout(150)
@@ -95,10 +95,12 @@ class BusObserver:
 
 
 def test_notify_and_sigterm_with_the_real_processes(tmp_path):
-    cfg_path = write_local_config(tmp_path)
+    bridge_args, changes = cpu_split()  # scheduled as in the demo
+    cfg_path = write_local_config(tmp_path, changes=changes)
     cfg = load_config(cfg_path)
     nodes = cfg.can.amplifiers.node_ids
-    bridge = BridgeProcess(cfg_path, duration_s=90.0, hold=True).start(timeout_s=90.0)
+    bridge = BridgeProcess(cfg_path, duration_s=90.0, hold=True,
+                           extra=bridge_args).start(timeout_s=90.0)
     notify = NotifyReceiver(str(tmp_path / "notify.sock"))
     observer = BusObserver(cfg.can.bus, nodes)
     env = dict(os.environ, NOTIFY_SOCKET=str(tmp_path / "notify.sock"),
