@@ -554,15 +554,16 @@ def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
     return path
 
 
-def cpu_split() -> tuple[list[str], dict]:
+def cpu_split(pin: bool = True) -> tuple[list[str], dict]:
     """Scheduling of a local HIL run: the daemon's loop at SCHED_FIFO 50, the emulated devices
     above it (60: separate hardware is never late because the vehicle computer is busy) and,
-    on a machine with two CPUs or more, each on its own CPU so that neither preempts the
-    other. Returns (sim-bridge arguments, configuration changes for the daemon)."""
+    with ``pin`` on a machine with two CPUs or more, each on its own CPU so that neither
+    preempts the other (tests that run several HIL set-ups at once do not pin). Returns
+    (sim-bridge arguments, configuration changes for the daemon)."""
     cpus = sorted(os.sched_getaffinity(0))
     bridge_args = ["--realtime", "60"]
     loop: dict[str, Any] = {"sched_fifo_priority": 50}
-    if len(cpus) >= 2:
+    if pin and len(cpus) >= 2:
         bridge_args += ["--cpu", str(cpus[0])]
         loop["cpu_affinity"] = [cpus[-1]]
     return bridge_args, {"loop": loop}

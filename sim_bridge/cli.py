@@ -69,19 +69,22 @@ def main(argv: list[str] | None = None) -> int:
             os.sched_setaffinity(0, set(args.cpu))
         except (OSError, ValueError) as exc:
             print(f"sim-bridge: CPU affinity {args.cpu} refused: {exc}", file=sys.stderr)
-    realtime = False
-    if args.realtime:
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.realtime))
-            realtime = args.realtime
-        except (OSError, AttributeError):
-            pass
     from sim_bridge.bridge import SimBridge
     try:
         bridge = SimBridge(cfg, seed=args.seed, hold=args.hold, truth_log=args.truth_log)
     except (UvdError, ValueError, OSError) as exc:
         emit({"event": "error", "error": str(exc)})
         return 2
+    import gc
+    gc.collect()  # the heavy start-up work is done at normal priority…
+    gc.freeze()
+    realtime = False
+    if args.realtime:  # …the threads started from here on inherit the priority
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.realtime))
+            realtime = args.realtime
+        except (OSError, AttributeError):
+            pass
 
     async def run() -> dict:
         loop = asyncio.get_running_loop()

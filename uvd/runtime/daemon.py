@@ -32,6 +32,7 @@ demo``, so simulation and daemon run the very same controller configuration.
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
 import math
 import time
@@ -351,7 +352,6 @@ class GcFreeze:
     name = "gc-freeze"
 
     async def start(self) -> None:
-        import gc
         gc.collect()
         gc.freeze()
 
@@ -525,6 +525,10 @@ class Daemon:
         self.commands_max_abs = 0.0
         self._first_write_ns = 0
         self.warm_up_s = self._warm_up()
+        # the long collection now, at normal priority; GcFreeze only walks what the drivers
+        # add when they start (the loop's thread may be real-time by then)
+        gc.collect()
+        gc.freeze()
 
     def _warm_up(self) -> float:
         """Run every numeric path of the cycle once on synthetic samples, off the clock.
