@@ -228,7 +228,10 @@ class TelemetryHub:
 
         async def finish(lane: _Lane) -> None:
             if await self._ensure_open(lane):
-                await self._drain(lane)
+                # a failed write ends one drain (the pump retries later); at close, go on until
+                # every record is written or counted as dropped — each drain takes >= 1 batch
+                while len(lane.queue):
+                    await self._drain(lane)
                 await lane.sink.flush()
                 await lane.sink.aclose()
 
