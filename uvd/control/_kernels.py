@@ -24,6 +24,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from uvd.model.integrate import _ad
 from uvd.model.lie import _A_inv_se3_blocks, _inv_H, _log_se3
 
 _jit = numba.njit(cache=True)
@@ -51,16 +52,9 @@ def _cross(a, b, out, o):
 
 @_jit
 def ad_mul(x, y):
-    """ad_x y = [ω_x × ν_y + ν_x × ω_y; ω_x × ω_y] (2.4)."""
+    """ad_x y = [ω_x × ν_y + ν_x × ω_y; ω_x × ω_y] (2.4) — the integrator's kernel, returned."""
     out = np.empty(6)
-    n1, n2, n3, w1, w2, w3 = x[0], x[1], x[2], x[3], x[4], x[5]
-    a1, a2, a3, b1, b2, b3 = y[0], y[1], y[2], y[3], y[4], y[5]
-    out[0] = w2 * a3 - w3 * a2 + n2 * b3 - n3 * b2
-    out[1] = w3 * a1 - w1 * a3 + n3 * b1 - n1 * b3
-    out[2] = w1 * a2 - w2 * a1 + n1 * b2 - n2 * b1
-    out[3] = w2 * b3 - w3 * b2
-    out[4] = w3 * b1 - w1 * b3
-    out[5] = w1 * b2 - w2 * b1
+    _ad(x, y, out)
     return out
 
 
