@@ -17,6 +17,7 @@ from drivers.can.bus import CanBus
 from drivers.can.config import AmplifierConfig, CanLogConfig
 from drivers.can.logging import CanRecorder
 from sim_bridge.amplifiers.harness import run_cycles, start_rig
+from sim_bridge.thrusters import ThrusterBank
 from uvd.errors import ConfigError
 from uvd.model.vehicle import load_vehicle
 
@@ -155,6 +156,32 @@ def test_can_logger_recording_replayed_by_can_player_moves_the_thrusters(tmp_pat
         rep_moves = moves(replayed, node)
         assert rep_moves.tolist() == rec_moves.tolist(), (node, rec_moves.tolist(),
                                                           rep_moves.tolist())
-    np.testing.assert_allclose(replayed["peak_omega_rad_s"], recorded["peak_omega_rad_s"],
-                               rtol=0.05)
+    # The propellers follow the targets through their lag (τ = 0.15 s), so their peak speed
+    # depends on *when* each target arrived: can.player's timing is not the recording's. Each
+    # run's measured peak is compared with the peak the thruster model predicts on that run's
+    # own SYNC timeline (emulator clock); the ticks' 5 ms quantisation is the only
+    # difference.
+    for stats in (recorded, replayed):
+        np.testing.assert_allclose(stats["peak_omega_rad_s"], predicted_peaks(stats, rig),
+                                   rtol=0.01)  # measured: within 0.15 %
     assert min(replayed["peak_omega_rad_s"]) > 50.0  # the propellers did spin up
+
+
+def predicted_peaks(stats: dict, rig) -> list[float]:
+    """Peak |ω| of each thruster driven by the applied targets held between their SYNC times
+    (the emulators' default torque scale: full thrust per 1000 ‰), in the emulators' 5 ms
+    ticks."""
+    nodes = [str(n) for n in rig.node_ids]
+    t = np.array(stats["history_t_ns"][nodes[0]], dtype=np.int64)
+    assert all(stats["history_t_ns"][n] == t.tolist() for n in nodes)  # one SYNC, every node
+    targets = np.array([stats["history"][n] for n in nodes], dtype=float).T  # (syncs, nodes)
+    bank = ThrusterBank(VEHICLE.thrusters)
+    tpp = bank.max_thrust / 1000.0
+    peak = np.zeros(len(nodes))
+    for k in range(len(t) - 1):
+        gap = (t[k + 1] - t[k]) / 1e9
+        n_sub = max(1, int(np.ceil(gap / 0.005)))
+        for _ in range(n_sub):
+            bank.step(targets[k] * tpp, min(gap / n_sub, 0.05))
+            np.maximum(peak, np.abs(bank.omega), out=peak)
+    return peak.tolist()

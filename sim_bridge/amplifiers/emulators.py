@@ -328,7 +328,11 @@ class CanEmulators:
 
     # -- reports --
     def stats(self, history: bool = False) -> dict:
-        """JSON-friendly state: every node, the bank, counters (``history``: applied targets)."""
+        """JSON-friendly state: every node, the bank, counters.
+
+        ``history``: each amplifier's applied targets, one per SYNC (``history``), and the
+        emulator-clock times (ns) they were applied at (``history_t_ns``).
+        """
         with self.lock:
             out = {
                 "t_ns": self.clock(),
@@ -351,6 +355,8 @@ class CanEmulators:
                 out["pressure"] = self.pressure.snapshot()
             if history:
                 out["history"] = {str(a.node_id): [v for _t, v in a.history] for a in self.amps}
+                out["history_t_ns"] = {str(a.node_id): [t for t, _v in a.history]
+                                       for a in self.amps}
         return out
 
     def call(self, op: str, **kw) -> dict:
