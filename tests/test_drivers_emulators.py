@@ -10,6 +10,7 @@ plus wire resolution), and an unplugged INS cable must be survived.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
 
@@ -100,6 +101,21 @@ def _readers(links, cfg: EmulatorConfig):
                                        name="depth", **kw)}
 
 
+@contextlib.asynccontextmanager
+async def _connected_readers(links, cfg: EmulatorConfig):
+    """The three readers, started and connected; closed on the way out."""
+    readers = _readers(links, cfg)
+    for r in readers.values():
+        r.start()
+    try:
+        for r in readers.values():
+            await r.wait_connected(3.0)
+        yield readers
+    finally:
+        for r in readers.values():
+            await r.close()
+
+
 def _check_against_truth(rows, emu, ins_rates=True):
     assert len(rows) > 40  # ≥ 0.4 s of 100 Hz navigation after every source arrived
     n_checked = 0
@@ -129,18 +145,8 @@ def test_emulated_instruments_to_navigation_within_noise(tmp_path, ins_protocol)
     emu = InstrumentEmulators(truth, links, Instruments(CFG, np.random.default_rng(7)), cfg)
 
     async def go():
-        async with emu:
-            readers = _readers(links, cfg)
-            for r in readers.values():
-                r.start()
-            try:
-                for r in readers.values():
-                    await r.wait_connected(3.0)
-                rows = await _run_nav(emu, readers, 2.0)
-            finally:
-                for r in readers.values():
-                    await r.close()
-            return rows, readers
+        async with emu, _connected_readers(links, cfg) as readers:
+            return await _run_nav(emu, readers, 2.0), readers
 
     rows, readers = asyncio.run(go())
     st, t_rel = _check_against_truth(rows, emu, ins_rates=ins_protocol == "stdbin")
@@ -166,29 +172,20 @@ def test_unplug_and_replug_of_the_ins_is_survived(tmp_path):
     cable_ns: dict[str, int] = {}
 
     async def go():
-        async with emu:
-            readers = _readers(links, cfg)
-            for r in readers.values():
-                r.start()
-            try:
-                for r in readers.values():
-                    await r.wait_connected(3.0)
+        async with emu, _connected_readers(links, cfg) as readers:
 
-                async def cable():
-                    await asyncio.sleep(0.6)
-                    cable_ns["unplug"] = time.monotonic_ns()
-                    emu.unplug("ins")
-                    await asyncio.sleep(0.5)
-                    emu.replug("ins")
-                    cable_ns["replug"] = time.monotonic_ns()
-                task = asyncio.create_task(cable())
-                rows = await _run_nav(
-                    emu, readers, 2.2,
-                    on_tick=lambda s: ticks.append((time.monotonic_ns(), s.ins_valid)))
-                await asyncio.wait_for(task, 1.0)
-            finally:
-                for r in readers.values():
-                    await r.close()
+            async def cable():
+                await asyncio.sleep(0.6)
+                cable_ns["unplug"] = time.monotonic_ns()
+                emu.unplug("ins")
+                await asyncio.sleep(0.5)
+                emu.replug("ins")
+                cable_ns["replug"] = time.monotonic_ns()
+            task = asyncio.create_task(cable())
+            rows = await _run_nav(
+                emu, readers, 2.2,
+                on_tick=lambda s: ticks.append((time.monotonic_ns(), s.ins_valid)))
+            await asyncio.wait_for(task, 1.0)
             return rows, readers
 
     rows, readers = asyncio.run(go())
