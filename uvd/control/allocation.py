@@ -10,10 +10,14 @@ and the thruster law both ways (App. A.1).
   ω* = sign(f)√(|f|/k) of the steady-state law f = k ω|ω| (App. A.1).
 * The inverse, which the thesis uses as the applied input: thrust estimated from measured
   propeller speed, f = k ω|ω|, and the wrench u = B f it produces.
+* Optional compensation of the propeller lag (:func:`lag_compensate`): with the measured
+  propeller speeds and each thruster's declared time constant τ, the command that brings every
+  propeller to its allocated thrust by the end of the control period.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -33,6 +37,8 @@ class Allocator:
     max_thrust_n : (N,) per-thruster thrust limit (N).
     k_thrust : (N,) f = k ω|ω| constants (N/(rad/s)²), for the amplifier command.
     weights : (N,) allocation weights (larger: used less).
+    time_constant_s : (N,) first-order time constant τ of each propeller's speed (s), as the
+        vehicle file declares it; used only by :func:`lag_compensate`.
     """
 
     B: np.ndarray
@@ -40,6 +46,7 @@ class Allocator:
     max_thrust_n: np.ndarray
     k_thrust: np.ndarray | None = None
     weights: np.ndarray | None = None
+    time_constant_s: np.ndarray | None = None
 
     @classmethod
     def from_vehicle(cls, vehicle, weights: np.ndarray | None = None) -> Allocator:
@@ -47,7 +54,9 @@ class Allocator:
         return cls(B=B, B_pinv=weighted_pinv(B, weights),
                    max_thrust_n=np.asarray(vehicle.max_thrust_n, dtype=float),
                    k_thrust=np.asarray(vehicle.k_thrust, dtype=float),
-                   weights=None if weights is None else np.asarray(weights, dtype=float))
+                   weights=None if weights is None else np.asarray(weights, dtype=float),
+                   time_constant_s=np.array([float(t.time_constant_s)
+                                             for t in vehicle.thrusters]))
 
     @property
     def n_thrusters(self) -> int:
@@ -124,3 +133,95 @@ def applied_wrench(alloc: Allocator, omega_rad_s: np.ndarray) -> np.ndarray:
     """The wrench u = B f with f estimated from measured propeller speed — the thesis's
     applied input (App. A.1, Fig. 5.2)."""
     return alloc.B @ thrust_from_measured_speed(alloc, omega_rad_s)
+
+
+# ---------------------------------------------------------------------------------------------
+# propeller-lag compensation
+# ---------------------------------------------------------------------------------------------
+@numba.njit(cache=True)
+def _lag_compensate(f_des, omega_meas, k, f_max, tau, dt, f_out):
+    """Kernel of :func:`lag_compensate`; writes f_out, returns the common fraction s ∈ [α, 1]
+    (1: full compensation), or -1.0 when an input is unusable (f_out untouched)."""
+    n = f_des.shape[0]
+    if not (dt > 0.0) or not np.isfinite(dt):
+        return -1.0
+    for j in range(n):
+        if (not np.isfinite(f_des[j]) or not np.isfinite(omega_meas[j])
+                or not (k[j] > 0.0) or not (f_max[j] > 0.0) or not (tau[j] >= 0.0)):
+            return -1.0
+    # per thruster: the measured speed (clamped to the speed limit), the increment of the
+    # compensated set-point over it, and the largest fraction of that increment within limits
+    s = 1.0
+    w0 = np.empty(n)
+    dw = np.empty(n)
+    for j in range(n):
+        w_max = math.sqrt(f_max[j] / k[j])
+        w0[j] = min(max(omega_meas[j], -w_max), w_max)
+        w_des = math.copysign(math.sqrt(abs(f_des[j]) / k[j]), f_des[j])
+        a = 1.0 if tau[j] == 0.0 else -math.expm1(-dt / tau[j])
+        if not (a > 0.0):  # τ so long that nothing moves in one period: do not compensate
+            return -1.0
+        dw[j] = (w_des - w0[j]) / a
+        lim = w_max - w0[j] if dw[j] > 0.0 else -w_max - w0[j]
+        if dw[j] != 0.0 and abs(dw[j]) > abs(lim):
+            s = min(s, lim / dw[j])
+    for j in range(n):
+        w = w0[j] + s * dw[j]
+        f_out[j] = min(max(k[j] * w * abs(w), -f_max[j]), f_max[j])
+    return s
+
+
+def lag_compensate(alloc: Allocator, f_des: np.ndarray, omega_meas_rad_s: np.ndarray | None,
+                   dt: float) -> tuple[np.ndarray, float]:
+    """Thrust commands that bring the propellers to ``f_des`` at the end of one control period.
+
+    The thrusters' first-order lag acts on propeller speed: with the command c held over the
+    period, the set-point is ω*(c) = sign(c)√(|c|/k) and the speed obeys τ ω̇ = ω* − ω, so
+    (exact discretisation over dt)
+
+        ω(t+dt) = ω_m + α (ω* − ω_m),   α = 1 − e^{−dt/τ},
+
+    from the measured speed ω_m at the start of the period; thrust is f = k ω|ω| (App. A.1).
+    Asking ω(t+dt) = ω_d = sign(f_des)√(|f_des|/k) gives the lead set-point
+
+        ω* = ω_m + (ω_d − ω_m)/α,   command c = k ω*|ω*|
+
+    (for τ = 0, α = 1 and c = f_des). In thrust terms this is the first-order compensation
+    f_cmd = f_m + (f_des − f_m)/α written in the speed the lag really acts on, so it is exact
+    for the f = k ω|ω| law rather than only to first order.
+
+    Saturation: |ω*| ≤ ω_max = √(f_max/k). When a set-point would exceed it, every thruster's
+    increment (ω* − ω_m) is scaled by one common fraction s so that all stay within limits —
+    each propeller then covers the same share s of the way to its target, as allocation's
+    direction-keeping scale does for the wrench. s ≥ α always: s = α is plain allocation
+    (ω* = ω_d, because f_des is itself within limits), so the compensated command never asks
+    less than the uncompensated one. Measured speeds beyond ±ω_max are clamped first.
+
+    Safety: when the speeds are missing, of the wrong shape or not finite, when f_des is not
+    finite, or the allocator lacks k or τ, the result is ``f_des`` unchanged with s = nan —
+    plain allocation, never an exception (the core's non-finite check still guards f_des).
+
+    Parameters
+    ----------
+    alloc : allocator with ``k_thrust``, ``max_thrust_n`` and ``time_constant_s``.
+    f_des : (N,) allocated thrust (N), within the limits.
+    omega_meas_rad_s : (N,) propeller speeds measured at the start of the period (rad/s).
+    dt : the control period over which the command is held (s).
+
+    Returns
+    -------
+    (f_cmd, s) : (N,) thrust command (N) and the common fraction s ∈ [α, 1] (nan: not
+    compensated).
+    """
+    f_des = np.asarray(f_des, dtype=float)
+    if (omega_meas_rad_s is None or alloc.k_thrust is None or alloc.time_constant_s is None):
+        return f_des, math.nan
+    w = np.asarray(omega_meas_rad_s, dtype=float)
+    if w.shape != f_des.shape or f_des.ndim != 1:
+        return f_des, math.nan
+    out = np.empty_like(f_des)
+    s = _lag_compensate(f_des, w, alloc.k_thrust, alloc.max_thrust_n, alloc.time_constant_s,
+                        float(dt), out)
+    if s < 0.0:
+        return f_des, math.nan
+    return out, s
