@@ -237,6 +237,28 @@ class SimBridge:
         self.emulators.ports = {name: FaultyPort(path, name, self.faults, self.rng)
                                 for name, path in self._links.items()}
         self.can = None
+        # the leak detector's digital input ([sensors.leak]): a file holding 0 or 1, as a
+        # GPIO's sysfs value file; dry until a "leak" command floods it
+        leak = config.sensors.leak
+        self.leak_path = Path(leak.path) if leak.enabled and leak.path else None
+        self.leak_wet = False
+        if self.leak_path is not None:
+            self.set_leak(False)
+
+    def set_leak(self, wet: bool) -> int:
+        """Put the emulated leak input at its active level (``wet``) or the other one,
+        replaced in one step (a reader never sees a half-written file). Returns the time
+        (monotonic ns) the new level became readable."""
+        if self.leak_path is None:
+            raise ValueError("no leak input configured ([sensors.leak] enabled = false)")
+        active = self.config.sensors.leak.active_level
+        level = active if wet else 1 - active
+        self.leak_path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.leak_path.with_name(self.leak_path.name + ".tmp")
+        tmp.write_text(f"{level}\n", encoding="ascii")
+        os.replace(tmp, self.leak_path)
+        self.leak_wet = bool(wet)
+        return self.clock()
 
     @staticmethod
     def _links_from(config) -> dict[str, Path]:
@@ -390,9 +412,14 @@ class SimBridge:
                 return {"ok": True, "t_ns": now}
             if op == "stats":
                 return {"ok": True, "t_ns": now, **self.stats(bool(kw.get("history")))}
+            if op == "leak":  # {"op": "leak", "wet": true} floods the leak input
+                return {"ok": True, "t_ns": self.set_leak(bool(kw.get("wet", True))),
+                        "wet": self.leak_wet}
             if op == "reset":
                 for name in self.faults.mode:
                     self.faults.set(name, "ok")
+                if self.leak_path is not None:
+                    self.set_leak(False)
                 ans = self.can.call("reset")
                 return {**ans, "t_ns": now}
             ans = self.can.call(op, **kw)
@@ -407,6 +434,7 @@ class SimBridge:
                  for n, p in self.emulators.ports.items()}
         return {"counters": dict(self.counters), "ports": ports,
                 "faults": dict(self.faults.mode), "held": self.held,
+                "leak_wet": self.leak_wet,
                 "released_at_ns": self.released_at_ns,
                 "can": self.can.stats(history) if self.can is not None else {}}
 
@@ -534,6 +562,8 @@ def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
     sensors = data.setdefault("sensors", {})
     for name in ("ins", "dvl", "depth"):
         sensors.setdefault(name, {})["port"] = str(run_dir / name)
+    if sensors.get("leak", {}).get("enabled"):
+        sensors["leak"]["path"] = str(run_dir / "leak")
     a, b = (int(x) for x in np.random.default_rng().integers(1, 0xFFFF, 2))
     can = data.setdefault("can", {})
     can.update(interface="udp_multicast", channel=f"ff11::7576:{a:x}:{b:x}",

@@ -79,12 +79,24 @@ def main(argv: list[str] | None = None) -> int:
     gc.collect()  # the heavy start-up work is done at normal priority…
     gc.freeze()
     realtime = False
+    thread_msgs: list[str] = []
     if args.realtime:  # …the threads started from here on inherit the priority
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.realtime))
             realtime = args.realtime
-        except (OSError, AttributeError):
-            pass
+        except (OSError, AttributeError) as exc:
+            print(f"sim-bridge: SCHED_FIFO {args.realtime} refused ({exc}): running with "
+                  "normal scheduling", file=sys.stderr)
+    if realtime:
+        # …and those started before (OpenBLAS workers of numpy and scipy, anything an import
+        # started) one below it, on the same CPUs: a normally scheduled thread holding the
+        # GIL while other load preempts it would hold up the plant and the emulators
+        from uvd.runtime.rtthreads import promote_threads
+        rep = promote_threads(max(1, realtime - 1), args.cpu,
+                              exclude={threading.get_native_id()})
+        thread_msgs = rep.messages
+        for m in thread_msgs:
+            print(f"sim-bridge: {m}", file=sys.stderr)
 
     async def run() -> dict:
         loop = asyncio.get_running_loop()
@@ -111,7 +123,10 @@ def main(argv: list[str] | None = None) -> int:
             loop.call_soon_threadsafe(stop.set)  # stdin closed: the parent is gone or done
 
         def ready(info: dict) -> None:
+            from uvd.runtime.rtthreads import thread_table
             info["realtime"] = realtime
+            info["threads"] = [t.as_dict() for t in thread_table()]
+            info["thread_messages"] = thread_msgs
             emit(info)
             if args.control:
                 threading.Thread(target=control, name="control", daemon=True).start()

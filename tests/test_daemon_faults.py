@@ -404,6 +404,80 @@ def test_bus_off_disarms_at_the_next_cycle_and_latches(hil):
     commands_were_safe(d, cycles, proc)
 
 
+def test_leak_disarms_within_a_poll_and_a_cycle_and_latches_until_dry_and_reset(hil):
+    cfg, proc = hil
+    lk = cfg.sensors.leak
+    assert lk.enabled  # config/sim.toml fits the leak input; sim-bridge writes its file
+    threshold = lk.poll_interval_s * lk.confirm_samples
+    info = {}
+
+    async def scenario(d):
+        info["t_inj"] = (await call(proc, "leak", wet=True))["t_ns"]
+        await _until(lambda: events(d, "fired", "leak"), threshold + 2.0, "leak")
+        await wait_state(d, State.STANDBY, 1.0, "disarmed")
+        info["refused_wet"] = d.supervisor.reset_failsafe(time.monotonic_ns(), ["leak"])
+        await call(proc, "leak", wet=False)
+        await asyncio.sleep(threshold + 2 * PERIOD + 0.3)  # dry again: still latched
+        info["active_dry"] = {a.name for a in d.supervisor.decision.active}
+        info["refused_dry"] = d.supervisor.reset_failsafe(time.monotonic_ns(), ["leak"])
+        await asyncio.sleep(2 * PERIOD)
+        info["active_after_reset"] = {a.name for a in d.supervisor.decision.active}
+        info["state_after_reset"] = d.supervisor.state
+        info["leak_stats"] = d.leak.stats()
+
+    d, cycles = run_scenario(cfg, scenario)
+    ev = fired(d, "leak")
+    assert ev["action"] == "disarm" and ev["reason"] == "leak detected"
+    delay = (ev["t_ns"] - info["t_inj"]) * 1e-9
+    # the poller reads the file within one poll interval (× confirm_samples), the cycle
+    # after that sees it; 20 ms for the poller's own wake-up and read
+    assert 0 < delay <= threshold + PERIOD + 0.02, delay
+    cur, prev = cycle_at(cycles, ev["t_ns"])
+    hist = [e for e in d.supervisor.failsafe_events() if e["type"] == "lifecycle"]
+    assert [e["to"] for e in hist if e["t_ns"] == ev["t_ns"]] == ["FAILSAFE", "STANDBY"]
+    assert all(r["thrust"] == [0.0] * 6 for r in cycles if r["t_ns"] >= ev["t_ns"])
+    assert prev["state"] == "ARMED" and cur["state"] == "STANDBY"
+    # latched: an operator reset is refused while wet, still active once dry, cleared by a
+    # reset once dry; the vehicle stays disarmed (re-arming is the operator's call)
+    assert info["refused_wet"] and info["refused_wet"][0][0] == "leak"
+    assert "leak" in info["active_dry"]
+    assert info["refused_dry"] == ()
+    assert "leak" not in info["active_after_reset"]
+    assert info["state_after_reset"] is State.STANDBY
+    assert not events(d, "fired", "leak_sensor_fault")
+    assert info["leak_stats"]["errors"] == 0 and info["leak_stats"]["active_reads"] >= 1
+    print(f"leak: fired {delay * 1e3:.0f} ms after the input was flooded (threshold "
+          f"{threshold * 1e3:.0f} ms + cycle {PERIOD * 1e3:.0f} ms)")
+    commands_were_safe(d, cycles, proc)
+
+
+def test_an_unreadable_leak_input_warns_and_clears(hil):
+    cfg, proc = hil
+    lk = cfg.sensors.leak
+    path = lk.path
+    info = {}
+
+    async def scenario(d):
+        os.replace(path, path + ".away")  # the GPIO file vanishes (unexported line)
+        try:
+            await _until(lambda: events(d, "fired", "leak_sensor_fault"),
+                         lk.poll_interval_s + 1.0, "leak_sensor_fault")
+            info["state"] = d.supervisor.state
+        finally:
+            os.replace(path + ".away", path)
+        await _until(lambda: events(d, "cleared", "leak_sensor_fault"),
+                     cfg.failsafe.clear_after_s + 2.0, "clearing")
+        await asyncio.sleep(0.3)
+        info["state_after"] = d.supervisor.state
+
+    d, cycles = run_scenario(cfg, scenario)
+    ev = fired(d, "leak_sensor_fault")
+    assert ev["action"] == "warn" and path in ev["reason"]
+    assert info["state"] is State.ARMED and info["state_after"] is State.ARMED  # a warning
+    assert not events(d, "fired", "leak")
+    commands_were_safe(d, cycles, proc)
+
+
 # ----------------------------------------------------------------------------- the loop, clocks
 
 class StallingDaemon(Daemon):

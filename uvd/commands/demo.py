@@ -300,6 +300,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
                  f"{duration_s:g} s")
 
         samples: list[tuple[float, float, float]] = []
+        loads: list[float] = []  # 1-minute load average, once a second
         next_report = 10.0
         while True:
             el = time.monotonic() - armed_at
@@ -309,6 +310,8 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
             rd, _ = _rss_mb(daemon.pid)
             rb, _ = _rss_mb(bridge.pid)
             samples.append((time.monotonic() - armed_at, rd, rb))
+            with contextlib.suppress(OSError, ValueError):
+                loads.append(float(Path("/proc/loadavg").read_text().split()[0]))
             if daemon.poll() is not None:
                 progress("uvd demo: the daemon exited during the run:\n" + tail.tail())
                 break
@@ -364,6 +367,14 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
                        "warm_up_and_start_s": armed_at - t_start},
             "sim_bridge": {"counters": bridge_stats.get("counters"),
                            "ports": bridge_stats.get("ports")},
+            # scheduling of every thread of both processes (uvd.runtime.rtthreads)
+            "realtime": {"daemon": summary.get("realtime"),
+                         "sim_bridge": {"sched_fifo_priority": prio,
+                                        "threads": (bridge.ready or {}).get("threads"),
+                                        "messages": (bridge.ready or {}).get(
+                                            "thread_messages")}},
+            "load_average_1min": {"min": min(loads), "max": max(loads),
+                                  "mean": sum(loads) / len(loads)} if loads else None,
         }
         if hil.get("samples"):
             # the same span of tracking: a run cut short by a failsafe disarm compares with
@@ -412,6 +423,15 @@ def _report(f: dict, progress) -> None:
         progress(f"Loop {lp['rate_hz']:g} Hz: {lp['cycles']} cycles, {lp['overruns']} overruns; "
                  f"lateness µs p50 {lat['p50']:.1f} p99 {lat['p99']:.1f} max {lat['max']:.1f}; "
                  f"compute µs p50 {comp['p50']:.0f} p99 {comp['p99']:.0f} (core + CAN sends)")
+    rt = f.get("realtime") or {}
+    for who, threads in (("daemon", (((rt.get("daemon") or {}).get("threads") or {}).get(
+            "booted"))), ("sim-bridge", (rt.get("sim_bridge") or {}).get("threads"))):
+        if threads:
+            pols = sorted({f"{t['policy']} {t['priority']}" for t in threads})
+            progress(f"Threads of the {who}: {len(threads)} ({', '.join(pols)})")
+    la = f.get("load_average_1min")
+    if la:
+        progress(f"Load average (1 min) during the run: {la['min']:.2f}–{la['max']:.2f}")
     fs = f["failsafe_events"]
     progress(f"Failsafe events: {len(fs)}" + "".join(
         f"\n  {e['kind']}: {e['trigger']} → {e['action']} ({e['reason']})" for e in fs))

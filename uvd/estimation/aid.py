@@ -318,11 +318,12 @@ def _finite(x):
 
 
 @numba.njit(cache=True)
-def _drive(n_v, theta, prev, H, v_in, u_in, cfg, theta_out, out):
+def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, theta_out, out):
     """Everything numeric of one AID step (n_v = 6: Theorem 4.3.1, 3: Theorem 4.2.1).
 
-    Arguments are packed to keep the call cheap: ``prev`` = [v̂, v_prev, r_prev, u_prev],
-    ``cfg`` = [dt, a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint, adapt], ``out`` receives
+    ``vhat, v_prev, r_prev, u_prev``: the previous step's v̂ and sample (zeros at t₀ or after a
+    gap, where dt = 0), ``cfg`` = [dt, a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint, adapt]
+    (:func:`_cfg_template` with dt and adapt filled in), ``out`` receives
     [v̂⁺, v, r, u, ∆v, λ_min, λ_max] (v, r = Rᵀe₃, u: the new sample). With dt = 0 only the
     sample is copied (t₀ or a gap: v̂ = v). Returns 0 adapted, 4 propagated only (frozen),
     2 non-finite input (nothing done), 1 M̂ not positive definite, 3 update rejected: M̂⁺ lost
@@ -330,10 +331,6 @@ def _drive(n_v, theta, prev, H, v_in, u_in, cfg, theta_out, out):
     else reset to v).
     """
     n = n_v
-    vhat = prev[0:n]
-    v_prev = prev[n:2 * n]
-    r_prev = prev[2 * n:2 * n + 3]
-    u_prev = prev[2 * n + 3:3 * n + 3]
     vhat_out = out[0:n]
     v_out = out[n:2 * n]
     r_out = out[2 * n:2 * n + 3]
@@ -388,6 +385,24 @@ def _drive(n_v, theta, prev, H, v_in, u_in, cfg, theta_out, out):
     return 0 if adapt else 4
 
 
+def _cfg_template(params, n_v: int) -> np.ndarray:
+    """[dt, a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint, adapt] with dt = adapt = 0: the
+    constant part of :func:`_drive`'s ``cfg``, built once per parameter set."""
+    gn = params.gains
+    cfg = np.array([0.0, gn.a, gn.gamma1, gn.gamma2, gn.gamma3,
+                    gn.gamma4 if n_v == 6 else 0.0, params.pd_floor,
+                    params.input_interp == "linear", params.sampling == "midpoint", 0.0],
+                   dtype=float)
+    cfg.setflags(write=False)
+    return cfg
+
+
+# inputs of the gap step (dt = 0: only the sample is copied); never written by the kernel, and
+# writable like the arrays of the normal step so both share one compiled specialisation
+_ZEROS = {6: np.zeros(6), 3: np.zeros(3)}
+_GAP_CFG = np.zeros(10)
+
+
 def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
     """The Python side of :func:`aid6_step`/:func:`aid3_step` (state bookkeeping only)."""
     n = n_v
@@ -395,16 +410,15 @@ def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
     theta_out = np.empty(st.theta.shape[0])
     gap = st.v_prev is None or not (0.0 < dt <= params.max_dt)  # t₀ (v̂ = v) or a gap
     if gap:
-        prev = np.zeros(3 * n + 3)
-        cfg = np.zeros(10)
+        z = _ZEROS[n]
+        status = _drive(n, st.theta, z, z, _ZEROS[3], z, vs.H, vs.v, u_applied, _GAP_CFG,
+                        theta_out, out)
     else:
-        prev = np.concatenate((st.v_hat, st.v_prev, st.r_prev, st.u_prev))
-        gn = params.gains
-        cfg = np.array([dt, gn.a, gn.gamma1, gn.gamma2, gn.gamma3,
-                        gn.gamma4 if n == 6 else 0.0, params.pd_floor,
-                        params.input_interp == "linear", params.sampling == "midpoint",
-                        not st.frozen], dtype=float)
-    status = _drive(n, st.theta, prev, vs.H, vs.v, u_applied, cfg, theta_out, out)
+        cfg = params._cfg.copy()
+        cfg[0] = dt
+        cfg[9] = 0.0 if st.frozen else 1.0
+        status = _drive(n, st.theta, st.v_hat, st.v_prev, st.r_prev, st.u_prev, vs.H, vs.v,
+                        u_applied, cfg, theta_out, out)
     if status == 2:
         return replace(st, skipped=st.skipped + 1)
     vhat_out, v_out, r_out = out[0:n], out[n:2 * n], out[2 * n:2 * n + 3]
@@ -487,6 +501,7 @@ class AID6Params:
             raise ValueError(f"pd_floor must be in [0, 1), got {self.pd_floor!r}")
         if not self.max_dt > 0.0:
             raise ValueError(f"max_dt must be > 0, got {self.max_dt!r}")
+        object.__setattr__(self, "_cfg", _cfg_template(self, 6))
 
 
 @dataclass(frozen=True)
@@ -623,6 +638,7 @@ class AID3Params:
             raise ValueError(f"pd_floor must be in [0, 1), got {self.pd_floor!r}")
         if not self.max_dt > 0.0:
             raise ValueError(f"max_dt must be > 0, got {self.max_dt!r}")
+        object.__setattr__(self, "_cfg", _cfg_template(self, 3))
 
 
 @dataclass(frozen=True)

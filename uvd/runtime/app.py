@@ -49,9 +49,11 @@ import contextlib
 import inspect
 import logging
 import logging.handlers
+import os
 import queue
 import signal
 import sys
+import threading
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -63,8 +65,15 @@ from uvd.runtime.clock import Clock
 from uvd.runtime.config import Config, ConfigValidationError, load_config
 from uvd.runtime.failsafe import Decision, FailsafeEvent, Health
 from uvd.runtime.lifecycle import Transition
-from uvd.runtime.loop import FixedRateLoop, RealtimeReport, apply_realtime, drop_realtime
+from uvd.runtime.loop import FixedRateLoop, RealtimeReport, apply_realtime
 from uvd.runtime.notify import SdNotifier, WatchdogPinger
+from uvd.runtime.rtthreads import (
+    ThreadPolicyReport,
+    helper_initializer,
+    promote_threads,
+    restore_threads,
+    thread_table,
+)
 from uvd.runtime.schema import reloadable_changes
 from uvd.runtime.supervisor import Supervisor
 from uvd.telemetry._worker import run_in_daemon_thread
@@ -179,6 +188,10 @@ class App:
             self.loop.after_cycle.append(self.watchdog)
         self.realtime = realtime
         self.realtime_report: RealtimeReport | None = None
+        self.thread_policy: ThreadPolicyReport | None = None
+        self.thread_tables: dict[str, list[dict[str, Any]]] = {}
+        self._helper_prio = 0
+        self._loop_tid: int | None = None
         self.shutdown_steps: list[ShutdownStep] = []
         self.reload_hooks: list[Callable[[Config, list[str]], None]] = []
         self.cycle_error_hooks: list[Callable[[BaseException, int], None]] = []
@@ -329,8 +342,10 @@ class App:
             self._stop.set()
         old_switch = sys.getswitchinterval()
         sys.setswitchinterval(self.config.daemon.gil_switch_interval_us * 1e-6)
+        # workers start later, from the loop's thread: each puts itself at the helpers'
+        # priority (normal scheduling when real time is not in force)
         executor = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uvd-worker",
-                                      initializer=drop_realtime)
+                                      initializer=helper_initializer(lambda: self._helper_prio))
         aloop.set_default_executor(executor)
         installed = self._install_signals(aloop)
         if self.realtime:
@@ -338,6 +353,7 @@ class App:
                                                   self.config.loop.cpu_affinity)
             for m in self.realtime_report.messages:
                 log.warning("%s", m)
+            self._promote_helpers("start")
         try:
             async with asyncio.TaskGroup() as tg:
                 self._tg = tg
@@ -353,7 +369,44 @@ class App:
             sys.setswitchinterval(old_switch)
             executor.shutdown(wait=False, cancel_futures=True)
             self.loop.close()
+            if self.thread_policy is not None:  # a run inside a longer-lived process (tests)
+                restore_threads(self.thread_policy)
+            self._helper_prio = 0
         return self.exit_code
+
+    def helper_priority(self) -> int:
+        """SCHED_FIFO priority for the daemon's other threads (0: leave them alone)."""
+        rep = self.realtime_report
+        loop_prio = rep.sched_fifo_priority if rep is not None else 0
+        if loop_prio <= 0:
+            return 0
+        want = self.config.daemon.helper_thread_priority
+        if want is None:
+            want = max(1, loop_prio - 1)
+        return min(int(want), loop_prio)
+
+    def _promote_helpers(self, when: str) -> None:
+        """Every thread but the loop's to SCHED_FIFO at :meth:`helper_priority`, on the
+        loop's CPUs (see :mod:`uvd.runtime.rtthreads`); tables before/after are kept."""
+        if self._loop_tid is None:
+            self._loop_tid = threading.get_native_id()
+            self.thread_tables["before"] = [t.as_dict() for t in thread_table()]
+        prio = self.helper_priority()
+        self._helper_prio = prio
+        if prio <= 0:
+            self.thread_tables[when] = [t.as_dict() for t in thread_table()]
+            return
+        first = self.thread_policy is None
+        self.thread_policy = promote_threads(
+            prio, self.realtime_report.cpu_affinity if self.realtime_report else (),
+            exclude={self._loop_tid}, report=self.thread_policy)
+        table = [t.as_dict() for t in thread_table()]
+        self.thread_tables[when] = table
+        for m in self.thread_policy.messages[:1] if first else ():
+            log.warning("%s", m)
+        fifo = sum(t["policy"] == "SCHED_FIFO" for t in table)
+        log.info("threads (%s): %d of %d at SCHED_FIFO (loop %d, helpers %d)", when, fifo,
+                 len(table), self.realtime_report.sched_fifo_priority, prio)
 
     async def _main(self, tg: asyncio.TaskGroup) -> None:
         cfg = self.config.daemon
@@ -371,6 +424,8 @@ class App:
             await self._shutdown(None, started)
             return
         t = time.monotonic_ns()
+        if self.realtime:  # threads the drivers started (python-can, canopen, pyserial)
+            self._promote_helpers("booted")
         self.supervisor.boot_complete(t, "components up: " +
                                       (", ".join(c.name for c in started) or "none"))
         self.notifier.ready(self.supervisor.status_text())
@@ -378,10 +433,28 @@ class App:
         tasks.append(tg.create_task(self._guard("telemetry", self.hub.run()), name="telemetry"))
         loop_task = tg.create_task(self._guard("control loop", self._run_loop()),
                                    name="control-loop")
+        if self._helper_prio > 0:
+            tasks.append(tg.create_task(self._guard("thread policy", self._watch_threads()),
+                                        name="thread-policy"))
         await self._stop.wait()
         await self._shutdown(loop_task, started)
         for task in tasks:
             task.cancel()
+
+    async def _watch_threads(self, period_s: float = 2.0) -> None:
+        """Threads started later (the telemetry sinks' writers, a reconnecting driver)
+        inherit their creator's priority — the loop's own when created from its thread: put
+        each new one at the helpers' priority too (a directory listing every ``period_s``)."""
+        known = set(os.listdir("/proc/self/task"))
+        while True:
+            await asyncio.sleep(period_s)
+            try:
+                now = set(os.listdir("/proc/self/task"))
+            except OSError:
+                return
+            if now - known:
+                self._promote_helpers("running")
+            known = now
 
     async def _run_loop(self) -> None:
         await self.loop.run()
@@ -468,5 +541,10 @@ class App:
             "realtime": None if self.realtime_report is None else {
                 "sched_fifo_priority": self.realtime_report.sched_fifo_priority,
                 "cpu_affinity": list(self.realtime_report.cpu_affinity),
-                "messages": list(self.realtime_report.messages)},
+                "messages": list(self.realtime_report.messages),
+                "helper_thread_priority": self.thread_policy.helper_priority
+                if self.thread_policy is not None else 0,
+                "helper_messages": list(self.thread_policy.messages)
+                if self.thread_policy is not None else [],
+                "threads": self.thread_tables},
         }

@@ -21,7 +21,8 @@ Sections and where their dataclass lives:
 ``[navigation]``     :class:`NavigationSection` — the dead-reckoning start fix
 ``[estimation]``     :class:`EstimationSection` — online identification (AID)
 ``[sensors.*]``      :class:`InsSection`, :class:`DvlSection`, :class:`DepthSection`; the depth
-                     conversion is the driver's own :class:`drivers.digiquartz.DepthConverter`
+                     conversion is the driver's own :class:`drivers.digiquartz.DepthConverter`;
+                     ``[sensors.leak]`` is :class:`uvd.runtime.leak.LeakSection`
 ``[can]``            the CAN driver's :class:`drivers.can.config.CanConfig` (validated by its own
                      ``from_mapping``; ``[can]`` bus keys, ``[can.amplifiers]``, ``[can.depth]``,
                      ``[can.log]``)
@@ -58,6 +59,7 @@ from drivers.digiquartz import DepthConverter
 from uvd.errors import ConfigError
 from uvd.runtime import schema
 from uvd.runtime.failsafe import Thresholds
+from uvd.runtime.leak import LeakSection
 from uvd.runtime.loop import LoopSettings
 from uvd.runtime.schema import section, setting
 
@@ -232,6 +234,7 @@ class SensorsSection:
     ins: InsSection = section(InsSection)
     dvl: DvlSection = section(DvlSection)
     depth: DepthSection = section(DepthSection)
+    leak: LeakSection = section(LeakSection)
 
 
 @dataclass(frozen=True)
@@ -278,6 +281,12 @@ class DaemonSection:
         500.0, unit="µs", min=50.0, max=5000.0,
         doc="sys.setswitchinterval: how long another Python thread may hold the GIL while "
             "the loop waits for it")
+    helper_thread_priority: int | None = setting(
+        None, min=0, max=99,
+        doc="SCHED_FIFO priority of every other thread of the daemon (logging, telemetry, CAN "
+            "receive, workers) when [loop] sched_fifo_priority is set: a normally scheduled "
+            "thread holding the GIL would make the loop wait while other load preempts it; "
+            "absent = the loop's priority − 1, 0 = leave them at normal scheduling")
 
 
 @dataclass(frozen=True)
@@ -305,6 +314,12 @@ class Config:
         if VALID_INTERFACES and self.can.bus.interface not in VALID_INTERFACES:
             out.append(("can.interface", f"{self.can.bus.interface!r} is not a python-can "
                                          f"interface ({', '.join(sorted(VALID_INTERFACES))})"))
+        helper = self.daemon.helper_thread_priority
+        if helper is not None and helper > self.loop.sched_fifo_priority:
+            out.append(("daemon.helper_thread_priority",
+                         f"{helper} is above [loop] sched_fifo_priority "
+                         f"{self.loop.sched_fifo_priority} (helper threads must not preempt "
+                         "the loop)"))
         if self.sensors.depth.source == "can" and not self.can.depth.enabled:
             out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
         try:

@@ -51,6 +51,7 @@ from uvd.estimation.navigation import NavConfig
 from uvd.runtime.app import App
 from uvd.runtime.config import Config
 from uvd.runtime.failsafe import Action, Health, nav_health
+from uvd.runtime.leak import LeakInput, leak_sensor_fault_trigger
 from uvd.runtime.lifecycle import State
 from uvd.runtime.loop import CpuLatencyRequest
 from uvd.runtime.mailbox import Mailbox
@@ -386,8 +387,9 @@ class CanComponent:
 
     def _open_bus(self) -> None:
         """Open the bus from the event loop's thread: its receive thread inherits that
-        thread's scheduling (SCHED_FIFO when configured). A normally scheduled thread that
-        holds the GIL while other processes preempt it would delay the loop by
+        thread's scheduling (SCHED_FIFO when configured; the App then puts it one below the
+        loop, with every other thread, :mod:`uvd.runtime.rtthreads`). A normally scheduled
+        thread that holds the GIL while other processes preempt it would delay the loop by
         milliseconds (priority inversion through the GIL)."""
         from drivers.can import CanBus, CanRecorder
         c = self.cfg.can
@@ -505,8 +507,13 @@ class Daemon:
         self.depth_box: Mailbox = Mailbox("depth")
         self.sensors = make_sensors(config, self.ins_box, self.dvl_box, self.depth_box)
         self.can = CanComponent(config, self.vehicle, self.depth_box)
-        self.supervisor = Supervisor(config.failsafe)
-        self.app = App(config, self.cycle, components=[*self.sensors, self.can, GcFreeze()],
+        self.leak = LeakInput(config.sensors.leak) if config.sensors.leak.enabled else None
+        self.supervisor = Supervisor(
+            config.failsafe,
+            extra_triggers=[leak_sensor_fault_trigger()] if self.leak is not None else ())
+        self.app = App(config, self.cycle,
+                       components=[*self.sensors, *([self.leak] if self.leak else []),
+                                   self.can, GcFreeze()],
                        sinks=sinks,
                        supervisor=self.supervisor, notifier=notifier, clock=clock,
                        realtime=realtime)
@@ -634,6 +641,10 @@ class Daemon:
             oldest = max(min(n.t_ns for n in fb.nodes), self._first_write_ns)
             fb_age = (t_ns - oldest) * 1e-9 if oldest > 0 else 0.0
         loop = self.app.loop
+        leak = leak_extra = None
+        if self.leak is not None:
+            leak, fault = self.leak.health(t_ns)
+            leak_extra = {"leak_sensor_fault": fault}
         h = Health(t_ns=t_ns, **nav_health(nav),
                    nonfinite_inputs=_nonfinite_inputs(ins, dvl, depth),
                    nonfinite_outputs=("command",) if out.status == "non-finite" else (),
@@ -641,7 +652,8 @@ class Daemon:
                    theta_hat=theta, amplifiers_enabled=enabled,
                    amplifier_faults=tuple(faults), feedback_age_s=fb_age, bus_off=bus_off,
                    overrun_streak=loop.overrun_streak,
-                   overrun_streak_exceeded=loop.streak_exceeded)
+                   overrun_streak_exceeded=loop.streak_exceeded, leak=leak,
+                   extra=leak_extra)
         d = sup.step(h)
 
         # -- the decision --
@@ -796,6 +808,8 @@ class Daemon:
         out["daemon"]["armed_at_ns"] = self.armed_at_ns
         out["daemon"]["arm_refusal"] = self.arm_refusal
         out["sensors"] = {s.name: s.stats() for s in self.sensors}
+        if self.leak is not None:
+            out["sensors"]["leak"] = self.leak.stats()
         if self.can.group is not None:
             out["can"] = self.can.group.stats()
             out["can"]["start"] = None if self.can.start_report is None else \
