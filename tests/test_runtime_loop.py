@@ -299,3 +299,54 @@ def test_fine_margin_defaults_scale_with_the_period():
     loop = FixedRateLoop(lambda t, dt: None, LoopSettings(rate_hz=1000.0, timer="asyncio"),
                          clock=FakeClock())
     assert loop.margin_ns == loop.period_ns == 1_000_000
+
+
+class _Node:
+    """A self-referencing object: only the cyclic collector frees it."""
+
+    def __init__(self) -> None:
+        self.me = self
+
+
+def _gc_run(compute_ns: int, cycles: int, policy: str):
+    import gc
+    import weakref
+    clock = FakeClock(start_ns=0)
+    refs: list = []
+    enabled_inside: list[bool] = []
+
+    def cycle(t, dt):
+        enabled_inside.append(gc.isenabled())
+        for _ in range(100):
+            refs.append(weakref.ref(_Node()))
+        clock.advance(compute_ns)
+
+    was = gc.isenabled()
+    loop = FixedRateLoop(cycle, LoopSettings(rate_hz=1000.0, gc=policy), clock=clock)
+    snap = run(loop.run(max_cycles=cycles))
+    assert gc.isenabled() == was  # restored on exit
+    live = sum(r() is not None for r in refs)
+    return snap, enabled_inside, live, len(refs)
+
+
+def test_gc_slack_policy_collects_only_between_cycles_with_slack():
+    # 0.3 ms of compute at 1 kHz leaves 0.5 ms before the coarse wait ends: room to collect
+    snap, enabled_inside, live, made = _gc_run(300_000, 200, "slack")
+    assert not any(enabled_inside)  # never CPython's automatic collection inside a cycle
+    assert snap["gc"]["collections"][0] > 0 and snap["gc"]["forced"] == 0
+    assert live < 0.1 * made  # the cyclic garbage was collected (memory stays bounded)
+
+
+def test_gc_slack_policy_forces_a_collection_when_no_cycle_leaves_slack():
+    # 0.95 ms of compute at 1 kHz: no slack ever; the collection is forced, memory bounded
+    snap, enabled_inside, live, made = _gc_run(950_000, 400, "slack")
+    assert snap["gc"]["forced"] > 0
+    assert live < 0.5 * made
+
+
+def test_gc_python_policy_leaves_the_automatic_collector_on():
+    import gc
+    if not gc.isenabled():
+        pytest.skip("the collector is disabled in this process")
+    snap, enabled_inside, _live, _made = _gc_run(300_000, 20, "python")
+    assert all(enabled_inside) and snap["gc"]["collections"] == [0, 0, 0]

@@ -166,6 +166,9 @@ def _add(p) -> None:
                    help="pin to this CPU (repeatable)")
     p.add_argument("--warmup", type=float, default=0.5,
                    help="seconds run before measuring (default 0.5)")
+    p.add_argument("--gc", choices=("slack", "python"), default="slack",
+                   help="garbage collection while our loop runs (LoopSettings.gc; default "
+                        "slack: start-up heap frozen, collections only in slack time)")
     p.add_argument("--no-naive", action="store_true", help="skip the naive asyncio loop")
 
 
@@ -194,6 +197,7 @@ async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float) -
         "last_error": snap["last_error"],
         "achieved_rate_hz": (snap["cycles"] + snap["skipped"]) / wall if wall > 0 else 0.0,
         "timer": snap["timer"],
+        "gc": snap["gc"],
         "histogram": {"lateness_us": snap["lateness_us"], "compute_us": snap["compute_us"]},
     }
 
@@ -231,7 +235,7 @@ def _fmt(d: dict) -> str:
 
 def _run(args) -> dict:
     settings = LoopSettings(rate_hz=args.rate, timer=args.timer, fine=args.fine,
-                            fine_margin_us=args.margin_us)
+                            fine_margin_us=args.margin_us, gc=args.gc)
     rt = apply_realtime(args.sched_fifo, args.cpu)
     for m in rt.messages:
         print(f"uvd bench loop: {m}")
@@ -256,6 +260,7 @@ def _run(args) -> dict:
         "achieved_rate_hz": ours["achieved_rate_hz"],
         "max_overrun_streak": ours["max_overrun_streak"],
         "timer": ours["timer"],
+        "gc": ours["gc"],
         "histogram": ours["histogram"],
         "realtime": {"sched_fifo_priority": rt.sched_fifo_priority,
                      "cpu_affinity": list(rt.cpu_affinity), "messages": list(rt.messages),
@@ -276,6 +281,9 @@ def _run(args) -> dict:
         print(f"  lateness µs  naive : {_fmt(naive['lateness_us'])}   achieved "
               f"{naive['achieved_rate_hz']:.1f} Hz")
     print(f"  compute  µs  ours  : {_fmt(ours['compute_us'])}")
+    g = ours["gc"]
+    print(f"  gc ({g['policy']}): collections {g['collections']}  forced {g['forced']}  "
+          f"max µs {[round(x, 1) for x in g['max_us']]}")
     return figures
 
 
