@@ -301,6 +301,9 @@ class Pd0Codec:
             first, = _U16.unpack_from(buf, start + 6)
             if first != hdr_len:
                 raise FrameError(f"pd0: first data type at offset {first}, expected {hdr_len}")
+        if avail >= hdr_len + 2 and _U16.unpack_from(buf, start + hdr_len)[0] != ID_FIXED:
+            # a false sync is rejected now, not after waiting for its declared length
+            raise FrameError("pd0: first data type is not the fixed leader")
         return n_bytes + 2
 
     def decode(self, frame: bytes) -> Pd0Ensemble:
@@ -323,7 +326,8 @@ def decode_ensemble(frame: bytes) -> Pd0Ensemble:
     ChecksumError
         The 16-bit sum does not match.
     FrameError
-        Bad sync, length, offsets or a data type that does not fit.
+        Bad sync, length, offsets, a data type that does not fit, or an ensemble that does
+        not start with the fixed and variable leaders.
     """
     n = len(frame)
     if n < 8 or frame[0] != 0x7F or frame[1] != 0x7F:
@@ -376,6 +380,12 @@ def decode_ensemble(frame: bytes) -> Pd0Ensemble:
                 other[(tid, "tail")] = frame[a + 2 + need:b]
         else:
             other[tid] = frame[a + 2:b]
+    if order[:2] != [ID_FIXED, ID_VARIABLE]:
+        # RDI: every ensemble starts with the fixed and the variable leader. Checked after the
+        # 16-bit checksum, it makes a false sync that sums right by chance (1 in 65 536) a
+        # frame error instead of a frame.
+        raise FrameError("pd0: ensemble does not start with the fixed and variable leaders "
+                         f"(data types {', '.join(f'0x{t:04x}' for t in order[:2])})")
     return Pd0Ensemble(fixed, variable, bt, profiles, other, tuple(order), spare)
 
 

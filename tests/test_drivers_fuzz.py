@@ -141,3 +141,27 @@ def _fuzz(codec_name: str):
 @pytest.mark.parametrize("codec_name", ["pd0", "phins-stdbin", "phins-ascii", "digiquartz"])
 def test_fuzz_streams_resync(codec_name):
     _fuzz(codec_name)
+
+
+def test_pd0_false_sync_whose_checksum_sums_right_is_not_a_frame():
+    """Found by the fuzz test on CI: garbage ending in a damaged ensemble header whose declared
+    length reaches into the next, valid ensemble, with a 16-bit sum that matched by chance.
+    Its second data type is not the variable leader, so it is a frame error, and the valid
+    ensemble behind it is decoded."""
+    garbage = bytes.fromhex("7f7fbc01000612004c008800020140017e010000220b4b42007f7fae01000816"
+                            "0051007f00c100e30005")
+    target = bytes.fromhex("7f7fae010008160051007f00c100e3000501270178010000130d4b42001a0408"
+                           "040032003c0001400519e8030000001794110000011d75003500010532000b00"
+                           "0000000000000000000000003c5600001e800010000e0c1311120001000000dc"
+                           "0500005565b9feec041f000a020000000000003e6373ffff6700950040000000"
+                           "01410094fff8ff9dff5a0092ff21009afffdffe8ff2c00aeff5c00b5ff0a00ce"
+                           "ff2f00bfff4500daffa10076ff2500e4ff7600dcff6300b8ff4800d7ff290027"
+                           "0000026f7380887e837d818083877d82797a7c758b817d857d81827e7681817b"
+                           "8281840003a6a4a5a6a4a29faf9ba099a79299889983947f8b7f857782777c75"
+                           "79757a7074000400000064000000640000006400000064000000640000006400"
+                           "00006400000064000604000000dc1e0005e803000000008a05a7059905a70523"
+                           "0083ff2d000100ffffffff41444348646464640a000a00320000800080008000"
+                           "80000000000000000000000000e2045d605d6200000000000020de07130b0000"
+                           "ffffff7f00000000feba8c1dfa89b8cdffffff7ffeba8c1dfa89b8cd7e0076b8"
+                           "00007e0076b810057700010011047882")
+    _check("pd0", [target], garbage, target, [285, 347, 352, 463, 245])
