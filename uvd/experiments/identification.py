@@ -450,6 +450,30 @@ def _thesis_rows(table: dict, states) -> dict:
     return {f"{m}.{d}": dict(zip(states, vals, strict=True)) for (m, d), vals in table.items()}
 
 
+def _ls_and_cross_validation(model, iddat, cross, aidp, initp, aidp_euler, truep):
+    """Least squares (plain and consistent, §4.4) on IDDAT, then every model cross-validated
+    (App. A.2) on IDDAT and CROSS; the true parameters as a reference row (not part of the
+    thesis tables). Returns (ls, lsc, mae, diverged, sims, mae_true, LS wall seconds)."""
+    t0 = time.perf_counter()
+    red = ls_reduce(iddat.run, model)
+    ls = ls_identify(iddat.run, model, reduced=red)
+    lsc = ls_identify(iddat.run, model, consistent=True, reduced=red)
+    t_ls = time.perf_counter() - t0
+    models = {"AIDPM": aidp, "LSPM": ls.params, "LSPM_consistent": lsc.params,
+              "INITPM": initp, "AIDPM_euler": aidp_euler}
+    runs = {"IDDAT": iddat.run, "CROSS": cross.run}
+    mae, diverged, sims = {}, {}, {}
+    for m, prm in models.items():
+        mae[m], diverged[m] = {}, {}
+        for d, run in runs.items():
+            xv = cross_validate(prm, run)
+            mae[m][d] = xv.mae
+            diverged[m][d] = xv.diverged_at_s
+            sims[(m, d)] = (xv.R_sim, xv.v_sim)
+    mae_true = {d: cross_validate(truep, run).mae for d, run in runs.items()}
+    return ls, lsc, mae, diverged, sims, mae_true, t_ls
+
+
 # ---------------------------------------------------------------------------------------------
 # aid-6dof
 # ---------------------------------------------------------------------------------------------
@@ -470,24 +494,10 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
     aidp = UVParams.from_theta(iddat.aid_theta)
     progress("aid-6dof: least squares and cross-validation")
     t1 = time.perf_counter()
-    red = ls_reduce(iddat.run, "6dof")
-    ls = ls_identify(iddat.run, "6dof", reduced=red)
-    lsc = ls_identify(iddat.run, "6dof", consistent=True, reduced=red)
-    t_ls = time.perf_counter() - t1
-    models = {"AIDPM": aidp, "LSPM": ls.params, "LSPM_consistent": lsc.params,
-              "INITPM": INITP_6DOF,
-              "AIDPM_euler": UVParams.from_theta(iddat.extra_theta["AIDPM_euler"])}
+    ls, lsc, mae, diverged, sims, mae_true, t_ls = _ls_and_cross_validation(
+        "6dof", iddat, cross, aidp, INITP_6DOF,
+        UVParams.from_theta(iddat.extra_theta["AIDPM_euler"]), true_p)
     runs = {"IDDAT": iddat.run, "CROSS": cross.run}
-    mae, diverged, sims = {}, {}, {}
-    for m, prm in models.items():
-        mae[m], diverged[m] = {}, {}
-        for d, run in runs.items():
-            xv = cross_validate(prm, run)
-            mae[m][d] = xv.mae
-            diverged[m][d] = xv.diverged_at_s
-            sims[(m, d)] = (xv.R_sim, xv.v_sim)
-    # the true parameters as a reference row (not part of the thesis tables)
-    mae_true = {d: cross_validate(true_p, run).mae for d, run in runs.items()}
     t_xval = time.perf_counter() - t1 - t_ls
 
     h = iddat.hist
@@ -534,7 +544,7 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
     }
     rows = []
     for d in ("CROSS", "IDDAT"):
-        for m in models:
+        for m in mae:
             rows.append((m, d, mae[m][d]))
     for d in ("CROSS", "IDDAT"):
         rows.append(("TRUEPM", d, mae_true[d]))
@@ -575,7 +585,7 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
         f"wall: lockstep {t_sim:.1f} s, LS {t_ls:.1f} s, cross-validation {t_xval:.1f} s",
     ]
     if opts.plots:
-        _plots(opts.plots, "aid6dof", runs, sims, models, STATES_6DOF)
+        _plots(opts.plots, "aid6dof", runs, sims, list(mae), STATES_6DOF)
         iddat.run.save(Path(opts.plots) / "iddat-run.npz")
         cross.run.save(Path(opts.plots) / "cross-run.npz")
     return {
@@ -635,22 +645,10 @@ def run_aid_rot(opts: ExperimentOptions) -> dict:
     t_sim = time.perf_counter() - t0
     true_rot = RotParams.from_theta(load_vehicle(VEHICLE).params.theta[ROTATIONAL_INDEX])
     aidp = RotParams.from_theta(iddat.aid_theta)
-    red = ls_reduce(iddat.run, "rot")
-    ls = ls_identify(iddat.run, "rot", reduced=red)
-    lsc = ls_identify(iddat.run, "rot", consistent=True, reduced=red)
-    models = {"AIDPM": aidp, "LSPM": ls.params, "LSPM_consistent": lsc.params,
-              "INITPM": INITP_ROT,
-              "AIDPM_euler": RotParams.from_theta(iddat.extra_theta["AIDPM_euler"])}
+    ls, lsc, mae, diverged, sims, mae_true, _t_ls = _ls_and_cross_validation(
+        "rot", iddat, cross, aidp, INITP_ROT,
+        RotParams.from_theta(iddat.extra_theta["AIDPM_euler"]), true_rot)
     runs = {"IDDAT": iddat.run, "CROSS": cross.run}
-    mae, diverged, sims = {}, {}, {}
-    for m, prm in models.items():
-        mae[m], diverged[m] = {}, {}
-        for d, run in runs.items():
-            xv = cross_validate(prm, run)
-            mae[m][d] = xv.mae
-            diverged[m][d] = xv.diverged_at_s
-            sims[(m, d)] = (xv.R_sim, xv.v_sim)
-    mae_true = {d: cross_validate(true_rot, run).mae for d, run in runs.items()}
     acc = {s: bool(mae["AIDPM"]["CROSS"][s] <= THESIS_ROT_AIDPM_CROSS[s]) for s in STATES_ROT}
     h = iddat.hist
     run = iddat.run
@@ -659,7 +657,7 @@ def run_aid_rot(opts: ExperimentOptions) -> dict:
     ts, rel_theta = _downsample(run.t, rel[:, 0], 30.0)
     _, rel_I = _downsample(run.t, rel[:, 1], 30.0)
     _, rel_b = _downsample(run.t, rel[:, 4], 30.0)
-    rows = [(m, d, mae[m][d]) for d in ("CROSS", "IDDAT") for m in models]
+    rows = [(m, d, mae[m][d]) for d in ("CROSS", "IDDAT") for m in mae]
     rows += [("TRUEPM", d, mae_true[d]) for d in ("CROSS", "IDDAT")]
     thesis_rows = [(f"{m} (thesis)", d, dict(zip(STATES_ROT, vals, strict=True)))
                    for (m, d), vals in THESIS_ROT.items() if d == "CROSS"]
@@ -679,7 +677,7 @@ def run_aid_rot(opts: ExperimentOptions) -> dict:
         f"LS: rank {ls.rank}/36, condition {ls.condition:.3g}; wall: lockstep {t_sim:.1f} s",
     ]
     if opts.plots:
-        _plots(opts.plots, "aidrot", runs, sims, models, STATES_ROT)
+        _plots(opts.plots, "aidrot", runs, sims, list(mae), STATES_ROT)
         iddat.run.save(Path(opts.plots) / "rot-iddat-run.npz")
         cross.run.save(Path(opts.plots) / "rot-cross-run.npz")
     return {
