@@ -1,5 +1,5 @@
 """Propeller-lag compensation (uvd.control.allocation.lag_compensate) against the plant's own
-thruster model, its saturation and its fall-backs."""
+thruster model, its saturation, its fall-backs, and its use by the core."""
 
 import dataclasses
 import math
@@ -7,8 +7,13 @@ import math
 import numpy as np
 import pytest
 
+from drivers.samples import DepthSample, DvlSample, InsSample
 from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
-from uvd.control.allocation import Allocator, lag_compensate
+from uvd import core
+from uvd.control.allocation import Allocator, allocate, lag_compensate
+from uvd.control.pdc import PDGains, PDState, pdc_step
+from uvd.control.trajectory import setpoint
+from uvd.estimation.navigation import NavConfig
 from uvd.model.vehicle import load_vehicle
 
 VEH = load_vehicle("jhu-rov")
@@ -125,3 +130,52 @@ def test_no_lag_declared_means_no_change():
                             np.zeros(6), DT)
     np.testing.assert_array_equal(cmd, f_des)
     assert math.isnan(s)
+
+
+# ------------------------------------------------------------------------------- in the core
+def _samples(t_ns):
+    return dict(ins=InsSample(t_ns=t_ns, roll=0.0, pitch=0.0, heading=0.0,
+                              omega_body=np.zeros(3)),
+                dvl=DvlSample(t_ns=t_ns, velocity_body=np.zeros(3), bottom_lock=True),
+                depth=DepthSample(t_ns=t_ns, depth_m=1.0))
+
+
+def _cfg(on: bool):
+    return core.CoreConfig(nav=NavConfig(ins_timeout_s=0.25),
+                           controller=core.ControllerSpec("pdc", pdc_step, PDGains(), PDState()),
+                           reference=setpoint([0.0, 0.0, 1.1, 0.0, 0.0, 0.05]),
+                           allocator=ALLOC, k_thrust=VEH.k_thrust, lag_compensation=on)
+
+
+def test_core_sends_the_lead_command_and_reports_the_wrench_reached():
+    omega = np.array([10.0, -10.0, 5.0, 20.0, 15.0, -5.0])
+    inp = core.CoreInputs(t_ns=0, propeller_speed_rad_s=omega, **_samples(0))
+    off, _ = core.step(_cfg(False), inp, core.core_init(_cfg(False)), DT)
+    on, _ = core.step(_cfg(True), inp, core.core_init(_cfg(True)), DT)
+    assert off.status == on.status == "ok" and math.isnan(off.lead_fraction)
+    assert on.lead_fraction == 1.0
+    np.testing.assert_allclose(on.u_cmd, off.u_cmd)  # the wrench asked for is the same
+    f_des = allocate(ALLOC, off.u_cmd)[0]
+    assert np.abs(on.thrust_n - f_des).max() > 1.0
+    np.testing.assert_allclose(_hold(_bank(omega), on.thrust_n, 10), f_des, atol=1e-9)
+
+
+@pytest.mark.parametrize("omega", [None, np.array([np.nan, 0, 0, 0, 0, 0])])
+def test_core_without_usable_speeds_uses_plain_allocation(omega):
+    inp = core.CoreInputs(t_ns=0, propeller_speed_rad_s=omega, **_samples(0))
+    off, _ = core.step(_cfg(False), inp, core.core_init(_cfg(False)), DT)
+    on, _ = core.step(_cfg(True), inp, core.core_init(_cfg(True)), DT)
+    assert on.status == "ok"
+    np.testing.assert_array_equal(on.thrust_n, off.thrust_n)
+    assert math.isnan(on.lead_fraction)
+
+
+def test_core_disarmed_or_invalid_navigation_is_zero_thrust_even_with_spinning_propellers():
+    omega = np.full(6, 100.0)  # compensation would brake them with a reverse command
+    cfg = _cfg(True)
+    out, _ = core.step(cfg, core.CoreInputs(t_ns=0, armed=False, propeller_speed_rad_s=omega,
+                                            **_samples(0)), core.core_init(cfg), DT)
+    assert out.status == "disarmed" and not out.thrust_n.any()
+    out, _ = core.step(cfg, core.CoreInputs(t_ns=0, propeller_speed_rad_s=omega),
+                       core.core_init(cfg), DT)
+    assert out.status == "nav-invalid" and not out.thrust_n.any()

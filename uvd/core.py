@@ -15,10 +15,18 @@ identify the vehicle whatever controls it (AID, :mod:`uvd.estimation`) are step 
 the vehicle is armed. ``u_applied`` is the wrench actually produced during the last cycle —
 from measured propeller speeds (f = k ω|ω|, App. A.1) when the amplifiers report them, else
 the previous command.
+
+Allocation turns the wrench into per-thruster thrusts. With ``lag_compensation`` on, the
+command sent to each thruster is the lead set-point of
+:func:`uvd.control.allocation.lag_compensate`: from the propeller speeds measured at the start
+of the cycle and the time constants declared in the vehicle file, the command that brings every
+propeller to its allocated thrust by the end of the cycle. Missing or non-finite speeds fall
+back to plain allocation for that cycle.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,7 +35,7 @@ import numba
 import numpy as np
 
 from drivers.samples import DepthSample, DvlSample, InsSample
-from uvd.control.allocation import Allocator
+from uvd.control.allocation import Allocator, lag_compensate
 from uvd.control.types import Reference, VehicleState
 from uvd.estimation.navigation import NavConfig, NavMemory, NavState, nav_init, nav_step
 
@@ -58,6 +66,7 @@ class CoreConfig:
     allocator: Allocator
     k_thrust: np.ndarray
     estimators: tuple[EstimatorSpec, ...] = ()
+    lag_compensation: bool = False  # lead set-points from measured propeller speeds
 
     def __post_init__(self) -> None:
         # constants of the compiled glue, prepared once (not fields): contiguous float64 B,
@@ -97,12 +106,14 @@ class CoreState:
 @dataclass(frozen=True)
 class CoreOutputs:
     thrust_n: np.ndarray          # per-thruster command (N), always finite
-    u_cmd: np.ndarray             # wrench after allocation/saturation (N, N m)
+    u_cmd: np.ndarray             # wrench after allocation/saturation (N, N m); with lag
+                                  # compensation the wrench the propellers reach by cycle end
     u_applied: np.ndarray         # wrench the estimators saw
     nav: NavState
     reference: Reference | None
     saturated: np.ndarray
     status: str                   # "ok", "disarmed", "nav-invalid", "non-finite"
+    lead_fraction: float = float("nan")  # lag compensation's common fraction s (nan: not used)
 
 
 def core_init(cfg: CoreConfig, *, north_m: float = 0.0, east_m: float = 0.0) -> CoreState:
@@ -281,8 +292,15 @@ def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
             status = "non-finite"
     elif code != _OK:
         status = "non-finite"
+    lead = math.nan
+    if cfg.lag_compensation and status == "ok":
+        # lead set-points from the speeds measured at the start of the cycle; u_cmd stays the
+        # wrench of the allocated thrusts, which the propellers reach by the cycle's end
+        f_cmd, s = lag_compensate(cfg.allocator, thrust, speeds, dt)
+        if s == s:
+            thrust, lead = f_cmd, s
     out = CoreOutputs(thrust_n=thrust, u_cmd=u_cmd, u_applied=u_applied, nav=nav,
-                      reference=ref, saturated=saturated, status=status)
+                      reference=ref, saturated=saturated, status=status, lead_fraction=lead)
     new_state = CoreState(nav=nav_mem, ctrl=ctrl, est=est, t0_ns=t0, est_t_ns=est_t_ns,
                           cycles=state.cycles + 1, u_last=u_cmd)
     return out, new_state

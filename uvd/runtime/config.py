@@ -147,6 +147,12 @@ class ControlSection:
         5400.0, unit="s", min=0.0, max=1e6,
         doc="two-step AMBC: length of step 1 (g, b on the quasi-static trajectory); 0 starts "
             "in step 2 with g, b from theta0")
+    lag_compensation: bool = setting(
+        False, doc="propeller-lag compensation: send each thruster the lead set-point that "
+                   "brings its propeller to the allocated thrust within one cycle, from the "
+                   "amplifiers' measured speed and the vehicle file's time_constant_s "
+                   "(uvd.control.allocation.lag_compensate); cycles without finite speeds use "
+                   "plain allocation")
 
 
 @dataclass(frozen=True)

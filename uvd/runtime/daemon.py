@@ -165,7 +165,7 @@ def build_core(cfg: Config, vehicle=None) -> core.CoreConfig:
         estimators = (aid6_estimator(),)
     return core.CoreConfig(nav=nav_config(cfg), controller=make_controller(cfg, vehicle, alloc),
                            reference=traj, allocator=alloc, k_thrust=vehicle.k_thrust,
-                           estimators=estimators)
+                           estimators=estimators, lag_compensation=cfg.control.lag_compensation)
 
 
 def _eta(H: np.ndarray) -> np.ndarray:
