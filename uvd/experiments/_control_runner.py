@@ -106,9 +106,11 @@ class ControlRun:
     extra: dict = field(default_factory=dict)
 
 
-def make_core(vehicle: Vehicle, controller: core.ControllerSpec, reference) -> core.CoreConfig:
+def make_core(vehicle: Vehicle, controller: core.ControllerSpec, reference, *,
+              lag_compensation: bool = False) -> core.CoreConfig:
     return core.CoreConfig(nav=NavConfig(), controller=controller, reference=reference,
-                           allocator=Allocator.from_vehicle(vehicle), k_thrust=vehicle.k_thrust)
+                           allocator=Allocator.from_vehicle(vehicle), k_thrust=vehicle.k_thrust,
+                           lag_compensation=lag_compensation)
 
 
 def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, duration_s: float,
@@ -119,15 +121,17 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
                 v0: np.ndarray | None = None,
                 progress: Callable[[str], None] | None = None, label: str = "",
                 progress_every_s: float = 1800.0,
-                on_theta: Callable[[float, np.ndarray], None] | None = None) -> ControlRun:
+                on_theta: Callable[[float, np.ndarray], None] | None = None,
+                lag_compensation: bool = False) -> ControlRun:
     """Run ``duration_s`` simulated seconds of ``controller`` tracking ``reference``.
 
     The plant starts on the reference (zero initial error) unless H0/v0 are given. Thruster
     lag, reversal stiction (§5.3.4) and saturation are on, and Table A.1 sensor noise, unless
-    ``thrusters``/``noise`` say otherwise.
+    ``thrusters``/``noise`` say otherwise. ``lag_compensation`` turns on the core's lead
+    set-points from the measured propeller speeds (:func:`uvd.control.allocation.lag_compensate`).
     """
     thrusters = ThrusterEffects() if thrusters is None else thrusters
-    cfg = make_core(vehicle, controller, reference)
+    cfg = make_core(vehicle, controller, reference, lag_compensation=lag_compensation)
     if H0 is None or v0 is None:
         r0 = reference.at(0.0)
         H0 = r0.H if H0 is None else H0

@@ -78,6 +78,13 @@ GAMMA_D_FULL = 250.0
 DEC_NAMES = [f"m{i}" for i in range(1, 7)] + [f"d{i}" for i in range(1, 7)] + ["g", "b1", "b2",
                                                                                 "b3"]
 PDC_MINUTES = 10.0  # §5.3.5.1: the PDC MNE/MAE come from 10 minutes of data
+# Propeller-lag compensation in the core (lead set-points from the measured propeller speeds
+# and the vehicle file's τ, uvd.control.allocation.lag_compensate): on in the experiments that
+# identify the model or compare controllers (two-step, pdc-vs-ambc, xval-two-step, ambc-robust,
+# ambc-full — PDC in the comparisons gets it too); off where the thesis's uncompensated vehicle
+# is reproduced (ambc-6dof-unstable, pitch-reversal) and in two-step-no-lag, whose plant has no
+# lag for the compensation to undo.
+LAG_COMPENSATION = True
 
 # thesis figures quoted next to ours
 THESIS_TABLE_5_2_5_3 = {  # AMBC from the identified values, 2 h (§5.3.2): initial and final
@@ -133,10 +140,10 @@ def _write_csv(opts: ExperimentOptions, name: str, header: list[str], cols: np.n
 
 
 def _pdc_run(vehicle, traj, seconds: float, seed: int, progress=None,
-             kd: float = KD) -> ControlRun:
+             kd: float = KD, lag_compensation: bool = LAG_COMPENSATION) -> ControlRun:
     spec = core.ControllerSpec("pdc", pdc_step, PDGains(kp=KP, kd=kd), PDState())
     return run_control(vehicle, spec, traj, seconds, seed=seed, theta_every_s=1e9,
-                       progress=progress, label="PDC: ")
+                       progress=progress, label="PDC: ", lag_compensation=lag_compensation)
 
 
 def _ratio_block(pdc: dict, ambc: dict) -> dict:
@@ -155,7 +162,8 @@ def _ratio_block(pdc: dict, ambc: dict) -> dict:
 # ---------------------------------------------------------------------------------------------
 # ambc-6dof-unstable (§5.3.2) and ambc-robust
 # ---------------------------------------------------------------------------------------------
-def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, name: str) -> dict:
+def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, name: str,
+                 lag_compensation: bool = False) -> dict:
     veh = _vehicle()
     alloc = Allocator.from_vehicle(veh)
     truth = theta_of(veh.params, "decoupled")
@@ -167,7 +175,8 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
                   f"{seconds / 3600:.2f} simulated h" + (", robust adaptation on" if robust
                                                         else ""))
     run = run_control(veh, spec, reftraj1(), seconds, seed=opts.seed, theta_every_s=10.0,
-                      progress=opts.progress, label=f"{name}: ")
+                      progress=opts.progress, label=f"{name}: ",
+                      lag_compensation=lag_compensation)
     th = run.theta
     final = th[-1]
     min_mass = th[:, :6].min(axis=1)
@@ -177,6 +186,7 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
     out = {
         "vehicle": veh.name, "controller": "decoupled AMBC (5.27)/(5.28)",
         "robust": robust, "gains": {"kp": KP, "kd": KD, "eps": EPS, "K": p.K.tolist()},
+        "lag_compensation": lag_compensation,
         "duration_s": seconds,
         "parameters": DEC_NAMES, "true": truth.tolist(), "initial": th[0].tolist(),
         "final": final.tolist(), "final_relative_error": rel.tolist(),
@@ -214,7 +224,8 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
     neg = [k for k, v in out["m4_m5"].items() if v["went_negative"]]
     out["summary"] = "\n".join([
         f"{name}: decoupled AMBC, RefTraj1, {seconds / 3600:.2f} h, k_p={KP:g}, k_d={KD:g}, "
-        f"eps={EPS:g}, thesis gammas" + (" + robust adaptation" if robust else ""),
+        f"eps={EPS:g}, thesis gammas" + (" + robust adaptation" if robust else "")
+        + (", propeller-lag compensation" if lag_compensation else ""),
         _param_table(DEC_NAMES, rows),
         f"min over time of min_i m_i (M-hat eigenvalue): {min_mass.min():.2f} "
         f"(positive definite throughout: {min_mass.min() > 0})",
@@ -230,7 +241,8 @@ def run_ambc_6dof_unstable(opts: ExperimentOptions) -> dict:
 
 
 def run_ambc_robust(opts: ExperimentOptions) -> dict:
-    return _single_step(opts, robust=True, default_h=4.0, name="ambc-robust")
+    return _single_step(opts, robust=True, default_h=4.0, name="ambc-robust",
+                        lag_compensation=LAG_COMPENSATION)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -315,7 +327,8 @@ def run_pitch_reversal(opts: ExperimentOptions) -> dict:
 # ---------------------------------------------------------------------------------------------
 def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label: str,
                   theta_times_s: tuple[float, ...] = (),
-                  thrusters: ThrusterEffects | None = None) -> tuple[ControlRun, dict]:
+                  thrusters: ThrusterEffects | None = None,
+                  lag_compensation: bool = LAG_COMPENSATION) -> tuple[ControlRun, dict]:
     veh = _vehicle()
     alloc = Allocator.from_vehicle(veh)
     params = two_step_params("decoupled", kp=KP, kd1=KD, eps1=EPS_STEP1, kd2=KD_STEP2,
@@ -333,19 +346,21 @@ def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label
 
     run = run_control(veh, spec, ref, step1_s + step2_s, seed=opts.seed, theta_every_s=1.0,
                       progress=opts.progress, label=f"{label}: ", on_theta=grab,
-                      thrusters=thrusters)
+                      thrusters=thrusters, lag_compensation=lag_compensation)
     return run, captured
 
 
 def run_two_step(opts: ExperimentOptions, *, name: str = "two-step",
-                 thrusters: ThrusterEffects | None = None) -> dict:
+                 thrusters: ThrusterEffects | None = None,
+                 lag_compensation: bool = LAG_COMPENSATION) -> dict:
     veh = _vehicle()
     truth = theta_of(veh.params, "decoupled")
     total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
     scale = total_h * 3600.0 / (STEP1_DURATION_S + STEP2_DURATION_S)
     step1_s, step2_s = STEP1_DURATION_S * scale, STEP2_DURATION_S * scale
     run, at = _two_step_run(opts, step1_s, step2_s, name,
-                            theta_times_s=(250.0, 1000.0, 5000.0), thrusters=thrusters)
+                            theta_times_s=(250.0, 1000.0, 5000.0), thrusters=thrusters,
+                            lag_compensation=lag_compensation)
     i1 = int(np.searchsorted(run.theta_t, step1_s - 1e-6))
     gb1 = run.theta[max(0, i1 - 1), 12:]
     final = run.theta[-1]
@@ -358,7 +373,7 @@ def run_two_step(opts: ExperimentOptions, *, name: str = "two-step",
                                                  "gamma_b": [0.5, 0.5, 10.0]},
                                        "step2": {"kd": KD_STEP2, "eps": EPS_STEP2,
                                                  "gamma_m": 1000.0, "gamma_d": 5000.0}},
-        "step1_s": step1_s, "step2_s": step2_s,
+        "step1_s": step1_s, "step2_s": step2_s, "lag_compensation": lag_compensation,
         "parameters": DEC_NAMES, "true": truth.tolist(), "final": final.tolist(),
         "final_relative_error": rel.tolist(),
         "step1": {"g_b": gb1.tolist(), "true": truth[12:].tolist(),
@@ -382,7 +397,8 @@ def run_two_step(opts: ExperimentOptions, *, name: str = "two-step",
                np.column_stack([run.theta_t, run.theta]))
     out["summary"] = "\n".join([
         f"{name}: step 1 {step1_s / 60:.0f} min (k_d={KD:g}, eps={EPS_STEP1:g}) + step 2 "
-        f"{step2_s / 3600:.2f} h (k_d={KD_STEP2:g}, eps={EPS_STEP2:g}), k_p={KP:g}",
+        f"{step2_s / 3600:.2f} h (k_d={KD_STEP2:g}, eps={EPS_STEP2:g}), k_p={KP:g}"
+        + (", propeller-lag compensation" if lag_compensation else ""),
         _param_table(DEC_NAMES, {"true": truth, "final": final, "rel.err %": 100 * rel}),
         f"masses/drags within 10 %: {out['masses_drags_within_10pct']} (worst "
         f"{100 * out['worst_mass_drag_relative_error']:.1f} %); g, b within 5 %: "
@@ -398,7 +414,8 @@ def run_two_step_no_lag(opts: ExperimentOptions) -> dict:
     saturation and sensor noise still on) — how much of the remaining parameter error is the
     unmodelled thruster lag."""
     return run_two_step(opts, name="two-step-no-lag",
-                        thrusters=ThrusterEffects(lag=False, stiction=True, saturation=True))
+                        thrusters=ThrusterEffects(lag=False, stiction=True, saturation=True),
+                        lag_compensation=False)
 
 
 def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
@@ -415,6 +432,7 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
     prun = _pdc_run(veh, reftraj1(), pdc_s, opts.seed, opts.progress, kd=KD_STEP2)
     pdc = tracking_stats(prun, 0.0)
     out = {"vehicle": veh.name, "gains": {"kp": KP, "kd": KD_STEP2, "eps_step2": EPS_STEP2},
+           "lag_compensation": LAG_COMPENSATION,
            "ambc_window_s": [step1_s + step2_s - win_s, step1_s + step2_s],
            "pdc_duration_s": pdc_s, **_ratio_block(pdc, ambc),
            "ambc_windows": [{"start_min": w["start_min"], "position_mne": w["position_mne"],
@@ -548,7 +566,8 @@ def run_ambc_full(opts: ExperimentOptions) -> dict:
     opts.progress(f"[ambc-full] 241-parameter AMBC with robust adaptation from zero, "
                   f"jhu-rov-coupled, RefTraj1, {seconds / 3600:.2f} h")
     run = run_control(veh, spec, reftraj1(), seconds, seed=opts.seed, theta_every_s=60.0,
-                      progress=opts.progress, label="ambc-full: ")
+                      progress=opts.progress, label="ambc-full: ",
+                      lag_compensation=LAG_COMPENSATION)
     win_s = min(900.0, seconds)
     ambc = tracking_stats(run, seconds - win_s)
     pdc_s = min(PDC_MINUTES * 60.0, seconds)
@@ -565,6 +584,7 @@ def run_ambc_full(opts: ExperimentOptions) -> dict:
            "robust_settings": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
                                for k, v in vars(ROBUST_DAEMON_DEFAULT).items()},
            "initial": "zero (projected: M-hat = mass_floor * I)", "duration_s": seconds,
+           "lag_compensation": LAG_COMPENSATION,
            "ambc_window_s": [seconds - win_s, seconds], "pdc_duration_s": pdc_s,
            **_ratio_block(pdc, ambc),
            "relative_parameter_error": series_summary(run.theta_t, rel_err[:, None],
