@@ -20,6 +20,8 @@ import sys
 import threading
 from pathlib import Path
 
+from uvd.blas import single_threaded_blas
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sim-bridge", description=__doc__.split("\n\n")[0])
@@ -44,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    single_threaded_blas()  # before the bridge's modules import numpy
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(levelname)s %(name)s: %(message)s")

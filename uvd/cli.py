@@ -13,6 +13,7 @@ import pkgutil
 import sys
 
 from uvd import __version__
+from uvd.blas import single_threaded_blas
 from uvd.errors import UvdError
 
 
@@ -34,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    single_threaded_blas()  # before any command module imports numpy
     parser = build_parser()
     args = parser.parse_args(argv)
     handler = getattr(args, "handler", None)

@@ -1,0 +1,50 @@
+"""The real-time processes (``uvd``, ``sim-bridge``) run numpy with one BLAS thread
+(:mod:`uvd.blas`): their entry points set it before anything imports numpy."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from uvd.blas import VARIABLES
+
+# call the entry point (it exits after --help), then load numpy and count this process' threads
+PROBE = """
+import os, sys
+from {mod} import main
+try:
+    main(["--help"])
+except SystemExit:
+    pass
+import numpy
+numpy.ones((300, 300)) @ numpy.ones((300, 300))  # a BLAS call big enough to use a pool
+print(",".join(os.environ.get(v, "") for v in {variables!r}),
+      len(os.listdir(f"/proc/{{os.getpid()}}/task")))
+"""
+
+
+def _probe(mod: str, env: dict) -> tuple[list[str], int]:
+    code = PROBE.format(mod=mod, variables=VARIABLES)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, timeout=60, check=True).stdout.strip().splitlines()[-1]
+    values, n = out.split(" ")
+    return values.split(","), int(n)
+
+
+def _clean_env(**extra) -> dict:
+    return {**{k: v for k, v in os.environ.items() if k not in VARIABLES}, **extra}
+
+
+@pytest.mark.parametrize("mod", ["uvd.cli", "sim_bridge.cli"])
+def test_entry_point_asks_for_one_blas_thread_before_numpy_loads(mod):
+    values, n_threads = _probe(mod, _clean_env())
+    assert values == ["1"] * len(VARIABLES)
+    assert n_threads == 1  # the main thread only: no BLAS pool
+
+
+def test_an_exported_value_wins():
+    values, _ = _probe("uvd.cli", _clean_env(OPENBLAS_NUM_THREADS="2"))
+    assert values[0] == "2"
