@@ -69,6 +69,19 @@ def _rss_mb(pid: int | None) -> tuple[float, float]:
     return vals.get("VmRSS", math.nan), vals.get("VmHWM", math.nan)
 
 
+def _steal_s() -> float | None:
+    """CPU time the hypervisor gave to others (``steal`` of /proc/stat, summed over CPUs, s).
+
+    A virtual machine whose host is busy is paused now and then: every process stalls at
+    once, whatever its priority. The demo reports it so a stall can be told from a bug.
+    """
+    try:
+        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
 def _wrap(a):
     return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
 
@@ -301,6 +314,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
 
         samples: list[tuple[float, float, float]] = []
         loads: list[float] = []  # 1-minute load average, once a second
+        steal: list[tuple[float, float]] = []  # (monotonic s, cumulative steal s), ~1 Hz
         next_report = 10.0
         while True:
             el = time.monotonic() - armed_at
@@ -312,6 +326,9 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
             samples.append((time.monotonic() - armed_at, rd, rb))
             with contextlib.suppress(OSError, ValueError):
                 loads.append(float(Path("/proc/loadavg").read_text().split()[0]))
+            st = _steal_s()
+            if st is not None:
+                steal.append((time.monotonic(), st))
             if daemon.poll() is not None:
                 progress("uvd demo: the daemon exited during the run:\n" + tail.tail())
                 break
@@ -375,6 +392,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
                                             "thread_messages")}},
             "load_average_1min": {"min": min(loads), "max": max(loads),
                                   "mean": sum(loads) / len(loads)} if loads else None,
+            "host_steal": _steal_summary(steal),
         }
         if hil.get("samples"):
             # the same span of tracking: a run cut short by a failsafe disarm compares with
@@ -405,6 +423,17 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
             shutil.rmtree(tmp, ignore_errors=True)
 
 
+def _steal_summary(steal: list[tuple[float, float]]) -> dict[str, float] | None:
+    """Total steal over the run and its largest share of one sampling interval (per CPU)."""
+    if len(steal) < 2:
+        return None
+    n_cpu = os.cpu_count() or 1
+    shares = [(s1 - s0) / n_cpu / (t1 - t0)
+              for (t0, s0), (t1, s1) in zip(steal, steal[1:], strict=False) if t1 > t0]
+    return {"total_s": steal[-1][1] - steal[0][1], "max_share_per_interval": max(shares),
+            "interval_s": (steal[-1][0] - steal[0][0]) / (len(steal) - 1)}
+
+
 def _report(f: dict, progress) -> None:
     hil = f["tracking"]
     if hil.get("samples"):
@@ -432,6 +461,11 @@ def _report(f: dict, progress) -> None:
     la = f.get("load_average_1min")
     if la:
         progress(f"Load average (1 min) during the run: {la['min']:.2f}–{la['max']:.2f}")
+    hs = f.get("host_steal")
+    if hs:
+        progress(f"CPU time taken by the VM host (steal): {hs['total_s']:.2f} s over the run, "
+                 f"at most {100 * hs['max_share_per_interval']:.0f} % of a "
+                 f"{hs['interval_s']:.1f} s interval")
     fs = f["failsafe_events"]
     progress(f"Failsafe events: {len(fs)}" + "".join(
         f"\n  {e['kind']}: {e['trigger']} → {e['action']} ({e['reason']})" for e in fs))
