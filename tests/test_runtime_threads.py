@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import subprocess
 import threading
 import time
 from dataclasses import replace
@@ -21,7 +22,12 @@ import pytest
 from uvd.runtime.app import App
 from uvd.runtime.config import load_config
 from uvd.runtime.notify import SdNotifier
-from uvd.runtime.rtthreads import promote_threads, restore_threads, thread_table
+from uvd.runtime.rtthreads import (
+    ThreadPolicyReport,
+    promote_threads,
+    restore_threads,
+    thread_table,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 LOOP_PRIO = 5  # low: whatever else runs on this machine at real-time priority stays above
@@ -180,3 +186,18 @@ def test_promote_and_restore_by_thread_id():
         assert os.sched_getscheduler(t.native_id) == os.SCHED_OTHER
     finally:
         stop.set()
+
+
+def test_restore_leaves_a_task_of_another_process_alone():
+    """A remembered thread that has ended may have lent its id to another process' task."""
+    other = subprocess.Popen(["sleep", "10"])
+    try:
+        before = (os.sched_getscheduler(other.pid), os.sched_getparam(other.pid).sched_priority)
+        rep = ThreadPolicyReport()
+        rep.changed[other.pid] = (os.SCHED_FIFO, 1, (0,))
+        assert restore_threads(rep) == 0 and not rep.changed
+        assert (os.sched_getscheduler(other.pid),
+                os.sched_getparam(other.pid).sched_priority) == before
+    finally:
+        other.kill()
+        other.wait(5)

@@ -180,7 +180,11 @@ def restore_threads(report: ThreadPolicyReport) -> int:
     Returns how many threads were restored (ended threads are skipped). Never raises.
     """
     n = 0
+    ours = set(_task_ids())  # an ended thread's id may since belong to another process
     for tid, (pol, prio, aff) in list(report.changed.items()):
+        if tid not in ours:
+            report.changed.pop(tid, None)
+            continue
         try:
             os.sched_setscheduler(tid, pol, os.sched_param(prio))
             os.sched_setaffinity(tid, aff)
