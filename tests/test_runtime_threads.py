@@ -88,7 +88,8 @@ def test_every_thread_of_a_started_app_runs_at_the_configured_policy():
     cfg = replace(cfg, loop=replace(cfg.loop, rate_hz=50.0, sched_fifo_priority=LOOP_PRIO,
                                     cpu_affinity=(cpus[-1],)),
                   telemetry=replace(cfg.telemetry,
-                                    jsonl=replace(cfg.telemetry.jsonl, enabled=False)))
+                                    jsonl=replace(cfg.telemetry.jsonl, enabled=False)),
+                  daemon=replace(cfg.daemon, helper_thread_priority=LOOP_PRIO - 1))
     # a thread that exists before the App starts, normally scheduled (the logging listener,
     # an OpenBLAS worker): it inherits nothing
     early_stop = threading.Event()
@@ -154,8 +155,9 @@ def test_helper_priority_zero_leaves_other_threads_alone_and_the_config_bounds_i
     from uvd.runtime.loop import RealtimeReport
     app.realtime_report = RealtimeReport(sched_fifo_priority=LOOP_PRIO)
     assert app.helper_priority() == 0
-    app.config = replace(cfg, daemon=replace(cfg.daemon, helper_thread_priority=None))
+    app.config = replace(cfg, daemon=replace(cfg.daemon, helper_thread_priority=LOOP_PRIO - 1))
     assert app.helper_priority() == LOOP_PRIO - 1
+    assert load_config(ROOT / "config" / "sim.toml").daemon.helper_thread_priority == 0  # default
     app.realtime_report = RealtimeReport(sched_fifo_priority=0)  # refused: nothing to do
     assert app.helper_priority() == 0
 

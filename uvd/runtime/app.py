@@ -380,10 +380,7 @@ class App:
         loop_prio = rep.sched_fifo_priority if rep is not None else 0
         if loop_prio <= 0:
             return 0
-        want = self.config.daemon.helper_thread_priority
-        if want is None:
-            want = max(1, loop_prio - 1)
-        return min(int(want), loop_prio)
+        return min(int(self.config.daemon.helper_thread_priority), loop_prio)
 
     def _promote_helpers(self, when: str) -> None:
         """Every thread but the loop's to SCHED_FIFO at :meth:`helper_priority`, on the

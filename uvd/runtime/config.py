@@ -287,12 +287,15 @@ class DaemonSection:
         500.0, unit="µs", min=50.0, max=5000.0,
         doc="sys.setswitchinterval: how long another Python thread may hold the GIL while "
             "the loop waits for it")
-    helper_thread_priority: int | None = setting(
-        None, min=0, max=99,
+    helper_thread_priority: int = setting(
+        0, min=0, max=99,
         doc="SCHED_FIFO priority of every other thread of the daemon (logging, telemetry, CAN "
             "receive, workers) when [loop] sched_fifo_priority is set: a normally scheduled "
             "thread holding the GIL would make the loop wait while other load preempts it; "
-            "absent = the loop's priority − 1, 0 = leave them at normal scheduling")
+            "0 (default) = leave them as they start (threads started after the loop took "
+            "SCHED_FIFO inherit its priority), e.g. 49 = every one at 49, on the loop's CPUs. "
+            "Experimental: a demo run with it at 49 once stalled its drivers; see "
+            "docs/runtime.md")
 
 
 @dataclass(frozen=True)
@@ -321,7 +324,7 @@ class Config:
             out.append(("can.interface", f"{self.can.bus.interface!r} is not a python-can "
                                          f"interface ({', '.join(sorted(VALID_INTERFACES))})"))
         helper = self.daemon.helper_thread_priority
-        if helper is not None and helper > self.loop.sched_fifo_priority:
+        if helper > self.loop.sched_fifo_priority:
             out.append(("daemon.helper_thread_priority",
                          f"{helper} is above [loop] sched_fifo_priority "
                          f"{self.loop.sched_fifo_priority} (helper threads must not preempt "
