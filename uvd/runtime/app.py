@@ -324,9 +324,11 @@ class App:
                 log.warning("cannot handle %s here (%s)", signal.Signals(sig).name, exc)
         return installed
 
-    async def _guard(self, name: str, coro: Awaitable[Any]) -> Any:
+    async def _guard(self, name: str, run: Callable[[], Awaitable[Any]]) -> Any:
+        """Await ``run()``; an exception stops the daemon (exit 1) instead of escaping. The
+        coroutine is made here, so a task cancelled before it starts leaves none unawaited."""
         try:
-            return await coro
+            return await run()
         except asyncio.CancelledError:
             raise
         except Exception as exc:
@@ -426,12 +428,12 @@ class App:
         self.supervisor.boot_complete(t, "components up: " +
                                       (", ".join(c.name for c in started) or "none"))
         self.notifier.ready(self.supervisor.status_text())
-        tasks = [tg.create_task(self._guard(c.name, c.run()), name=c.name) for c in started]
-        tasks.append(tg.create_task(self._guard("telemetry", self.hub.run()), name="telemetry"))
-        loop_task = tg.create_task(self._guard("control loop", self._run_loop()),
+        tasks = [tg.create_task(self._guard(c.name, c.run), name=c.name) for c in started]
+        tasks.append(tg.create_task(self._guard("telemetry", self.hub.run), name="telemetry"))
+        loop_task = tg.create_task(self._guard("control loop", self._run_loop),
                                    name="control-loop")
         if self._helper_prio > 0:
-            tasks.append(tg.create_task(self._guard("thread policy", self._watch_threads()),
+            tasks.append(tg.create_task(self._guard("thread policy", self._watch_threads),
                                         name="thread-policy"))
         await self._stop.wait()
         await self._shutdown(loop_task, started)
