@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import logging
 import os
 import signal
@@ -20,6 +19,7 @@ import sys
 import threading
 from pathlib import Path
 
+from sim_bridge.control_channel import JsonLines, serve_commands
 from uvd.blas import single_threaded_blas
 
 
@@ -52,12 +52,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("canopen").setLevel(logging.WARNING)
     sys.setswitchinterval(0.0005)  # answer a SYNC promptly while other threads hold the GIL
-    out_lock = threading.Lock()
-
-    def emit(obj: dict) -> None:
-        with out_lock:
-            sys.stdout.write(json.dumps(obj, default=float) + "\n")
-            sys.stdout.flush()
+    emit = JsonLines()
 
     from uvd.errors import UvdError
     from uvd.runtime.config import ConfigValidationError, load_config
@@ -107,23 +102,8 @@ def main(argv: list[str] | None = None) -> int:
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, stop.set)
 
-        def control() -> None:
-            for line in sys.stdin:
-                line = line.strip()
-                if not line:
-                    continue
-                try:
-                    cmd = json.loads(line)
-                    op = cmd.pop("op")
-                    rid = cmd.pop("id", None)
-                except (ValueError, KeyError, AttributeError) as exc:
-                    emit({"ok": False, "error": f"bad command {line[:80]!r}: {exc}"})
-                    continue
-                if op == "quit":
-                    emit({"id": rid, "ok": True})
-                    break
-                emit({"id": rid, **bridge.call(op, **cmd)})
-            loop.call_soon_threadsafe(stop.set)  # stdin closed: the parent is gone or done
+        def control() -> None:  # stdin closed or quit: the parent is gone or done
+            serve_commands(bridge.call, emit, lambda: loop.call_soon_threadsafe(stop.set))
 
         def ready(info: dict) -> None:
             from uvd.runtime.rtthreads import thread_table

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import os
 import signal
 import sys
@@ -24,6 +23,7 @@ import time
 
 from drivers.can.config import DEFAULT_UDP_GROUP, DEFAULT_UDP_PORT, CanBusConfig, DepthConfig
 from sim_bridge.amplifiers.emulators import CanEmulators
+from sim_bridge.control_channel import JsonLines, serve_commands
 from sim_bridge.thrusters import ThrusterEffects
 from uvd.errors import UvdError
 from uvd.model.vehicle import load_vehicle
@@ -65,12 +65,7 @@ def main(argv: list[str] | None = None) -> int:
             realtime = True
         except (OSError, AttributeError):
             pass  # not permitted: normal priority, reported in the ready line
-    out_lock = threading.Lock()
-
-    def emit(obj: dict) -> None:
-        with out_lock:
-            sys.stdout.write(json.dumps(obj, default=float) + "\n")
-            sys.stdout.flush()
+    emit = JsonLines()
 
     try:
         cfg = CanBusConfig(interface=args.interface, channel=args.channel, port=args.port,
@@ -91,23 +86,8 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
 
-    def control() -> None:
-        for line in sys.stdin:
-            line = line.strip()
-            if not line:
-                continue
-            try:
-                cmd = json.loads(line)
-                op = cmd.pop("op")
-                rid = cmd.pop("id", None)
-            except (ValueError, KeyError, AttributeError) as exc:
-                emit({"ok": False, "error": f"bad command {line[:80]!r}: {exc}"})
-                continue
-            if op == "quit":
-                emit({"id": rid, "ok": True})
-                break
-            emit({"id": rid, **emu.call(op, **cmd)})
-        stop.set()  # stdin closed or quit: the parent is gone or done
+    def control() -> None:  # stdin closed or quit: the parent is gone or done
+        serve_commands(emu.call, emit, stop.set)
 
     if args.control:
         threading.Thread(target=control, name="control", daemon=True).start()
