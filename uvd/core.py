@@ -22,13 +22,18 @@ command sent to each thruster is the lead set-point of
 of the cycle and the time constants declared in the vehicle file, the command that brings every
 propeller to its allocated thrust by the end of the cycle. Missing or non-finite speeds fall
 back to plain allocation for that cycle.
+
+With ``ff_preview_s`` = δ > 0 (default 0: off) the reference handed to the controller carries
+``preview``, the desired state at t + δ, on which the model-based controllers evaluate their
+feed-forward (:func:`uvd.control.ambc.ambc_step`) to offset the actuation chain's delay δ
+(:func:`uvd.control.allocation.actuation_delay_s`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numba
@@ -67,8 +72,11 @@ class CoreConfig:
     k_thrust: np.ndarray
     estimators: tuple[EstimatorSpec, ...] = ()
     lag_compensation: bool = False  # lead set-points from measured propeller speeds
+    ff_preview_s: float = 0.0  # δ of the feed-forward preview (s); 0: off
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.ff_preview_s) and self.ff_preview_s >= 0.0):
+            raise ValueError(f"ff_preview_s must be finite and >= 0, got {self.ff_preview_s}")
         # constants of the compiled glue, prepared once (not fields): contiguous float64 B,
         # B⁺, thrust limits and per-thruster k of f = k ω|ω|
         alloc = self.allocator
@@ -241,6 +249,8 @@ def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
     t0 = state.t0_ns if state.t0_ns is not None else inputs.t_ns
     t_s = (inputs.t_ns - t0) * 1e-9
     ref = cfg.reference.at(t_s)
+    if cfg.ff_preview_s > 0.0:
+        ref = replace(ref, preview=cfg.reference.at(t_s + cfg.ff_preview_s))
     vs = VehicleState(H=nav.H, v=nav.v)
     nav_ok = nav.valid and _finite_hv(nav.H, nav.v)
 

@@ -307,11 +307,34 @@ def min_mass_eig(model, theta):
 
 
 @_jit
-def ambc_cycle(model, H_a, v_a, H_d, v_d, vdot_d, mask, theta, K, kp, kd, eps, adapt, dt, t,
+def ff_increment(model, theta, H_d, v_d, vdot_d, H_p, v_p, vdot_p):
+    """Feed-forward preview increment W_d(t+δ)θ̂ − W_d(t)θ̂, where W_d is W_MBC of (5.12)
+    evaluated on the reference alone (ᵃvₐ = ᵈv_d, Δv = 0, ᵃv̇_d = ᵈv̇_d, R = R_d):
+    W_d θ = M ᵈv̇_d − ad_{v_d}ᵀ(M ᵈv_d) − Σᵢ|v_d,ᵢ|Dᵢ ᵈv_d − G(R_d). ``_p`` is the reference
+    at t + δ. Identical inputs give exactly zero."""
+    r_d = np.empty(3)
+    r_p = np.empty(3)
+    for i in range(3):
+        r_d[i] = H_d[2, i]
+        r_p[i] = H_p[2, i]
+    wp = w_theta(model, theta, v_p, vdot_p, r_p)
+    wd = w_theta(model, theta, v_d, vdot_d, r_d)
+    out = np.empty(6)
+    for i in range(6):
+        out[i] = wp[i] - wd[i]
+    return out
+
+
+@_jit
+def ambc_cycle(model, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, K, kp, kd, eps,
+               adapt, dt, t,
                robust, dead_zone, mass_floor, drag_ceiling, B_pinv, f_max, freeze_on_saturation,
                hold_s, band, last_f, hold_until, err, theta_out, rate_out, f_out):
     """One AMBC cycle: the control law (5.27) with θ̂_k and the Euler step of the update law
     (5.28), θ̂_{k+1} = θ̂_k + dt θ̂̇ with θ̂̇ = −K_θ W_MBCᵀ(εΔψ + Δv).
+
+    With ``use_ff`` the feed-forward preview increment ``ff`` (:func:`ff_increment`) is added
+    to the command (before the mask); the update law keeps the regressor at t.
 
     With ``robust``: θ̂̇ is scaled by the dead zone max(0, 1 − δ/‖εΔψ + Δv‖) (δ > 0), zeroed
     while the command saturates a thruster (``freeze_on_saturation``) and until ``hold_until``
@@ -332,7 +355,10 @@ def ambc_cycle(model, H_a, v_a, H_d, v_d, vdot_d, mask, theta, K, kp, kd, eps, a
     wt = w_theta(model, theta, v_a, alpha, r)
     u = np.empty(6)
     for i in range(6):
-        u[i] = (wt[i] - fb[i]) * mask[i]
+        x = wt[i] - fb[i]
+        if use_ff:
+            x += ff[i]
+        u[i] = x * mask[i]
     n = theta.shape[0]
     for i in range(n):
         theta_out[i] = theta[i]

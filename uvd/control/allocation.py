@@ -225,3 +225,34 @@ def lag_compensate(alloc: Allocator, f_des: np.ndarray, omega_meas_rad_s: np.nda
     if s < 0.0:
         return f_des, math.nan
     return out, s
+
+
+def actuation_delay_s(dt: float, tau_s: float, *, compensated: bool) -> float:
+    """Low-frequency delay δ (s) of the actuation chain, from the wrench the controller computes
+    at t_k to the thrust the propellers produce: the cycle's zero-order hold followed by the
+    first-order propeller lag τ ω̇ = ω* − ω (App. A.1), with or without
+    :func:`lag_compensate`. Small-signal (speed and thrust delays agree to first order).
+
+    * Hold alone (τ = 0): the held sample of a ramp lags it by s ∈ [0, dt), δ = dt/2.
+    * Hold + uncompensated lag: the lag's group delay at ω → 0 is τ, δ = dt/2 + τ.
+    * Hold + compensated lag: the lead set-point makes the speed leave ω_{k−1} (reached at t_k)
+      and reach ω_k = ω_d(t_k) at t_k + dt along ω(t_k + s) = ω_{k−1} + (ω_k − ω_{k−1}) φ(s),
+      φ(s) = (1 − e^{−s/τ})/α, α = 1 − e^{−dt/τ}. For a ramp ω_d = r t the delay at t_k + s is
+      dt + s − dt φ(s); its mean over the cycle, with (1/dt)∫₀^dt φ = 1/α − τ/dt, is
+
+          δ = 3dt/2 + τ − dt/α  =  dt/2 (hold)  +  (dt + τ − dt/α) (compensated propeller).
+
+      τ → 0 gives dt/2 (no lag), τ → ∞ gives dt (linear interpolation one cycle late). For
+      dt = 0.1 s, τ = 0.15 s: 50 + 44.5 = 94.5 ms — the delay measured on the plant model
+      (docs/experiments.md, "What biases the masses and drags").
+    """
+    dt = float(dt)
+    tau = float(tau_s)
+    if not (math.isfinite(dt) and dt > 0.0 and math.isfinite(tau) and tau >= 0.0):
+        raise ValueError(f"need dt > 0 and tau >= 0 (finite), got dt={dt}, tau={tau}")
+    if tau == 0.0:
+        return 0.5 * dt
+    if not compensated:
+        return 0.5 * dt + tau
+    a = -math.expm1(-dt / tau)
+    return 1.5 * dt + tau - dt / a

@@ -265,9 +265,39 @@ def _mask(reference: Reference) -> np.ndarray:
     return np.asarray(reference.closed_loop, dtype=float)
 
 
+def _ff(code: int, theta: np.ndarray, reference: Reference) -> tuple[np.ndarray, bool]:
+    """(increment, on) of the feed-forward preview; off (zeros) without ``reference.preview``."""
+    p = reference.preview
+    if p is None:
+        return _ZERO6, False
+    return _kernels.ff_increment(code, theta, reference.H, reference.v, reference.vdot, p.H,
+                                 p.v, p.vdot), True
+
+
 def ambc_step(state: VehicleState, reference: Reference, params: AMBCParams, ctrl: AMBCState,
               dt: float) -> tuple[np.ndarray, AMBCState]:
     """One AMBC cycle: u by (5.27) with θ̂_k, then θ̂_{k+1} = θ̂_k + dt θ̂̇ by (5.28).
+
+    **Feed-forward preview** (opt-in: only when ``reference.preview``, the desired state at
+    t + δ, is set — the core does it when ``CoreConfig.ff_preview_s`` = δ > 0). The command the
+    law computes at t reaches the vehicle as thrust about δ later (10 Hz hold + propeller,
+    :func:`uvd.control.allocation.actuation_delay_s`); the update law (5.28), which assumes the
+    input acts at once, turns that delay into bias of M̂ and D̂ (delayed Mv̇_d looks like drag,
+    delayed drag like mass). The part of (5.27) that the reference alone determines is known in
+    advance, so it is sent δ early:
+
+        u = (5.27) at t  +  [W_d(t+δ) − W_d(t)] θ̂,
+        W_d(t) θ̂ = W_MBC(ᵈv_d, 0, ᵈv̇_d, ʷ_dH)(t) θ̂ = M̂ ᵈv̇_d − ad_{v_d}ᵀ(M̂ ᵈv_d)
+                    − Σᵢ|v_d,ᵢ| D̂ᵢ ᵈv_d − Ĝ(R_d)
+
+    i.e. (5.12) with the actual state replaced by the desired one (Δψ = 0, Δv = 0). In (5.12)
+    only M ᵃv̇_d is built from the reference; Coriolis, drag and G use the measured state, which
+    on the reference equals the desired one — so the preview advances the whole regressor's
+    reference part and leaves the state-error part (and the PD term) at t. The increment is
+    formed in the desired body frame (first order in ΔH; ΔH ≈ I when tracking). The update law
+    keeps W_MBC at t: after the delay the applied feed-forward is W_d(t)θ̂ again. With the
+    preview equal to the reference (δ = 0) the increment is exactly zero and u is unchanged;
+    a non-finite preview makes u non-finite, which the core turns into zero thrust.
 
     Parameters
     ----------
@@ -289,10 +319,11 @@ def ambc_step(state: VehicleState, reference: Reference, params: AMBCParams, ctr
     nthr = params.B_pinv.shape[0]
     f = np.empty(nthr)
     last_f = ctrl.last_f if ctrl.last_f is not None else np.zeros(nthr)
+    ff, use_ff = _ff(code, ctrl.theta, reference)
     u, saturated, frozen, projected, hold_until = _kernels.ambc_cycle(
         code, state.H, state.v, reference.H, reference.v, reference.vdot, _mask(reference),
-        ctrl.theta, params.K, kp, kd, float(params.eps), adapt, float(dt), float(ctrl.t),
-        rb.enabled, float(rb.dead_zone), mf, dc, params.B_pinv, params.f_max,
+        ff, use_ff, ctrl.theta, params.K, kp, kd, float(params.eps), adapt, float(dt),
+        float(ctrl.t), rb.enabled, float(rb.dead_zone), mf, dc, params.B_pinv, params.f_max,
         rb.freeze_on_saturation, float(rb.reversal_hold_s), float(rb.stiction_band_n), last_f,
         float(ctrl.hold_until), err, theta, rate, f)
     return u, AMBCState(theta=theta, theta_dot=rate, t=ctrl.t + dt, dpsi=err[0], dv=err[1],
@@ -352,19 +383,22 @@ class MBCState:
 
 def mbc_step(state: VehicleState, reference: Reference, params: MBCParams, ctrl: MBCState,
              dt: float) -> tuple[np.ndarray, MBCState]:
-    """One MBC cycle, (5.11): u = −(k_p A⁻ᵀ(Δψ)Δψ + k_d Δv) + W_MBC θ_UV (5.12)."""
+    """One MBC cycle, (5.11): u = −(k_p A⁻ᵀ(Δψ)Δψ + k_d Δv) + W_MBC θ_UV (5.12), with the
+    feed-forward preview of :func:`ambc_step` when ``reference.preview`` is set."""
     a = params._ambc
     code, kp, kd, mf, dc, _ = a._c
     n = a.n
     err = np.empty((5, 6))
+    ff, use_ff = _ff(code, params.theta, reference)
     u, _, _, _, _ = _kernels.ambc_cycle(
         code, state.H, state.v, reference.H, reference.v, reference.vdot, _mask(reference),
-        params.theta, a.K, kp, kd, 0.0, False, float(dt), 0.0, False, 0.0, mf, dc, a.B_pinv,
-        a.f_max, False, 0.0, 0.0, _EMPTY, -1.0, err, np.empty(n), np.empty(n), _EMPTY)
+        ff, use_ff, params.theta, a.K, kp, kd, 0.0, False, float(dt), 0.0, False, 0.0, mf, dc,
+        a.B_pinv, a.f_max, False, 0.0, 0.0, _EMPTY, -1.0, err, np.empty(n), np.empty(n), _EMPTY)
     return u, MBCState(dpsi=err[0], dv=err[1])
 
 
 _EMPTY = np.zeros(0)
+_ZERO6 = np.zeros(6)
 
 
 # ---------------------------------------------------------------------------------------------

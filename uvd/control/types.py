@@ -21,7 +21,10 @@ class Reference:
 
     ``open_loop_wrench`` is added to the controller's output for DOFs driven open loop
     (RefTraj2's roll and pitch torques, Table 5.1); ``closed_loop`` masks which DOFs the
-    controller acts on (all six by default).
+    controller acts on (all six by default). ``preview`` is the desired state δ seconds later,
+    set by the core only when the feed-forward preview is on (``CoreConfig.ff_preview_s``);
+    the model-based controllers then evaluate their feed-forward on it
+    (:func:`uvd.control.ambc.ambc_step`).
     """
 
     H: np.ndarray
@@ -29,3 +32,4 @@ class Reference:
     vdot: np.ndarray
     open_loop_wrench: np.ndarray | None = None
     closed_loop: np.ndarray | None = None
+    preview: Reference | None = None

@@ -107,10 +107,10 @@ class ControlRun:
 
 
 def make_core(vehicle: Vehicle, controller: core.ControllerSpec, reference, *,
-              lag_compensation: bool = False) -> core.CoreConfig:
+              lag_compensation: bool = False, ff_preview_s: float = 0.0) -> core.CoreConfig:
     return core.CoreConfig(nav=NavConfig(), controller=controller, reference=reference,
                            allocator=Allocator.from_vehicle(vehicle), k_thrust=vehicle.k_thrust,
-                           lag_compensation=lag_compensation)
+                           lag_compensation=lag_compensation, ff_preview_s=ff_preview_s)
 
 
 def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, duration_s: float,
@@ -122,16 +122,18 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
                 progress: Callable[[str], None] | None = None, label: str = "",
                 progress_every_s: float = 1800.0,
                 on_theta: Callable[[float, np.ndarray], None] | None = None,
-                lag_compensation: bool = False) -> ControlRun:
+                lag_compensation: bool = False, ff_preview_s: float = 0.0) -> ControlRun:
     """Run ``duration_s`` simulated seconds of ``controller`` tracking ``reference``.
 
     The plant starts on the reference (zero initial error) unless H0/v0 are given. Thruster
     lag, reversal stiction (§5.3.4) and saturation are on, and Table A.1 sensor noise, unless
     ``thrusters``/``noise`` say otherwise. ``lag_compensation`` turns on the core's lead
-    set-points from the measured propeller speeds (:func:`uvd.control.allocation.lag_compensate`).
+    set-points from the measured propeller speeds (:func:`uvd.control.allocation.lag_compensate`);
+    ``ff_preview_s`` > 0 the feed-forward preview (``CoreConfig.ff_preview_s``).
     """
     thrusters = ThrusterEffects() if thrusters is None else thrusters
-    cfg = make_core(vehicle, controller, reference, lag_compensation=lag_compensation)
+    cfg = make_core(vehicle, controller, reference, lag_compensation=lag_compensation,
+                    ff_preview_s=ff_preview_s)
     if H0 is None or v0 is None:
         r0 = reference.at(0.0)
         H0 = r0.H if H0 is None else H0

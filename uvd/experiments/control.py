@@ -29,7 +29,7 @@ import numpy as np
 
 from sim_bridge.thrusters import ThrusterEffects
 from uvd import core
-from uvd.control.allocation import Allocator
+from uvd.control.allocation import Allocator, actuation_delay_s
 from uvd.control.ambc import (
     ROBUST_DAEMON_DEFAULT,
     ambc_init,
@@ -85,6 +85,26 @@ PDC_MINUTES = 10.0  # §5.3.5.1: the PDC MNE/MAE come from 10 minutes of data
 # is reproduced (ambc-6dof-unstable, pitch-reversal) and in two-step-no-lag, whose plant has no
 # lag for the compensation to undo.
 LAG_COMPENSATION = True
+# Feed-forward preview (CoreConfig.ff_preview_s, uvd.control.ambc.ambc_step): the reference
+# part of the AMBC law evaluated δ ahead, δ = the actuation chain's delay derived from the
+# 10 Hz hold and the vehicle file's τ (uvd.control.allocation.actuation_delay_s: 94.5 ms with
+# lag compensation), not tuned. On where the lag compensation is on and a model-based
+# controller runs (two-step, pdc-vs-ambc, xval-two-step, ambc-robust); off in the experiments
+# that reproduce the thesis's vehicle (ambc-6dof-unstable, pitch-reversal), in the
+# two-step-no-lag diagnostic, and in ambc-full (not re-run with it). PDC has no feed-forward.
+FF_PREVIEW = True
+CONTROL_DT_S = 0.1
+
+
+def _preview_s(veh, enabled: bool, lag_compensation: bool,
+               thrusters: ThrusterEffects | None = None) -> float:
+    """δ of the feed-forward preview for this vehicle and actuation chain (0 when off): the
+    10 Hz hold plus the propellers' lag (none if the plant's lag is off), compensated or not."""
+    if not enabled:
+        return 0.0
+    lag = thrusters is None or thrusters.lag
+    tau = float(np.mean([t.time_constant_s for t in veh.thrusters])) if lag else 0.0
+    return actuation_delay_s(CONTROL_DT_S, tau, compensated=lag_compensation)
 
 # thesis figures quoted next to ours
 THESIS_TABLE_5_2_5_3 = {  # AMBC from the identified values, 2 h (§5.3.2): initial and final
@@ -163,10 +183,11 @@ def _ratio_block(pdc: dict, ambc: dict) -> dict:
 # ambc-6dof-unstable (§5.3.2) and ambc-robust
 # ---------------------------------------------------------------------------------------------
 def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, name: str,
-                 lag_compensation: bool = False) -> dict:
+                 lag_compensation: bool = False, ff_preview: bool = False) -> dict:
     veh = _vehicle()
     alloc = Allocator.from_vehicle(veh)
     truth = theta_of(veh.params, "decoupled")
+    preview_s = _preview_s(veh, ff_preview, lag_compensation)
     p = ambc_params("decoupled", kp=KP, kd=KD, eps=EPS, allocator=alloc,
                     robust=ROBUST_DAEMON_DEFAULT if robust else None)
     spec = core.ControllerSpec("ambc", ambc_step, p, ambc_init(p, truth))
@@ -176,7 +197,7 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
                                                         else ""))
     run = run_control(veh, spec, reftraj1(), seconds, seed=opts.seed, theta_every_s=10.0,
                       progress=opts.progress, label=f"{name}: ",
-                      lag_compensation=lag_compensation)
+                      lag_compensation=lag_compensation, ff_preview_s=preview_s)
     th = run.theta
     final = th[-1]
     min_mass = th[:, :6].min(axis=1)
@@ -186,7 +207,7 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
     out = {
         "vehicle": veh.name, "controller": "decoupled AMBC (5.27)/(5.28)",
         "robust": robust, "gains": {"kp": KP, "kd": KD, "eps": EPS, "K": p.K.tolist()},
-        "lag_compensation": lag_compensation,
+        "lag_compensation": lag_compensation, "ff_preview_s": preview_s,
         "duration_s": seconds,
         "parameters": DEC_NAMES, "true": truth.tolist(), "initial": th[0].tolist(),
         "final": final.tolist(), "final_relative_error": rel.tolist(),
@@ -225,7 +246,8 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
     out["summary"] = "\n".join([
         f"{name}: decoupled AMBC, RefTraj1, {seconds / 3600:.2f} h, k_p={KP:g}, k_d={KD:g}, "
         f"eps={EPS:g}, thesis gammas" + (" + robust adaptation" if robust else "")
-        + (", propeller-lag compensation" if lag_compensation else ""),
+        + (", propeller-lag compensation" if lag_compensation else "")
+        + (f", feed-forward preview {1e3 * preview_s:.1f} ms" if ff_preview else ""),
         _param_table(DEC_NAMES, rows),
         f"min over time of min_i m_i (M-hat eigenvalue): {min_mass.min():.2f} "
         f"(positive definite throughout: {min_mass.min() > 0})",
@@ -242,7 +264,7 @@ def run_ambc_6dof_unstable(opts: ExperimentOptions) -> dict:
 
 def run_ambc_robust(opts: ExperimentOptions) -> dict:
     return _single_step(opts, robust=True, default_h=4.0, name="ambc-robust",
-                        lag_compensation=LAG_COMPENSATION)
+                        lag_compensation=LAG_COMPENSATION, ff_preview=FF_PREVIEW)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -328,8 +350,10 @@ def run_pitch_reversal(opts: ExperimentOptions) -> dict:
 def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label: str,
                   theta_times_s: tuple[float, ...] = (),
                   thrusters: ThrusterEffects | None = None,
-                  lag_compensation: bool = LAG_COMPENSATION) -> tuple[ControlRun, dict]:
+                  lag_compensation: bool = LAG_COMPENSATION,
+                  ff_preview: bool | None = None) -> tuple[ControlRun, dict]:
     veh = _vehicle()
+    ff_preview = FF_PREVIEW if ff_preview is None else ff_preview
     alloc = Allocator.from_vehicle(veh)
     params = two_step_params("decoupled", kp=KP, kd1=KD, eps1=EPS_STEP1, kd2=KD_STEP2,
                              eps2=EPS_STEP2, allocator=alloc, step1_duration_s=step1_s)
@@ -346,21 +370,24 @@ def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label
 
     run = run_control(veh, spec, ref, step1_s + step2_s, seed=opts.seed, theta_every_s=1.0,
                       progress=opts.progress, label=f"{label}: ", on_theta=grab,
-                      thrusters=thrusters, lag_compensation=lag_compensation)
+                      thrusters=thrusters, lag_compensation=lag_compensation,
+                      ff_preview_s=_preview_s(veh, ff_preview, lag_compensation, thrusters))
     return run, captured
 
 
 def run_two_step(opts: ExperimentOptions, *, name: str = "two-step",
                  thrusters: ThrusterEffects | None = None,
-                 lag_compensation: bool = LAG_COMPENSATION) -> dict:
+                 lag_compensation: bool = LAG_COMPENSATION,
+                 ff_preview: bool | None = None) -> dict:
     veh = _vehicle()
+    ff_preview = FF_PREVIEW if ff_preview is None else ff_preview
     truth = theta_of(veh.params, "decoupled")
     total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
     scale = total_h * 3600.0 / (STEP1_DURATION_S + STEP2_DURATION_S)
     step1_s, step2_s = STEP1_DURATION_S * scale, STEP2_DURATION_S * scale
     run, at = _two_step_run(opts, step1_s, step2_s, name,
                             theta_times_s=(250.0, 1000.0, 5000.0), thrusters=thrusters,
-                            lag_compensation=lag_compensation)
+                            lag_compensation=lag_compensation, ff_preview=ff_preview)
     i1 = int(np.searchsorted(run.theta_t, step1_s - 1e-6))
     gb1 = run.theta[max(0, i1 - 1), 12:]
     final = run.theta[-1]
@@ -374,6 +401,7 @@ def run_two_step(opts: ExperimentOptions, *, name: str = "two-step",
                                        "step2": {"kd": KD_STEP2, "eps": EPS_STEP2,
                                                  "gamma_m": 1000.0, "gamma_d": 5000.0}},
         "step1_s": step1_s, "step2_s": step2_s, "lag_compensation": lag_compensation,
+        "ff_preview_s": _preview_s(veh, ff_preview, lag_compensation, thrusters),
         "parameters": DEC_NAMES, "true": truth.tolist(), "final": final.tolist(),
         "final_relative_error": rel.tolist(),
         "step1": {"g_b": gb1.tolist(), "true": truth[12:].tolist(),
@@ -398,7 +426,8 @@ def run_two_step(opts: ExperimentOptions, *, name: str = "two-step",
     out["summary"] = "\n".join([
         f"{name}: step 1 {step1_s / 60:.0f} min (k_d={KD:g}, eps={EPS_STEP1:g}) + step 2 "
         f"{step2_s / 3600:.2f} h (k_d={KD_STEP2:g}, eps={EPS_STEP2:g}), k_p={KP:g}"
-        + (", propeller-lag compensation" if lag_compensation else ""),
+        + (", propeller-lag compensation" if lag_compensation else "")
+        + (f", feed-forward preview {1e3 * out['ff_preview_s']:.1f} ms" if ff_preview else ""),
         _param_table(DEC_NAMES, {"true": truth, "final": final, "rel.err %": 100 * rel}),
         f"masses/drags within 10 %: {out['masses_drags_within_10pct']} (worst "
         f"{100 * out['worst_mass_drag_relative_error']:.1f} %); g, b within 5 %: "
@@ -415,7 +444,7 @@ def run_two_step_no_lag(opts: ExperimentOptions) -> dict:
     unmodelled thruster lag."""
     return run_two_step(opts, name="two-step-no-lag",
                         thrusters=ThrusterEffects(lag=False, stiction=True, saturation=True),
-                        lag_compensation=False)
+                        lag_compensation=False, ff_preview=False)
 
 
 def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
@@ -433,6 +462,7 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
     pdc = tracking_stats(prun, 0.0)
     out = {"vehicle": veh.name, "gains": {"kp": KP, "kd": KD_STEP2, "eps_step2": EPS_STEP2},
            "lag_compensation": LAG_COMPENSATION,
+           "ff_preview_s": _preview_s(veh, FF_PREVIEW, LAG_COMPENSATION),
            "ambc_window_s": [step1_s + step2_s - win_s, step1_s + step2_s],
            "pdc_duration_s": pdc_s, **_ratio_block(pdc, ambc),
            "ambc_windows": [{"start_min": w["start_min"], "position_mne": w["position_mne"],
