@@ -226,16 +226,21 @@ def _command(B, B_pinv, f_max, u_ctrl, ol, use_ol):
     return status, f, sat, u_cmd, u
 
 
+# Every array handed to a compiled kernel is a writable, C-contiguous float64 array: numba
+# compiles one specialisation per (dtype, layout, read-only) combination, and a new one met in
+# the running loop — a read-only zero wrench while disarmed, read-only speeds decoded from a
+# CAN frame — would be compiled there, a stall of seconds with an empty cache. The kernels
+# never write to their inputs, so the shared zero vector stays zero.
 _ZERO6 = np.zeros(6)
-_ZERO6.setflags(write=False)
 _F64 = np.dtype(np.float64)
 
 
 def _as_vec(a, n: int) -> np.ndarray | None:
-    """``a`` as a contiguous float64 (n,) array, or None if it cannot be one."""
-    if type(a) is not np.ndarray or a.dtype != _F64 or not a.flags.c_contiguous:
+    """``a`` as a writable contiguous float64 (n,) array, or None if it cannot be one."""
+    if (type(a) is not np.ndarray or a.dtype != _F64 or not a.flags.c_contiguous
+            or not a.flags.writeable):
         try:
-            a = np.ascontiguousarray(a, dtype=np.float64)
+            a = np.array(a, dtype=np.float64, order="C")  # a copy: writable
         except (TypeError, ValueError):
             return None
     return a if a.shape == (n,) else None

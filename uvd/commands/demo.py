@@ -307,8 +307,10 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
             if any("→ ARMED" in e for e in events):
                 armed_at = time.monotonic()
             elif daemon.poll() is not None or time.monotonic() - t_start > 180.0:
-                progress("uvd demo: the daemon did not arm:\n" + tail.tail())
-                return {"error": "the daemon did not arm", "daemon_log": tail.tail(40)}, 1
+                progress("uvd demo: the daemon did not arm:\n" + tail.tail()
+                         + "\nsim-bridge's last words:\n" + bridge.stderr_tail())
+                return {"error": "the daemon did not arm", "daemon_log": tail.tail(40),
+                        "sim_bridge_log": bridge.stderr_tail()}, 1
         progress(f"  armed {armed_at - t_start:.1f} s after start; tracking for "
                  f"{duration_s:g} s")
 

@@ -555,8 +555,9 @@ class Daemon:
                             omega_body=np.zeros(3))
             dvl = DvlSample(t_ns=t, velocity_body=np.zeros(3), bottom_lock=True)
             depth = DepthSample(t_ns=t, depth_m=float(H[2, 3]))
+            # the first cycle disarmed (as after boot), the others armed: both paths loaded
             out, st = core.step(self.core_cfg, core.CoreInputs(
-                t_ns=t, ins=ins, dvl=dvl, depth=depth,
+                t_ns=t, ins=ins, dvl=dvl, depth=depth, armed=k > 0,
                 propeller_speed_rad_s=np.zeros(self.allocator.n_thrusters)), st, 0.1)
             m_hat_min_eig(st.ctrl, self.core_cfg.controller)
             self._fallback(out.nav, out.reference, 0.1)
