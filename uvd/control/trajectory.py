@@ -23,6 +23,7 @@ import numba
 import numpy as np
 
 from uvd.control.types import Reference
+from uvd.model.lie import euler_R
 
 DOFS = ("x", "y", "z", "roll", "pitch", "heading")
 WRENCH = ("fx", "fy", "fz", "tx", "ty", "tz")
@@ -71,19 +72,9 @@ def _from_euler(eta, d1, d2, H, v, vdot):
     """Desired (H, v, v̇) from η = [x, y, z, φ, θ, ψ] and its derivatives (module docstring)."""
     phi, th, psi = eta[3], eta[4], eta[5]
     dphi, dth, dpsi = d1[3], d1[4], d1[5]
+    R = euler_R(phi, th, psi)
     cr, sr = math.cos(phi), math.sin(phi)
     cp, sp = math.cos(th), math.sin(th)
-    ch, sh = math.cos(psi), math.sin(psi)
-    R = np.empty((3, 3))
-    R[0, 0] = ch * cp
-    R[0, 1] = ch * sp * sr - sh * cr
-    R[0, 2] = ch * sp * cr + sh * sr
-    R[1, 0] = sh * cp
-    R[1, 1] = sh * sp * sr + ch * cr
-    R[1, 2] = sh * sp * cr - ch * sr
-    R[2, 0] = -sp
-    R[2, 1] = cp * sr
-    R[2, 2] = cp * cr
     for i in range(4):
         for j in range(4):
             H[i, j] = 0.0

@@ -54,7 +54,7 @@ import numba
 import numpy as np
 
 from drivers.frames import dvl_mount_to_body
-from uvd.model.lie import exp_so3
+from uvd.model.lie import euler_R, exp_so3
 
 if TYPE_CHECKING:  # the sample types are plain dataclasses; only their attributes are read
     from drivers.samples import DepthSample, DvlSample, InsSample
@@ -230,26 +230,7 @@ def nav_set_position(mem: NavMemory, north_m: float, east_m: float) -> NavMemory
 
 # ------------------------------------------------------------------ compiled small-matrix steps
 # Each replaces a few numpy calls on 3-vectors (≈1 µs each in the interpreter) with one compiled
-# call; same formulas (drivers.samples.euler_to_R, R @ ν, the assembly of H and v).
-
-@numba.njit(cache=True)
-def _euler_to_R(roll, pitch, heading):
-    """R = Rz(ψ) Ry(θ) Rx(φ) (App. A), as :func:`drivers.samples.euler_to_R`."""
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    ch, sh = np.cos(heading), np.sin(heading)
-    R = np.empty((3, 3))
-    R[0, 0] = ch * cp
-    R[0, 1] = ch * sp * sr - sh * cr
-    R[0, 2] = ch * sp * cr + sh * sr
-    R[1, 0] = sh * cp
-    R[1, 1] = sh * sp * sr + ch * cr
-    R[1, 2] = sh * sp * cr - ch * sr
-    R[2, 0] = -sp
-    R[2, 1] = cp * sr
-    R[2, 2] = cp * cr
-    return R
-
+# call; same formulas (R @ ν, the assembly of H and v; Euler → R is uvd.model.lie.euler_R).
 
 @numba.njit(cache=True)
 def _rotate(R, x):
@@ -349,7 +330,7 @@ def nav_step(cfg: NavConfig, mem: NavMemory, t_ns: int, ins: InsSample | None,
     # --- INS: attitude and rates ------------------------------------------------------------
     if ins is not None and ins.valid and math.isfinite(ins.roll) and math.isfinite(ins.pitch) \
             and math.isfinite(ins.heading):
-        R_new = _euler_to_R(float(ins.roll), float(ins.pitch), float(ins.heading))
+        R_new = euler_R(float(ins.roll), float(ins.pitch), float(ins.heading))
         w = ins.omega_body
         if _finite3(w):
             omega = _vec3(w)

@@ -397,3 +397,23 @@ def A_inv_se3_T_psi(psi) -> np.ndarray:
     """A⁻ᵀ(ψ) ψ, the proportional term of the PD law (5.11)."""
     psi = _f(psi)
     return _A_inv_se3_blocks(psi).T @ psi
+
+
+@numba.njit(cache=True)
+def euler_R(roll, pitch, heading):
+    """R = Rz(ψ) Ry(θ) Rx(φ) from heading ψ, pitch θ, roll φ (App. A, Fig. A.2), compiled;
+    the same formula as :func:`drivers.samples.euler_to_R`."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    ch, sh = np.cos(heading), np.sin(heading)
+    R = np.empty((3, 3))
+    R[0, 0] = ch * cp
+    R[0, 1] = ch * sp * sr - sh * cr
+    R[0, 2] = ch * sp * cr + sh * sr
+    R[1, 0] = sh * cp
+    R[1, 1] = sh * sp * sr + ch * cr
+    R[1, 2] = sh * sp * cr - ch * sr
+    R[2, 0] = -sp
+    R[2, 1] = cp * sr
+    R[2, 2] = cp * cr
+    return R
