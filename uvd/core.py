@@ -40,7 +40,7 @@ import numba
 import numpy as np
 
 from drivers.samples import DepthSample, DvlSample, InsSample
-from uvd.control.allocation import Allocator, lag_compensate
+from uvd.control.allocation import Allocator, allocate_kernel, lag_compensate
 from uvd.control.types import Reference, VehicleState
 from uvd.estimation.navigation import NavConfig, NavMemory, NavState, nav_init, nav_step
 
@@ -193,23 +193,8 @@ def _command(B, B_pinv, f_max, u_ctrl, ol, use_ol):
             for m in range(6):
                 u[m] = 0.0
             break
-    n = B_pinv.shape[0]
-    f = np.empty(n)
-    ratio = np.empty(n)
-    worst = 0.0
-    for j in range(n):
-        x = 0.0
-        for i in range(6):
-            x += B_pinv[j, i] * u[i]
-        f[j] = x
-        ratio[j] = abs(x) / f_max[j]
-        worst = max(worst, ratio[j])
-    sat = np.zeros(n, dtype=np.bool_)
-    if worst > 1.0:
-        scale = 1.0 / worst
-        for j in range(n):
-            f[j] *= scale
-            sat[j] = ratio[j] >= worst * (1.0 - 1e-12)
+    f, sat, _scale = allocate_kernel(B_pinv, f_max, u)
+    n = f.shape[0]
     for j in range(n):
         if not np.isfinite(f[j]):
             status = _NON_FINITE

@@ -78,7 +78,9 @@ def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarra
 
 
 @numba.njit(cache=True)
-def _allocate(B_pinv, f_max, u):
+def allocate_kernel(B_pinv, f_max, u):
+    """Compiled body of :func:`allocate` (B⁺ and limits as arrays), for compiled callers
+    such as the core's command kernel."""
     n = B_pinv.shape[0]
     f = np.empty(n)
     ratio = np.empty(n)
@@ -111,7 +113,7 @@ def allocate(alloc: Allocator, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, f
     if not np.isfinite(u).all():
         f = alloc.B_pinv @ u
         return f, np.zeros(f.shape, dtype=bool), 1.0
-    return _allocate(alloc.B_pinv, alloc.max_thrust_n, u)
+    return allocate_kernel(alloc.B_pinv, alloc.max_thrust_n, u)
 
 
 def speed_command(alloc: Allocator, f: np.ndarray) -> np.ndarray:
