@@ -15,11 +15,10 @@ import numpy as np
 
 from drivers.samples import DepthSample, DvlSample, InsSample
 from uvd import core
+from uvd.bench.loop import ambc_aid_config
 from uvd.control.allocation import Allocator
-from uvd.control.ambc import ROBUST_DAEMON_DEFAULT, ambc_init, ambc_params, ambc_step, theta_of
 from uvd.control.pdc import PDGains, PDState, pdc_step
-from uvd.control.trajectory import reftraj1, reftraj2
-from uvd.estimation.aid import aid6_estimator
+from uvd.control.trajectory import reftraj2
 from uvd.estimation.navigation import NavConfig, nav_set_position
 from uvd.model.vehicle import load_vehicle
 
@@ -31,15 +30,7 @@ FIELDS = ("thrust_n", "u_cmd", "u_applied", "nav_H", "nav_v", "ref_H", "ref_v", 
 
 def _config(name: str) -> core.CoreConfig:
     if name == "ambc-aid":
-        vehicle = load_vehicle("jhu-rov-coupled")
-        alloc = Allocator.from_vehicle(vehicle)
-        params = ambc_params("full", kp=300.0, kd=100.0, eps=1.0, robust=ROBUST_DAEMON_DEFAULT,
-                             allocator=alloc)
-        spec = core.ControllerSpec("ambc", ambc_step, params,
-                                   ambc_init(params, theta_of(vehicle.params, "full")))
-        return core.CoreConfig(nav=NavConfig(), controller=spec, reference=reftraj1(),
-                               allocator=alloc, k_thrust=vehicle.k_thrust,
-                               estimators=(aid6_estimator(),))
+        return ambc_aid_config()
     vehicle = load_vehicle("jhu-rov")
     nav = NavConfig(dvl_mount_R=np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
                     dvl_lever_arm_m=np.array([0.1, 0.0, 0.2]))

@@ -88,10 +88,10 @@ def _cycle_pdc() -> Callable[[int, float], None]:
     return cycle
 
 
-def _cycle_ambc_aid() -> Callable[[int, float], None]:
-    """The core cycle with full AMBC (θ̂ ∈ R²⁴¹, (2.48); robust adaptation as the daemon runs
-    it) and 6-DOF AID (Theorem 4.3.1) both on, on ``jhu-rov-coupled`` tracking RefTraj1."""
-    from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+def ambc_aid_config():
+    """The core configuration with full AMBC (θ̂ ∈ R²⁴¹, (2.48); robust adaptation as the
+    daemon runs it) and 6-DOF AID (Theorem 4.3.1) both on, on ``jhu-rov-coupled`` tracking
+    RefTraj1 (also the core replay test's ``ambc-aid`` scenario)."""
     from uvd import core
     from uvd.control.allocation import Allocator
     from uvd.control.ambc import ROBUST_DAEMON_DEFAULT, ambc_init, ambc_params, ambc_step, theta_of
@@ -106,15 +106,24 @@ def _cycle_ambc_aid() -> Callable[[int, float], None]:
                          allocator=alloc)
     spec = core.ControllerSpec("ambc", ambc_step, params,
                                ambc_init(params, theta_of(vehicle.params, "full")))
-    traj = reftraj1()
-    cfg = core.CoreConfig(nav=NavConfig(), controller=spec, reference=traj, allocator=alloc,
-                          k_thrust=vehicle.k_thrust, estimators=(aid6_estimator(),))
+    return core.CoreConfig(nav=NavConfig(), controller=spec, reference=reftraj1(),
+                           allocator=alloc, k_thrust=vehicle.k_thrust,
+                           estimators=(aid6_estimator(),))
+
+
+def _cycle_ambc_aid() -> Callable[[int, float], None]:
+    """The core cycle of :func:`ambc_aid_config` on fresh INS, DVL and depth samples."""
+    from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+    from uvd import core
+
+    cfg = ambc_aid_config()
+    traj = cfg.reference
     ref0 = traj.at(0.0)
     roll, pitch, heading = R_to_euler(ref0.H[:3, :3])
     offset = np.array([0.05, -0.03, 0.02])
     nu = ref0.v[:3] + 0.01
     depth0 = float(ref0.H[2, 3] + offset[2])
-    speeds = np.full(vehicle.n_thrusters, 20.0)
+    speeds = np.full(cfg.allocator.n_thrusters, 20.0)
 
     def fresh():
         return core.core_init(cfg, north_m=ref0.H[0, 3] + offset[0],
