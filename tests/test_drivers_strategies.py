@@ -147,7 +147,9 @@ def phins_sentences(draw) -> phins_ascii.PhinsSentence:
 def generic_sentences(draw) -> phins_ascii.PhinsSentence:
     kind = draw(st.text(alphabet="ABCDEFGHIJKLMNOPQRSTUVWXYZ_", min_size=5, max_size=6))
     pixse = draw(st.booleans())
-    if kind in phins_ascii.SENTENCES:
+    # a known sentence id is not generic, and "$PIXSE," is the envelope of iXblue's proprietary
+    # sentences (``pixse=True``), not a sentence id of its own
+    if kind in phins_ascii.SENTENCES or kind == "PIXSE":
         kind = "X" + kind[1:]
     return phins_ascii.PhinsSentence(kind, tuple(draw(st.lists(_ASCII_TEXT, max_size=6))),
                                      {}, pixse)
