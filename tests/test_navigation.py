@@ -250,3 +250,82 @@ def test_dead_reckoning_does_not_drift_on_correlated_yaw_and_sway():
                 worst = max(worst, float(np.linalg.norm(state.H[:2, 3] - ref.H[:2, 3])))
     assert state.valid
     assert worst < 0.03, worst  # lag of < one DVL period at ≤ 0.17 m/s, no drift
+
+
+def _angle(Ra, Rb) -> float:
+    c = 0.5 * (np.trace(Ra.T @ Rb) - 1.0)
+    return math.acos(min(1.0, max(-1.0, c)))
+
+
+def test_ins_carried_to_the_cycle_time_on_a_constant_rate_is_exact():
+    cfg = NavConfig(ins_timeout_s=0.25)
+    mem = nav_init(cfg)
+    w = np.array([0.05, -0.03, 0.2])
+    R0 = euler_to_R(0.1, 0.05, 1.0)
+    from drivers.samples import R_to_euler
+    for k in range(3):
+        t_ins = k * 100 * MS
+        r, p, h = R_to_euler(R0 @ exp_so3(w * (t_ins * 1e-9)))
+        s, mem = nav_step(cfg, mem, t_ins + 60 * MS, _ins(t_ins, r, p, h, w), _dvl(t_ins),
+                          DepthSample(t_ins, 0.0))
+        assert s.ins_age_s == pytest.approx(0.06)
+        np.testing.assert_allclose(s.H[:3, :3], R0 @ exp_so3(w * (t_ins * 1e-9 + 0.06)),
+                                   atol=1e-12)
+        np.testing.assert_allclose(s.v[3:], w, atol=1e-12)
+    # switched off: the sample as it is
+    off = NavConfig(ins_timeout_s=0.25, propagate_ins=False)
+    s, _ = nav_step(off, nav_init(off), 60 * MS, _ins(0, 0.1, 0.05, 1.0, w), None, None)
+    np.testing.assert_allclose(s.H[:3, :3], euler_to_R(0.1, 0.05, 1.0), atol=1e-15)
+
+
+def test_ins_carried_to_the_cycle_time_follows_a_smooth_trajectory():
+    """RefTraj1's attitude and rates, INS at 10 Hz sampled 60 ms before each 10 Hz cycle (an
+    INS not synchronised with the loop): carried forward, the attitude and rate at the cycle's
+    time are several times closer to the truth than the sample's."""
+    from uvd.control.trajectory import reftraj1
+    traj = reftraj1()
+    errs = {}
+    for prop in (False, True):
+        cfg = NavConfig(ins_timeout_s=0.25, propagate_ins=prop)
+        mem = nav_init(cfg)
+        worst_R = worst_w = 0.0
+        for k in range(600):
+            t_ins = k * 100 * MS + 40 * MS
+            ref = traj.at(t_ins * 1e-9)
+            from drivers.samples import R_to_euler
+            r, p, h = R_to_euler(ref.H[:3, :3])
+            t = t_ins + 60 * MS
+            s, mem = nav_step(cfg, mem, t, _ins(t_ins, r, p, h, ref.v[3:]), None, None)
+            if k > 2:
+                truth = traj.at(t * 1e-9)
+                worst_R = max(worst_R, _angle(s.H[:3, :3], truth.H[:3, :3]))
+                worst_w = max(worst_w, float(np.linalg.norm(s.v[3:] - truth.v[3:])))
+        errs[prop] = (worst_R, worst_w)
+    (R_off, w_off), (R_on, w_on) = errs[False], errs[True]
+    assert R_off > 0.005  # the sample's 60 ms age is a visible error (0.3° and more)
+    assert R_on < R_off / 5 and w_on < w_off / 5, errs
+
+
+def test_ins_not_carried_with_derived_rates_or_across_a_gap():
+    cfg = NavConfig(ins_timeout_s=0.25)
+    nan3 = (float("nan"),) * 3
+    # rates derived from attitude (ASCII INS): the attitude is the sample's, however old
+    mem = nav_init(cfg)
+    for k in range(3):
+        t = k * 100 * MS
+        s, mem = nav_step(cfg, mem, t + 80 * MS, _ins(t, heading=0.02 * k, omega=nan3,
+                                                     rates_valid=False), None, None)
+    assert s.rates_degraded
+    np.testing.assert_allclose(s.H[:3, :3], euler_to_R(0.0, 0.0, 0.04), atol=1e-15)
+    # a sample after a gap longer than the INS timeout: no slope from the stale one
+    mem = nav_init(cfg)
+    _, mem = nav_step(cfg, mem, 0, _ins(0, omega=(0.0, 0.0, 0.0)), None, None)
+    s, mem = nav_step(cfg, mem, 1000 * MS + 50 * MS, _ins(1000 * MS, omega=(0.0, 0.0, 0.3)),
+                      None, None)
+    np.testing.assert_allclose(s.v[3:], [0.0, 0.0, 0.3], atol=1e-15)
+    np.testing.assert_allclose(s.H[:3, :3], exp_so3(np.array([0.0, 0.0, 0.3 * 0.05])),
+                               atol=1e-12)
+    # a stale sample (older than the timeout) is invalid and not carried either
+    s, _ = nav_step(cfg, mem, 1000 * MS + 300 * MS, None, None, None)
+    assert not s.ins_valid
+    np.testing.assert_allclose(s.v[3:], [0.0, 0.0, 0.3], atol=1e-15)

@@ -24,6 +24,14 @@ How the state is assembled (thesis App. A.1, Table A.1):
   correlation of yaw rate and sway (RefTraj1 drives both at 0.21 rad/s) into a steady drift —
   R(ω × ν)·age has a non-zero mean — where the world-frame hold only delays the position.
 * **z (depth)** from the latest valid depth sample (Digiquartz, 7 Hz).
+* **Carried to the cycle's time** (``propagate_ins``): the INS is not synchronised with the
+  control loop, so its latest sample is 0–100 ms old at a 10 Hz cycle, and that delay sits
+  inside the heading loop. With measured rates, R and ω are reported at the cycle's time t:
+  ω(t) = ω_k + ω̇ a and R(t) = R_k e^{J((ω_k + ω̇ a/2) a)}, a = t − t_k the sample's age and
+  ω̇ = (ω_k − ω_{k−1})/(t_k − t_{k−1}) from the last two samples (a first-order hold of the
+  rate, whose integral is the rotation). Only while the sample is valid, and never with rates
+  derived from attitude (differencing noisy attitudes twice would amplify the noise). An age
+  of 0 — the lockstep instruments, sampled on the tick — leaves the sample unchanged.
 
 Validity and ages: a source is valid when its latest usable sample is at most its timeout old
 (``NavConfig.*_timeout_s``); ages are seconds since the sample's ``t_ns`` (``inf`` before the
@@ -54,7 +62,7 @@ import numba
 import numpy as np
 
 from drivers.frames import dvl_mount_to_body
-from uvd.model.lie import euler_R, exp_so3
+from uvd.model.lie import _exp_so3, euler_R, exp_so3
 
 if TYPE_CHECKING:  # the sample types are plain dataclasses; only their attributes are read
     from drivers.samples import DepthSample, DvlSample, InsSample
@@ -91,6 +99,9 @@ class NavConfig:
         Fewest good beams for a DVL sample to count as bottom lock (RDI 3-beam solution).
     derive_rates_min_dt_s : float
         Shortest attitude interval used to derive rates (shorter ones keep the previous ω).
+    propagate_ins : bool
+        Carry the INS attitude and rate to the cycle's time (module docstring). Off, the
+        latest sample is reported as it is, however old.
     """
 
     ins_timeout_s: float = 0.1
@@ -100,6 +111,7 @@ class NavConfig:
     dvl_lever_arm_m: np.ndarray = field(default_factory=_zeros3)
     min_good_beams: int = 3
     derive_rates_min_dt_s: float = 1e-3
+    propagate_ins: bool = True
 
     def __post_init__(self):
         R = np.asarray(self.dvl_mount_R, dtype=float)
@@ -198,6 +210,9 @@ class NavMemory:
         Previous INS attitude and its stamp, for rates derived from attitude.
     dvl_raw : (3,) ndarray or None
         Latest locked DVL velocity in the DVL frame (the lever arm is re-applied with each ω).
+    omega_dot : (3,) ndarray
+        Change of the measured rate between the last two INS samples, per second (zero
+        until two samples with measured rates arrived within ``ins_timeout_s``).
     """
 
     t_ns: int | None = None
@@ -216,6 +231,7 @@ class NavMemory:
     att_prev_R: np.ndarray | None = None
     att_prev_t_ns: int | None = None
     dvl_raw: np.ndarray | None = None
+    omega_dot: np.ndarray = field(default_factory=_zeros3)
 
 
 def nav_init(cfg: NavConfig, north_m: float = 0.0, east_m: float = 0.0) -> NavMemory:
@@ -239,6 +255,18 @@ def _rotate(R, x):
     for i in range(3):
         y[i] = R[i, 0] * x[0] + R[i, 1] * x[1] + R[i, 2] * x[2]
     return y
+
+
+@numba.njit(cache=True)
+def _carry(R, omega, omega_dot, age):
+    """(R(t), ω(t)) carried ``age`` seconds past the sample (R, ω) with ω(t) = ω + ω̇ t:
+    R e^{J(φ)} with φ = ∫ω = (ω + ω̇ age/2) age (module docstring)."""
+    phi = np.empty(3)
+    w = np.empty(3)
+    for i in range(3):
+        phi[i] = (omega[i] + 0.5 * omega_dot[i] * age) * age
+        w[i] = omega[i] + omega_dot[i] * age
+    return R @ _exp_so3(phi), w
 
 
 @numba.njit(cache=True)
@@ -325,6 +353,7 @@ def nav_step(cfg: NavConfig, mem: NavMemory, t_ns: int, ins: InsSample | None,
     att_prev_R = mem.att_prev_R
     att_prev_t = mem.att_prev_t_ns
     dvl_raw = mem.dvl_raw
+    omega_dot = mem.omega_dot
     omega_changed = False
 
     # --- INS: attitude and rates ------------------------------------------------------------
@@ -333,11 +362,20 @@ def nav_step(cfg: NavConfig, mem: NavMemory, t_ns: int, ins: InsSample | None,
         R_new = euler_R(float(ins.roll), float(ins.pitch), float(ins.heading))
         w = ins.omega_body
         if _finite3(w):
-            omega = _vec3(w)
+            w = _vec3(w)
+            # the rate's slope from the previous measured rate, for carrying it forward
+            gap_s = (ins.t_ns - ins_t) * 1e-9 if ins_t is not None else 0.0
+            if not rates_degraded and ins.rates_valid \
+                    and cfg.derive_rates_min_dt_s <= gap_s <= cfg.ins_timeout_s:
+                omega_dot = (w - omega) / gap_s
+            else:
+                omega_dot = _Z3
+            omega = w
             omega_changed = True
             rates_degraded = not ins.rates_valid
         else:
             rates_degraded = True
+            omega_dot = _Z3
             if att_prev_R is not None and att_prev_t is not None:
                 dt = (ins.t_ns - att_prev_t) * 1e-9
                 if dt >= cfg.derive_rates_min_dt_s:
@@ -405,7 +443,11 @@ def nav_step(cfg: NavConfig, mem: NavMemory, t_ns: int, ins: InsSample | None,
         east += float(v_hold[1]) * (t_ns - t_prev) * 1e-9
     v_world_prev = v_hold
 
-    H, v = _assemble(R, float(north), float(east), float(depth_m), nu, omega)
+    if cfg.propagate_ins and ins_valid and ins_age > 0.0 and not rates_degraded:
+        R_now, omega_now = _carry(R, omega, omega_dot, ins_age)
+    else:
+        R_now, omega_now = R, omega
+    H, v = _assemble(R_now, float(north), float(east), float(depth_m), nu, omega_now)
 
     state = NavState(
         int(t_ns), H, v, ins_valid and dvl_valid and depth_valid, ins_valid, dvl_valid,
@@ -413,6 +455,6 @@ def nav_step(cfg: NavConfig, mem: NavMemory, t_ns: int, ins: InsSample | None,
     )
     new_mem = NavMemory(
         int(t_ns), north, east, depth_m, R, omega, nu, v_world_prev, ins_t, dvl_t, depth_t,
-        rates_degraded, bottom_lock, att_prev_R, att_prev_t, dvl_raw,
+        rates_degraded, bottom_lock, att_prev_R, att_prev_t, dvl_raw, omega_dot,
     )
     return state, new_mem

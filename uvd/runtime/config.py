@@ -164,6 +164,11 @@ class NavigationSection:
                                          "fix the run starts from)")
     initial_east_m: float = setting(0.0, unit="m", min=-1e6, max=1e6,
                                     doc="east of the dead-reckoned position at start")
+    propagate_ins: bool = setting(
+        True, doc="carry the INS attitude and rate from the sample's time to the cycle's "
+                  "with the measured rate and its slope (the INS is not synchronised with the "
+                  "loop: its sample is up to one period old); never with rates derived from "
+                  "attitude (uvd.estimation.navigation)")
 
 
 @dataclass(frozen=True)

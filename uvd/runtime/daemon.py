@@ -76,7 +76,8 @@ def nav_config(cfg: Config) -> NavConfig:
     its stale trigger is quiet."""
     th = cfg.failsafe
     return NavConfig(ins_timeout_s=th.ins_stale_s, dvl_timeout_s=th.dvl_stale_s,
-                     depth_timeout_s=th.depth_stale_s)
+                     depth_timeout_s=th.depth_stale_s,
+                     propagate_ins=cfg.navigation.propagate_ins)
 
 
 def make_reference(cfg: Config, center=None):
