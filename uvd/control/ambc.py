@@ -205,9 +205,17 @@ class AMBCParams:
         rb = self.robust
         mf = np.broadcast_to(np.asarray(rb.mass_floor, dtype=float), (6,)).copy()
         dc = np.broadcast_to(np.asarray(rb.drag_ceiling, dtype=float), (6,)).copy()
-        object.__setattr__(self, "_c", (
-            _MODEL_CODE[self.model], gain_vector(self.kp, "kp"), gain_vector(self.kd, "kd"),
-            mf, dc, bool(np.any(K > 0))))
+        kp, kd = gain_vector(self.kp, "kp"), gain_vector(self.kd, "kd")
+        object.__setattr__(self, "_c", (_MODEL_CODE[self.model], kp, kd, mf, dc,
+                                        bool(np.any(K > 0))))
+        # the same constants as ambc_step hands them to the kernel, converted once
+        object.__setattr__(self, "_hot", (
+            _MODEL_CODE[self.model], np.ascontiguousarray(np.stack([kp, kd, mf, dc]),
+                                                          dtype=np.float64),
+            float(self.eps), bool(np.any(K > 0)), bool(rb.enabled), float(rb.dead_zone),
+            bool(rb.freeze_on_saturation), float(rb.reversal_hold_s),
+            float(rb.stiction_band_n), 36 + 2 * K.shape[0] + B_pinv.shape[0],
+            np.zeros(B_pinv.shape[0])))
 
     @property
     def n(self) -> int:
@@ -310,25 +318,22 @@ def ambc_step(state: VehicleState, reference: Reference, params: AMBCParams, ctr
     -------
     u : (6,) body wrench [f; τ] (N, N m). ctrl : the next :class:`AMBCState`.
     """
-    code, kp, kd, mf, dc, adapt = params._c
-    rb = params.robust
-    n = params.n
-    err = np.empty((5, 6))
-    theta = np.empty(n)
-    rate = np.empty(n)
-    nthr = params.B_pinv.shape[0]
-    f = np.empty(nthr)
-    last_f = ctrl.last_f if ctrl.last_f is not None else np.zeros(nthr)
+    code, gains, eps, adapt, robust, dead_zone, freeze_sat, hold_s, band, n_out, f0 = \
+        params._hot
+    n = params.K.shape[0]
+    out = np.empty(n_out)  # [u, err, θ̂⁺, θ̂̇, f]: the new state's arrays are views of it
+    last_f = ctrl.last_f if ctrl.last_f is not None else f0
     ff, use_ff = _ff(code, ctrl.theta, reference)
-    u, saturated, frozen, projected, hold_until = _kernels.ambc_cycle(
+    saturated, frozen, projected, hold_until = _kernels.ambc_cycle_buf(
         code, state.H, state.v, reference.H, reference.v, reference.vdot, _mask(reference),
-        ff, use_ff, ctrl.theta, params.K, kp, kd, float(params.eps), adapt, float(dt),
-        float(ctrl.t), rb.enabled, float(rb.dead_zone), mf, dc, params.B_pinv, params.f_max,
-        rb.freeze_on_saturation, float(rb.reversal_hold_s), float(rb.stiction_band_n), last_f,
-        float(ctrl.hold_until), err, theta, rate, f)
-    return u, AMBCState(theta=theta, theta_dot=rate, t=ctrl.t + dt, dpsi=err[0], dv=err[1],
-                        saturated=saturated, frozen=frozen, hold_until=hold_until, last_f=f,
-                        projections=ctrl.projections + int(projected))
+        ff, use_ff, ctrl.theta, params.K, gains, eps, adapt, float(dt), float(ctrl.t), robust,
+        dead_zone, params.B_pinv, params.f_max, freeze_sat, hold_s, band, last_f,
+        float(ctrl.hold_until), out)
+    # positional, in the field order of AMBCState (a frozen dataclass's keyword __init__ costs
+    # twice as much, on every cycle)
+    return out[0:6], AMBCState(out[36:36 + n], out[36 + n:36 + 2 * n], ctrl.t + dt, out[6:12],
+                               out[12:18], saturated, frozen, hold_until, out[36 + 2 * n:],
+                               ctrl.projections + int(projected))
 
 
 def ambc_params(model: str, *, K: np.ndarray | None = None, kp: float = 300.0,

@@ -318,25 +318,28 @@ def _finite(x):
 
 
 @numba.njit(cache=True)
-def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, theta_out, out):
+def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, dt, adapt, out):
     """Everything numeric of one AID step (n_v = 6: Theorem 4.3.1, 3: Theorem 4.2.1).
 
     ``vhat, v_prev, r_prev, u_prev``: the previous step's v̂ and sample (zeros at t₀ or after a
-    gap, where dt = 0), ``cfg`` = [dt, a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint, adapt]
-    (:func:`_cfg_template` with dt and adapt filled in), ``out`` receives
-    [v̂⁺, v, r, u, ∆v, λ_min, λ_max] (v, r = Rᵀe₃, u: the new sample). With dt = 0 only the
-    sample is copied (t₀ or a gap: v̂ = v). Returns 0 adapted, 4 propagated only (frozen),
+    gap, where dt = 0), ``cfg`` = [a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint]
+    (:func:`_cfg_template`), ``dt`` the step, ``adapt`` whether θ̂ is updated. ``out`` receives
+    [θ̂⁺, v̂⁺, v, r, u, ∆v, λ_min, λ_max] (θ̂⁺ first, as many entries as θ̂; v, r = Rᵀe₃, u: the
+    new sample) — one buffer, so one array crosses into the kernel and back. With dt = 0 only
+    the sample is copied (t₀ or a gap: v̂ = v). Returns 0 adapted, 4 propagated only (frozen),
     2 non-finite input (nothing done), 1 M̂ not positive definite, 3 update rejected: M̂⁺ lost
     positive definiteness or something became non-finite (θ̂ kept, v̂ propagated if finite
     else reset to v).
     """
     n = n_v
-    vhat_out = out[0:n]
-    v_out = out[n:2 * n]
-    r_out = out[2 * n:2 * n + 3]
-    u_out = out[2 * n + 3:3 * n + 3]
-    dv_out = out[3 * n + 3:4 * n + 3]
-    diag = out[4 * n + 3:4 * n + 5]
+    p = theta.shape[0]
+    theta_out = out[0:p]
+    vhat_out = out[p:p + n]
+    v_out = out[p + n:p + 2 * n]
+    r_out = out[p + 2 * n:p + 2 * n + 3]
+    u_out = out[p + 2 * n + 3:p + 3 * n + 3]
+    dv_out = out[p + 3 * n + 3:p + 4 * n + 3]
+    diag = out[p + 4 * n + 3:p + 4 * n + 5]
     off = 6 - n
     for i in range(n):
         v_out[i] = v_in[off + i]
@@ -345,13 +348,12 @@ def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, theta_o
         r_out[i] = H[2, i]
     if not (_finite(v_out) and _finite(r_out) and _finite(u_out)):
         return 2
-    dt = cfg[0]
     if dt == 0.0:
         for i in range(n):
             vhat_out[i] = v_out[i]
             dv_out[i] = 0.0
         return 4
-    linear, midpoint, adapt = cfg[7] != 0.0, cfg[8] != 0.0, cfg[9] != 0.0
+    linear, midpoint = cfg[6] != 0.0, cfg[7] != 0.0
     u = np.empty(n)
     vs = np.empty(n)
     rs = np.empty(3)
@@ -361,17 +363,17 @@ def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, theta_o
     for i in range(3):
         rs[i] = 0.5 * (r_prev[i] + r_out[i]) if midpoint else r_prev[i]
     if n == 6:
-        status = _aid6_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[1],
-                              cfg[2], cfg[3], cfg[4], cfg[5], adapt, theta_out, vhat_out, diag)
+        status = _aid6_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[0],
+                              cfg[1], cfg[2], cfg[3], cfg[4], adapt, theta_out, vhat_out, diag)
     else:
-        status = _aid3_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[1],
-                              cfg[2], cfg[3], cfg[4], adapt, theta_out, vhat_out, diag)
+        status = _aid3_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[0],
+                              cfg[1], cfg[2], cfg[3], adapt, theta_out, vhat_out, diag)
     if status != 0:
         for i in range(n):
             vhat_out[i] = v_out[i]
             dv_out[i] = 0.0
         return 1
-    ok = _finite(theta_out) and _finite(vhat_out) and diag[0] > cfg[6] * diag[1]
+    ok = _finite(theta_out) and _finite(vhat_out) and diag[0] > cfg[5] * diag[1]
     if not ok:
         for i in range(theta.shape[0]):
             theta_out[i] = theta[i]
@@ -386,63 +388,62 @@ def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, theta_o
 
 
 def _cfg_template(params, n_v: int) -> np.ndarray:
-    """[dt, a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint, adapt] with dt = adapt = 0: the
-    constant part of :func:`_drive`'s ``cfg``, built once per parameter set."""
+    """[a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint]: :func:`_drive`'s ``cfg``, built once
+    per parameter set (writable like every array handed to the kernel — one compiled
+    specialisation — and never written)."""
     gn = params.gains
-    cfg = np.array([0.0, gn.a, gn.gamma1, gn.gamma2, gn.gamma3,
-                    gn.gamma4 if n_v == 6 else 0.0, params.pd_floor,
-                    params.input_interp == "linear", params.sampling == "midpoint", 0.0],
-                   dtype=float)
-    cfg.setflags(write=False)
-    return cfg
+    return np.array([gn.a, gn.gamma1, gn.gamma2, gn.gamma3, gn.gamma4 if n_v == 6 else 0.0,
+                     params.pd_floor, params.input_interp == "linear",
+                     params.sampling == "midpoint"], dtype=float)
 
 
 # inputs of the gap step (dt = 0: only the sample is copied); never written by the kernel, and
 # writable like the arrays of the normal step so both share one compiled specialisation
 _ZEROS = {6: np.zeros(6), 3: np.zeros(3)}
-_GAP_CFG = np.zeros(10)
+_GAP_CFG = np.zeros(8)
 
 
 def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
-    """The Python side of :func:`aid6_step`/:func:`aid3_step` (state bookkeeping only)."""
+    """The Python side of :func:`aid6_step`/:func:`aid3_step` (state bookkeeping only).
+
+    The new state's arrays are views of the kernel's one output buffer (see :func:`_drive`);
+    states are built positionally, in the field order of :class:`AID6State`."""
     n = n_v
-    out = np.empty(4 * n + 5)
-    theta_out = np.empty(st.theta.shape[0])
+    p = st.theta.shape[0]
+    out = np.empty(p + 4 * n + 5)
     gap = st.v_prev is None or not (0.0 < dt <= params.max_dt)  # t₀ (v̂ = v) or a gap
     if gap:
         z = _ZEROS[n]
         status = _drive(n, st.theta, z, z, _ZEROS[3], z, vs.H, vs.v, u_applied, _GAP_CFG,
-                        theta_out, out)
+                        0.0, False, out)
     else:
-        cfg = params._cfg.copy()
-        cfg[0] = dt
-        cfg[9] = 0.0 if st.frozen else 1.0
         status = _drive(n, st.theta, st.v_hat, st.v_prev, st.r_prev, st.u_prev, vs.H, vs.v,
-                        u_applied, cfg, theta_out, out)
+                        u_applied, params._cfg, dt, not st.frozen, out)
     if status == 2:
         return replace(st, skipped=st.skipped + 1)
-    vhat_out, v_out, r_out = out[0:n], out[n:2 * n], out[2 * n:2 * n + 3]
-    u_out, dv = out[2 * n + 3:3 * n + 3], out[3 * n + 3:4 * n + 3]
+    o = p
+    vhat_out, v_out = out[o:o + n], out[o + n:o + 2 * n]
+    r_out, u_out = out[o + 2 * n:o + 2 * n + 3], out[o + 2 * n + 3:o + 3 * n + 3]
+    dv = out[o + 3 * n + 3:o + 4 * n + 3]
     if gap:
-        return replace(st, v_hat=vhat_out, dv=dv, v_prev=v_out, r_prev=r_out, u_prev=u_out,
-                       resyncs=st.resyncs + (st.v_prev is not None))
+        return state_cls(st.theta, vhat_out, dv, v_out, r_out, u_out, st.m_min_eig,
+                         st.m_max_eig, st.frozen, st.freeze_reason, st.steps, st.skipped,
+                         st.resyncs + (st.v_prev is not None), st.t_s)
     t_s = st.t_s + dt
     frozen, reason, steps = st.frozen, st.freeze_reason, st.steps
-    lo, hi = float(out[4 * n + 3]), float(out[4 * n + 4])
+    lo, hi = float(out[o + 4 * n + 3]), float(out[o + 4 * n + 4])
     theta_new = st.theta
     if status == 0:
         steps += 1
-        theta_out.setflags(write=False)
-        theta_new = theta_out
+        theta_new = out[0:p]
+        theta_new.setflags(write=False)
     elif status in (1, 3):
         frozen = True
         reason = (f"t={t_s:.1f}s after {steps} steps: {what} lost positive definiteness "
                   f"(λ_min {lo:.4g}, λ_max {hi:.4g}); θ̂ frozen at its last PD value")
         lo, hi = st.m_min_eig, st.m_max_eig
-    return state_cls(theta=theta_new, v_hat=vhat_out, dv=dv, v_prev=v_out, r_prev=r_out,
-                     u_prev=u_out, m_min_eig=lo, m_max_eig=hi, frozen=frozen,
-                     freeze_reason=reason, steps=steps, skipped=st.skipped,
-                     resyncs=st.resyncs, t_s=t_s)
+    return state_cls(theta_new, vhat_out, dv, v_out, r_out, u_out, lo, hi, frozen, reason,
+                     steps, st.skipped, st.resyncs, t_s)
 
 
 # ---------------------------------------------------------------------------------------------
