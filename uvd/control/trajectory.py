@@ -106,6 +106,15 @@ def _from_euler(eta, d1, d2, H, v, vdot):
     vdot[3], vdot[4], vdot[5] = a0, a1, a2
 
 
+@numba.njit(cache=True)
+def _reference(t, center, amp, w, ph, idx, H, v, vdot):
+    """:func:`_cosines` then :func:`_from_euler` in one compiled call (the per-cycle path of
+    :meth:`CosineTrajectory.at`)."""
+    eta, d1, d2 = np.empty(6), np.empty(6), np.empty(6)
+    _cosines(t, center, amp, w, ph, idx, eta, d1, d2)
+    _from_euler(eta, d1, d2, H, v, vdot)
+
+
 def reference_from_euler(eta: np.ndarray, d1: np.ndarray, d2: np.ndarray, *,
                          open_loop_wrench: np.ndarray | None = None,
                          closed_loop: np.ndarray | None = None) -> Reference:
@@ -179,10 +188,11 @@ class CosineTrajectory:
         return self._arrays[6]
 
     def at(self, t: float) -> Reference:
-        eta, d1, d2 = self.dof(t)
-        mask = self._arrays[6]
-        return reference_from_euler(eta, d1, d2, open_loop_wrench=self.open_loop_wrench(t),
-                                    closed_loop=None if mask is None else mask > 0.5)
+        center, amp, w, ph, idx, ol, mask = self._arrays
+        H, v, vdot = np.empty((4, 4)), np.empty(6), np.empty(6)
+        _reference(float(t), center, amp, w, ph, idx, H, v, vdot)
+        return Reference(H, v, vdot, None if ol is None else self.open_loop_wrench(t),
+                         None if mask is None else mask > 0.5)
 
 
 def _smootherstep(x: float) -> tuple[float, float, float]:
