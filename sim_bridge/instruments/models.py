@@ -53,27 +53,35 @@ class InstrumentConfig:
     depth_rate_hz: float = 7.0
     depth_std_m: float = 0.00075
     xy_scale_error: float = 0.005
+    #: the INS samples at k/ins_rate_hz + ins_offset_s: its phase against a control loop
+    #: ticking at k/rate (0: on the tick, as lockstep runs; a real INS has its own clock)
+    ins_offset_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("ins_rate_hz", "dvl_rate_hz", "depth_rate_hz"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"instrument {name} must be > 0, got {getattr(self, name)}")
+        if not 0.0 <= self.ins_offset_s < 1.0 / self.ins_rate_hz:
+            raise ValueError(f"instrument ins_offset_s must be in [0, 1/ins_rate_hz), got "
+                             f"{self.ins_offset_s}")
 
 
 class _Periodic:
     """Fires at t = k/rate on a simulated clock: the k-th due time is computed from k, so no
     rounding error accumulates (6 Hz gives exactly 360 samples a minute)."""
 
-    def __init__(self, rate_hz: float) -> None:
+    def __init__(self, rate_hz: float, offset_ns: int = 0) -> None:
         self.rate_hz = rate_hz
+        self.offset_ns = offset_ns
         self.k = 0
-        self.next_ns = 0
+        self.next_ns = offset_ns
 
     def due(self, t_ns: int) -> bool:
         if t_ns >= self.next_ns:
             # skip the due times already passed (a coarse caller never gets a burst)
-            self.k = max(self.k + 1, math.floor(t_ns * self.rate_hz / 1e9) + 1)
-            self.next_ns = round(self.k * 1e9 / self.rate_hz)
+            self.k = max(self.k + 1,
+                         math.floor((t_ns - self.offset_ns) * self.rate_hz / 1e9) + 1)
+            self.next_ns = self.offset_ns + round(self.k * 1e9 / self.rate_hz)
             return True
         return False
 
@@ -88,7 +96,7 @@ class Instruments:
     def __init__(self, config: InstrumentConfig, rng: np.random.Generator) -> None:
         self.config = config
         self.rng = rng
-        self._ins = _Periodic(config.ins_rate_hz)
+        self._ins = _Periodic(config.ins_rate_hz, round(config.ins_offset_s * 1e9))
         self._dvl = _Periodic(config.dvl_rate_hz)
         self._depth = _Periodic(config.depth_rate_hz)
         self.dr_north = 0.0
