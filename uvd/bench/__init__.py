@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -58,3 +59,26 @@ def percentiles(samples_s, scale: float = 1e6) -> dict[str, float]:
         "p999": float(np.percentile(a, 99.9)),
         "max": float(a.max()),
     }
+
+
+def host_steal_s(cpus=None) -> float | None:
+    """CPU time the hypervisor gave to others (``steal`` of /proc/stat, s): summed over all
+    CPUs, or over ``cpus`` (CPU numbers) only; None where the kernel does not say.
+
+    A virtual machine whose host is busy is paused now and then: every thread on the paused
+    CPU stalls at once, whatever its priority. Benchmarks and the demo report it so such a
+    stall can be told from one of ours. The counter ticks in 1/USER_HZ (10 ms) units.
+    """
+    want = None if cpus is None else {f"cpu{int(c)}" for c in cpus}
+    try:
+        total = 0
+        with open("/proc/stat", encoding="ascii") as fh:
+            for line in fh:
+                if not line.startswith("cpu"):
+                    break
+                fields = line.split()
+                if (want is None and fields[0] == "cpu") or (want and fields[0] in want):
+                    total += int(fields[8])
+        return total / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None

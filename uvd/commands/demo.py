@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from uvd.bench import host_steal_s
 from uvd.jsonio import write_json
 
 
@@ -67,19 +68,6 @@ def _rss_mb(pid: int | None) -> tuple[float, float]:
             k, v = line.split(":", 1)
             vals[k] = int(v.split()[0]) / 1024.0
     return vals.get("VmRSS", math.nan), vals.get("VmHWM", math.nan)
-
-
-def _steal_s() -> float | None:
-    """CPU time the hypervisor gave to others (``steal`` of /proc/stat, summed over CPUs, s).
-
-    A virtual machine whose host is busy is paused now and then: every process stalls at
-    once, whatever its priority. The demo reports it so a stall can be told from a bug.
-    """
-    try:
-        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
-        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
-    except (OSError, ValueError, IndexError):
-        return None
 
 
 def _wrap(a):
@@ -328,7 +316,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
             samples.append((time.monotonic() - armed_at, rd, rb))
             with contextlib.suppress(OSError, ValueError):
                 loads.append(float(Path("/proc/loadavg").read_text().split()[0]))
-            st = _steal_s()
+            st = host_steal_s()
             if st is not None:
                 steal.append((time.monotonic(), st))
             if daemon.poll() is not None:
