@@ -236,6 +236,29 @@ def _pd_above(S, floor):
 
 
 @_jit
+def _sym_inside(A, sign, floor, L):
+    """True when :func:`_sym_eig_clip_min` (sign·A, floor) would leave its matrix unchanged:
+    the same Cholesky test as there, on sym(sign·A) = ½(sign·A + (sign·A)ᵀ) formed entry by
+    entry (sign = ±1, so every entry is bit-identical) instead of as four temporary matrices
+    — the projection's common case, every cycle. ``L``: n × n scratch."""
+    n = A.shape[0]
+    lim = floor - 1e-9 * max(1.0, abs(floor))
+    for j in range(n):
+        d = 0.5 * (sign * A[j, j] + sign * A[j, j]) - lim
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if d <= 0.0:
+            return False
+        L[j, j] = np.sqrt(d)
+        for i in range(j + 1, n):
+            x = 0.5 * (sign * A[i, j] + sign * A[j, i])
+            for k in range(j):
+                x -= L[i, k] * L[j, k]
+            L[i, j] = x / L[j, j]
+    return True
+
+
+@_jit
 def _sym_eig_clip_min(A, floor):
     """Symmetric part of A with its eigenvalues raised to at least ``floor`` (Frobenius
     projection onto {S = Sᵀ : S ⪰ floor·I}); returns (S, clipped?)."""
@@ -270,20 +293,25 @@ def project(model, theta, mass_floor, drag_ceiling):
     for i in range(6):
         for j in range(6):
             M[i, j] = theta[_MIDX[i, j]]
-    S, clipped = _sym_eig_clip_min(M, mf)
+    L = np.empty((6, 6))  # scratch of the tests
+    clipped = False
+    if not _sym_inside(M, 1.0, mf, L):
+        S, clipped = _sym_eig_clip_min(M, mf)
     if clipped:
         moved += 1
         for i in range(6):
             for j in range(i, 6):
                 theta[_MIDX[i, j]] = S[i, j]
     dc = drag_ceiling.min()
+    D = np.empty((6, 6))
     for k in range(6):
         base = 21 + 36 * k
-        D = np.empty((6, 6))
         for col in range(6):
             for row in range(6):
                 D[row, col] = theta[base + col * 6 + row]
         # sym(D) ⪯ −dc I  ⇔  sym(−D) ⪰ dc I
+        if _sym_inside(D, -1.0, dc, L):
+            continue
         S, clipped = _sym_eig_clip_min(-D, dc)
         if clipped:
             moved += 1
