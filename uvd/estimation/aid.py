@@ -421,17 +421,16 @@ def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
                         u_applied, params._cfg, dt, not st.frozen, out)
     if status == 2:
         return replace(st, skipped=st.skipped + 1)
-    o = p
-    vhat_out, v_out = out[o:o + n], out[o + n:o + 2 * n]
-    r_out, u_out = out[o + 2 * n:o + 2 * n + 3], out[o + 2 * n + 3:o + 3 * n + 3]
-    dv = out[o + 3 * n + 3:o + 4 * n + 3]
+    vhat_out, v_out = out[p:p + n], out[p + n:p + 2 * n]
+    r_out, u_out = out[p + 2 * n:p + 2 * n + 3], out[p + 2 * n + 3:p + 3 * n + 3]
+    dv = out[p + 3 * n + 3:p + 4 * n + 3]
     if gap:
         return state_cls(st.theta, vhat_out, dv, v_out, r_out, u_out, st.m_min_eig,
                          st.m_max_eig, st.frozen, st.freeze_reason, st.steps, st.skipped,
                          st.resyncs + (st.v_prev is not None), st.t_s)
     t_s = st.t_s + dt
     frozen, reason, steps = st.frozen, st.freeze_reason, st.steps
-    lo, hi = float(out[o + 4 * n + 3]), float(out[o + 4 * n + 4])
+    lo, hi = float(out[p + 4 * n + 3]), float(out[p + 4 * n + 4])
     theta_new = st.theta
     if status == 0:
         steps += 1
