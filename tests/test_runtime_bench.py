@@ -23,3 +23,8 @@ def test_bench_loop_keys(tmp_path, capsys):
     assert r["cycle"] == "pdc" and r["cycle_errors"] == 0 and isinstance(r["overruns"], int)
     assert r["cycles"] + r["skipped"] >= 50 and r["naive_asyncio"]["cycles"] > 10
     assert r["compute_us"]["p50"] > 1.0       # the PDC cycle really ran
+    # the host's steal over the measured run, on every CPU here (not pinned)
+    hs = r["host_steal"]
+    assert hs["cpus"] == "all"
+    if hs["seconds"] is not None:
+        assert hs["seconds"] >= 0.0 and 0.0 <= hs["share"] <= 1.0

@@ -28,7 +28,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from uvd.bench import Bench, percentiles
+from uvd.bench import Bench, host_steal_s, percentiles
 from uvd.runtime.loop import CpuLatencyRequest, FixedRateLoop, LoopSettings, apply_realtime
 
 CycleFactory = Callable[[], Callable[[int, float], None]]
@@ -181,7 +181,8 @@ def _add(p) -> None:
     p.add_argument("--no-naive", action="store_true", help="skip the naive asyncio loop")
 
 
-async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float) -> dict:
+async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float,
+                steal: Callable[[], float | None]) -> dict:
     n_max = int(math.ceil(duration * settings.rate_hz)) + 16
     loop = FixedRateLoop(cycle, settings, trace_capacity=n_max)
     try:
@@ -189,9 +190,9 @@ async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float) -
             await loop.run(duration_s=warmup)
             loop.reset_stats()
             loop.trace.n = 0
-        wall0 = time.monotonic()
+        steal0, wall0 = steal(), time.monotonic()
         snap = await loop.run(duration_s=duration)
-        wall = time.monotonic() - wall0
+        wall, steal1 = time.monotonic() - wall0, steal()
     finally:
         loop.close()
     n = loop.trace.n
@@ -208,6 +209,8 @@ async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float) -
         "timer": snap["timer"],
         "gc": snap["gc"],
         "histogram": {"lateness_us": snap["lateness_us"], "compute_us": snap["compute_us"]},
+        "host_steal_s": None if steal0 is None or steal1 is None else steal1 - steal0,
+        "wall_s": wall,
     }
 
 
@@ -262,7 +265,10 @@ def _run(args) -> dict:
     if cpu_latency is not None and cpu_latency.message:
         print(f"uvd bench loop: {cpu_latency.message}")
     load0 = os.getloadavg()
-    ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup))
+    # the hypervisor's steal on the loop's CPUs: a paused vCPU stalls us whatever our priority
+    steal_cpus = sorted(rt.cpu_affinity) if args.cpu else None
+    ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup,
+                             lambda: host_steal_s(steal_cpus)))
     naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
     figures = {
         "rate_hz": args.rate,
@@ -283,6 +289,10 @@ def _run(args) -> dict:
                      "cpu_affinity": list(rt.cpu_affinity), "messages": list(rt.messages),
                      "cpu_dma_latency_held": bool(cpu_latency and cpu_latency.held)},
         "loadavg_1min_at_start": load0[0],
+        "host_steal": {"cpus": steal_cpus or "all", "seconds": ours["host_steal_s"],
+                       "share": (ours["host_steal_s"] / ours["wall_s"] / (len(steal_cpus)
+                                 if steal_cpus else os.cpu_count() or 1))
+                       if ours["host_steal_s"] is not None and ours["wall_s"] > 0 else None},
     }
     if cpu_latency is not None:
         cpu_latency.close()
@@ -298,6 +308,10 @@ def _run(args) -> dict:
         print(f"  lateness µs  naive : {_fmt(naive['lateness_us'])}   achieved "
               f"{naive['achieved_rate_hz']:.1f} Hz")
     print(f"  compute  µs  ours  : {_fmt(ours['compute_us'])}")
+    hs = figures["host_steal"]
+    if hs["seconds"] is not None:
+        print(f"  host steal on CPUs {hs['cpus']}: {hs['seconds']:.2f} s over the run "
+              f"({100 * hs['share']:.2f} % of their time)")
     g = ours["gc"]
     print(f"  gc ({g['policy']}): collections {g['collections']}  forced {g['forced']}  "
           f"max µs {[round(x, 1) for x in g['max_us']]}")
