@@ -159,6 +159,17 @@ def _finite_hv(H, v):
 
 
 @numba.njit(cache=True)
+def _wrench_of(B, f, u):
+    """u = B f, written into ``u`` (the same summation order as ``B @ f``'s loop form)."""
+    n = f.shape[0]
+    for i in range(6):
+        x = 0.0
+        for j in range(n):
+            x += B[i, j] * f[j]
+        u[i] = x
+
+
+@numba.njit(cache=True)
 def _applied_wrench(B, k, omega, u):
     """u = B f with f = k ω|ω| (App. A.1), written into ``u``; returns False (u unset) if ω
     has a non-finite entry."""
@@ -169,11 +180,7 @@ def _applied_wrench(B, k, omega, u):
     f = np.empty(n)
     for j in range(n):
         f[j] = k[j] * omega[j] * np.abs(omega[j])
-    for i in range(6):
-        x = 0.0
-        for j in range(n):
-            x += B[i, j] * f[j]
-        u[i] = x
+    _wrench_of(B, f, u)
     return True
 
 
@@ -207,11 +214,7 @@ def _command(B, B_pinv, f_max, u_ctrl, ol, use_ol, f_out, sat_out, u_cmd):
     for j in range(n):
         f_out[j] = f[j]
         sat_out[j] = sat[j]
-    for i in range(6):
-        x = 0.0
-        for j in range(n):
-            x += B[i, j] * f[j]
-        u_cmd[i] = x
+    _wrench_of(B, f, u_cmd)
     return status
 
 
