@@ -41,10 +41,12 @@ def test_cycles_disarmed_and_armed_with_read_only_inputs_compile_nothing_new():
     st = d.state
     for k in range(6):
         t = (k + 10) * 100_000_000
-        ins = InsSample(t_ns=t, roll=roll, pitch=pitch, heading=heading,
-                        omega_body=_readonly([0.01, 0.0, -0.02]))
-        dvl = DvlSample(t_ns=t, velocity_body=_readonly([0.1, 0.0, 0.0]), bottom_lock=True)
-        depth = DepthSample(t_ns=t, depth_m=float(H[2, 3]))
+        # stamped before the cycle and apart from each other, as samples arrive in flight
+        ins = InsSample(t_ns=t - 63_000_000, roll=roll, pitch=pitch, heading=heading,
+                        omega_body=_readonly([0.01, 0.0, -0.02 - 0.01 * k]))
+        dvl = DvlSample(t_ns=t - 41_000_000, velocity_body=_readonly([0.1, 0.0, 0.0]),
+                        bottom_lock=True)
+        depth = DepthSample(t_ns=t - 7_000_000, depth_m=float(H[2, 3]))
         speeds = _readonly(np.full(d.allocator.n_thrusters, 3.0))  # as decoded from CAN
         out, st = core.step(d.core_cfg, core.CoreInputs(
             t_ns=t, ins=ins, dvl=dvl, depth=depth, armed=k % 2 == 1,

@@ -552,10 +552,12 @@ class Daemon:
         st = self.state
         for k in range(3):
             t = (k + 1) * 100_000_000
-            ins = InsSample(t_ns=t, roll=roll, pitch=pitch, heading=heading,
+            # stamped before the cycle and apart, as in flight: the INS sample carried to the
+            # cycle's time, the DVL's attitude carried to its own stamp (every kernel loaded)
+            ins = InsSample(t_ns=t - 30_000_000, roll=roll, pitch=pitch, heading=heading,
                             omega_body=np.zeros(3))
-            dvl = DvlSample(t_ns=t, velocity_body=np.zeros(3), bottom_lock=True)
-            depth = DepthSample(t_ns=t, depth_m=float(H[2, 3]))
+            dvl = DvlSample(t_ns=t - 50_000_000, velocity_body=np.zeros(3), bottom_lock=True)
+            depth = DepthSample(t_ns=t - 20_000_000, depth_m=float(H[2, 3]))
             # the first cycle disarmed (as after boot), the others armed: both paths loaded
             out, st = core.step(self.core_cfg, core.CoreInputs(
                 t_ns=t, ins=ins, dvl=dvl, depth=depth, armed=k > 0,
