@@ -236,26 +236,17 @@ def _pd_above(S, floor):
 
 
 @_jit
-def _sym_inside(A, sign, floor, L):
+def _sym_inside(A, sign, floor, S):
     """True when :func:`_sym_eig_clip_min` (sign·A, floor) would leave its matrix unchanged:
-    the same Cholesky test as there, on sym(sign·A) = ½(sign·A + (sign·A)ᵀ) formed entry by
-    entry (sign = ±1, so every entry is bit-identical) instead of as four temporary matrices
-    — the projection's common case, every cycle. ``L``: n × n scratch."""
+    the same test as there (:func:`_pd_above` at the floor less its tolerance) on
+    sym(sign·A) = ½(sign·A + (sign·A)ᵀ) formed entry by entry into the n × n scratch ``S``
+    (sign = ±1, so every entry is bit-identical) instead of as four temporary matrices — the
+    projection's common case, every cycle."""
     n = A.shape[0]
-    lim = floor - 1e-9 * max(1.0, abs(floor))
-    for j in range(n):
-        d = 0.5 * (sign * A[j, j] + sign * A[j, j]) - lim
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if d <= 0.0:
-            return False
-        L[j, j] = np.sqrt(d)
-        for i in range(j + 1, n):
-            x = 0.5 * (sign * A[i, j] + sign * A[j, i])
-            for k in range(j):
-                x -= L[i, k] * L[j, k]
-            L[i, j] = x / L[j, j]
-    return True
+    for i in range(n):
+        for j in range(n):
+            S[i, j] = 0.5 * (sign * A[i, j] + sign * A[j, i])
+    return _pd_above(S, floor - 1e-9 * max(1.0, abs(floor)))
 
 
 @_jit
