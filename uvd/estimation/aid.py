@@ -109,6 +109,89 @@ def _min_max_eig(A):
 
 
 @numba.njit(cache=True)
+def _chol_solve(A, b, n, x):
+    """x = A⁻¹b by Cholesky; False (x untouched) if A is not positive definite."""
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not (s > 0.0):
+            return False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    y = np.empty(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+    return True
+
+
+@numba.njit(cache=True)
+def _add_drag(theta, base0, n, v, rhs):
+    """rhs += Σᵢ |vᵢ| D̂ᵢ v, D̂ᵢ stored column-major from θ[base0 + n²i] ((2.40), (2.44))."""
+    for i in range(n):
+        avi = abs(v[i])
+        if avi != 0.0:
+            base = base0 + n * n * i
+            for c in range(n):
+                s = avi * v[c]
+                off = base + n * c
+                for row in range(n):
+                    rhs[row] += theta[off + row] * s
+
+
+@numba.njit(cache=True)
+def _observer(vhat, v_prev, psi, dt, a, n, v_now, fresh, vhat_out):
+    """v̂⁺ = v̂ + dt(ψ − a∆v) with ∆v = v̂ − v_prev ((4.23), (4.10)); returns the ∆v the
+    parameter laws use: that one, or with ``fresh`` the new error v̂⁺ − v_now."""
+    dv = vhat - v_prev
+    for i in range(n):
+        vhat_out[i] = vhat[i] + dt * (psi[i] - a * dv[i])
+    if fresh:
+        dv = vhat_out - v_now
+    return dv
+
+
+@numba.njit(cache=True)
+def _inertia_law(theta_out, n, hg, psi_a, v, dv, psi_b):
+    """θ_M += hg(−ψ_a vᵀ − v ψ_aᵀ + ∆v ψ_bᵀ + ψ_b ∆vᵀ) on the upper triangle: (4.24) with
+    hg = γ₁dt/2, ψ_a = ψ₁, ψ_b = ψ₂; (4.11) with ψ_a = ψ₄, ψ_b = ψ₃."""
+    k = 0
+    for i in range(n):
+        for j in range(i, n):
+            theta_out[k] += hg * (-psi_a[i] * v[j] - v[i] * psi_a[j]
+                                  + dv[i] * psi_b[j] + psi_b[i] * dv[j])
+            k += 1
+
+
+@numba.njit(cache=True)
+def _drag_law(theta_out, base0, n, g2dt, v, dv):
+    """D̂ᵢ += −γ₂ dt |vᵢ| ∆v vᵀ ((4.25), (4.12))."""
+    for i in range(n):
+        avi = abs(v[i])
+        if avi != 0.0:
+            sc = -g2dt * avi
+            base = base0 + n * n * i
+            for c in range(n):
+                s = sc * v[c]
+                off = base + n * c
+                for row in range(n):
+                    theta_out[off + row] += s * dv[row]
+
+
+@numba.njit(cache=True)
 def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, g4, adapt,
                  theta_out, vhat_out, diag):
     """One Euler step of (4.23)–(4.27).
@@ -134,46 +217,12 @@ def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, 
     rhs[3] = p2 * n3 - p3 * n2 + h2 * w3 - h3 * w2 + b2 * r3 - b3 * r2 + u[3]
     rhs[4] = p3 * n1 - p1 * n3 + h3 * w1 - h1 * w3 + b3 * r1 - b1 * r3 + u[4]
     rhs[5] = p1 * n2 - p2 * n1 + h1 * w2 - h2 * w1 + b1 * r2 - b2 * r1 + u[5]
-    for i in range(6):
-        avi = abs(v[i])
-        if avi != 0.0:
-            base = 21 + 36 * i
-            for c in range(6):
-                s = avi * v[c]
-                off = base + 6 * c
-                for row in range(6):
-                    rhs[row] += theta[off + row] * s
+    _add_drag(theta, 21, 6, v, rhs)
     # ψ₂ = M̂⁻¹ rhs by Cholesky (fails ⇔ M̂ not positive definite)
-    L = np.zeros((6, 6))
-    for j in range(6):
-        s = M[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not (s > 0.0):
-            return 1
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, 6):
-            s = M[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    y = np.empty(6)
-    for i in range(6):
-        s = rhs[i]
-        for k in range(i):
-            s -= L[i, k] * y[k]
-        y[i] = s / L[i, i]
     psi2 = np.empty(6)
-    for i in range(5, -1, -1):
-        s = y[i]
-        for k in range(i + 1, 6):
-            s -= L[k, i] * psi2[k]
-        psi2[i] = s / L[i, i]
-    dv = vhat - v_prev
-    for i in range(6):
-        vhat_out[i] = vhat[i] + dt * (psi2[i] - a * dv[i])
-    if fresh:
-        dv = vhat_out - v_now
+    if not _chol_solve(M, rhs, 6, psi2):
+        return 1
+    dv = _observer(vhat, v_prev, psi2, dt, a, 6, v_now, fresh, vhat_out)
     for i in range(N_THETA_UV):
         theta_out[i] = theta[i]
     if not adapt:
@@ -189,25 +238,9 @@ def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, 
     psi1[3] = w2 * e3 - w3 * e2
     psi1[4] = w3 * e1 - w1 * e3
     psi1[5] = w1 * e2 - w2 * e1
-    # (4.24) on the upper triangle (θ_M of (2.45))
-    hg = 0.5 * g1 * dt
-    k = 0
-    for i in range(6):
-        for j in range(i, 6):
-            theta_out[k] += hg * (-psi1[i] * v[j] - v[i] * psi1[j]
-                                  + dv[i] * psi2[j] + psi2[i] * dv[j])
-            k += 1
-    # (4.25): D̂ᵢˢ += −γ₂ dt |vᵢ| (v ⊗ ∆v)
-    for i in range(6):
-        avi = abs(v[i])
-        if avi != 0.0:
-            sc = -g2 * dt * avi
-            base = 21 + 36 * i
-            for c in range(6):
-                s = sc * v[c]
-                off = base + 6 * c
-                for row in range(6):
-                    theta_out[off + row] += s * dv[row]
+    # (4.24) on the upper triangle (θ_M of (2.45)); (4.25): D̂ᵢˢ += −γ₂ dt |vᵢ| (v ⊗ ∆v)
+    _inertia_law(theta_out, 6, 0.5 * g1 * dt, psi1, v, dv, psi2)
+    _drag_law(theta_out, 21, 6, g2 * dt, v, dv)
     # (4.26), (4.27)
     theta_out[237] -= g3 * dt * (d1 * r1 + d2 * r2 + d3 * r3)
     theta_out[238] += g4 * dt * (e2 * r3 - e3 * r2)
@@ -234,44 +267,11 @@ def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3
     rhs[0] = h[1] * w3 - h[2] * w2 + b2 * r3 - b3 * r2 + tau[0]
     rhs[1] = h[2] * w1 - h[0] * w3 + b3 * r1 - b1 * r3 + tau[1]
     rhs[2] = h[0] * w2 - h[1] * w1 + b1 * r2 - b2 * r1 + tau[2]
-    for i in range(3):
-        awi = abs(w[i])
-        if awi != 0.0:
-            base = 6 + 9 * i
-            for c in range(3):
-                s = awi * w[c]
-                for row in range(3):
-                    rhs[row] += theta[base + 3 * c + row] * s
-    L = np.zeros((3, 3))
-    for j in range(3):
-        s = I[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not (s > 0.0):
-            return 1
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, 3):
-            s = I[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    y = np.empty(3)
-    for i in range(3):
-        s = rhs[i]
-        for k in range(i):
-            s -= L[i, k] * y[k]
-        y[i] = s / L[i, i]
+    _add_drag(theta, 6, 3, w, rhs)
     psi3 = np.empty(3)
-    for i in range(2, -1, -1):
-        s = y[i]
-        for k in range(i + 1, 3):
-            s -= L[k, i] * psi3[k]
-        psi3[i] = s / L[i, i]
-    dw = what - w_prev
-    for i in range(3):
-        what_out[i] = what[i] + dt * (psi3[i] - a * dw[i])
-    if fresh:
-        dw = what_out - w_now
+    if not _chol_solve(I, rhs, 3, psi3):
+        return 1
+    dw = _observer(what, w_prev, psi3, dt, a, 3, w_now, fresh, what_out)
     for i in range(N_THETA_UVR):
         theta_out[i] = theta[i]
     if not adapt:
@@ -283,22 +283,9 @@ def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3
     psi4[0] = w2 * e3 - w3 * e2
     psi4[1] = w3 * e1 - w1 * e3
     psi4[2] = w1 * e2 - w2 * e1
-    hg = -0.5 * g1 * dt
-    k = 0
-    for i in range(3):
-        for j in range(i, 3):
-            theta_out[k] += hg * (psi4[i] * w[j] + w[i] * psi4[j]
-                                  - dw[i] * psi3[j] - psi3[i] * dw[j])
-            k += 1
-    for i in range(3):
-        awi = abs(w[i])
-        if awi != 0.0:
-            sc = -g2 * dt * awi
-            base = 6 + 9 * i
-            for c in range(3):
-                s = sc * w[c]
-                for row in range(3):
-                    theta_out[base + 3 * c + row] += s * dw[row]
+    # (4.11) (the same symmetric form as (4.24)) and (4.12)
+    _inertia_law(theta_out, 3, 0.5 * g1 * dt, psi4, w, dw, psi3)
+    _drag_law(theta_out, 6, 3, g2 * dt, w, dw)
     # (4.13): b̂̇ = −γ₃ J(r)∆ω = −γ₃ r × ∆ω
     theta_out[33] -= g3 * dt * (r2 * e3 - r3 * e2)
     theta_out[34] -= g3 * dt * (r3 * e1 - r1 * e3)

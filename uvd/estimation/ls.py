@@ -146,24 +146,24 @@ def _inertia_batch(w: np.ndarray, wdot: np.ndarray) -> np.ndarray:
     return W
 
 
-def regressor_uv_batch(v: np.ndarray, vdot: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """W_UV of (2.49) for n samples: (n, 6, 241), u = W_UV θ_UV; r = Rᵀe₃ (n, 3)."""
-    Phi, A, drag, shared = _features("6dof", v, vdot, r)
-    W = np.zeros((v.shape[0], 6, N_THETA_UV))
-    for row in range(6):
+def _regressor_batch(model: str, n_theta: int, v, vdot, r) -> np.ndarray:
+    Phi, A, drag, shared = _features(model, v, vdot, r)
+    rows = A.shape[1]
+    W = np.zeros((v.shape[0], rows, n_theta))
+    for row in range(rows):
         W[:, row, drag[row]] = Phi
         W[:, row, shared] = A[:, row, :]
     return W
+
+
+def regressor_uv_batch(v: np.ndarray, vdot: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """W_UV of (2.49) for n samples: (n, 6, 241), u = W_UV θ_UV; r = Rᵀe₃ (n, 3)."""
+    return _regressor_batch("6dof", N_THETA_UV, v, vdot, r)
 
 
 def regressor_uvr_batch(w: np.ndarray, wdot: np.ndarray, r: np.ndarray) -> np.ndarray:
     """W_UVR of (2.42) for n samples: (n, 3, 36), τ = W_UVR θ_UVR."""
-    Phi, A, drag, shared = _features("rot", w, wdot, r)
-    W = np.zeros((w.shape[0], 3, N_THETA_UVR))
-    for row in range(3):
-        W[:, row, drag[row]] = Phi
-        W[:, row, shared] = A[:, row, :]
-    return W
+    return _regressor_batch("rot", N_THETA_UVR, w, wdot, r)
 
 
 # ---------------------------------------------------------------------------------------------
