@@ -23,6 +23,9 @@ def test_bench_loop_keys(tmp_path, capsys):
     assert r["cycle"] == "pdc" and r["cycle_errors"] == 0 and isinstance(r["overruns"], int)
     assert r["cycles"] + r["skipped"] >= 50 and r["naive_asyncio"]["cycles"] > 10
     assert r["compute_us"]["p50"] > 1.0       # the PDC cycle really ran
+    # the same cycle back to back, for telling code cost from cold caches
+    assert r["compute_back_to_back_us"]["n"] == 2000
+    assert r["compute_back_to_back_us"]["p50"] > 1.0
     # the host's steal over the measured run, on every CPU here (not pinned)
     hs = r["host_steal"]
     assert hs["cpus"] == "all"

@@ -241,6 +241,21 @@ async def _naive(rate: float, cycle, duration: float) -> dict:
     }
 
 
+def _back_to_back(cycle, rate: float, n: int) -> dict:
+    """The same cycle run ``n`` times back to back, each on the next period's timestamp: its
+    cost with the CPU's caches and predictors warm, for comparison with ``compute_us`` (at a
+    low rate every cycle starts cold — docs/runtime.md, "compute at low rates")."""
+    ns = np.empty(n, dtype=np.int64)
+    period_ns = int(round(1e9 / rate))
+    t = time.monotonic_ns()
+    now = time.perf_counter_ns
+    for i in range(n):
+        t0 = now()
+        cycle(t + i * period_ns, 1.0 / rate)
+        ns[i] = now() - t0
+    return percentiles(ns * 1e-9)
+
+
 def _fmt(d: dict) -> str:
     return "  ".join(f"{k} {d[k]:8.1f}" for k in ("p50", "p99", "p999", "max") if k in d)
 
@@ -269,6 +284,7 @@ def _run(args) -> dict:
     steal_cpus = sorted(rt.cpu_affinity) if args.cpu else None
     ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup,
                              lambda: host_steal_s(steal_cpus)))
+    warm = _back_to_back(cycle, args.rate, 2000) if args.cycle != "none" else None
     naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
     figures = {
         "rate_hz": args.rate,
@@ -276,6 +292,7 @@ def _run(args) -> dict:
         "cycle": args.cycle,
         "lateness_us": ours["lateness_us"],
         "compute_us": ours["compute_us"],
+        "compute_back_to_back_us": warm,
         "overruns": ours["overruns"],
         "skipped": ours["skipped"],
         "cycles": ours["cycles"],
@@ -308,6 +325,8 @@ def _run(args) -> dict:
         print(f"  lateness µs  naive : {_fmt(naive['lateness_us'])}   achieved "
               f"{naive['achieved_rate_hz']:.1f} Hz")
     print(f"  compute  µs  ours  : {_fmt(ours['compute_us'])}")
+    if warm is not None:
+        print(f"  compute  µs  2000 back to back (warm caches): {_fmt(warm)}")
     hs = figures["host_steal"]
     if hs["seconds"] is not None:
         print(f"  host steal on CPUs {hs['cpus']}: {hs['seconds']:.2f} s over the run "
