@@ -336,7 +336,7 @@ def _run(args) -> dict:
               f"{naive['achieved_rate_hz']:.1f} Hz")
     print(f"  compute  µs  ours  : {_fmt(ours['compute_us'])}")
     if warm is not None:
-        print(f"  compute  µs  2000 back to back (warm caches): {_fmt(warm)}")
+        print(f"  compute  µs  back to back (warm caches, 2000 in bursts of 10): {_fmt(warm)}")
     hs = figures["host_steal"]
     if hs["seconds"] is not None:
         print(f"  host steal on CPUs {hs['cpus']}: {hs['seconds']:.2f} s over the run "
