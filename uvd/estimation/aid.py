@@ -452,6 +452,18 @@ class AID6Gains:
                 raise ValueError(f"AID gain {name} must be finite and > 0, got {x!r}")
 
 
+def _check_params(p) -> None:
+    """Checks shared by :class:`AID6Params` and :class:`AID3Params` (errors name the field)."""
+    if p.input_interp not in _INTERP:
+        raise ValueError(f"input_interp must be one of {_INTERP}, got {p.input_interp!r}")
+    if p.sampling not in _SAMPLING:
+        raise ValueError(f"sampling must be one of {_SAMPLING}, got {p.sampling!r}")
+    if not (0.0 <= p.pd_floor < 1.0):
+        raise ValueError(f"pd_floor must be in [0, 1), got {p.pd_floor!r}")
+    if not p.max_dt > 0.0:
+        raise ValueError(f"max_dt must be > 0, got {p.max_dt!r}")
+
+
 @dataclass(frozen=True)
 class AID6Params:
     """Constant configuration of :func:`aid6_step`.
@@ -480,14 +492,7 @@ class AID6Params:
     max_dt: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.input_interp not in _INTERP:
-            raise ValueError(f"input_interp must be one of {_INTERP}, got {self.input_interp!r}")
-        if self.sampling not in _SAMPLING:
-            raise ValueError(f"sampling must be one of {_SAMPLING}, got {self.sampling!r}")
-        if not (0.0 <= self.pd_floor < 1.0):
-            raise ValueError(f"pd_floor must be in [0, 1), got {self.pd_floor!r}")
-        if not self.max_dt > 0.0:
-            raise ValueError(f"max_dt must be > 0, got {self.max_dt!r}")
+        _check_params(self)
         object.__setattr__(self, "_cfg", _cfg_template(self, 6))
 
 
@@ -617,14 +622,7 @@ class AID3Params:
     max_dt: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.input_interp not in _INTERP:
-            raise ValueError(f"input_interp must be one of {_INTERP}, got {self.input_interp!r}")
-        if self.sampling not in _SAMPLING:
-            raise ValueError(f"sampling must be one of {_SAMPLING}, got {self.sampling!r}")
-        if not (0.0 <= self.pd_floor < 1.0):
-            raise ValueError(f"pd_floor must be in [0, 1), got {self.pd_floor!r}")
-        if not self.max_dt > 0.0:
-            raise ValueError(f"max_dt must be > 0, got {self.max_dt!r}")
+        _check_params(self)
         object.__setattr__(self, "_cfg", _cfg_template(self, 3))
 
 

@@ -617,8 +617,6 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
     ]
     if opts.plots:
         _plots(opts.plots, "aid6dof", runs, sims, list(mae), STATES_6DOF)
-        iddat.run.save(Path(opts.plots) / "iddat-run.npz")
-        cross.run.save(Path(opts.plots) / "cross-run.npz")
     return {
         "summary": "\n".join(lines),
         "vehicle": VEHICLE,
@@ -651,12 +649,15 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
     }
 
 
-def _plots(directory, prefix, runs, sims, models, states) -> None:
+def _plots(directory, prefix, runs, sims, models, states, run_prefix: str = "") -> None:
+    """Figures per data set under ``directory/prefix-<dataset>`` and each recorded run as
+    ``directory/<run_prefix><dataset>-run.npz`` (for ``uvd identify`` / ``uvd xval``)."""
     directory = Path(directory)
     for d, run in runs.items():
         write_figures(directory / f"{prefix}-{d.lower()}", run,
                       {m: sims[(m, d)] for m in models if sims[(m, d)] is not None}, states,
                       prefix="")
+        run.save(directory / f"{run_prefix}{d.lower()}-run.npz")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -710,9 +711,7 @@ def run_aid_rot(opts: ExperimentOptions) -> dict:
         f"LS: rank {ls.rank}/36, condition {ls.condition:.3g}; wall: lockstep {t_sim:.1f} s",
     ]
     if opts.plots:
-        _plots(opts.plots, "aidrot", runs, sims, list(mae), STATES_ROT)
-        iddat.run.save(Path(opts.plots) / "rot-iddat-run.npz")
-        cross.run.save(Path(opts.plots) / "rot-cross-run.npz")
+        _plots(opts.plots, "aidrot", runs, sims, list(mae), STATES_ROT, run_prefix="rot-")
     return {
         "summary": "\n".join(lines),
         "vehicle": VEHICLE,
