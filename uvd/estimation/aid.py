@@ -497,20 +497,8 @@ class AID6Params:
 
 
 @dataclass(frozen=True)
-class AID6State:
-    """State of 6-DOF AID. Read θ̂ as ``theta`` (order of (2.48)) or :func:`aid6_params`.
-
-    Attributes
-    ----------
-    theta : (241,) θ̂_UV = [θ_M, D₁ˢ…D₆ˢ, g, b] (2.48).
-    v_hat : (6,) v̂ at the last sample time (m/s, rad/s).
-    dv : (6,) ∆v = v̂ − v at the last sample (zeros before the second call).
-    v_prev, r_prev, u_prev : last sample's v, Rᵀe₃ and wrench (None before the first call).
-    m_min_eig, m_max_eig : extreme eigenvalues of M̂ (health of Theorem 4.3.1's (4.36)).
-    frozen : True once M̂ lost positive definiteness; ``freeze_reason`` says why and when.
-    steps : adaptation steps taken; ``skipped`` : calls ignored (non-finite input);
-    ``resyncs`` : gaps after which v̂ was re-synchronised.
-    """
+class _AIDState:
+    """The fields of :class:`AID6State` and :class:`AID3State` (documented there)."""
 
     theta: np.ndarray
     v_hat: np.ndarray
@@ -526,6 +514,23 @@ class AID6State:
     skipped: int = 0
     resyncs: int = 0
     t_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class AID6State(_AIDState):
+    """State of 6-DOF AID. Read θ̂ as ``theta`` (order of (2.48)) or :func:`aid6_params`.
+
+    Attributes
+    ----------
+    theta : (241,) θ̂_UV = [θ_M, D₁ˢ…D₆ˢ, g, b] (2.48).
+    v_hat : (6,) v̂ at the last sample time (m/s, rad/s).
+    dv : (6,) ∆v = v̂ − v at the last sample (zeros before the second call).
+    v_prev, r_prev, u_prev : last sample's v, Rᵀe₃ and wrench (None before the first call).
+    m_min_eig, m_max_eig : extreme eigenvalues of M̂ (health of Theorem 4.3.1's (4.36)).
+    frozen : True once M̂ lost positive definiteness; ``freeze_reason`` says why and when.
+    steps : adaptation steps taken; ``skipped`` : calls ignored (non-finite input);
+    ``resyncs`` : gaps after which v̂ was re-synchronised.
+    """
 
 
 def _check_theta(theta, n: int, what: str) -> np.ndarray:
@@ -627,24 +632,9 @@ class AID3Params:
 
 
 @dataclass(frozen=True)
-class AID3State:
+class AID3State(_AIDState):
     """State of rotational AID: θ̂_UVR ∈ R³⁶ (2.41), ω̂, ∆ω; fields as :class:`AID6State`
     (``m_min_eig``/``m_max_eig`` are the extreme eigenvalues of Î)."""
-
-    theta: np.ndarray
-    v_hat: np.ndarray
-    dv: np.ndarray
-    v_prev: np.ndarray | None = None
-    r_prev: np.ndarray | None = None
-    u_prev: np.ndarray | None = None
-    m_min_eig: float = float("nan")
-    m_max_eig: float = float("nan")
-    frozen: bool = False
-    freeze_reason: str = ""
-    steps: int = 0
-    skipped: int = 0
-    resyncs: int = 0
-    t_s: float = 0.0
 
 
 def aid3_init(theta0: np.ndarray | RotParams) -> AID3State:
