@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 from uvd.cli import main
 
 
@@ -26,8 +28,57 @@ def test_bench_loop_keys(tmp_path, capsys):
     # the same cycle back to back, for telling code cost from cold caches
     assert r["compute_back_to_back_us"]["n"] == 2000
     assert r["compute_back_to_back_us"]["p50"] > 1.0
+    # every overrun sorted by its cause (StallProbe)
+    oa = r["overrun_attribution"]
+    assert oa["overruns"] == r["overruns"]
+    assert sum(oa[k] for k in ("stalled", "preempted", "woke_late", "compute")) == r["overruns"]
+    assert oa["stall_ms_total"] >= 0.0
     # the host's steal over the measured run, on every CPU here (not pinned)
     hs = r["host_steal"]
     assert hs["cpus"] == "all"
     if hs["seconds"] is not None:
         assert hs["seconds"] >= 0.0 and 0.0 <= hs["share"] <= 1.0
+
+
+def test_overruns_are_sorted_by_cause():
+    from uvd.bench.loop import attribute_overruns
+
+    ms = 1_000_000
+    period, margin = 1 * ms, ms // 5
+    # cycle: on time | host stall | preempted | woke late from the timer | own compute
+    lateness = [0, 0, 0, 1.2 * ms, 0]
+    compute = [0.3 * ms, 1.5 * ms, 1.5 * ms, 0.1 * ms, 1.3 * ms]
+    wake = [-margin, -margin, -margin, 1.0 * ms, -margin]  # coarse return − deadline
+    stall = [0, 0.8 * ms, 0.8 * ms, 0, 0.1 * ms]
+    preempted = [False, False, True, False, False]
+    a = attribute_overruns(np.array(lateness, dtype=np.int64), np.array(compute, dtype=np.int64),
+                           np.array(wake, dtype=np.int64), np.array(stall, dtype=np.int64),
+                           np.array(preempted), period, margin)
+    assert a["overruns"] == 4
+    assert (a["stalled"], a["preempted"], a["woke_late"], a["compute"]) == (1, 1, 1, 1)
+    assert a["stall_ms_total"] == 1.7 and a["stall_ms_in_overruns"] == 1.7
+    assert a["max_stall_us"] == 800.0 and a["cycles_with_stall_over_100us"] == 2
+
+
+def test_stall_probe_sees_the_time_a_cycle_does_not_run(tmp_path):
+    """A cycle that blocks 5 ms (the thread not running, as when the host pauses the vCPU)
+    shows a stall of those 5 ms, less the sleep call's own CPU time (tens of µs); the
+    span's CPU time does not include it."""
+    import asyncio
+    import time
+
+    from uvd.bench.loop import StallProbe
+    from uvd.runtime.clock import MonotonicClock
+    from uvd.runtime.loop import FixedRateLoop, LoopSettings
+
+    settings = LoopSettings(rate_hz=100.0)
+    probe = StallProbe(MonotonicClock(), 64)
+    loop = FixedRateLoop(lambda t, dt: time.sleep(0.005), settings, clock=probe)
+    loop.after_cycle.append(probe.after_cycle)
+    try:
+        asyncio.run(loop.run(max_cycles=10))
+    finally:
+        probe.close()
+    assert probe.n == 10
+    stalls = probe.stalls_ns()
+    assert np.all(stalls >= 4_500_000), stalls

@@ -9,6 +9,12 @@ shows that). Compute is the cycle's own time. Percentiles are exact (from every 
 :func:`uvd.bench.percentiles`); the loop's own histogram snapshot is included as
 ``histogram`` for comparison.
 
+Every overrun of our loop is sorted by its cause (``overrun_attribution``,
+:func:`attribute_overruns`): the loop's thread *stalled* (runnable but not running — on a
+virtual machine, the hypervisor's steal, measured per cycle by :class:`StallProbe`), was
+*preempted* by a thread of this machine, *woke late* from its blocking coarse wait, or the
+cycle's own *compute* was too long.
+
 Per-cycle work (``--cycle``), registered in :data:`CYCLES`:
 
 * ``none`` — nothing: the timer alone;
@@ -23,12 +29,14 @@ from __future__ import annotations
 import asyncio
 import math
 import os
+import resource
 import time
 from collections.abc import Callable
 
 import numpy as np
 
 from uvd.bench import Bench, host_steal_s, percentiles
+from uvd.runtime.clock import MonotonicClock
 from uvd.runtime.loop import CpuLatencyRequest, FixedRateLoop, LoopSettings, apply_realtime
 
 CycleFactory = Callable[[], Callable[[int, float], None]]
@@ -152,6 +160,121 @@ def _cycle_ambc_aid() -> Callable[[int, float], None]:
     return cycle
 
 
+class StallProbe:
+    """The loop's clock, plus a record of how long the loop's thread was *runnable but not
+    running* in each cycle — to tell an overrun caused by the host from one of ours.
+
+    From the moment the coarse wait returns (the fine wait begins) to the cycle's end, the
+    thread never blocks: it spins, then computes. Over that span the wall clock and the
+    thread's CPU time (``CLOCK_THREAD_CPUTIME_ID``) advance together, except while the thread
+    does not run. With ``CONFIG_PARAVIRT_TIME_ACCOUNTING`` (KVM guests) the thread's CPU time
+    excludes the time the hypervisor ran something else on this virtual CPU (steal), so the
+    gap — the *stall* — is steal, or preemption by a higher-priority thread of this machine,
+    which the involuntary context switches in the span (``getrusage``) reveal. Both readings
+    happen outside the timed compute (at the fine wait's start and in an ``after_cycle``
+    hook); ~1 µs each.
+    """
+
+    def __init__(self, clock: MonotonicClock, capacity: int) -> None:
+        self.clock = clock
+        self.coarse, self.fine = clock.coarse, clock.fine
+        z = lambda: np.zeros(capacity, dtype=np.int64)  # noqa: E731
+        self.wall0, self.cpu0, self.csw0 = z(), z(), z()
+        self.wall1, self.cpu1, self.csw1 = z(), z(), z()
+        self.n = 0
+        self._open = False
+
+    # the Clock protocol, delegated
+    def monotonic_ns(self) -> int:
+        return self.clock.monotonic_ns()
+
+    def sleep(self, seconds: float) -> None:
+        self.clock.sleep(seconds)
+
+    async def wait_until_ns(self, deadline_ns: int) -> None:
+        await self.clock.wait_until_ns(deadline_ns)
+
+    def sleep_until_ns(self, deadline_ns: int) -> None:
+        i = self.n
+        if i < self.wall0.shape[0]:
+            self.csw0[i] = resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw
+            self.cpu0[i] = time.thread_time_ns()
+            self.wall0[i] = time.monotonic_ns()
+            self._open = True
+        self.clock.sleep_until_ns(deadline_ns)
+
+    def after_cycle(self, t_end_ns: int, ok: bool) -> None:
+        if not self._open:
+            return
+        i = self.n
+        self.cpu1[i] = time.thread_time_ns()
+        self.csw1[i] = resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw
+        self.wall1[i] = t_end_ns
+        self.n = i + 1
+        self._open = False
+
+    def reset(self) -> None:
+        self.n = 0
+        self._open = False
+
+    def close(self) -> None:
+        self.clock.close()
+
+    def stalls_ns(self) -> np.ndarray:
+        n = self.n
+        return (self.wall1[:n] - self.wall0[:n]) - (self.cpu1[:n] - self.cpu0[:n])
+
+    def preempted(self) -> np.ndarray:
+        n = self.n
+        return self.csw1[:n] > self.csw0[:n]
+
+
+def attribute_overruns(lateness_ns: np.ndarray, compute_ns: np.ndarray, wake_ns: np.ndarray,
+                       stall_ns: np.ndarray, preempted: np.ndarray, period_ns: int,
+                       margin_ns: int) -> dict:
+    """Sort each overrunning cycle by what made it end after the next deadline.
+
+    Per cycle (arrays of equal length): the loop's lateness and compute, ``wake_ns`` the
+    time the coarse wait returned, relative to the deadline (normally ≈ −margin), the stall
+    of :class:`StallProbe` and whether the thread was preempted in the span. A cycle
+    overruns by ``over = lateness + compute − period`` > 0. It is
+
+    * ``stalled`` when the thread's stall alone covers ``over`` and no thread of this machine
+      preempted it: the virtual CPU was not running (the hypervisor's steal);
+    * ``preempted`` when the stall covers it but an involuntary context switch happened;
+    * ``woke_late`` when only the stall plus the coarse wait's return after its planned time
+      (``wake − (−margin)``, spent blocked: a halted vCPU or a late timer) covers it;
+    * ``compute`` otherwise: the cycle's own work, as executed, took too long.
+    """
+    lateness_ns = np.asarray(lateness_ns, dtype=np.int64)
+    over = lateness_ns + np.asarray(compute_ns, dtype=np.int64) - period_ns
+    stall = np.maximum(np.asarray(stall_ns, dtype=np.int64), 0)
+    late_wake = np.maximum(np.asarray(wake_ns, dtype=np.int64) + margin_ns, 0)
+    pre = np.asarray(preempted, dtype=bool)
+    hit = over > 0
+    by_stall = hit & (stall >= over)
+    counts = {
+        "stalled": int(np.sum(by_stall & ~pre)),
+        "preempted": int(np.sum(by_stall & pre)),
+        "woke_late": int(np.sum(hit & ~by_stall & (stall + late_wake >= over))),
+        "compute": int(np.sum(hit & (stall + late_wake < over))),
+    }
+    own = np.flatnonzero(hit & (stall + late_wake < over))[:10]
+    return {
+        "overruns": int(hit.sum()),
+        **counts,
+        "stall_ms_total": float(stall.sum() * 1e-6),
+        "stall_ms_in_overruns": float(stall[hit].sum() * 1e-6),
+        "late_wake_ms_in_overruns": float(late_wake[hit].sum() * 1e-6),
+        "compute_examples_us": [
+            {"cycle": int(i), "lateness": float(lateness_ns[i]) * 1e-3,
+             "compute": float(compute_ns[i]) * 1e-3, "stall": float(stall[i]) * 1e-3,
+             "late_wake": float(late_wake[i]) * 1e-3} for i in own],
+        "max_stall_us": float(stall.max() * 1e-3) if stall.size else 0.0,
+        "cycles_with_stall_over_100us": int(np.sum(stall > 100_000)),
+    }
+
+
 #: Per-cycle work selectable with ``--cycle``.
 CYCLES: dict[str, CycleFactory] = {"none": _cycle_none, "pdc": _cycle_pdc,
                                    "ambc-aid": _cycle_ambc_aid}
@@ -184,19 +307,28 @@ def _add(p) -> None:
 async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float,
                 steal: Callable[[], float | None]) -> dict:
     n_max = int(math.ceil(duration * settings.rate_hz)) + 16
-    loop = FixedRateLoop(cycle, settings, trace_capacity=n_max)
+    probe = StallProbe(MonotonicClock(coarse=settings.timer, fine=settings.fine),
+                       max(n_max, int(math.ceil(warmup * settings.rate_hz)) + 16))
+    loop = FixedRateLoop(cycle, settings, clock=probe, trace_capacity=n_max)
+    loop.after_cycle.append(probe.after_cycle)
     try:
         if warmup > 0:
             await loop.run(duration_s=warmup)
             loop.reset_stats()
             loop.trace.n = 0
+            probe.reset()
         steal0, wall0 = steal(), time.monotonic()
         snap = await loop.run(duration_s=duration)
         wall, steal1 = time.monotonic() - wall0, steal()
     finally:
-        loop.close()
-    n = loop.trace.n
+        probe.close()
+    n = min(loop.trace.n, probe.n)
+    lat, comp = loop.trace.lateness_ns[:n], loop.trace.compute_ns[:n]
+    wake = probe.wall0[:n] - (probe.wall1[:n] - comp - lat)  # coarse return − deadline
+    attribution = attribute_overruns(lat, comp, wake, probe.stalls_ns()[:n],
+                                     probe.preempted()[:n], loop.period_ns, loop.margin_ns)
     return {
+        "overrun_attribution": attribution,
         "lateness_us": percentiles(loop.trace.lateness_ns[:n] * 1e-9),
         "compute_us": percentiles(loop.trace.compute_ns[:n] * 1e-9),
         "cycles": snap["cycles"],
@@ -304,6 +436,7 @@ def _run(args) -> dict:
         "compute_us": ours["compute_us"],
         "compute_back_to_back_us": warm,
         "overruns": ours["overruns"],
+        "overrun_attribution": ours["overrun_attribution"],
         "skipped": ours["skipped"],
         "cycles": ours["cycles"],
         "cycle_errors": ours["cycle_errors"],
@@ -341,6 +474,11 @@ def _run(args) -> dict:
     if hs["seconds"] is not None:
         print(f"  host steal on CPUs {hs['cpus']}: {hs['seconds']:.2f} s over the run "
               f"({100 * hs['share']:.2f} % of their time)")
+    oa = ours["overrun_attribution"]
+    print(f"  overruns by cause: stalled {oa['stalled']} (thread runnable, vCPU not running: "
+          f"host steal)  preempted {oa['preempted']}  woke late {oa['woke_late']}  "
+          f"compute {oa['compute']};  stall over the run {oa['stall_ms_total']:.1f} ms, "
+          f"longest {oa['max_stall_us']:.0f} µs")
     g = ours["gc"]
     print(f"  gc ({g['policy']}): collections {g['collections']}  forced {g['forced']}  "
           f"max µs {[round(x, 1) for x in g['max_us']]}")
