@@ -53,11 +53,14 @@ def test_overruns_are_sorted_by_cause():
     preempted = [False, False, True, False, False]
     a = attribute_overruns(np.array(lateness, dtype=np.int64), np.array(compute, dtype=np.int64),
                            np.array(wake, dtype=np.int64), np.array(stall, dtype=np.int64),
-                           np.array(preempted), period, margin)
+                           np.array(preempted), period, margin,
+                           page_faults=np.array([0, 0, 0, 0, 7]))
     assert a["overruns"] == 4
     assert (a["stalled"], a["preempted"], a["woke_late"], a["compute"]) == (1, 1, 1, 1)
     assert a["stall_ms_total"] == 1.7 and a["stall_ms_in_overruns"] == 1.7
     assert a["max_stall_us"] == 800.0 and a["cycles_with_stall_over_100us"] == 2
+    assert a["compute_examples_us"] == [{"cycle": 4, "lateness": 0.0, "compute": 1300.0,
+                                         "stall": 100.0, "late_wake": 0.0, "page_faults": 7}]
 
 
 def test_stall_probe_sees_the_time_a_cycle_does_not_run(tmp_path):

@@ -181,6 +181,7 @@ class StallProbe:
         z = lambda: np.zeros(capacity, dtype=np.int64)  # noqa: E731
         self.wall0, self.cpu0, self.csw0 = z(), z(), z()
         self.wall1, self.cpu1, self.csw1 = z(), z(), z()
+        self.flt0, self.flt1 = z(), z()
         self.n = 0
         self._open = False
 
@@ -197,7 +198,8 @@ class StallProbe:
     def sleep_until_ns(self, deadline_ns: int) -> None:
         i = self.n
         if i < self.wall0.shape[0]:
-            self.csw0[i] = resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw
+            ru = resource.getrusage(resource.RUSAGE_THREAD)
+            self.csw0[i], self.flt0[i] = ru.ru_nivcsw, ru.ru_minflt + ru.ru_majflt
             self.cpu0[i] = time.thread_time_ns()
             self.wall0[i] = time.monotonic_ns()
             self._open = True
@@ -208,7 +210,8 @@ class StallProbe:
             return
         i = self.n
         self.cpu1[i] = time.thread_time_ns()
-        self.csw1[i] = resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw
+        ru = resource.getrusage(resource.RUSAGE_THREAD)
+        self.csw1[i], self.flt1[i] = ru.ru_nivcsw, ru.ru_minflt + ru.ru_majflt
         self.wall1[i] = t_end_ns
         self.n = i + 1
         self._open = False
@@ -228,10 +231,14 @@ class StallProbe:
         n = self.n
         return self.csw1[:n] > self.csw0[:n]
 
+    def page_faults(self) -> np.ndarray:
+        n = self.n
+        return self.flt1[:n] - self.flt0[:n]
+
 
 def attribute_overruns(lateness_ns: np.ndarray, compute_ns: np.ndarray, wake_ns: np.ndarray,
                        stall_ns: np.ndarray, preempted: np.ndarray, period_ns: int,
-                       margin_ns: int) -> dict:
+                       margin_ns: int, page_faults: np.ndarray | None = None) -> dict:
     """Sort each overrunning cycle by what made it end after the next deadline.
 
     Per cycle (arrays of equal length): the loop's lateness and compute, ``wake_ns`` the
@@ -244,7 +251,9 @@ def attribute_overruns(lateness_ns: np.ndarray, compute_ns: np.ndarray, wake_ns:
     * ``preempted`` when the stall covers it but an involuntary context switch happened;
     * ``woke_late`` when only the stall plus the coarse wait's return after its planned time
       (``wake − (−margin)``, spent blocked: a halted vCPU or a late timer) covers it;
-    * ``compute`` otherwise: the cycle's own work, as executed, took too long.
+    * ``compute`` otherwise: the cycle's own work, as executed, took too long. The first ten
+      are listed in ``compute_examples_us``, with the thread's page faults in the span when
+      ``page_faults`` is given.
     """
     lateness_ns = np.asarray(lateness_ns, dtype=np.int64)
     over = lateness_ns + np.asarray(compute_ns, dtype=np.int64) - period_ns
@@ -269,7 +278,9 @@ def attribute_overruns(lateness_ns: np.ndarray, compute_ns: np.ndarray, wake_ns:
         "compute_examples_us": [
             {"cycle": int(i), "lateness": float(lateness_ns[i]) * 1e-3,
              "compute": float(compute_ns[i]) * 1e-3, "stall": float(stall[i]) * 1e-3,
-             "late_wake": float(late_wake[i]) * 1e-3} for i in own],
+             "late_wake": float(late_wake[i]) * 1e-3,
+             "page_faults": None if page_faults is None else int(page_faults[i])}
+            for i in own],
         "max_stall_us": float(stall.max() * 1e-3) if stall.size else 0.0,
         "cycles_with_stall_over_100us": int(np.sum(stall > 100_000)),
     }
@@ -326,7 +337,8 @@ async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float,
     lat, comp = loop.trace.lateness_ns[:n], loop.trace.compute_ns[:n]
     wake = probe.wall0[:n] - (probe.wall1[:n] - comp - lat)  # coarse return − deadline
     attribution = attribute_overruns(lat, comp, wake, probe.stalls_ns()[:n],
-                                     probe.preempted()[:n], loop.period_ns, loop.margin_ns)
+                                     probe.preempted()[:n], loop.period_ns, loop.margin_ns,
+                                     probe.page_faults()[:n])
     return {
         "overrun_attribution": attribution,
         "lateness_us": percentiles(loop.trace.lateness_ns[:n] * 1e-9),
