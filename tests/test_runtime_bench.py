@@ -31,7 +31,8 @@ def test_bench_loop_keys(tmp_path, capsys):
     # every overrun sorted by its cause (StallProbe)
     oa = r["overrun_attribution"]
     assert oa["overruns"] == r["overruns"]
-    assert sum(oa[k] for k in ("stalled", "preempted", "woke_late", "compute")) == r["overruns"]
+    assert sum(oa[k] for k in ("stalled", "preempted", "woke_late", "paused_in_spin",
+                               "compute")) == r["overruns"]
     assert oa["stall_ms_total"] >= 0.0
     # the host's steal over the measured run, on every CPU here (not pinned)
     hs = r["host_steal"]
@@ -45,18 +46,21 @@ def test_overruns_are_sorted_by_cause():
 
     ms = 1_000_000
     period, margin = 1 * ms, ms // 5
-    # cycle: on time | host stall | preempted | woke late from the timer | own compute
-    lateness = [0, 0, 0, 1.2 * ms, 0]
-    compute = [0.3 * ms, 1.5 * ms, 1.5 * ms, 0.1 * ms, 1.3 * ms]
-    wake = [-margin, -margin, -margin, 1.0 * ms, -margin]  # coarse return − deadline
-    stall = [0, 0.8 * ms, 0.8 * ms, 0, 0.1 * ms]
-    preempted = [False, False, True, False, False]
+    # cycle: on time | host stall | preempted | woke late from the timer | own compute |
+    #        a spin that returned 2.6 ms after its deadline
+    lateness = [0, 0, 0, 1.0 * ms, 0, 2.6 * ms]
+    compute = [0.3 * ms, 1.5 * ms, 1.5 * ms, 0.1 * ms, 1.3 * ms, 0.2 * ms]
+    wake = [-margin, -margin, -margin, 1.0 * ms, -margin, -margin]  # coarse return − deadline
+    stall = [0, 0.8 * ms, 0.8 * ms, 0, 0.1 * ms, 0]
+    preempted = [False, False, True, False, False, False]
     a = attribute_overruns(np.array(lateness, dtype=np.int64), np.array(compute, dtype=np.int64),
                            np.array(wake, dtype=np.int64), np.array(stall, dtype=np.int64),
                            np.array(preempted), period, margin,
-                           page_faults=np.array([0, 0, 0, 0, 7]))
-    assert a["overruns"] == 4
-    assert (a["stalled"], a["preempted"], a["woke_late"], a["compute"]) == (1, 1, 1, 1)
+                           page_faults=np.array([0, 0, 0, 0, 7, 0]))
+    assert a["overruns"] == 5
+    assert (a["stalled"], a["preempted"], a["woke_late"], a["paused_in_spin"],
+            a["compute"]) == (1, 1, 1, 1, 1)
+    assert a["spin_overshoot_ms_in_overruns"] == 2.6
     assert a["stall_ms_total"] == 1.7 and a["stall_ms_in_overruns"] == 1.7
     assert a["max_stall_us"] == 800.0 and a["cycles_with_stall_over_100us"] == 2
     assert a["compute_examples_us"] == [{"cycle": 4, "lateness": 0.0, "compute": 1300.0,

@@ -251,6 +251,10 @@ def attribute_overruns(lateness_ns: np.ndarray, compute_ns: np.ndarray, wake_ns:
     * ``preempted`` when the stall covers it but an involuntary context switch happened;
     * ``woke_late`` when only the stall plus the coarse wait's return after its planned time
       (``wake − (−margin)``, spent blocked: a halted vCPU or a late timer) covers it;
+    * ``paused_in_spin`` when it takes the fine wait's overshoot to cover it: a busy-wait
+      ends within a clock read of its deadline, so a spin that returns late (``lateness −
+      max(wake, 0)``) was paused, though the thread's CPU time ran on (a long VM exit, or
+      interrupt work charged to the thread; neither counts as steal);
     * ``compute`` otherwise: the cycle's own work, as executed, took too long. The first ten
       are listed in ``compute_examples_us``, with the thread's page faults in the span when
       ``page_faults`` is given.
@@ -258,23 +262,31 @@ def attribute_overruns(lateness_ns: np.ndarray, compute_ns: np.ndarray, wake_ns:
     lateness_ns = np.asarray(lateness_ns, dtype=np.int64)
     over = lateness_ns + np.asarray(compute_ns, dtype=np.int64) - period_ns
     stall = np.maximum(np.asarray(stall_ns, dtype=np.int64), 0)
-    late_wake = np.maximum(np.asarray(wake_ns, dtype=np.int64) + margin_ns, 0)
+    wake = np.asarray(wake_ns, dtype=np.int64)
+    late_wake = np.maximum(wake + margin_ns, 0)
+    overshoot = np.maximum(lateness_ns - np.maximum(wake, 0), 0)
     pre = np.asarray(preempted, dtype=bool)
     hit = over > 0
     by_stall = hit & (stall >= over)
+    by_wake = hit & ~by_stall & (stall + late_wake >= over)
+    # the stall spans spin and compute, the overshoot only the spin: count the larger
+    by_spin = hit & ~by_stall & ~by_wake & (late_wake + np.maximum(stall, overshoot) >= over)
+    own_mask = hit & ~by_stall & ~by_wake & ~by_spin
     counts = {
         "stalled": int(np.sum(by_stall & ~pre)),
         "preempted": int(np.sum(by_stall & pre)),
-        "woke_late": int(np.sum(hit & ~by_stall & (stall + late_wake >= over))),
-        "compute": int(np.sum(hit & (stall + late_wake < over))),
+        "woke_late": int(np.sum(by_wake)),
+        "paused_in_spin": int(np.sum(by_spin)),
+        "compute": int(np.sum(own_mask)),
     }
-    own = np.flatnonzero(hit & (stall + late_wake < over))[:10]
+    own = np.flatnonzero(own_mask)[:10]
     return {
         "overruns": int(hit.sum()),
         **counts,
         "stall_ms_total": float(stall.sum() * 1e-6),
         "stall_ms_in_overruns": float(stall[hit].sum() * 1e-6),
         "late_wake_ms_in_overruns": float(late_wake[hit].sum() * 1e-6),
+        "spin_overshoot_ms_in_overruns": float(overshoot[hit].sum() * 1e-6),
         "compute_examples_us": [
             {"cycle": int(i), "lateness": float(lateness_ns[i]) * 1e-3,
              "compute": float(compute_ns[i]) * 1e-3, "stall": float(stall[i]) * 1e-3,
@@ -488,9 +500,9 @@ def _run(args) -> dict:
               f"({100 * hs['share']:.2f} % of their time)")
     oa = ours["overrun_attribution"]
     print(f"  overruns by cause: stalled {oa['stalled']} (thread runnable, vCPU not running: "
-          f"host steal)  preempted {oa['preempted']}  woke late {oa['woke_late']}  "
-          f"compute {oa['compute']};  stall over the run {oa['stall_ms_total']:.1f} ms, "
-          f"longest {oa['max_stall_us']:.0f} µs")
+          f"host steal)  preempted {oa['preempted']}  woke late {oa['woke_late']}  paused in "
+          f"spin {oa['paused_in_spin']}  compute {oa['compute']};  stall over the run "
+          f"{oa['stall_ms_total']:.1f} ms, longest {oa['max_stall_us']:.0f} µs")
     g = ours["gc"]
     print(f"  gc ({g['policy']}): collections {g['collections']}  forced {g['forced']}  "
           f"max µs {[round(x, 1) for x in g['max_us']]}")
