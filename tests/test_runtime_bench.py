@@ -89,3 +89,19 @@ def test_stall_probe_sees_the_time_a_cycle_does_not_run(tmp_path):
     assert probe.n == 10
     stalls = probe.stalls_ns()
     assert np.all(stalls >= 4_500_000), stalls
+
+
+def test_fixed_work_control_cycle_does_work():
+    """The control cycle of ``--cycle fixed-work`` costs tens of µs (sized to ~80), not the
+    ~1 µs of a call that does nothing."""
+    import time
+
+    from uvd.bench.loop import CYCLES
+
+    cycle = CYCLES["fixed-work"]()
+    took = []
+    for _ in range(21):
+        t = time.perf_counter_ns()
+        cycle(t, 1e-3)
+        took.append(time.perf_counter_ns() - t)
+    assert np.median(took) > 10_000, took

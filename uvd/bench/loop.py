@@ -21,7 +21,9 @@ Per-cycle work (``--cycle``), registered in :data:`CYCLES`:
 * ``pdc`` — the core's full PDC cycle (:func:`uvd.core.step`: navigation from fresh INS, DVL
   and depth samples → RefTraj1 reference → PD (5.11) → allocation) on ``jhu-rov``;
 * ``ambc-aid`` — the same cycle with the full 241-parameter AMBC (robust adaptation) as the
-  controller and 6-DOF AID as estimator, on ``jhu-rov-coupled``.
+  controller and 6-DOF AID as estimator, on ``jhu-rov-coupled``;
+* ``fixed-work`` — a control: the same ~80 µs of compiled arithmetic every cycle, so any
+  spread in its compute time is the machine's.
 """
 
 from __future__ import annotations
@@ -298,9 +300,35 @@ def attribute_overruns(lateness_ns: np.ndarray, compute_ns: np.ndarray, wake_ns:
     }
 
 
+def _cycle_fixed_work() -> Callable[[int, float], None]:
+    """A control: the same arithmetic every cycle (a compiled loop, a few bytes of memory),
+    sized to take as long as the median ``ambc-aid`` cycle back to back (~80 µs here). Its
+    compute time can vary only with the machine, so its spikes show what the machine adds
+    to any cycle."""
+    import numba
+
+    @numba.njit(cache=True)
+    def work(n):
+        x = 1.0
+        for _ in range(n):
+            x = x * 1.0000001 + 1e-9
+        return x
+
+    work(10)
+    t0 = time.perf_counter_ns()
+    work(1_000_000)
+    per_iter = max((time.perf_counter_ns() - t0) / 1_000_000, 1e-3)
+    n = int(80_000 / per_iter)
+
+    def cycle(t_ns: int, dt: float) -> None:
+        work(n)
+    return cycle
+
+
 #: Per-cycle work selectable with ``--cycle``.
 CYCLES: dict[str, CycleFactory] = {"none": _cycle_none, "pdc": _cycle_pdc,
-                                   "ambc-aid": _cycle_ambc_aid}
+                                   "ambc-aid": _cycle_ambc_aid,
+                                   "fixed-work": _cycle_fixed_work}
 
 
 def _add(p) -> None:
