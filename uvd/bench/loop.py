@@ -12,8 +12,9 @@ shows that). Compute is the cycle's own time. Percentiles are exact (from every 
 Every overrun of our loop is sorted by its cause (``overrun_attribution``,
 :func:`attribute_overruns`): the loop's thread *stalled* (runnable but not running — on a
 virtual machine, the hypervisor's steal, measured per cycle by :class:`StallProbe`), was
-*preempted* by a thread of this machine, *woke late* from its blocking coarse wait, or the
-cycle's own *compute* was too long.
+*preempted* by a thread of this machine, *woke late* from its blocking coarse wait, was
+*paused in the spin* (a busy-wait returned long after its deadline), or the cycle's own
+*compute* was too long.
 
 Per-cycle work (``--cycle``), registered in :data:`CYCLES`:
 
