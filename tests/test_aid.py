@@ -279,6 +279,25 @@ def test_init_rejects_indefinite_mass_and_bad_input_is_skipped():
     assert np.array_equal(st3.theta, st.theta)
 
 
+@pytest.mark.parametrize("step, init, theta0",
+                         [(aid6_step, aid6_init, INITP_6DOF.theta),
+                          (aid3_step, aid3_init, INITP_ROT.theta)])
+@pytest.mark.parametrize("big", [1e3, 1e150, 1e200, 1e300])
+def test_finite_but_huge_inputs_never_raise(step, init, theta0, big):
+    """Finite inputs so large that the update overflows to inf or NaN: the step rejects the
+    update (θ̂ kept, M̂ still positive definite) instead of raising mid-cycle. Before M̂'s
+    eigenvalues were guarded, 1e200 raised LinAlgError."""
+    prm = AID6Params() if step is aid6_step else AID3Params()
+    st = init(theta0)
+    for k in range(4):
+        v = np.full(6, big) * (-1) ** k
+        st = step(_vs(np.eye(3), v), np.full(6, big), prm, st, 0.1)
+        assert np.all(np.isfinite(st.theta)) and np.all(np.isfinite(st.v_hat))
+    kept = UVParams.from_theta(st.theta).M if step is aid6_step else \
+        RotParams.from_theta(st.theta).I
+    assert np.linalg.eigvalsh(kept)[0] > 0
+
+
 def test_first_step_sets_vhat_to_v():
     v0 = np.array([0.1, -0.2, 0.05, 0.01, 0.02, -0.03])
     st = aid6_step(_vs(exp_so3(np.array([0.1, 0.2, 0.3])), v0), np.ones(6), AID6Params(),

@@ -171,6 +171,26 @@ def test_true_parameters_are_inside_the_projection_set():
                             np.full(6, 1.0)) == 6
 
 
+def test_a_non_finite_estimate_passes_the_projection_without_raising():
+    """NaN in M̂ or a D̂ᵢ: the block is left as it was, and the projection does not raise
+    (numba's eigendecomposition would, mid-cycle)."""
+    th = theta_of(COUPLED.params, "full")
+    th[3] = np.nan       # an off-diagonal entry of M̂
+    th[21 + 7] = np.nan  # an entry of D̂₁
+    before = th.copy()
+    assert _kernels.project(0, th, np.full(6, 10.0), np.full(6, 1.0)) == 0
+    np.testing.assert_array_equal(th, before)  # (NaNs in the same places count as equal)
+    # the full-model AMBC cycle with robust projection on and a NaN in the reference:
+    # a non-finite command (the core zeroes it), no exception
+    alloc = Allocator.from_vehicle(COUPLED)
+    p = ambc_params("full", robust=RobustAdaptation(enabled=True), allocator=alloc)
+    ref = reftraj1().at(1.0)
+    bad = Reference(H=ref.H, v=ref.v, vdot=np.array([np.nan, 0, 0, 0, 0, 0]))
+    u, _ = ambc_step(VehicleState(ref.H, ref.v + 0.01), bad, p,
+                     ambc_init(p, theta_of(COUPLED.params, "full")), 0.1)
+    assert not np.all(np.isfinite(u))
+
+
 def test_decoupled_projection_clips_masses_and_drags():
     th = ROV.params.decoupled_view()
     th[3] = -5.0

@@ -26,6 +26,7 @@ import numpy as np
 
 from uvd.model.integrate import _ad
 from uvd.model.lie import _A_inv_se3_blocks, _inv_H, _log_se3
+from uvd.model.spd import cholesky
 
 _jit = numba.njit(cache=True)
 
@@ -217,22 +218,9 @@ def wT_s(model, n, v, alpha, r, s):
 
 @_jit
 def _pd_above(S, floor):
-    """True when S − floor·I is positive definite (S symmetric), by an in-place Cholesky."""
+    """True when S − floor·I is positive definite (S symmetric, finite), by Cholesky."""
     n = S.shape[0]
-    L = np.zeros((n, n))
-    for j in range(n):
-        d = S[j, j] - floor
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if d <= 0.0:
-            return False
-        L[j, j] = np.sqrt(d)
-        for i in range(j + 1, n):
-            x = S[i, j]
-            for k in range(j):
-                x -= L[i, k] * L[j, k]
-            L[i, j] = x / L[j, j]
-    return True
+    return cholesky(S, floor, n, np.zeros((n, n)))
 
 
 @_jit
@@ -256,18 +244,24 @@ def _sym_eig_clip_min(A, floor):
     S = 0.5 * (A + A.T)
     if _pd_above(S, floor - 1e-9 * max(1.0, abs(floor))):  # at the floor counts as inside
         return S, False
+    if not np.isfinite(S).all():  # left as it is (the eigendecomposition would raise)
+        return S, False
     w, V = np.linalg.eigh(S)
     for i in range(w.shape[0]):
         if w[i] < floor:
             w[i] = floor
     return (V * w) @ V.T, True
+
+
 @_jit
 def project(model, theta, mass_floor, drag_ceiling):
     """Parameter projection of the robust adaptation (in place); returns how many blocks moved.
 
     Decoupled: mᵢ ≥ mass_floor[i], dᵢ ≤ −drag_ceiling[i]. Full: M̂ symmetric with eigenvalues
     ≥ min(mass_floor) and each D̂ᵢ with symmetric part ⪯ −min(drag_ceiling)·I (which makes
-    vᵀ(Σ|vᵢ|D̂ᵢ)v < 0, i.e. dissipative, §2.6); the skew part of D̂ᵢ is kept.
+    vᵀ(Σ|vᵢ|D̂ᵢ)v < 0, i.e. dissipative, §2.6); the skew part of D̂ᵢ is kept. A block with a
+    non-finite entry is left as it is: the command computed from it is not finite either, and
+    the core zeroes it.
     """
     moved = 0
     if model == MODEL_DECOUPLED:
@@ -311,18 +305,6 @@ def project(model, theta, mass_floor, drag_ceiling):
                 for row in range(6):
                     theta[base + col * 6 + row] = K[row, col] - S[row, col]
     return moved
-
-
-@_jit
-def min_mass_eig(model, theta):
-    """Smallest eigenvalue of M̂ (decoupled: min mᵢ)."""
-    if model == MODEL_DECOUPLED:
-        return theta[:6].min()
-    M = np.empty((6, 6))
-    for i in range(6):
-        for j in range(6):
-            M[i, j] = theta[_MIDX[i, j]]
-    return np.linalg.eigvalsh(M)[0]
 
 
 @_jit

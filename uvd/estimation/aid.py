@@ -75,6 +75,7 @@ from uvd.model.params import (
     UVParams,
     params_from_theta,
 )
+from uvd.model.spd import cholesky, min_max_eig
 
 __all__ = [
     "AID6Gains", "AID6Params", "AID6State", "aid6_init", "aid6_step", "aid6_params",
@@ -103,27 +104,11 @@ def _sym_from_upper(th, n, out):
 
 
 @numba.njit(cache=True)
-def _min_max_eig(A):
-    w = np.linalg.eigvalsh(A)
-    return w[0], w[-1]
-
-
-@numba.njit(cache=True)
 def _chol_solve(A, b, n, x):
-    """x = A⁻¹b by Cholesky; False (x untouched) if A is not positive definite."""
+    """x = A⁻¹b by Cholesky; False (x untouched) if A is not positive definite or not finite."""
     L = np.zeros((n, n))
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not (s > 0.0):
-            return False
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
+    if not cholesky(A, 0.0, n, L):
+        return False
     y = np.empty(n)
     for i in range(n):
         s = b[i]
@@ -226,7 +211,7 @@ def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, 
     for i in range(N_THETA_UV):
         theta_out[i] = theta[i]
     if not adapt:
-        lo, hi = _min_max_eig(M)
+        lo, hi = min_max_eig(M)
         diag[0], diag[1] = lo, hi
         return 0
     # ψ₁ = ad_v(∆v) = [ω × ∆ν + ν × ∆ω; ω × ∆ω]
@@ -247,7 +232,7 @@ def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, 
     theta_out[239] += g4 * dt * (e3 * r1 - e1 * r3)
     theta_out[240] += g4 * dt * (e1 * r2 - e2 * r1)
     _sym_from_upper(theta_out, 6, M)
-    lo, hi = _min_max_eig(M)
+    lo, hi = min_max_eig(M)
     diag[0], diag[1] = lo, hi
     return 0
 
@@ -275,7 +260,7 @@ def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3
     for i in range(N_THETA_UVR):
         theta_out[i] = theta[i]
     if not adapt:
-        lo, hi = _min_max_eig(I)
+        lo, hi = min_max_eig(I)
         diag[0], diag[1] = lo, hi
         return 0
     e1, e2, e3 = dw[0], dw[1], dw[2]
@@ -291,7 +276,7 @@ def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3
     theta_out[34] -= g3 * dt * (r3 * e1 - r1 * e3)
     theta_out[35] -= g3 * dt * (r1 * e2 - r2 * e1)
     _sym_from_upper(theta_out, 3, I)
-    lo, hi = _min_max_eig(I)
+    lo, hi = min_max_eig(I)
     diag[0], diag[1] = lo, hi
     return 0
 
