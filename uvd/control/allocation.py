@@ -97,7 +97,8 @@ def allocate_kernel(B_pinv, f_max, u):
     if worst > 1.0:
         scale = 1.0 / worst
         for j in range(n):
-            f[j] *= scale
+            # clamped: x·(1/worst) can round one ulp past the limit for the thruster at it
+            f[j] = min(max(f[j] * scale, -f_max[j]), f_max[j])
             sat[j] = ratio[j] >= worst * (1.0 - 1e-12)
     return f, sat, scale
 
