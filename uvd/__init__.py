@@ -6,6 +6,10 @@ Vehicles*, PhD thesis, Johns Hopkins University, 2013 ("the thesis").
 
 from importlib.metadata import PackageNotFoundError, version
 
+from uvd import _jitcache
+
+_jitcache.configure()  # before numba is imported anywhere: see uvd/_jitcache.py
+
 try:
     __version__ = version("uvd")
 except PackageNotFoundError:  # running from a source tree that is not installed
