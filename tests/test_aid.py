@@ -296,6 +296,9 @@ def test_finite_but_huge_inputs_never_raise(step, init, theta0, big):
     kept = UVParams.from_theta(st.theta).M if step is aid6_step else \
         RotParams.from_theta(st.theta).I
     assert np.linalg.eigvalsh(kept)[0] > 0
+    # frozen, with the cause named: indefinite M̂ (1e3, 1e150) or an overflow (1e200 and up)
+    cause = "update was not finite" if big >= 1e200 else "lost positive definiteness"
+    assert st.frozen and cause in st.freeze_reason
 
 
 def test_first_step_sets_vhat_to_v():

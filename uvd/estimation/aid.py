@@ -410,7 +410,8 @@ def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
         theta_new.setflags(write=False)
     elif status in (1, 3):
         frozen = True
-        reason = (f"t={t_s:.1f}s after {steps} steps: {what} lost positive definiteness "
+        cause = "lost positive definiteness" if lo == lo else "update was not finite"
+        reason = (f"t={t_s:.1f}s after {steps} steps: {what} {cause} "
                   f"(λ_min {lo:.4g}, λ_max {hi:.4g}); θ̂ frozen at its last PD value")
         lo, hi = st.m_min_eig, st.m_max_eig
     return state_cls(theta_new, vhat_out, dv, v_out, r_out, u_out, lo, hi, frozen, reason,
