@@ -80,11 +80,17 @@ def candidate_bases(root: Path, env: dict) -> list[Path]:
 
 def _prune(base: Path, keep_name: str) -> None:
     """Remove all but the newest :data:`KEEP` key directories under ``base``."""
+    def mtime(d: Path) -> float:
+        try:
+            return d.stat().st_mtime
+        except OSError:  # removed meanwhile by another process
+            return 0.0
+
     try:
         dirs = [d for d in base.iterdir() if d.is_dir() and len(d.name) == 16]
     except OSError:
         return
-    dirs.sort(key=lambda d: d.stat().st_mtime, reverse=True)
+    dirs.sort(key=mtime, reverse=True)
     for d in dirs[KEEP:]:
         if d.name != keep_name:
             shutil.rmtree(d, ignore_errors=True)
