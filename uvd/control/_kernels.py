@@ -218,7 +218,8 @@ def wT_s(model, n, v, alpha, r, s):
 
 @_jit
 def _pd_above(S, floor):
-    """True when S − floor·I is positive definite (S symmetric, finite), by Cholesky."""
+    """True when S − floor·I is positive definite (S symmetric), by Cholesky; False when S has
+    a non-finite entry."""
     n = S.shape[0]
     return cholesky(S, floor, n, np.zeros((n, n)))
 
