@@ -61,7 +61,8 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
     bogus.write_bytes(b"not a zip")
     assert main(["identify", "--log", str(bogus), "--method", "ls", "--out",
                  str(tmp_path / "x.toml")]) == 2
-    assert "not a readable run log" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "not a readable run log" in err and "not a zip archive" in err
     np.savez(tmp_path / "partial.npz", t=np.arange(3.0))
     assert main(["xval", "--params", str(tmp_path / "none.toml"), "--log",
                  str(tmp_path / "partial.npz")]) == 2

@@ -28,6 +28,7 @@ wrench at t[k] (from measured propeller speeds, App. A.1; the core's ``u_applied
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -123,6 +124,9 @@ class RunLog:
     def load(cls, path: str | Path) -> RunLog:
         """Read a run written by :meth:`save`; raises :class:`ConfigError` naming what is wrong."""
         path = Path(path)
+        if path.is_file() and not zipfile.is_zipfile(path):
+            raise ConfigError(f"{path}: not a readable run log (.npz): not a zip archive "
+                              "(numpy's savez format)")
         try:
             with np.load(path, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
