@@ -12,13 +12,18 @@ ROOT = Path(__file__).resolve().parents[1]
 PROBE = f"""
 import sys
 sys.path.insert(0, {str(ROOT)!r})
+import numpy as np
 from sim_bridge import plant
 from sim_bridge.bridge import SimBridge
 from uvd.runtime.config import load_config
 assert not plant._thrusters_then_rigid_body.signatures
 b = SimBridge(load_config({str(ROOT / "config" / "sim.toml")!r}), hold=True)
 assert b.held and b.plant.steps == 0  # the real plant did not move
-print(len(plant._thrusters_then_rigid_body.signatures), b.warm_up_s)
+n_warm = len(plant._thrusters_then_rigid_body.signatures)
+# the live plant's first step (released from the cradle) needs no other compiled version: the
+# warm-up steps a copy, and a copy's arrays must be the same types as the original's
+b.plant.step(np.zeros(len(b.plant.thrusters.specs)))
+print(n_warm, len(plant._thrusters_then_rigid_body.signatures), b.warm_up_s)
 """
 
 
@@ -26,5 +31,6 @@ def test_the_fused_plant_kernel_is_loaded_at_construction():
     out = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True,
                          timeout=300, cwd=ROOT)
     assert out.returncode == 0, out.stderr
-    n_signatures, warm_up_s = out.stdout.split()
-    assert int(n_signatures) >= 1 and float(warm_up_s) > 0.0
+    n_warm, n_after_live_step, warm_up_s = out.stdout.split()
+    assert int(n_warm) >= 1 and float(warm_up_s) > 0.0
+    assert int(n_after_live_step) == int(n_warm)

@@ -67,8 +67,11 @@ class UVModel:
     @classmethod
     def from_params(cls, p: UVParams) -> UVModel:
         M = 0.5 * (p.M + p.M.T)
+        # b is copied: UVParams' arrays are read-only, and a read-only array is another type
+        # to the compiled kernels — a copy of the model (copy.deepcopy makes arrays writable)
+        # would compile them a second time, seconds, at its first step
         return cls(params=p, M=M, M_inv=np.linalg.inv(M), D_flat=np.hstack(list(p.D)),
-                   g=float(p.g), b=np.asarray(p.b, dtype=float),
+                   g=float(p.g), b=np.array(p.b, dtype=float),
                    b_list=[float(x) for x in p.b])
 
 
