@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from drivers import digiquartz, pd0, phins_ascii, phins_stdbin
+from drivers.samples import DepthSample, DvlSample, InsSample
 from drivers.serial_transport import SerialFrameReader
 from sim_bridge.instruments.models import InstrumentConfig, Instruments
 from sim_bridge.instruments.pty_emulators import EmulatorConfig, InstrumentEmulators
@@ -35,6 +36,24 @@ H0[:3, 3] = [1.0, -2.0, 1.5]
 def truth(t_ns: int) -> tuple[np.ndarray, np.ndarray]:
     t = t_ns * 1e-9
     return H0 @ exp_se3(np.concatenate([NU, OMEGA]) * t), np.concatenate([NU, OMEGA])
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _compiled():
+    """Load the compiled kernels (navigation, the truth's exponential) before any timed
+    window: with an empty numba cache their first call compiles for seconds, in the middle of
+    the 2 s the tests below count navigation ticks in."""
+    cfg = NavConfig(ins_timeout_s=0.25)
+    truth(0)
+    for rates_valid in (True, False):  # PHINS rates / rates derived from attitude (ASCII)
+        mem = nav_init(cfg)
+        for k in range(1, 4):
+            t = k * 100_000_000
+            ins = InsSample(t_ns=t - 5_000_000, roll=0.01 * k, pitch=0.02, heading=0.3,
+                            omega_body=np.zeros(3), rates_valid=rates_valid)
+            dvl = DvlSample(t_ns=t - 10_000_000, velocity_body=NU.copy(), bottom_lock=True)
+            depth = DepthSample(t_ns=t - 3_000_000, depth_m=1.5)
+            _, mem = nav_step(cfg, mem, t, ins, dvl, depth)
 
 
 CFG = InstrumentConfig()
