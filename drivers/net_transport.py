@@ -34,7 +34,7 @@ class UdpFrameReader(FrameReader):
             transport, _ = await loop.create_datagram_endpoint(
                 lambda: protocol, local_addr=(self.host, self.port))
         except OSError as exc:
-            raise TransportError(f"{self.name}: cannot bind {self.where}: {exc}") from exc
+            raise TransportError(f"bind failed: {exc}") from exc
         self.bound_port = transport.get_extra_info("sockname")[1]
         self.where = f"udp://{self.host}:{self.bound_port}"
         return transport
@@ -58,6 +58,7 @@ class TcpFrameReader(FrameReader):
                 loop.create_connection(lambda: protocol, self.host, self.port),
                 self.connect_timeout_s)
         except (TimeoutError, OSError) as exc:
-            raise TransportError(f"{self.name}: cannot connect to {self.where}: {exc}") \
-                from exc
+            what = f"no answer within {self.connect_timeout_s} s" \
+                if isinstance(exc, TimeoutError) else str(exc)
+            raise TransportError(f"connect failed: {what}") from exc
         return transport

@@ -21,6 +21,16 @@ from drivers.transport import FrameReader, _Protocol
 from uvd.errors import TransportError
 
 
+def _reason(exc: BaseException, port: str) -> str:
+    """Why ``port`` did not open, saying the port once (the reader's message names it):
+    pyserial repeats it around the operating system's error, which it chains as context."""
+    text = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+    ctx = exc.__context__
+    if isinstance(ctx, OSError) and ctx.strerror:
+        text = text.replace(str(ctx), f"[Errno {ctx.errno}] {ctx.strerror}")
+    return text.replace(f"could not open port {port}: ", "").replace(f"port {port}", "the port")
+
+
 class SerialFrameReader(FrameReader):
     """Framed reader of one serial port.
 
@@ -56,5 +66,4 @@ class SerialFrameReader(FrameReader):
             transport.serial.reset_input_buffer()
             return transport
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise TransportError(f"{self.name}: cannot open serial port {self.port}: {exc}") \
-                from exc
+            raise TransportError(_reason(exc, self.port)) from exc

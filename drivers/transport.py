@@ -100,7 +100,8 @@ class FrameReader:
     # ---- to implement ------------------------------------------------------------------------
     async def _open(self, protocol: _Protocol):
         """Open the byte source with ``protocol`` as its asyncio protocol; return the
-        asyncio transport (raise on failure)."""
+        asyncio transport. On failure raise with the reason only: :meth:`run` prefixes the
+        reader's name and where it reads from."""
         raise NotImplementedError
 
     # ---- callbacks (event loop) -------------------------------------------------------------
@@ -194,8 +195,9 @@ class FrameReader:
         deadline = time.monotonic() + timeout
         while not self.connected:
             if time.monotonic() > deadline:
-                raise TransportError(f"{self.name}: {self.where} not open after {timeout} s"
-                                     + (f" ({self.last_error})" if self.last_error else ""))
+                raise TransportError(f"{self.last_error} (not open after {timeout} s)"
+                                     if self.last_error else
+                                     f"{self.name}: {self.where} not open after {timeout} s")
             await asyncio.sleep(0.005)
 
     # ---- consumer API --------------------------------------------------------------------------

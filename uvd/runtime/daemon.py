@@ -240,7 +240,7 @@ class SerialSensor:
         self.reader.start()
         try:
             await self.reader.wait_connected(self.connect_timeout_s)
-        except BaseException:  # the App's start timeout cancels us: say which port it was
+        except asyncio.CancelledError:  # the App's start timeout: say which port it was
             log.error("%s: %s did not open%s", self.name, self.reader.where,
                       f" ({self.reader.last_error})" if self.reader.last_error else "")
             raise
