@@ -532,7 +532,11 @@ class Daemon:
                          "write_failed": 0, "feedback_invalid": 0}
         self.commands_max_abs = 0.0
         self._first_write_ns = 0
+        self.app.notifier.status("loading compiled kernels")  # systemctl status shows it
+        log.info("loading compiled kernels (the first start after an install or upgrade "
+                 "compiles them: up to a minute)")
         self.warm_up_s = self._warm_up()
+        log.info("compiled kernels loaded in %.1f s", self.warm_up_s)
         # the long collection now, at normal priority; GcFreeze only walks what the drivers
         # add when they start (the loop's thread may be real-time by then)
         gc.collect()
