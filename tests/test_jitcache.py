@@ -48,6 +48,16 @@ def test_configure_prefers_systemds_cache_directory_and_respects_the_users_choic
     assert user["NUMBA_CACHE_DIR"] == str(tmp_path / "mine")
 
 
+def test_an_empty_cache_is_told_apart_from_a_filled_one(tmp_path):
+    assert not _jitcache.cache_is_empty({})  # numba's default place: unknown, say nothing
+    d = tmp_path / "numba" / "0123456789abcdef"
+    assert _jitcache.cache_is_empty({"NUMBA_CACHE_DIR": str(d)})  # not even created yet
+    (d / "uvd_0a1b").mkdir(parents=True)
+    assert _jitcache.cache_is_empty({"NUMBA_CACHE_DIR": str(d)})
+    (d / "uvd_0a1b" / "core._command-187.py311.nbi").write_bytes(b"")
+    assert not _jitcache.cache_is_empty({"NUMBA_CACHE_DIR": str(d)})
+
+
 def test_old_keys_are_pruned(tmp_path):
     root = _tree(tmp_path / "src")
     env = {"CACHE_DIRECTORY": str(tmp_path / "cache")}

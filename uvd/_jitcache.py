@@ -120,3 +120,14 @@ def configure(root: Path | None = None, env: dict | None = None) -> Path | None:
                 numba_config.CACHE_DIR = str(target)  # numba came first: tell it directly
             return target
     return None
+
+
+def cache_is_empty(env: dict | None = None) -> bool:
+    """True when ``NUMBA_CACHE_DIR`` is set and holds no compiled kernel yet: the first run
+    after an install, an upgrade or any edit of a kernel module compiles them (tens of
+    seconds). False when unknown (numba's default location)."""
+    d = (os.environ if env is None else env).get("NUMBA_CACHE_DIR")
+    if not d:
+        return False
+    path = Path(d)
+    return not (path.is_dir() and next(path.rglob("*.nbi"), None) is not None)

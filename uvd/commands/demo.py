@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from uvd import _jitcache
 from uvd.bench import host_steal_s
 from uvd.jsonio import write_json
 
@@ -252,6 +253,9 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
                  f"{'on' if c.robust_adaptation else 'off'}) tracking {c.reference} on "
                  f"'{cfg.vehicle.name}' at {cfg.loop.rate_hz:g} Hz for {duration_s:g} s, "
                  "hardware in the loop")
+        if _jitcache.cache_is_empty():
+            progress("  compiling the numeric kernels first (once after an install or upgrade: "
+                     "about a minute)")
         t0 = time.monotonic()
         lock_log = lockstep_run(cfg, duration_s, seed)
         progress(f"  lockstep simulation of the same configuration: {lock_log.wall_s:.1f} s "

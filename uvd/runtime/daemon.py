@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from drivers.samples import R_to_euler
-from uvd import core
+from uvd import _jitcache, core
 from uvd.control.allocation import Allocator, allocate
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.types import Reference, VehicleState
@@ -491,6 +491,8 @@ class Daemon:
 
     def __init__(self, config: Config, *, auto_arm: bool = False, sinks: Sequence = (),
                  notifier=None, clock=None, realtime: bool = True) -> None:
+        cold = _jitcache.cache_is_empty()  # before anything below calls a kernel
+        t_init = time.perf_counter()
         self.config = config
         self.vehicle = config.load_vehicle()
         self.core_cfg = build_core(config, self.vehicle)
@@ -532,11 +534,12 @@ class Daemon:
                          "write_failed": 0, "feedback_invalid": 0}
         self.commands_max_abs = 0.0
         self._first_write_ns = 0
-        self.app.notifier.status("loading compiled kernels")  # systemctl status shows it
-        log.info("loading compiled kernels (the first start after an install or upgrade "
-                 "compiles them: up to a minute)")
+        what = "compiling the numeric kernels (once after an install or upgrade: up to a " \
+            "minute)" if cold else "loading the compiled kernels"
+        self.app.notifier.status(what)  # systemctl status shows it
+        log.info("%s", what)
         self.warm_up_s = self._warm_up()
-        log.info("compiled kernels loaded in %.1f s", self.warm_up_s)
+        log.info("kernels ready in %.1f s", time.perf_counter() - t_init)
         # the long collection now, at normal priority; GcFreeze only walks what the drivers
         # add when they start (the loop's thread may be real-time by then)
         gc.collect()
