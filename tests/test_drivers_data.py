@@ -6,23 +6,13 @@ import csv
 import functools
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from driver_strategies import DATA, read_data
 
 from drivers import pd0, phins_ascii, phins_stdbin
 from drivers.framing import decode_bytes
-
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-
-
-def _read(rel: str) -> bytes:
-    path = DATA / rel
-    if not path.is_file():
-        pytest.fail(f"recording {path} is missing: the tests read ../shared/data/ relative to "
-                    f"the project root (see ../shared/data/README.md)")
-    return path.read_bytes()
 
 
 def _yaml(rel: str):
@@ -34,7 +24,7 @@ def _yaml_cached(rel: str):
     import yaml
 
     loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: 5x faster
-    return yaml.load(_read(rel), Loader=loader)
+    return yaml.load(read_data(rel), Loader=loader)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -50,7 +40,7 @@ def _bt_particles(doc):
 
 @pytest.mark.parametrize("name", ["adcp_auv_51", "adcp_auv_3", "NE051400"])
 def test_pd0_bottom_track_matches_yml(name):
-    raw = _read(f"pd0/{name}.pd0" if name != "NE051400" else "pd0/NE051400.PD0")
+    raw = read_data(f"pd0/{name}.pd0" if name != "NE051400" else "pd0/NE051400.PD0")
     ensembles, dec = decode_bytes(pd0.Pd0Codec(), raw)
     expected = _bt_particles(_yaml(f"pd0/{name}.yml"))
     assert dec.counters.bad_checksums == 0 and dec.counters.bytes_dropped == 0
@@ -88,7 +78,7 @@ def test_pd0_bottom_track_matches_yml(name):
 
 
 def test_pd0_leaders_match_yml():
-    ensembles, _ = decode_bytes(pd0.Pd0Codec(), _read("pd0/adcp_auv_51.pd0"))
+    ensembles, _ = decode_bytes(pd0.Pd0Codec(), read_data("pd0/adcp_auv_51.pd0"))
     doc = _yaml("pd0/adcp_auv_51.yml")["data"]
     configs = [p for p in doc if p["particle_type"] == "adcp_config"]
     velocity = [p for p in doc if p["particle_type"] == "adcp_velocity_earth"]
@@ -116,7 +106,7 @@ def test_pd0_leaders_match_yml():
 
 
 def test_pd0_every_ensemble_of_rdi_withbt_matches_dolfyn():
-    ensembles, dec = decode_bytes(pd0.Pd0Codec(), _read("pd0/RDI_withBT.000"))
+    ensembles, dec = decode_bytes(pd0.Pd0Codec(), read_data("pd0/RDI_withBT.000"))
     with (DATA / "pd0" / "RDI_withBT_dolfyn_bottom_track.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     assert len(ensembles) == len(rows) == 1721
@@ -145,7 +135,7 @@ def test_pd0_every_ensemble_of_rdi_withbt_matches_dolfyn():
 def test_pd0_auv_vehicle_velocity_is_forward():
     """Physical check of the sign chain (bottom motion negated, RDI ship axes → body):
     the AUV of adcp_auv_51 cruises forward at ~1.2 m/s."""
-    ensembles, _ = decode_bytes(pd0.Pd0Codec(), _read("pd0/adcp_auv_51.pd0"))
+    ensembles, _ = decode_bytes(pd0.Pd0Codec(), read_data("pd0/adcp_auv_51.pd0"))
     samples = [pd0.to_dvl_sample(e, k) for k, e in enumerate(ensembles)]
     assert all(s.bottom_lock and s.good_beams == 4 for s in samples)
     v = np.array([s.velocity_body for s in samples])
@@ -159,7 +149,7 @@ def test_pd0_auv_vehicle_velocity_is_forward():
 
 
 def test_pd0_corrupted_recording_counts_and_reports_damage():
-    raw = _read("pd0/LB180210_3_corrupted.PD0")
+    raw = read_data("pd0/LB180210_3_corrupted.PD0")
     ensembles, dec = decode_bytes(pd0.Pd0Codec(), raw)
     c = dec.counters
     assert c.bad_checksums >= 1 and c.bytes_dropped > 0
@@ -176,7 +166,7 @@ def test_pd0_corrupted_recording_counts_and_reports_damage():
 
 @pytest.mark.parametrize("name", ["adcp_auv_51.pd0", "NE051400.PD0", "RDI_withBT.000"])
 def test_pd0_recordings_reencode_byte_for_byte(name):
-    raw = _read(f"pd0/{name}")
+    raw = read_data(f"pd0/{name}")
     frames, _ = decode_bytes(pd0.Pd0Codec(), raw, keep_raw=True)
     assert frames and all(pd0.encode_ensemble(e) == r for e, r in frames)
 
@@ -193,9 +183,9 @@ NOT_ASSERTED_BY_IXBLUE = {("V3", "soundVelocity", "validityTime_100us")}
 
 @pytest.mark.parametrize("version", ["V2", "V3", "V4", "V5"])
 def test_stdbin_first_frame_matches_ixblue_expectations(version):
-    expected = json.loads(_read("phins/stdbin_first_frame_expected.json"))[version]
+    expected = json.loads(read_data("phins/stdbin_first_frame_expected.json"))[version]
     frames, dec = decode_bytes(phins_stdbin.StdbinCodec(),
-                               _read(f"phins/log_STDBIN_{version}.log"))
+                               read_data(f"phins/log_STDBIN_{version}.log"))
     assert frames and dec.counters.bad_checksums == 0 and dec.counters.bytes_dropped == 0
     first = frames[0]
     assert first.version == int(version[1])
@@ -213,7 +203,7 @@ def test_stdbin_first_frame_matches_ixblue_expectations(version):
 
 
 def test_stdbin_v3_all_17_frames_valid_with_external_blocks():
-    raw = _read("phins/log_STDBIN_V3.log")
+    raw = read_data("phins/log_STDBIN_V3.log")
     frames, dec = decode_bytes(phins_stdbin.StdbinCodec(), raw, keep_raw=True)
     assert len(frames) == 17
     assert dec.counters.frames == 17 and dec.counters.bad_checksums == 0
@@ -235,7 +225,7 @@ def test_stdbin_v3_all_17_frames_valid_with_external_blocks():
 @pytest.mark.parametrize("version", ["V2", "V3", "V4", "V5"])
 def test_stdbin_ins_sample_signs(version):
     frames, _ = decode_bytes(phins_stdbin.StdbinCodec(),
-                             _read(f"phins/log_STDBIN_{version}.log"))
+                             read_data(f"phins/log_STDBIN_{version}.log"))
     fr = frames[0]
     s = phins_stdbin.to_ins_sample(fr, 123)
     att = fr.blocks["attitudeHeading"]
@@ -262,7 +252,7 @@ BAD_PREFIX = "$PIXSE,LMNIN_,"  # README elides the rest; its checksum is *78
 
 
 def test_phins_ascii_valid_lines_decoded_bad_checksums_rejected():
-    raw = _read("phins/phins_ascii_samples.txt")
+    raw = read_data("phins/phins_ascii_samples.txt")
     lines = [ln for ln in raw.decode("ascii").splitlines() if ln.strip()]
     bad = [ln for ln in lines if ln in BAD_LINES or (ln.startswith(BAD_PREFIX)
                                                       and ln.endswith("*78"))]
@@ -285,7 +275,7 @@ def test_phins_ascii_valid_lines_decoded_bad_checksums_rejected():
 
 def test_phins_ascii_values_and_signs():
     frames, _ = decode_bytes(phins_ascii.PhinsAsciiCodec(),
-                             _read("phins/phins_ascii_samples.txt"))
+                             read_data("phins/phins_ascii_samples.txt"))
     by = {}
     for s in frames:
         by.setdefault(s.kind, s)

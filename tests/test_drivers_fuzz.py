@@ -19,9 +19,9 @@ import random
 import time
 
 import pytest
+from driver_strategies import CODECS, mutated, sample_frames
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_drivers_strategies import CODECS, mutated, sample_frames
 
 from drivers.framing import StreamDecoder
 from uvd.errors import FrameError

@@ -5,15 +5,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from test_drivers_strategies import (
+from driver_strategies import (
     digiquartz_lines,
     generic_sentences,
     pd0_ensembles,
     phins_sentences,
     stdbin_frames,
 )
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from drivers import digiquartz, frames, pd0, phins_ascii, phins_stdbin
 from drivers.framing import StreamDecoder, decode_bytes

@@ -1,4 +1,5 @@
-"""Hypothesis strategies and sample frames shared by the driver property tests (no tests here)."""
+"""Hypothesis strategies, sample frames and the recordings of ../shared/data shared by the
+driver tests (no tests here)."""
 
 from __future__ import annotations
 
