@@ -4,15 +4,21 @@ command timeout to disarm the vehicle (seen on fresh-clone CI)."""
 
 from __future__ import annotations
 
+import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
+import pytest
 from numba.core.registry import CPUDispatcher
 
 from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+from sim_bridge.bridge import write_local_config
 from uvd import core
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon, start_pose
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _signatures() -> dict[str, int]:
@@ -32,8 +38,31 @@ def _readonly(a) -> np.ndarray:
     return a
 
 
-def test_cycles_disarmed_and_armed_with_read_only_inputs_compile_nothing_new():
-    cfg = load_config("config/sim.toml")
+# every controller, parameter model and the online identification; one process each, so that
+# no case finds its kernels compiled by another
+VARIANTS = {
+    "default": {},
+    "pdc+aid": {"control": {"controller": "pdc"}, "estimation": {"aid": True}},
+    "ambc": {"control": {"controller": "ambc", "robust_adaptation": False}},
+    "ambc-full+aid": {"control": {"controller": "ambc", "model": "full"},
+                      "estimation": {"aid": True}},
+    "two-step-full": {"control": {"controller": "two-step-ambc", "model": "full"}},
+}
+
+
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_cycles_disarmed_and_armed_with_read_only_inputs_compile_nothing_new(variant, tmp_path):
+    probe = (f"import sys; sys.path.insert(0, {str(ROOT / 'tests')!r}); "
+             f"import test_no_compile_in_the_loop as t; t.check({variant!r}, {str(tmp_path)!r})")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         timeout=300, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.strip().endswith("no new signatures"), out.stdout[-1000:]
+
+
+def check(variant: str, run_dir: str) -> None:
+    """Build the daemon of ``variant`` (warm-up included), then run cycles as in flight."""
+    cfg = load_config(write_local_config(Path(run_dir), changes=VARIANTS[variant]))
     d = Daemon(cfg, realtime=False)
     before = _signatures()
     H, _ = start_pose(cfg)
@@ -55,3 +84,4 @@ def test_cycles_disarmed_and_armed_with_read_only_inputs_compile_nothing_new():
     after = _signatures()
     grown = {f: (before.get(f, 0), n) for f, n in after.items() if n > before.get(f, 0)}
     assert not grown, f"compiled in the loop (signatures before, after): {grown}"
+    print("no new signatures")
