@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from uvd.cli import main
@@ -212,7 +213,9 @@ def test_reloadable_changes(tmp_path):
 def test_check_config_command(tmp_path, capsys):
     assert main(["check-config", str(ROOT / "config" / "sim.toml")]) == 0
     out = capsys.readouterr().out
-    assert "OK" in out and "two-step-ambc" in out
+    assert "OK" in out and "two-step-ambc" in out and "AID" not in out
+    assert main(["check-config", str(ROOT / "config" / "jhu-rov.toml")]) == 0
+    assert "AID on (from INITP, saved to aid-params.toml)" in capsys.readouterr().out
     bad = write(tmp_path, MINIMAL + "[control]\nkp = -1\n")
     assert main(["check-config", str(bad)]) == 2
     err = capsys.readouterr().err
@@ -231,3 +234,30 @@ def test_check_config_as_a_process(tmp_path):
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
     assert f"{bad}: loop.rate_hz: expected a number, got string 'fast'" in r.stderr
+
+
+def test_aid_initial_params_is_checked_at_load(tmp_path):
+    from uvd.estimation.aid import INITP_6DOF
+    from uvd.model.params import UVParams, save_params
+
+    _, errs = errors_of(tmp_path, "[estimation]\naid = true\ninitial_params = \"none.toml\"\n"
+                        + MINIMAL)
+    assert "cannot read parameters" in errs["estimation.initial_params"]
+    assert str(tmp_path / "none.toml") in errs["estimation.initial_params"]
+    (tmp_path / "bad.toml").write_text("[parameters]\nm = [1, 1]\n")
+    _, errs = errors_of(tmp_path, "[estimation]\ninitial_params = \"bad.toml\"\n" + MINIMAL)
+    assert "missing key" in errs["estimation.initial_params"]
+    # M not positive definite: AID cannot start from it (Theorem 4.3.1)
+    M = np.array(INITP_6DOF.M)
+    M[0, 0] = -1.0
+    save_params(UVParams(M=M, D=INITP_6DOF.D, g=INITP_6DOF.g, b=INITP_6DOF.b),
+                tmp_path / "neg.toml")
+    _, errs = errors_of(tmp_path, "[estimation]\ninitial_params = \"neg.toml\"\n" + MINIMAL)
+    assert "not positive definite" in errs["estimation.initial_params"]
+    # a good file, relative to the config file's folder
+    save_params(INITP_6DOF, tmp_path / "good.toml")
+    cfg = load_config(write(tmp_path, "[estimation]\naid = true\ninitial_params = "
+                                      "\"good.toml\"\n" + MINIMAL))
+    assert cfg.estimation.initial_params_path(tmp_path) == tmp_path / "good.toml"
+    _, errs = errors_of(tmp_path, "[estimation]\npublish_every_s = 0\n" + MINIMAL)
+    assert "estimation.publish_every_s" in errs

@@ -54,6 +54,10 @@ def test_identify_then_xval(run_file, tmp_path, capsys, method):
                                "q_degps", "r_degps"}
     if method.startswith("ls"):  # LS of the same run predicts it well
         assert res["mae"]["u_mps"] < 0.02 and res["mae"]["roll_deg"] < 1.0
+    # an --out that cannot be written is a clear error, not a traceback
+    assert main(["identify", "--log", str(run_file), "--method", method, "--out",
+                 str(tmp_path / "no" / "dir.toml")]) == 2
+    assert f"cannot write: no folder {tmp_path / 'no'}" in capsys.readouterr().err
 
 
 def test_bad_inputs_are_clear_errors(tmp_path, capsys):

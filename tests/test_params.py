@@ -130,3 +130,19 @@ def test_toml_errors_name_the_key(tmp_path):
     f.write_text("[parameters]\nm = [1,1,1,1,1,1]\ng = 0\nb = [0,0,1]\n")
     with pytest.raises(ParameterError, match="missing key.*'d'"):
         P.params_from_toml(f)
+
+
+def test_toml_file_errors_and_atomic_save(tmp_path):
+    with pytest.raises(ParameterError, match="cannot read parameters"):
+        P.params_from_toml(tmp_path / "none.toml")
+    f = tmp_path / "p.toml"
+    f.write_text("[parameters\n")
+    with pytest.raises(ParameterError, match=f"{f}: not valid TOML"):
+        P.params_from_toml(f)
+    p = P.UVParams.decoupled([1] * 6, [-1] * 6, 2.0, [0, 0, 1])
+    P.save_params(p, f)  # replaces the bad file whole
+    assert P.params_from_toml(f).g == 2.0
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["p.toml"]
+    with pytest.raises(FileNotFoundError):
+        P.save_params(p, tmp_path / "no" / "dir.toml")
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["p.toml"]

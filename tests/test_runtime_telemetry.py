@@ -218,3 +218,87 @@ def test_mailbox_keeps_the_newest_untaken_item():
     m.put(3)
     assert m.take() == 3
     assert m.stats() == {"puts": 3, "takes": 2, "overwritten": 1}
+
+
+def test_a_sink_can_take_only_some_record_types():
+    cycles_too, estimates = ListSink("all"), ListSink("est")
+
+    async def main():
+        hub = TelemetryHub([cycles_too], flush_interval_s=0.01)
+        hub.add_sink(estimates, types=("estimate",))
+        pump = asyncio.create_task(hub.run())
+        for i in range(50):
+            hub.publish({"type": "cycle", "i": i})
+            if i % 10 == 0:
+                hub.publish({"type": "estimate", "i": i}, always=True)
+        hub.publish({"type": "failsafe"}, always=True)
+        stats = await hub.aclose(1.0)
+        await asyncio.wait_for(pump, 2.0)
+        return stats
+
+    stats = run(main())
+    assert [r["i"] for r in estimates.records] == [0, 10, 20, 30, 40]
+    assert len(cycles_too.records) == 56
+    assert stats["est"]["published"] == 5 and stats["est"]["dropped"] == 0
+
+
+def _estimate(k, theta):
+    return {"type": "estimate", "t_ns": k, "estimator": "aid6", "theta": theta, "steps": k,
+            "m_min_eig": 1.0, "m_max_eig": 2.0, "frozen": k >= 3,
+            "freeze_reason": "M̂ not positive definite at t = 3 s" if k >= 3 else ""}
+
+
+def test_params_file_sink_keeps_the_newest_estimate(tmp_path):
+    from uvd.estimation.aid import INITP_6DOF
+    from uvd.model.params import params_from_toml
+    from uvd.telemetry import ParamsFileSink
+
+    path = tmp_path / "state" / "aid.toml"
+    now = [0.0]
+    thetas = [INITP_6DOF.theta + k for k in range(5)]
+    seen = []
+
+    async def main():
+        sink = ParamsFileSink(path, every_s=10.0, clock=lambda: now[0])
+        await sink.open()
+        await sink.write([{"type": "cycle"}])
+        assert not path.exists()  # nothing to keep yet
+        await sink.write([_estimate(0, thetas[0])])  # the first estimate: written at once
+        seen.append(params_from_toml(path).theta)
+        now[0] = 5.0
+        await sink.write([_estimate(1, thetas[1]), _estimate(2, thetas[2])])
+        seen.append(params_from_toml(path).theta)  # not yet: 5 s < every_s
+        now[0] = 10.0
+        await sink.write([_estimate(3, thetas[3])])
+        seen.append(params_from_toml(path).theta)
+        await sink.write([_estimate(4, thetas[4])])
+        await sink.aclose()  # the newest, whatever the interval
+        seen.append(params_from_toml(path).theta)
+        return sink
+
+    sink = run(main())
+    for got, k in zip(seen, (0, 0, 3, 4), strict=True):
+        np.testing.assert_array_equal(got, thetas[k])
+    assert sink.writes == 3
+    text = path.read_text()
+    assert text.startswith("# aid6: online estimate") and "FROZEN" in text
+    assert sorted(p.name for p in path.parent.iterdir()) == ["aid.toml"]  # no temporary left
+
+
+def test_params_file_sink_that_cannot_write_is_counted(tmp_path):
+    from uvd.estimation.aid import INITP_6DOF
+    from uvd.telemetry import ParamsFileSink
+
+    (tmp_path / "file").write_text("")  # a file where the folder should be
+
+    async def main():
+        hub = TelemetryHub(flush_interval_s=0.01)
+        hub.add_sink(ParamsFileSink(tmp_path / "file" / "aid.toml"), types=("estimate",))
+        pump = asyncio.create_task(hub.run())
+        hub.publish(_estimate(0, INITP_6DOF.theta), always=True)
+        stats = await hub.aclose(1.0)
+        await asyncio.wait_for(pump, 2.0)
+        return stats
+
+    st = run(main())["params-file"]
+    assert st["errors"] == 1 and "open" in st["last_error"] and "file" in st["last_error"]

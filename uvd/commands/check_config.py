@@ -55,5 +55,14 @@ def _run(args) -> int:
     print(f"{args.file}: OK — vehicle {cfg.vehicle.name}, loop {cfg.loop.rate_hz:g} Hz, "
           f"controller {cfg.control.controller}, INS {cfg.sensors.ins.port}, "
           f"CAN {cfg.can.bus.interface}:{cfg.can.bus.channel} "
-          f"(nodes {', '.join(map(str, cfg.can.amplifiers.node_ids))})")
+          f"(nodes {', '.join(map(str, cfg.can.amplifiers.node_ids))})"
+          + _aid_summary(cfg.estimation))
     return 0
+
+
+def _aid_summary(est) -> str:
+    if not est.aid:
+        return ""
+    start = est.initial_params or "INITP"
+    saved = f", saved to {est.save_path}" if est.save_path else ", not saved"
+    return f", AID on (from {start}{saved})"

@@ -70,18 +70,19 @@ def _parse_gains(text):
 
 
 def _run(args) -> int:
-    from uvd.commands.xval import _load_params
     from uvd.estimation.aid import INITP_6DOF, aid6_params
     from uvd.estimation.ls import DiffFilter, ls_identify
     from uvd.estimation.runlog import RunLog
     from uvd.jsonio import write_json
-    from uvd.model.params import save_params
+    from uvd.model.params import params_from_toml, save_params
 
+    if not args.out.parent.is_dir():  # before minutes of identification, not after
+        raise ConfigError(f"--out {args.out}: cannot write: no folder {args.out.parent}")
     run = RunLog.load(args.log)
     summary: dict = {"log": str(args.log), "method": args.method, "samples": len(run.t),
                      "duration_s": float(len(run.t) * run.dt)}
     if args.method == "aid":
-        init = _load_params(args.init) if args.init else INITP_6DOF
+        init = params_from_toml(args.init) if args.init else INITP_6DOF
         try:
             st = identify_aid(run, init.theta, _parse_gains(args.gains))
         except ValueError as exc:
@@ -109,7 +110,10 @@ def _run(args) -> int:
     except ParameterError as exc:
         valid = f"NOT physically valid: {exc}"
     summary["validity"] = valid
-    save_params(params, args.out, title=title)
+    try:
+        save_params(params, args.out, title=title)
+    except OSError as exc:
+        raise ConfigError(f"--out {args.out}: cannot write: {exc.strerror or exc}") from exc
     print(title)
     print(f"M min eigenvalue {lam:.4g}; g = {params.g:.4g} N; b = "
           f"{np.array2string(params.b, precision=4)} N m; {valid}")

@@ -24,30 +24,16 @@ def register(sub) -> None:
     p.set_defaults(handler=_run)
 
 
-def _load_params(path: Path):
-    """A ``[parameters]`` TOML, with a clear error for a missing or malformed file."""
-    import tomllib
-
-    from uvd.errors import ConfigError
-    from uvd.model.params import params_from_toml
-
-    try:
-        return params_from_toml(path)
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read parameters: {exc.strerror or exc}") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
-
-
 def _run(args) -> int:
     from uvd.errors import ConfigError
     from uvd.estimation.runlog import RunLog
     from uvd.estimation.xval import STATES_6DOF, cross_validate, format_mae_table, write_figures
     from uvd.jsonio import write_json
+    from uvd.model.params import params_from_toml
 
     if args.substeps < 1:
         raise ConfigError(f"--substeps must be >= 1, got {args.substeps}")
-    params = _load_params(args.params)
+    params = params_from_toml(args.params)
     run = RunLog.load(args.log)
     res = cross_validate(params, run, substeps=args.substeps)
     name = args.params.stem

@@ -359,13 +359,40 @@ def params_from_mapping(table: dict, *, where: str = "parameters") -> UVParams:
 
 
 def params_from_toml(path: str | Path) -> UVParams:
+    """Load a ``[parameters]`` TOML (:func:`params_to_toml`'s layout or the decoupled form).
+
+    Raises :class:`~uvd.errors.ParameterError` naming the file: unreadable, not TOML, no
+    ``[parameters]`` table, a missing or unknown key, a wrong shape or a non-finite entry.
+    """
     path = Path(path)
-    with path.open("rb") as fh:
-        doc = tomllib.load(fh)
+    try:
+        with path.open("rb") as fh:
+            doc = tomllib.load(fh)
+    except OSError as exc:
+        raise ParameterError(f"{path}: cannot read parameters: {exc.strerror or exc}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"{path}: not valid TOML: {exc}") from exc
     if "parameters" not in doc:
         raise ParameterError(f"{path}: no [parameters] table")
     return params_from_mapping(doc["parameters"], where=f"{path}: [parameters]")
 
 
 def save_params(p: UVParams, path: str | Path, *, title: str = "") -> None:
-    Path(path).write_text(params_to_toml(p, title=title))
+    """Write :func:`params_to_toml` to ``path`` atomically.
+
+    The text goes to a temporary file in the same folder, is flushed to disk and renamed over
+    ``path``: a reader (or a crash mid-write) sees the old file or the new one, never half.
+    """
+    import os
+
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        with tmp.open("w", encoding="utf-8") as fh:
+            fh.write(params_to_toml(p, title=title))
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise

@@ -175,8 +175,45 @@ class NavigationSection:
 class EstimationSection:
     """Online identification (``[estimation]``), running whoever drives the vehicle."""
 
-    aid: bool = setting(False, doc="run 6-DOF adaptive identification (Theorem 4.3.1, INITP "
-                                   "of §4.6 as θ̂(0)) every cycle")
+    aid: bool = setting(False, doc="run 6-DOF adaptive identification (Theorem 4.3.1) every "
+                                   "cycle, armed or not")
+    initial_params: str = setting(
+        "", doc="θ̂(0) of AID: a [parameters] TOML (e.g. the save_path of an earlier run, "
+                "to go on from its estimate; relative to this config file); empty = INITP of "
+                "§4.6 (Tables 4.6-4.7). Its M must be positive definite")
+    publish_every_s: float = setting(
+        1.0, unit="s", min=0.01, max=3600.0, reload=True,
+        doc="how often the estimate goes to the telemetry sinks as an \"estimate\" record "
+            "(θ̂ ∈ R²⁴¹ in the order of (2.48), M̂'s extreme eigenvalues, frozen and why)")
+    save_path: str = setting(
+        "", doc="write the latest θ̂ to this [parameters] TOML (loadable by initial_params, "
+                "uvd xval --params, uvd identify --init) every save_every_s and at shutdown, "
+                "atomically; relative to the working directory (under systemd "
+                "$STATE_DIRECTORY); empty = not saved")
+    save_every_s: float = setting(60.0, unit="s", min=1.0, max=86400.0,
+                                  doc="how often save_path is rewritten while running")
+
+    def initial_params_path(self, base_dir: Path) -> Path | None:
+        """``initial_params`` resolved against the config file's folder (None: INITP)."""
+        if not self.initial_params:
+            return None
+        p = Path(self.initial_params)
+        return p if p.is_absolute() else base_dir / p
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        p = self.initial_params_path(ctx.base_dir)
+        if p is None:
+            return []
+        from uvd.errors import ParameterError
+        from uvd.model.params import params_from_toml
+        try:
+            lam = params_from_toml(p).mass_min_eigenvalue()
+        except ParameterError as exc:
+            return [("initial_params", str(exc))]
+        if not lam > 0.0:
+            return [("initial_params", f"{p}: M is not positive definite (smallest eigenvalue "
+                                       f"{lam:.4g}); AID needs M̂(t₀) > 0 (Theorem 4.3.1)")]
+        return []
 
 
 def _check_port(port: str | None, key: str = "port") -> list[tuple[str, str]]:

@@ -21,7 +21,10 @@
           command zero
         → the last guard before the bus (finite, within ±max thrust)
         → AmplifierGroup.write (RPDOs + SYNC)
-        → one telemetry record (never blocks)
+        → one telemetry record (never blocks); with ``[estimation] aid`` also, every
+          ``publish_every_s``, an ``"estimate"`` record (θ̂, M̂'s eigenvalues, frozen or not:
+          :meth:`Daemon.estimate_records`), which ``save_path`` keeps as a parameters file
+          (:class:`~uvd.telemetry.params_file.ParamsFileSink`; once more at shutdown)
 
 The navigation timeouts are the failsafe thresholds (:func:`nav_config`: one source of truth).
 The reference clock starts when the vehicle is armed; ``reference = "hold"`` holds the pose
@@ -38,6 +41,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -48,7 +52,7 @@ from uvd.control.allocation import Allocator, allocate
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.types import Reference, VehicleState
 from uvd.estimation.navigation import NavConfig
-from uvd.runtime.app import App
+from uvd.runtime.app import App, ShutdownStep
 from uvd.runtime.config import Config
 from uvd.runtime.failsafe import Action, Health, nav_health
 from uvd.runtime.leak import LeakInput, leak_sensor_fault_trigger
@@ -163,10 +167,20 @@ def build_core(cfg: Config, vehicle=None) -> core.CoreConfig:
     estimators: tuple = ()
     if cfg.estimation.aid:
         from uvd.estimation.aid import aid6_estimator
-        estimators = (aid6_estimator(),)
+        estimators = (aid6_estimator(aid_theta0(cfg)),)
     return core.CoreConfig(nav=nav_config(cfg), controller=make_controller(cfg, vehicle, alloc),
                            reference=traj, allocator=alloc, k_thrust=vehicle.k_thrust,
                            estimators=estimators, lag_compensation=cfg.control.lag_compensation)
+
+
+def aid_theta0(cfg: Config) -> np.ndarray | None:
+    """θ̂(0) of online AID: ``[estimation] initial_params`` or None (INITP of §4.6)."""
+    base = Path(cfg.source).parent if cfg.source else Path.cwd()
+    path = cfg.estimation.initial_params_path(base)
+    if path is None:
+        return None
+    from uvd.model.params import params_from_toml
+    return params_from_toml(path).theta
 
 
 def _eta(H: np.ndarray) -> np.ndarray:
@@ -522,6 +536,19 @@ class Daemon:
                        realtime=realtime)
         self.app.set_amplifier_hooks(zero=self.can.zero, disable=self.can.disable)
         self.app.reload_hooks.append(self._on_reload)
+        est = config.estimation
+        self._estimate_period_ns = int(est.publish_every_s * 1e9)
+        self._next_estimate_ns = 0
+        self._frozen_logged: set[str] = set()
+        if self.core_cfg.estimators:
+            if est.save_path:
+                from uvd.telemetry.params_file import RECORD_TYPE, ParamsFileSink
+                self.app.hub.add_sink(ParamsFileSink(est.save_path, every_s=est.save_every_s),
+                                      types=(RECORD_TYPE,))
+            # after the amplifiers are safe, before the sinks close: the newest θ̂ reaches
+            # them (and save_path) however long ago the last periodic record went out
+            self.app.add_shutdown_step(ShutdownStep("publish the final estimate",
+                                                    self._publish_final_estimates))
         self.auto_arm = auto_arm
         self._armed_once = False
         self._last_arm_try_ns = 0
@@ -602,6 +629,45 @@ class Daemon:
         new = build_core(cfg, self.vehicle)
         # keep the running reference (hold setpoint) and the controller's memory
         self.core_cfg = replace(new, reference=self.core_cfg.reference)
+        self._estimate_period_ns = int(cfg.estimation.publish_every_s * 1e9)
+
+    # -- the estimates --
+
+    def estimate_records(self, t_ns: int) -> list[dict[str, Any]]:
+        """One ``"estimate"`` telemetry record per online estimator (``[estimation]``).
+
+        Keys: ``estimator`` (name), ``theta`` (θ̂, for AID θ_UV ∈ R²⁴¹ in the order of (2.48),
+        a copy), ``m_min_eig``/``m_max_eig`` (M̂'s extreme eigenvalues), ``frozen`` and
+        ``freeze_reason`` (AID stops adapting when M̂ would lose positive definiteness and
+        keeps the last positive-definite θ̂), ``steps``, ``skipped`` (non-finite inputs),
+        ``resyncs`` (v̂ re-synchronised after a navigation gap), ``velocity_error`` (‖v̂ − v‖).
+        """
+        out = []
+        for spec, st in zip(self.core_cfg.estimators, self.state.est, strict=True):
+            theta = getattr(st, "theta", None)
+            dv = getattr(st, "dv", None)
+            out.append({"type": "estimate", "t_ns": t_ns, "estimator": spec.name,
+                        "theta": None if theta is None else np.array(theta, dtype=float),
+                        "m_min_eig": getattr(st, "m_min_eig", None),
+                        "m_max_eig": getattr(st, "m_max_eig", None),
+                        "frozen": bool(getattr(st, "frozen", False)),
+                        "freeze_reason": getattr(st, "freeze_reason", ""),
+                        "steps": getattr(st, "steps", None),
+                        "skipped": getattr(st, "skipped", None),
+                        "resyncs": getattr(st, "resyncs", None),
+                        "velocity_error": None if dv is None else float(np.linalg.norm(dv))})
+        return out
+
+    def _publish_estimates(self, t_ns: int) -> None:
+        for rec in self.estimate_records(t_ns):
+            if rec["frozen"] and rec["estimator"] not in self._frozen_logged:
+                self._frozen_logged.add(rec["estimator"])
+                log.warning("%s stopped adapting: %s (the estimate kept is the last with M̂ "
+                            "positive definite)", rec["estimator"], rec["freeze_reason"])
+            self.app.hub.publish(rec, always=True)
+
+    async def _publish_final_estimates(self) -> None:
+        self._publish_estimates(self.last.t_ns)
 
     # -- the cycle --
 
@@ -735,6 +801,10 @@ class Daemon:
         if self.armed_at_ns is not None:
             rec["armed_at_ns"] = self.armed_at_ns
         self.app.hub.publish(rec)
+        # within half a period of the due time: a cycle a few µs early is not skipped
+        if self.core_cfg.estimators and t_ns >= self._next_estimate_ns - int(dt * 5e8):
+            self._next_estimate_ns = t_ns + self._estimate_period_ns
+            self._publish_estimates(t_ns)
 
     def _hold_depth(self, nav, dt: float) -> np.ndarray:
         """PD on depth, roll and pitch only (closed-loop mask), zero surge/sway/yaw thrust.

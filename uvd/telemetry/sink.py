@@ -12,7 +12,9 @@ Records must not be mutated after they are published (the core returns new array
 so this holds by construction).
 
 A sink implements :class:`TelemetrySink`. Zenoh, MAVLink and the black-box recorder plug in
-as further sinks; :class:`uvd.telemetry.jsonl.JsonLinesSink` is the one provided now.
+as further sinks; provided now: :class:`uvd.telemetry.jsonl.JsonLinesSink` (every record as a
+JSON line) and :class:`uvd.telemetry.params_file.ParamsFileSink` (the newest online estimate
+θ̂ as a parameters file).
 """
 
 from __future__ import annotations
@@ -104,9 +106,11 @@ class SinkStats:
 
 
 class _Lane:
-    def __init__(self, sink: TelemetrySink, capacity: int, every_n: int = 1) -> None:
+    def __init__(self, sink: TelemetrySink, capacity: int, every_n: int = 1,
+                 types: Iterable[str] | None = None) -> None:
         self.sink = sink
         self.every_n = max(1, int(every_n))
+        self.types = None if types is None else frozenset(types)
         self.queue = BoundedQueue(capacity)
         self.stats = SinkStats()
         self.opened = False
@@ -143,9 +147,14 @@ class TelemetryHub:
         self._lanes: list[_Lane] = [_Lane(s, self.queue_size, every_n) for s in sinks]
         self._closing = False
 
-    def add_sink(self, sink: TelemetrySink, every_n: int = 1) -> None:
-        """Add a sink (taking one cycle record in ``every_n``) before :meth:`run` starts."""
-        self._lanes.append(_Lane(sink, self.queue_size, every_n))
+    def add_sink(self, sink: TelemetrySink, every_n: int = 1,
+                 types: Iterable[str] | None = None) -> None:
+        """Add a sink before :meth:`run` starts.
+
+        It takes one cycle record in ``every_n``, and, when ``types`` is given, only records
+        whose ``"type"`` is one of them (e.g. ``("estimate",)``).
+        """
+        self._lanes.append(_Lane(sink, self.queue_size, every_n, types))
 
     def set_every_n(self, name: str, every_n: int) -> None:
         """Change a sink's decimation at run time (reload)."""
@@ -167,6 +176,8 @@ class TelemetryHub:
             self._count += 1
         n = self._count
         for lane in self._lanes:
+            if lane.types is not None and record.get("type") not in lane.types:
+                continue
             if always or lane.every_n == 1 or n % lane.every_n == 0:
                 lane.queue.put(record)
 

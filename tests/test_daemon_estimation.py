@@ -1,0 +1,143 @@
+"""Online identification in the daemon: the estimate leaves the process and comes back.
+
+``uvd run`` with ``[estimation] aid = true`` against ``sim-bridge`` (second process, real
+pseudo-terminals and ``udp_multicast`` CAN bus): the loop publishes ``"estimate"`` records
+(θ̂ ∈ R²⁴¹ of 6-DOF AID) at ``publish_every_s``; ``save_path`` holds the newest θ̂ as a
+parameters file, rewritten once more at shutdown; a second daemon configured with that file
+as ``initial_params`` starts its AID from it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
+from uvd.estimation.aid import INITP_6DOF
+from uvd.model.params import params_from_toml
+from uvd.runtime.config import load_config
+from uvd.runtime.daemon import Daemon
+from uvd.runtime.loop import drop_realtime
+
+pytestmark = pytest.mark.timeout(120)
+
+
+class ListSink:
+    """A telemetry sink keeping every record in memory."""
+
+    name = "test"
+
+    def __init__(self) -> None:
+        self.records: list[dict] = []
+
+    async def open(self) -> None:
+        pass
+
+    async def write(self, records) -> None:
+        self.records.extend(records)
+
+    async def flush(self) -> None:
+        pass
+
+    async def aclose(self) -> None:
+        pass
+
+
+@pytest.fixture(scope="module")
+def hil(tmp_path_factory):
+    run_dir = tmp_path_factory.mktemp("hil-aid")
+    bridge_args, changes = cpu_split(pin=False)
+    changes["telemetry"] = {"jsonl": {"enabled": False}}
+    changes["estimation"] = {"aid": True, "publish_every_s": 0.2,
+                             "save_path": str(run_dir / "aid-params.toml"),
+                             "save_every_s": 1.0}
+    cfg_path = write_local_config(run_dir, changes=changes)
+    proc = BridgeProcess(cfg_path, duration_s=120.0, hold=True,
+                         extra=bridge_args).start(timeout_s=90.0)
+    try:
+        yield cfg_path, proc
+    finally:
+        proc.stop(timeout_s=5.0)
+        proc.kill()
+
+
+def run_daemon(cfg, seconds: float):
+    """Run the daemon (auto-arm) for ``seconds`` after arming, stop it; its records."""
+    sink = ListSink()
+    out = {}
+
+    async def main():
+        d = Daemon(cfg, auto_arm=True, sinks=[sink])
+        out["daemon"] = d
+        task = asyncio.get_running_loop().create_task(d.run())
+        try:
+            deadline = time.monotonic() + 30.0
+            while not d.supervisor.armed:
+                assert not task.done(), "the daemon stopped before arming"
+                assert time.monotonic() < deadline, f"not armed: {d.arm_refusal}"
+                await asyncio.sleep(0.02)
+            await asyncio.sleep(seconds)
+        finally:
+            d.stop("test done")
+            out["code"] = await asyncio.wait_for(task, 10.0)
+
+    affinity = os.sched_getaffinity(0)
+    try:
+        asyncio.run(asyncio.wait_for(main(), 60.0))
+    finally:  # the daemon made this thread real-time: back to normal for the next tests
+        drop_realtime()
+        os.sched_setaffinity(0, affinity)
+    assert out["code"] == 0
+    return out["daemon"], sink.records
+
+
+def test_aid_estimate_is_published_saved_and_resumed(hil, tmp_path):
+    cfg_path, proc = hil
+    assert proc.call("reset")["ok"] and proc.call("place", hold=True)["ok"]
+    cfg = load_config(cfg_path)
+    save_path = cfg.estimation.save_path
+    d, records = run_daemon(cfg, 3.0)
+
+    est = [r for r in records if r.get("type") == "estimate"]
+    cycles = [r for r in records if r.get("type") == "cycle"]
+    # every 0.2 s from the first cycle on, plus the final one at shutdown
+    span_s = (cycles[-1]["t_ns"] - cycles[0]["t_ns"]) * 1e-9
+    assert int(span_s / 0.2) + 1 <= len(est) <= int(span_s / 0.2) + 3, (len(est), span_s)
+    assert all(r["estimator"] == "aid6" and r["theta"].shape == (241,) for r in est)
+    assert np.all(np.diff([r["t_ns"] for r in est]) >= 0)
+    last = est[-1]
+    assert last["t_ns"] == cycles[-1]["t_ns"]  # the shutdown record: the newest θ̂
+    np.testing.assert_array_equal(last["theta"], d.state.est[0].theta)
+    assert last["steps"] > 20 and not last["frozen"] and last["m_min_eig"] > 0
+    assert np.linalg.norm(last["theta"] - INITP_6DOF.theta) > 0  # it adapted
+    assert last["velocity_error"] < 0.5
+
+    # the file holds exactly the newest estimate, and the temporary file is gone
+    saved = params_from_toml(save_path)
+    np.testing.assert_array_equal(saved.theta, last["theta"])
+    assert not any(p.name.endswith(".tmp") for p in Path(save_path).parent.iterdir())
+    stats = d.app.shutdown_report["telemetry"]["params-file"]
+    assert stats["errors"] == 0 and stats["dropped"] == 0
+    assert stats["written"] == len(est)  # only estimate records reach that sink
+    # rewritten at the first estimate, then at most once per save_every_s = 1 s, and at close
+    sink = next(s for s in d.app.hub.sinks if s.name == "params-file")
+    assert 3 <= sink.writes <= int(span_s / 1.0) + 2, (sink.writes, span_s)
+    assert d.app.shutdown_report["steps"]["publish the final estimate"] == "ok"
+
+    # a second daemon starts its AID from the saved file
+    cfg2_path = tmp_path / "resume.toml"
+    cfg2_path.write_text(_with_initial_params(cfg_path.read_text(), save_path))
+    cfg2 = load_config(cfg2_path)
+    d2 = Daemon(cfg2)
+    np.testing.assert_array_equal(d2.state.est[0].theta, saved.theta)
+
+
+def _with_initial_params(text: str, path: str) -> str:
+    """The config text with ``[estimation] initial_params`` set."""
+    assert "[estimation]" in text
+    return text.replace("[estimation]", f"[estimation]\ninitial_params = {path!r}", 1)
