@@ -141,3 +141,23 @@ def _with_initial_params(text: str, path: str) -> str:
     """The config text with ``[estimation] initial_params`` set."""
     assert "[estimation]" in text
     return text.replace("[estimation]", f"[estimation]\ninitial_params = {path!r}", 1)
+
+
+def test_a_frozen_estimate_is_published_and_logged_once(tmp_path, caplog):
+    from dataclasses import replace
+
+    cfg = load_config(write_local_config(tmp_path, changes={"estimation": {"aid": True}}))
+    d = Daemon(cfg)  # not run: no port is opened
+    lane = next(la for la in d.app.hub._lanes if la.sink.name == "jsonl")
+    st = d.state.est[0]
+    d.state.est = (replace(st, frozen=True, freeze_reason="M̂ not positive definite at t = 9 s"),)
+    with caplog.at_level("WARNING", logger="uvd.daemon"):
+        d._publish_estimates(123)
+        d._publish_estimates(456)
+    recs = lane.queue.drain()
+    assert [r["t_ns"] for r in recs] == [123, 456]
+    assert all(r["frozen"] and "t = 9 s" in r["freeze_reason"] for r in recs)
+    np.testing.assert_array_equal(recs[0]["theta"], st.theta)
+    assert recs[0]["theta"] is not st.theta  # a copy: the record never changes afterwards
+    warnings = [r.getMessage() for r in caplog.records if "stopped adapting" in r.getMessage()]
+    assert len(warnings) == 1 and "aid6" in warnings[0] and "t = 9 s" in warnings[0]
