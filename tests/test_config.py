@@ -261,3 +261,18 @@ def test_aid_initial_params_is_checked_at_load(tmp_path):
     assert cfg.estimation.initial_params_path(tmp_path) == tmp_path / "good.toml"
     _, errs = errors_of(tmp_path, "[estimation]\npublish_every_s = 0\n" + MINIMAL)
     assert "estimation.publish_every_s" in errs
+    _, errs = errors_of(tmp_path, "[estimation]\ngains = [10, 0, 1, 1, 1]\n" + MINIMAL)
+    assert "gamma1 must be finite and > 0" in errs["estimation.gains"]
+    _, errs = errors_of(tmp_path, "[estimation]\ngains = [10, 1, 1]\n" + MINIMAL)
+    assert "exactly 5 values" in errs["estimation.gains"]
+    # the configured gains and θ̂(0) reach the daemon's estimator
+    from uvd.estimation.aid import AID6Gains
+    from uvd.runtime.daemon import build_core
+    resume = UVParams(M=INITP_6DOF.M, D=INITP_6DOF.D, g=7.0, b=INITP_6DOF.b)
+    save_params(resume, tmp_path / "resume.toml")
+    cfg = load_config(write(tmp_path, "[estimation]\naid = true\ninitial_params = "
+                                      "\"resume.toml\"\ngains = [1, 2, 3, 4, 5]\n" + MINIMAL))
+    (spec,) = build_core(cfg).estimators
+    assert spec.params.gains == AID6Gains(1.0, 2.0, 3.0, 4.0, 5.0)
+    np.testing.assert_array_equal(spec.init_state.theta, resume.theta)
+    assert spec.init_state.theta[237] == 7.0  # g, not INITP's

@@ -181,6 +181,11 @@ class EstimationSection:
         "", doc="θ̂(0) of AID: a [parameters] TOML (e.g. the save_path of an earlier run, "
                 "to go on from its estimate; relative to this config file); empty = INITP of "
                 "§4.6 (Tables 4.6-4.7). Its M must be positive definite")
+    gains: tuple[float, float, float, float, float] = setting(
+        (10.0, 5000.0, 20000.0, 2000.0, 2000.0),
+        doc="AID gains [a, γ₁, γ₂, γ₃, γ₄] of Theorem 4.3.1, each > 0: a (1/s) pulls v̂ "
+            "toward v (4.23); γ₁, γ₂, γ₃, γ₄ scale the adaptation rates of M̂, D̂ᵢ, ĝ, b̂ "
+            "(4.24)-(4.27) (larger = faster); default §4.6's")
     publish_every_s: float = setting(
         1.0, unit="s", min=0.01, max=3600.0, reload=True,
         doc="how often the estimate goes to the telemetry sinks as an \"estimate\" record "
@@ -200,7 +205,16 @@ class EstimationSection:
         p = Path(self.initial_params)
         return p if p.is_absolute() else base_dir / p
 
+    def aid_params(self):
+        """The :class:`uvd.estimation.aid.AID6Params` of these settings."""
+        from uvd.estimation.aid import AID6Gains, AID6Params
+        return AID6Params(gains=AID6Gains(*self.gains))
+
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        try:
+            self.aid_params()
+        except ValueError as exc:
+            return [("gains", str(exc))]
         p = self.initial_params_path(ctx.base_dir)
         if p is None:
             return []

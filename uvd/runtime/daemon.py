@@ -167,7 +167,7 @@ def build_core(cfg: Config, vehicle=None) -> core.CoreConfig:
     estimators: tuple = ()
     if cfg.estimation.aid:
         from uvd.estimation.aid import aid6_estimator
-        estimators = (aid6_estimator(aid_theta0(cfg)),)
+        estimators = (aid6_estimator(aid_theta0(cfg), cfg.estimation.aid_params()),)
     return core.CoreConfig(nav=nav_config(cfg), controller=make_controller(cfg, vehicle, alloc),
                            reference=traj, allocator=alloc, k_thrust=vehicle.k_thrust,
                            estimators=estimators, lag_compensation=cfg.control.lag_compensation)
