@@ -3,8 +3,9 @@
 ``uvd run`` with ``[estimation] aid = true`` against ``sim-bridge`` (second process, real
 pseudo-terminals and ``udp_multicast`` CAN bus): the loop publishes ``"estimate"`` records
 (θ̂ ∈ R²⁴¹ of 6-DOF AID) at ``publish_every_s``; ``save_path`` holds the newest θ̂ as a
-parameters file, rewritten once more at shutdown; a second daemon configured with that file
-as ``initial_params`` starts its AID from it.
+parameters file, rewritten once more at shutdown; AID replayed offline over the daemon's
+JSON-lines telemetry ends at the online estimate; a second daemon configured with the saved
+file as ``initial_params`` starts its AID from it.
 """
 
 from __future__ import annotations
@@ -18,7 +19,9 @@ import numpy as np
 import pytest
 
 from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
-from uvd.estimation.aid import INITP_6DOF
+from uvd.commands.identify import identify_aid
+from uvd.estimation.aid import INITP_6DOF, AID6Gains
+from uvd.estimation.runlog import RunLog
 from uvd.model.params import params_from_toml
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
@@ -52,7 +55,7 @@ class ListSink:
 def hil(tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("hil-aid")
     bridge_args, changes = cpu_split(pin=False)
-    changes["telemetry"] = {"jsonl": {"enabled": False}}
+    changes["telemetry"] = {"jsonl": {"enabled": True, "path": str(run_dir / "tel.jsonl")}}
     changes["estimation"] = {"aid": True, "publish_every_s": 0.2,
                              "save_path": str(run_dir / "aid-params.toml"),
                              "save_every_s": 1.0}
@@ -128,6 +131,18 @@ def test_aid_estimate_is_published_saved_and_resumed(hil, tmp_path):
     sink = next(s for s in d.app.hub.sinks if s.name == "params-file")
     assert 3 <= sink.writes <= int(span_s / 1.0) + 2, (sink.writes, span_s)
     assert d.app.shutdown_report["steps"]["publish the final estimate"] == "ok"
+
+    # the daemon's own telemetry is an identification log: AID replayed over it offline
+    # (uvd identify --method aid) ends where the online estimate ended — same samples, same
+    # steps; only the period differs (measured in the loop, nominal in the replay)
+    run = RunLog.load(cfg.telemetry.jsonl.path)
+    assert run.extra["bad_lines"] == 0 and len(run) >= len(cycles) - 2, run.extra
+    assert abs(run.dt - 0.1) < 1e-6
+    st = identify_aid(run, INITP_6DOF.theta, AID6Gains())
+    assert st.steps == last["steps"]
+    rel = np.linalg.norm(st.theta - last["theta"]) / np.linalg.norm(last["theta"])
+    jitter = max(abs(r["dt"] - 0.1) / 0.1 for r in cycles[1:])  # the loop's, this run
+    assert rel < max(1e-4, 10 * jitter), (rel, jitter)
 
     # a second daemon starts its AID from the saved file
     cfg2_path = tmp_path / "resume.toml"

@@ -78,3 +78,47 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
     save_params(INITP_6DOF, good)
     assert main(["xval", "--params", str(good), "--log", str(tmp_path / "partial.npz")]) == 2
     assert "lacks array(s)" in capsys.readouterr().err
+
+
+def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
+    """The daemon's JSON-lines cycle records as a run: nominal grid, longest stretch."""
+    from drivers.samples import R_to_euler
+
+    run = RunLog.load(run_file)
+    rng = np.random.default_rng(1)
+    lines = [json.dumps({"type": "lifecycle", "to": "STANDBY"})]
+    for k in range(len(run.t)):
+        if 100 <= k < 103:  # an overrun and a navigation outage: a gap
+            if k == 101:
+                lines.append(json.dumps({"type": "cycle", "t_ns": k * 100_000_000,
+                                         "nav_valid": False, "eta": [0] * 6, "v": [0] * 6,
+                                         "u": [0] * 6}))
+            continue
+        eta = [*run.p[k], *R_to_euler(run.R[k])]
+        jitter = int(rng.integers(0, 50_000))  # the loop wakes up to 50 µs late
+        lines.append(json.dumps({"type": "cycle", "t_ns": 5_000_000_000 + k * 100_000_000
+                                 + jitter, "nav_valid": True, "eta": eta,
+                                 "v": run.v[k].tolist(), "u": run.u[k].tolist()}))
+    lines.append('{"type": "cycle", "t_ns": 9')  # cut by a crash
+    f = tmp_path / "telemetry.jsonl"
+    f.write_text("\n".join(lines))
+    tel = RunLog.load(f)
+    assert tel.extra["segments"] == [[0, 100], [100, 2297]]
+    assert tel.extra["kept_segment"] == [100, 2297] and tel.extra["bad_lines"] == 1
+    assert len(tel) == 2297 and abs(tel.dt - 0.1) < 1e-6 and tel.input_interp == "linear"
+    np.testing.assert_allclose(tel.R, run.R[103:], atol=1e-12)
+    np.testing.assert_array_equal(tel.v, run.v[103:])
+    np.testing.assert_array_equal(tel.u, run.u[103:])
+    np.testing.assert_array_equal(tel.p, run.p[103:])
+    # uvd identify takes it as it is
+    out = tmp_path / "ls.toml"
+    assert main(["identify", "--log", str(f), "--method", "ls", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "rank 241/241" in text
+    assert "2 uninterrupted stretches (samples missing between them); using the longest, 2297 " \
+           "of 2397 samples; 1 unreadable line(s) skipped" in text
+    # a file with no usable cycle record says what it needs
+    empty = tmp_path / "empty.jsonl"
+    empty.write_text(lines[0] + "\n")
+    assert main(["xval", "--params", str(out), "--log", str(empty)]) == 2
+    assert "0 cycle record(s) with valid navigation" in capsys.readouterr().err

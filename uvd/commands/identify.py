@@ -24,7 +24,8 @@ def register(sub) -> None:
     p = sub.add_parser("identify", help="identify UV parameters from a recorded run (AID or LS)",
                        description="Identify the 241 UV parameters of (2.44) from a recorded run.")
     p.add_argument("--log", type=Path, required=True, metavar="RUN",
-                   help="recorded run (.npz, see docs/experiments-identification.md)")
+                   help="recorded run: .npz or uvd run's telemetry .jsonl "
+                        "(docs/experiments-identification.md)")
     p.add_argument("--method", choices=("aid", "ls", "ls-consistent"), required=True)
     p.add_argument("--out", type=Path, required=True, metavar="PARAMS.toml",
                    help="where to write the identified parameters")
@@ -79,6 +80,8 @@ def _run(args) -> int:
     if not args.out.parent.is_dir():  # before minutes of identification, not after
         raise ConfigError(f"--out {args.out}: cannot write: no folder {args.out.parent}")
     run = RunLog.load(args.log)
+    if run.stretch_note():
+        print(f"{args.log}: {run.stretch_note()}")
     summary: dict = {"log": str(args.log), "method": args.method, "samples": len(run.t),
                      "duration_s": float(len(run.t) * run.dt)}
     if args.method == "aid":

@@ -15,7 +15,8 @@ def register(sub) -> None:
                        description="Simulate PARAMS with the inputs of RUN; MAE per state.")
     p.add_argument("--params", type=Path, required=True, metavar="PARAMS.toml")
     p.add_argument("--log", type=Path, required=True, metavar="RUN",
-                   help="recorded run (.npz, see docs/experiments-identification.md)")
+                   help="recorded run: .npz or uvd run's telemetry .jsonl "
+                        "(docs/experiments-identification.md)")
     p.add_argument("--json", type=Path, metavar="OUT", help="write the MAE to this file")
     p.add_argument("--plots", type=Path, metavar="DIR",
                    help="write figures in the style of Figs. 4.5-4.7 into this folder")
@@ -35,6 +36,8 @@ def _run(args) -> int:
         raise ConfigError(f"--substeps must be >= 1, got {args.substeps}")
     params = params_from_toml(args.params)
     run = RunLog.load(args.log)
+    if run.stretch_note():
+        print(f"{args.log}: {run.stretch_note()}")
     res = cross_validate(params, run, substeps=args.substeps)
     name = args.params.stem
     print(format_mae_table([(name, run.name, res.mae)], STATES_6DOF,

@@ -3,8 +3,10 @@
 This is the interface between recordings and :mod:`uvd.estimation.ls` /
 :mod:`uvd.estimation.xval` / ``uvd identify`` / ``uvd xval``. Until the black-box recorder
 exists, runs come from the lockstep experiments (``uvd experiment aid-6dof --plots DIR`` writes
-``DIR/<dataset>-run.npz``) or from :meth:`RunLog.from_lockstep` on a
-:class:`uvd.experiments.lockstep.LockstepLog`.
+``DIR/<dataset>-run.npz``), from :meth:`RunLog.from_lockstep` on a
+:class:`uvd.experiments.lockstep.LockstepLog`, or from the JSON-lines telemetry of ``uvd run``
+on a vehicle or ``sim-bridge`` (:meth:`RunLog.from_telemetry`; :meth:`RunLog.load` tells the
+two file kinds apart).
 
 File format (``.npz``, numpy's zip of arrays; see ``docs/experiments-identification.md``):
 
@@ -122,11 +124,16 @@ class RunLog:
 
     @classmethod
     def load(cls, path: str | Path) -> RunLog:
-        """Read a run written by :meth:`save`; raises :class:`ConfigError` naming what is wrong."""
+        """Read a run written by :meth:`save`, or ``uvd run``'s JSON-lines telemetry
+        (:meth:`from_telemetry`); raises :class:`ConfigError` naming what is wrong."""
         path = Path(path)
         if path.is_file() and not zipfile.is_zipfile(path):
-            raise ConfigError(f"{path}: not a readable run log (.npz): not a zip archive "
-                              "(numpy's savez format)")
+            with path.open("rb") as fh:
+                head = fh.read(1)
+            if head == b"{":
+                return cls.from_telemetry(path)
+            raise ConfigError(f"{path}: not a readable run log: not a zip archive (.npz, "
+                              "numpy's savez format) nor uvd run's JSON-lines telemetry")
         try:
             with np.load(path, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
@@ -148,6 +155,93 @@ class RunLog:
                                                                            "linear"),
                    source=meta.get("source", str(path)), R_true=data.get("R_true"),
                    v_true=data.get("v_true"), extra=extra)
+
+    def stretch_note(self) -> str:
+        """What :meth:`from_telemetry` kept, when it had to cut the run ("" otherwise)."""
+        segs = self.extra.get("segments") or []
+        bad = self.extra.get("bad_lines", 0)
+        parts = []
+        if len(segs) > 1:
+            parts.append(f"{len(segs)} uninterrupted stretches (samples missing between "
+                         f"them); using the longest, {len(self)} of "
+                         f"{sum(n for _, n in segs)} samples")
+        if bad:
+            parts.append(f"{bad} unreadable line(s) skipped")
+        return "; ".join(parts)
+
+    @classmethod
+    def from_telemetry(cls, path: str | Path, *, name: str | None = None) -> RunLog:
+        """From ``uvd run``'s JSON-lines telemetry (``[telemetry.jsonl]``): its cycle records.
+
+        A cycle record holds the navigation pose ``eta`` (north, east, down, roll, pitch,
+        heading), the body velocity ``v``, ``nav_valid`` and ``u`` — the wrench the estimators
+        saw at that cycle (measured propeller speeds, else the last command: ``input_interp``
+        "linear"). Cycles without valid navigation are left out; so is a line that is not
+        JSON (a crash can cut the last one), counted in ``extra["bad_lines"]``.
+
+        The loop wakes a few µs after its deadlines: the samples are put on the nominal grid
+        t₀ + k·T (T the median spacing, the loop period times the sink's ``every_n_cycles``).
+        Where samples are missing (an overrun, a navigation outage, a restart) the run is
+        cut; the longest uninterrupted stretch is returned and ``extra["segments"]`` lists
+        every stretch as [first index, samples].
+        """
+        from drivers.samples import euler_to_R
+
+        path = Path(path)
+        t, eta, v, u = [], [], [], []
+        bad = 0
+        try:
+            with path.open("r", encoding="utf-8") as fh:
+                for line in fh:
+                    try:
+                        rec = json.loads(line)
+                    except json.JSONDecodeError:
+                        bad += 1
+                        continue
+                    if not isinstance(rec, dict) or rec.get("type") != "cycle" \
+                            or not rec.get("nav_valid") or rec.get("u") is None:
+                        continue
+                    row = (rec.get("eta"), rec.get("v"), rec.get("u"))
+                    try:
+                        arr = [np.asarray(x, dtype=float) for x in row]
+                    except (TypeError, ValueError):
+                        bad += 1
+                        continue
+                    if [a.shape for a in arr] != [(6,)] * 3 \
+                            or not all(np.all(np.isfinite(a)) for a in arr):
+                        bad += 1
+                        continue
+                    t.append(int(rec["t_ns"]))
+                    eta.append(arr[0])
+                    v.append(arr[1])
+                    u.append(arr[2])
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{path}: cannot read the telemetry: {exc}") from exc
+        if len(t) < 2:
+            raise ConfigError(f"{path}: {len(t)} cycle record(s) with valid navigation and the "
+                              "applied wrench 'u'; needs uvd run's telemetry ([telemetry.jsonl] "
+                              "enabled) over a stretch with valid navigation")
+        t_ns = np.asarray(t, dtype=np.int64)
+        order = np.argsort(t_ns, kind="stable")
+        t_ns = t_ns[order]
+        period_ns = float(np.median(np.diff(t_ns)))
+        if not period_ns > 0:
+            raise ConfigError(f"{path}: cycle records do not advance in time")
+        k = np.rint((t_ns - t_ns[0]) / period_ns).astype(np.int64)
+        cuts = np.flatnonzero(np.diff(k) != 1) + 1
+        starts = np.concatenate(([0], cuts))
+        stops = np.concatenate((cuts, [len(k)]))
+        segments = [[int(a), int(b - a)] for a, b in zip(starts, stops, strict=True)]
+        a, n = max(segments, key=lambda s: s[1])
+        sel = order[a:a + n]
+        eta_a = np.asarray(eta)[sel]
+        R = np.stack([euler_to_R(*e[3:]) for e in eta_a])
+        dt = period_ns * 1e-9
+        return cls(t=np.arange(n) * dt, R=R, p=eta_a[:, :3], v=np.asarray(v)[sel],
+                   u=np.asarray(u)[sel], name=name or path.stem, input_interp="linear",
+                   source=f"uvd run telemetry {path}",
+                   extra={"segments": segments, "kept_segment": [a, n], "bad_lines": bad,
+                          "t0_ns": int(t_ns[a])})
 
     @classmethod
     def from_lockstep(cls, log, name: str = "lockstep", input_interp: str = "linear") -> RunLog:

@@ -791,8 +791,8 @@ class Daemon:
         ref = out.reference
         rec = {"type": "cycle", "t_ns": t_ns, "dt": dt, "state": sup.state.value,
                "action": d.action.label, "mode": mode, "status": out.status,
-               "eta": _eta(nav.H).tolist(), "v": nav.v.tolist(),
-               "thrust": thrust.tolist(),
+               "eta": _eta(nav.H).tolist(), "v": nav.v.tolist(), "nav_valid": nav.valid,
+               "u": out.u_applied.tolist(), "thrust": thrust.tolist(),
                "ins_rx_ns": ins.t_ns if ins is not None else None,
                "ages": [h.ins_age_s, h.dvl_age_s, h.depth_age_s, fb_age]}
         if ref is not None:
