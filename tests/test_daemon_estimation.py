@@ -11,92 +11,39 @@ file as ``initial_params`` starts its AID from it.
 from __future__ import annotations
 
 import asyncio
-import os
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
+from sim_bridge.bridge import write_local_config
+from tests.hil_daemon import ListSink, run_scenario, running_bridge
 from uvd.commands.identify import identify_aid
 from uvd.estimation.aid import INITP_6DOF, AID6Gains
 from uvd.estimation.runlog import RunLog
 from uvd.model.params import params_from_toml
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
-from uvd.runtime.loop import drop_realtime
 
 pytestmark = pytest.mark.timeout(120)
-
-
-class ListSink:
-    """A telemetry sink keeping every record in memory."""
-
-    name = "test"
-
-    def __init__(self) -> None:
-        self.records: list[dict] = []
-
-    async def open(self) -> None:
-        pass
-
-    async def write(self, records) -> None:
-        self.records.extend(records)
-
-    async def flush(self) -> None:
-        pass
-
-    async def aclose(self) -> None:
-        pass
 
 
 @pytest.fixture(scope="module")
 def hil(tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("hil-aid")
-    bridge_args, changes = cpu_split(pin=False)
-    changes["telemetry"] = {"jsonl": {"enabled": True, "path": str(run_dir / "tel.jsonl")}}
-    changes["estimation"] = {"aid": True, "publish_every_s": 0.2,
-                             "save_path": str(run_dir / "aid-params.toml"),
-                             "save_every_s": 1.0}
-    cfg_path = write_local_config(run_dir, changes=changes)
-    proc = BridgeProcess(cfg_path, duration_s=120.0, hold=True,
-                         extra=bridge_args).start(timeout_s=90.0)
-    try:
-        yield cfg_path, proc
-    finally:
-        proc.stop(timeout_s=5.0)
-        proc.kill()
+    changes = {"telemetry": {"jsonl": {"enabled": True, "path": str(run_dir / "tel.jsonl")}},
+               "estimation": {"aid": True, "publish_every_s": 0.2,
+                              "save_path": str(run_dir / "aid-params.toml"),
+                              "save_every_s": 1.0}}
+    with running_bridge(run_dir, changes, duration_s=120.0) as b:
+        yield b
 
 
 def run_daemon(cfg, seconds: float):
-    """Run the daemon (auto-arm) for ``seconds`` after arming, stop it; its records."""
+    """Run the daemon (auto-arm) for ``seconds`` after arming, stop it; all its records."""
     sink = ListSink()
-    out = {}
-
-    async def main():
-        d = Daemon(cfg, auto_arm=True, sinks=[sink])
-        out["daemon"] = d
-        task = asyncio.get_running_loop().create_task(d.run())
-        try:
-            deadline = time.monotonic() + 30.0
-            while not d.supervisor.armed:
-                assert not task.done(), "the daemon stopped before arming"
-                assert time.monotonic() < deadline, f"not armed: {d.arm_refusal}"
-                await asyncio.sleep(0.02)
-            await asyncio.sleep(seconds)
-        finally:
-            d.stop("test done")
-            out["code"] = await asyncio.wait_for(task, 10.0)
-
-    affinity = os.sched_getaffinity(0)
-    try:
-        asyncio.run(asyncio.wait_for(main(), 60.0))
-    finally:  # the daemon made this thread real-time: back to normal for the next tests
-        drop_realtime()
-        os.sched_setaffinity(0, affinity)
-    assert out["code"] == 0
-    return out["daemon"], sink.records
+    d, _ = run_scenario(cfg, lambda d: asyncio.sleep(seconds), tracking_s=0.0, sink=sink)
+    return d, sink.records
 
 
 def test_aid_estimate_is_published_saved_and_resumed(hil, tmp_path):

@@ -23,58 +23,21 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
+from tests.hil_daemon import run_scenario, running_bridge, until
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.failsafe import Action
 from uvd.runtime.lifecycle import State
-from uvd.runtime.loop import drop_realtime
 
 pytestmark = pytest.mark.timeout(120)
 
 PERIOD = 0.1  # config/sim.toml: 10 Hz
 
 
-class ListSink:
-    """A telemetry sink keeping every record in memory."""
-
-    name = "test"
-
-    def __init__(self) -> None:
-        self.records: list[dict] = []
-
-    async def open(self) -> None:
-        pass
-
-    async def write(self, records) -> None:
-        self.records.extend(records)
-
-    async def flush(self) -> None:
-        pass
-
-    async def aclose(self) -> None:
-        pass
-
-    def cycles(self) -> list[dict]:
-        return [r for r in self.records if r.get("type") == "cycle"]
-
-
 @pytest.fixture(scope="module")
 def bridge(tmp_path_factory):
-    run_dir = tmp_path_factory.mktemp("hil")
-    # as the demo runs them: the devices at SCHED_FIFO 60, the daemon's loop at 50 (not pinned:
-    # several HIL set-ups may run at once) — the machine also runs other test suites, and a
-    # 200 ms stall of either side would trip the drives' command timeout mid-test
-    bridge_args, changes = cpu_split(pin=False)
-    changes["telemetry"] = {"jsonl": {"enabled": False}}
-    cfg_path = write_local_config(run_dir, changes=changes)
-    proc = BridgeProcess(cfg_path, duration_s=300.0, hold=True,
-                         extra=bridge_args).start(timeout_s=90.0)
-    try:
-        yield cfg_path, proc
-    finally:
-        proc.stop(timeout_s=5.0)
-        proc.kill()
+    with running_bridge(tmp_path_factory.mktemp("hil")) as b:
+        yield b
 
 
 @pytest.fixture
@@ -82,47 +45,6 @@ def hil(bridge):
     cfg_path, proc = bridge
     assert proc.call("reset")["ok"] and proc.call("place", hold=True)["ok"]
     return load_config(cfg_path), proc
-
-
-async def _until(pred, timeout_s: float, what: str, task=None) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not pred():
-        if task is not None and task.done():
-            raise AssertionError(f"the daemon stopped while waiting for {what}")
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        await asyncio.sleep(0.02)
-
-
-def run_scenario(cfg, scenario, *, daemon_cls=Daemon, tracking_s: float = 1.0,
-                 timeout_s: float = 60.0):
-    """Start the daemon (auto-arm), let it track, run ``scenario(daemon)``, stop it."""
-    sink = ListSink()
-    out = {}
-
-    async def main():
-        d = daemon_cls(cfg, auto_arm=True, sinks=[sink])
-        out["daemon"] = d
-        task = asyncio.get_running_loop().create_task(d.run())
-        try:
-            await _until(lambda: d.supervisor.armed, 30.0, "arming", task)
-            await asyncio.sleep(tracking_s)
-            assert d.supervisor.state is State.ARMED, d.supervisor.failsafe_events()
-            await scenario(d)
-        finally:
-            d.stop("test done")
-            out["code"] = await asyncio.wait_for(task, 10.0)
-
-    affinity = os.sched_getaffinity(0)
-    try:
-        asyncio.run(asyncio.wait_for(main(), timeout_s))
-    finally:  # the daemon made this thread real-time: back to normal for the next tests
-        drop_realtime()
-        os.sched_setaffinity(0, affinity)
-    assert out["code"] == 0
-    print("shutdown:", out["daemon"].app.shutdown_report.get("steps"),
-          f"{out['daemon'].app.shutdown_report.get('duration_s', 0):.3f} s")
-    return out["daemon"], sink.cycles()
 
 
 async def call(proc, op, **kw) -> dict:
@@ -162,7 +84,7 @@ def commands_were_safe(d, cycles, proc) -> None:
 
 
 def wait_state(d, state: State, timeout_s: float, task_hint: str):
-    return _until(lambda: d.supervisor.state is state, timeout_s, task_hint)
+    return until(lambda: d.supervisor.state is state, timeout_s, task_hint)
 
 
 # ----------------------------------------------------------------------------- sensors
@@ -182,11 +104,11 @@ def test_silence_fires_the_stale_trigger_and_clears(hil, sensor, trigger, action
     async def scenario(d):
         info["t_inj"] = (await call(proc, "sensor", name=sensor, mode="silence",
                                     seconds=silent_s))["t_ns"]
-        await _until(lambda: events(d, "fired", trigger), threshold + 2.0, trigger)
+        await until(lambda: events(d, "fired", trigger), threshold + 2.0, trigger)
         await asyncio.sleep(0.3)
         info["state_during"] = d.supervisor.state
         # data back: the trigger clears clear_after_s later and control resumes
-        await _until(lambda: events(d, "cleared", trigger), silent_s + 4.0, "clearing")
+        await until(lambda: events(d, "cleared", trigger), silent_s + 4.0, "clearing")
         await wait_state(d, State.ARMED, 2.0, "ARMED again")
         await asyncio.sleep(0.5)
 
@@ -225,8 +147,8 @@ def test_garbage_bytes_are_dropped_counted_and_the_ins_goes_stale(hil):
 
     async def scenario(d):
         await call(proc, "sensor", name="ins", mode="garbage", seconds=1.0)
-        await _until(lambda: events(d, "fired", "ins_stale"), 3.0, "ins_stale")
-        await _until(lambda: events(d, "cleared", "ins_stale"), 5.0, "clearing")
+        await until(lambda: events(d, "fired", "ins_stale"), 3.0, "ins_stale")
+        await until(lambda: events(d, "cleared", "ins_stale"), 5.0, "clearing")
         await wait_state(d, State.ARMED, 2.0, "ARMED again")
 
     d, cycles = run_scenario(cfg, scenario)
@@ -247,8 +169,8 @@ def test_nan_attitude_fires_nonfinite_input_at_once_and_clears(hil):
 
     async def scenario(d):
         await call(proc, "sensor", name="ins", mode="nan", seconds=0.6)
-        await _until(lambda: events(d, "fired", "nonfinite_input"), 2.0, "nonfinite_input")
-        await _until(lambda: events(d, "cleared", "nonfinite_input"), 4.0, "clearing")
+        await until(lambda: events(d, "fired", "nonfinite_input"), 2.0, "nonfinite_input")
+        await until(lambda: events(d, "cleared", "nonfinite_input"), 4.0, "clearing")
         await wait_state(d, State.ARMED, 3.0, "ARMED again")
 
     d, cycles = run_scenario(cfg, scenario)
@@ -268,7 +190,7 @@ def test_stuck_depth_latches_until_operator_reset(hil):
 
     async def scenario(d):
         await call(proc, "sensor", name="depth", mode="stuck", seconds=stuck_s + 0.7)
-        await _until(lambda: events(d, "fired", "depth_stuck"), stuck_s + 2.0, "depth_stuck")
+        await until(lambda: events(d, "fired", "depth_stuck"), stuck_s + 2.0, "depth_stuck")
         # the value moves again; a latched trigger stays until an operator reset
         await asyncio.sleep(1.0 + cfg.failsafe.clear_after_s)
         info["still"] = d.supervisor.state is State.FAILSAFE and not events(d, "cleared",
@@ -299,7 +221,7 @@ def test_parameter_divergence_falls_back_to_pdc_with_adaptation_frozen(hil):
     info = {}
 
     async def scenario(d):
-        await _until(lambda: events(d, "fired", "parameter_divergence"), 30.0,
+        await until(lambda: events(d, "fired", "parameter_divergence"), 30.0,
                      "parameter_divergence")
         info["theta"] = d.state.ctrl.ambc.theta.copy()
         await asyncio.sleep(1.0)
@@ -327,7 +249,7 @@ def test_amplifier_fault_disarms_and_latches(hil):
 
     async def scenario(d):
         await call(proc, "fault", node=3, name="overcurrent", persistent=True)
-        await _until(lambda: events(d, "fired", "amplifier_fault"), 1.0, "amplifier_fault")
+        await until(lambda: events(d, "fired", "amplifier_fault"), 1.0, "amplifier_fault")
         node = next(n for n in d.can.group.nodes if n.node_id == 3)
         info["emcy_rx"] = min(node.emcy_active.values())
         await wait_state(d, State.STANDBY, 1.0, "disarm")
@@ -358,7 +280,7 @@ def test_silent_node_fires_feedback_missing_then_its_timeout_fault_latches(hil):
 
     async def scenario(d):
         await call(proc, "silence", node=2, seconds=threshold + 0.5)
-        await _until(lambda: events(d, "fired", "feedback_missing"), threshold + 1.0,
+        await until(lambda: events(d, "fired", "feedback_missing"), threshold + 1.0,
                      "feedback_missing")
         await asyncio.sleep(1.5)
         info["state"] = d.supervisor.state
@@ -383,7 +305,7 @@ def test_bus_off_disarms_at_the_next_cycle_and_latches(hil):
 
     async def scenario(d):
         await call(proc, "bus_off", seconds=0.3)
-        await _until(lambda: events(d, "fired", "bus_off"), 1.0, "bus_off")
+        await until(lambda: events(d, "fired", "bus_off"), 1.0, "bus_off")
         info["since"] = d.can.bus.monitor.since_ns
         await asyncio.sleep(1.5)
         info["bus_after"] = d.can.bus.status().state
@@ -413,7 +335,7 @@ def test_leak_disarms_within_a_poll_and_a_cycle_and_latches_until_dry_and_reset(
 
     async def scenario(d):
         info["t_inj"] = (await call(proc, "leak", wet=True))["t_ns"]
-        await _until(lambda: events(d, "fired", "leak"), threshold + 2.0, "leak")
+        await until(lambda: events(d, "fired", "leak"), threshold + 2.0, "leak")
         await wait_state(d, State.STANDBY, 1.0, "disarmed")
         info["refused_wet"] = d.supervisor.reset_failsafe(time.monotonic_ns(), ["leak"])
         await call(proc, "leak", wet=False)
@@ -460,12 +382,12 @@ def test_an_unreadable_leak_input_warns_and_clears(hil):
     async def scenario(d):
         os.replace(path, path + ".away")  # the GPIO file vanishes (unexported line)
         try:
-            await _until(lambda: events(d, "fired", "leak_sensor_fault"),
+            await until(lambda: events(d, "fired", "leak_sensor_fault"),
                          lk.poll_interval_s + 1.0, "leak_sensor_fault")
             info["state"] = d.supervisor.state
         finally:
             os.replace(path + ".away", path)
-        await _until(lambda: events(d, "cleared", "leak_sensor_fault"),
+        await until(lambda: events(d, "cleared", "leak_sensor_fault"),
                      cfg.failsafe.clear_after_s + 2.0, "clearing")
         await asyncio.sleep(0.3)
         info["state_after"] = d.supervisor.state
@@ -503,9 +425,9 @@ def test_overrun_streak_zeroes_thrust_and_clears(hil, tmp_path):
     async def scenario(d):
         d.stalled = []
         d.stall_s = 0.025
-        await _until(lambda: len(d.stalled) >= streak + 3, 2.0, "stalled cycles")
+        await until(lambda: len(d.stalled) >= streak + 3, 2.0, "stalled cycles")
         d.stall_s = 0.0
-        await _until(lambda: events(d, "cleared", "loop_overrun_streak"), 3.0, "clearing")
+        await until(lambda: events(d, "cleared", "loop_overrun_streak"), 3.0, "clearing")
         await wait_state(d, State.ARMED, 1.0, "ARMED again")
 
     d, cycles = run_scenario(cfg, scenario, daemon_cls=StallingDaemon)
