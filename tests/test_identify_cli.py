@@ -99,12 +99,18 @@ def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
         lines.append(json.dumps({"type": "cycle", "t_ns": 5_000_000_000 + k * 100_000_000
                                  + jitter, "nav_valid": True, "eta": eta,
                                  "v": run.v[k].tolist(), "u": run.u[k].tolist()}))
+    lines.append(json.dumps({"type": "cycle", "nav_valid": True, "eta": [0] * 6, "v": [0] * 6,
+                             "u": [0] * 6}))  # no time stamp: unusable
+    for k in range(50):  # the daemon restarted after a reboot: its clock starts lower
+        lines.append(json.dumps({"type": "cycle", "t_ns": 1_000_000 + k * 100_000_000,
+                                 "nav_valid": True, "eta": [0] * 6, "v": [0] * 6,
+                                 "u": [0] * 6}))
     lines.append('{"type": "cycle", "t_ns": 9')  # cut by a crash
     f = tmp_path / "telemetry.jsonl"
     f.write_text("\n".join(lines))
     tel = RunLog.load(f)
-    assert tel.extra["segments"] == [[0, 100], [100, 2297]]
-    assert tel.extra["kept_segment"] == [100, 2297] and tel.extra["bad_lines"] == 1
+    assert tel.extra["segments"] == [[0, 100], [100, 2297], [2397, 50]]
+    assert tel.extra["kept_segment"] == [100, 2297] and tel.extra["bad_lines"] == 2
     assert len(tel) == 2297 and abs(tel.dt - 0.1) < 1e-6 and tel.input_interp == "linear"
     np.testing.assert_allclose(tel.R, run.R[103:], atol=1e-12)
     np.testing.assert_array_equal(tel.v, run.v[103:])
@@ -115,8 +121,8 @@ def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
     assert main(["identify", "--log", str(f), "--method", "ls", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "rank 241/241" in text
-    assert "2 uninterrupted stretches (samples missing between them); using the longest, 2297 " \
-           "of 2397 samples; 1 unreadable line(s) skipped" in text
+    assert "3 uninterrupted stretches (cut where samples are missing or a run restarts); " \
+           "using the longest, 2297 of 2447 samples; 2 unreadable line(s) skipped" in text
     # a file with no usable cycle record says what it needs
     empty = tmp_path / "empty.jsonl"
     empty.write_text(lines[0] + "\n")

@@ -162,8 +162,8 @@ class RunLog:
         bad = self.extra.get("bad_lines", 0)
         parts = []
         if len(segs) > 1:
-            parts.append(f"{len(segs)} uninterrupted stretches (samples missing between "
-                         f"them); using the longest, {len(self)} of "
+            parts.append(f"{len(segs)} uninterrupted stretches (cut where samples are "
+                         f"missing or a run restarts); using the longest, {len(self)} of "
                          f"{sum(n for _, n in segs)} samples")
         if bad:
             parts.append(f"{bad} unreadable line(s) skipped")
@@ -181,9 +181,10 @@ class RunLog:
 
         The loop wakes a few µs after its deadlines: the samples are put on the nominal grid
         t₀ + k·T (T the median spacing, the loop period times the sink's ``every_n_cycles``).
-        Where samples are missing (an overrun, a navigation outage, a restart) the run is
-        cut; the longest uninterrupted stretch is returned and ``extra["segments"]`` lists
-        every stretch as [first index, samples].
+        Where the spacing is not one period (samples missing after an overrun or a navigation
+        outage; a restart appending a new run) the run is cut; the longest uninterrupted
+        stretch is returned and ``extra["segments"]`` lists every stretch as [first usable
+        record, samples].
         """
         from drivers.samples import euler_to_R
 
@@ -208,10 +209,11 @@ class RunLog:
                         bad += 1
                         continue
                     if [a.shape for a in arr] != [(6,)] * 3 \
-                            or not all(np.all(np.isfinite(a)) for a in arr):
+                            or not all(np.all(np.isfinite(a)) for a in arr) \
+                            or not isinstance(rec.get("t_ns"), int):
                         bad += 1
                         continue
-                    t.append(int(rec["t_ns"]))
+                    t.append(rec["t_ns"])
                     eta.append(arr[0])
                     v.append(arr[1])
                     u.append(arr[2])
@@ -221,25 +223,24 @@ class RunLog:
             raise ConfigError(f"{path}: {len(t)} cycle record(s) with valid navigation and the "
                               "applied wrench 'u'; needs uvd run's telemetry ([telemetry.jsonl] "
                               "enabled) over a stretch with valid navigation")
+        # in file order (the sink writes in order; a restart appends a new run, whose clock
+        # may even start lower after a reboot): a step of other than one period is a cut
         t_ns = np.asarray(t, dtype=np.int64)
-        order = np.argsort(t_ns, kind="stable")
-        t_ns = t_ns[order]
-        period_ns = float(np.median(np.diff(t_ns)))
-        if not period_ns > 0:
+        diffs = np.diff(t_ns)
+        ahead = diffs[diffs > 0]
+        if ahead.size == 0:
             raise ConfigError(f"{path}: cycle records do not advance in time")
-        k = np.rint((t_ns - t_ns[0]) / period_ns).astype(np.int64)
-        cuts = np.flatnonzero(np.diff(k) != 1) + 1
+        period_ns = float(np.median(ahead))
+        cuts = np.flatnonzero(np.rint(diffs / period_ns) != 1) + 1
         starts = np.concatenate(([0], cuts))
-        stops = np.concatenate((cuts, [len(k)]))
+        stops = np.concatenate((cuts, [len(t_ns)]))
         segments = [[int(a), int(b - a)] for a, b in zip(starts, stops, strict=True)]
         a, n = max(segments, key=lambda s: s[1])
-        sel = order[a:a + n]
-        eta_a = np.asarray(eta)[sel]
+        eta_a = np.asarray(eta[a:a + n])
         R = np.stack([euler_to_R(*e[3:]) for e in eta_a])
-        dt = period_ns * 1e-9
-        return cls(t=np.arange(n) * dt, R=R, p=eta_a[:, :3], v=np.asarray(v)[sel],
-                   u=np.asarray(u)[sel], name=name or path.stem, input_interp="linear",
-                   source=f"uvd run telemetry {path}",
+        return cls(t=np.arange(n) * (period_ns * 1e-9), R=R, p=eta_a[:, :3],
+                   v=np.asarray(v[a:a + n]), u=np.asarray(u[a:a + n]), name=name or path.stem,
+                   input_interp="linear", source=f"uvd run telemetry {path}",
                    extra={"segments": segments, "kept_segment": [a, n], "bad_lines": bad,
                           "t0_ns": int(t_ns[a])})
 
