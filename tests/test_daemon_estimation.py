@@ -123,3 +123,24 @@ def test_a_frozen_estimate_is_published_and_logged_once(tmp_path, caplog):
     assert recs[0]["theta"] is not st.theta  # a copy: the record never changes afterwards
     warnings = [r.getMessage() for r in caplog.records if "stopped adapting" in r.getMessage()]
     assert len(warnings) == 1 and "aid6" in warnings[0] and "t = 9 s" in warnings[0]
+
+
+def test_a_reload_keeps_the_running_estimate_and_does_not_read_initial_params(tmp_path):
+    from dataclasses import replace
+
+    from uvd.model.params import params_from_theta, save_params
+
+    start = params_from_theta(INITP_6DOF.theta * 1.01)
+    save_params(start, tmp_path / "start.toml")
+    cfg_path = write_local_config(tmp_path, changes={"estimation": {"aid": True}})
+    cfg_path.write_text(_with_initial_params(cfg_path.read_text(), str(tmp_path / "start.toml")))
+    d = Daemon(load_config(cfg_path))  # not run: no port is opened
+    spec = d.core_cfg.estimators[0]
+    np.testing.assert_array_equal(d.state.est[0].theta, start.theta)
+    # the file may be gone (or rewritten) while the daemon runs; the estimate it started
+    # from lives in the daemon, and a SIGHUP that changes a gain must still apply
+    (tmp_path / "start.toml").unlink()
+    new = replace(d.config, control=replace(d.config.control, kp=123.0))
+    d._on_reload(new, ["control.kp"])
+    assert d.pd_gains.kp == 123.0
+    assert d.core_cfg.estimators == (spec,)

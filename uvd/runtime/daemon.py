@@ -150,12 +150,15 @@ def make_controller(cfg: Config, vehicle, allocator: Allocator) -> core.Controll
     return core.ControllerSpec("two-step-ambc", two_step_step, p, two_step_init(p))
 
 
-def build_core(cfg: Config, vehicle=None) -> core.CoreConfig:
+def build_core(cfg: Config, vehicle=None, estimators: tuple | None = None
+               ) -> core.CoreConfig:
     """The :class:`uvd.core.CoreConfig` of a configuration — shared by the daemon and the
     lockstep comparison of ``uvd demo``.
 
     For ``reference = "hold"`` the reference is a setpoint at the start pose until the
-    daemon replaces it with the pose it has when armed.
+    daemon replaces it with the pose it has when armed. ``estimators`` given (a reload: the
+    ``[estimation]`` keys need a restart) are kept as they are; None builds them from
+    ``[estimation]``, reading ``initial_params``.
     """
     from uvd.control.trajectory import setpoint
     vehicle = vehicle if vehicle is not None else cfg.load_vehicle()
@@ -164,10 +167,11 @@ def build_core(cfg: Config, vehicle=None) -> core.CoreConfig:
     if traj is None:
         H0, _ = start_pose(cfg)
         traj = setpoint(_eta(H0))
-    estimators: tuple = ()
-    if cfg.estimation.aid:
-        from uvd.estimation.aid import aid6_estimator
-        estimators = (aid6_estimator(aid_theta0(cfg), cfg.estimation.aid_params()),)
+    if estimators is None:
+        estimators = ()
+        if cfg.estimation.aid:
+            from uvd.estimation.aid import aid6_estimator
+            estimators = (aid6_estimator(aid_theta0(cfg), cfg.estimation.aid_params()),)
     return core.CoreConfig(nav=nav_config(cfg), controller=make_controller(cfg, vehicle, alloc),
                            reference=traj, allocator=alloc, k_thrust=vehicle.k_thrust,
                            estimators=estimators, lag_compensation=cfg.control.lag_compensation)
@@ -626,7 +630,9 @@ class Daemon:
     def _on_reload(self, cfg: Config, applied: list[str]) -> None:
         self.config = cfg
         self.pd_gains = PDGains(kp=cfg.control.kp, kd=cfg.control.kd)
-        new = build_core(cfg, self.vehicle)
+        # the running estimators stay (their keys need a restart; initial_params is not read
+        # again: a running estimate does not restart from it)
+        new = build_core(cfg, self.vehicle, estimators=self.core_cfg.estimators)
         # keep the running reference (hold setpoint) and the controller's memory
         self.core_cfg = replace(new, reference=self.core_cfg.reference)
         self._estimate_period_ns = int(cfg.estimation.publish_every_s * 1e9)
