@@ -26,7 +26,7 @@ from uvd.estimation.aid import (
     aid6_init,
     aid6_params,
     aid6_step,
-    aid6_unfreeze,
+    aid_unfreeze,
 )
 from uvd.model.lie import J, ad, exp_so3, make_H
 from uvd.model.params import ROTATIONAL_INDEX, RotParams, UVParams, theta_M_from
@@ -259,8 +259,21 @@ def test_freezes_when_mass_estimate_loses_definiteness():
         st = aid6_step(_vs(R, v * (s + 1)), np.full(6, 50.0), prm, st, 0.1)
         assert np.array_equal(st.theta, frozen_theta)
         assert np.all(np.isfinite(st.v_hat))
-    resumed = aid6_unfreeze(st)
+    resumed = aid_unfreeze(st)
     assert not resumed.frozen and resumed.freeze_reason == ""
+    assert np.array_equal(resumed.theta, frozen_theta)
+    # the same call resumes a frozen 3-DOF estimator, which then adapts again
+    st3 = replace(aid3_init(INITP_ROT), frozen=True, freeze_reason="test")
+    w = np.array([0.0, 0.0, 0.0, 0.2, -0.1, 0.3])
+
+    def two_steps(s3):
+        s3 = aid3_step(_vs(R, w), np.zeros(6), AID3Params(), s3, 0.1)
+        return aid3_step(_vs(R, 2 * w), np.full(6, 20.0), AID3Params(), s3, 0.1)
+
+    still = two_steps(st3)
+    assert still.frozen and np.array_equal(still.theta, INITP_ROT.theta)
+    moved = two_steps(aid_unfreeze(st3))
+    assert not moved.frozen and not np.array_equal(moved.theta, INITP_ROT.theta)
 
 
 def test_init_rejects_indefinite_mass_and_bad_input_is_skipped():

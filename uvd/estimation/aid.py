@@ -53,7 +53,7 @@ definite only inside their (conservative) domain of attraction (4.29), (4.36). E
 checks the new M̂: if its smallest eigenvalue falls to ``pd_floor``·(largest) or below (or
 anything becomes non-finite), the update is discarded, the estimator **freezes** (θ̂ kept at the
 last positive-definite value, ``frozen=True`` and ``freeze_reason`` set) and from then on only
-propagates v̂ with the frozen θ̂. :func:`aid6_unfreeze` resumes adaptation explicitly.
+propagates v̂ with the frozen θ̂. :func:`aid_unfreeze` resumes adaptation explicitly.
 
 Hot loop: one compiled (numba) kernel per step, no regressor matrix is formed — the blocks of
 W_UVᵀ∆v are the structured products above (the drag block is −|vᵢ|(v ⊗ ∆v)); ~15 µs median per
@@ -79,10 +79,10 @@ from uvd.model.spd import cholesky, min_max_eig
 
 __all__ = [
     "AID6Gains", "AID6Params", "AID6State", "aid6_init", "aid6_step", "aid6_params",
-    "aid6_unfreeze", "aid6_estimator",
+    "aid6_estimator",
     "AID3Gains", "AID3Params", "AID3State", "aid3_init", "aid3_step", "aid3_params",
-    "aid3_unfreeze", "aid3_estimator",
-    "INITP_6DOF", "INITP_ROT",
+    "aid3_estimator",
+    "aid_unfreeze", "INITP_6DOF", "INITP_ROT",
 ]
 
 _INTERP = ("linear", "hold")
@@ -568,8 +568,9 @@ def aid6_params(st: AID6State) -> UVParams:
     return params_from_theta(st.theta)
 
 
-def aid6_unfreeze(st: AID6State) -> AID6State:
-    """Resume adaptation after a freeze (θ̂ is the last positive-definite estimate)."""
+def aid_unfreeze(st: AID6State | AID3State) -> AID6State | AID3State:
+    """Resume adaptation (6-DOF or 3-DOF AID) after a freeze; θ̂ is the last
+    positive-definite estimate."""
     return replace(st, frozen=False, freeze_reason="")
 
 
@@ -648,11 +649,6 @@ def aid3_step(vs, u_applied: np.ndarray, params: AID3Params, st: AID3State,
 def aid3_params(st: AID3State) -> RotParams:
     """θ̂_UVR as :class:`RotParams` (Î symmetric by construction)."""
     return RotParams.from_theta(st.theta)
-
-
-def aid3_unfreeze(st: AID3State) -> AID3State:
-    """Resume adaptation after a freeze."""
-    return replace(st, frozen=False, freeze_reason="")
 
 
 def aid3_estimator(theta0: np.ndarray | RotParams | None = None,
