@@ -210,12 +210,14 @@ def test_reloadable_changes(tmp_path):
     assert same is old and a == [] and r == []
 
 
-def test_check_config_command(tmp_path, capsys):
+def test_check_config_command(tmp_path, capsys, monkeypatch):
     assert main(["check-config", str(ROOT / "config" / "sim.toml")]) == 0
     out = capsys.readouterr().out
     assert "OK" in out and "two-step-ambc" in out and "AID" not in out
+    monkeypatch.chdir(tmp_path)  # the working directory, where save_path lands, is empty
     assert main(["check-config", str(ROOT / "config" / "jhu-rov.toml")]) == 0
-    assert "AID on (from INITP, saved to aid-params.toml)" in capsys.readouterr().out
+    assert "AID on (from INITP, saved to aid-params.toml; resume: later runs go on from it)" \
+        in capsys.readouterr().out
     bad = write(tmp_path, MINIMAL + "[control]\nkp = -1\n")
     assert main(["check-config", str(bad)]) == 2
     err = capsys.readouterr().err
@@ -276,3 +278,50 @@ def test_aid_initial_params_is_checked_at_load(tmp_path):
     assert spec.params.gains == AID6Gains(1.0, 2.0, 3.0, 4.0, 5.0)
     np.testing.assert_array_equal(spec.init_state.theta, resume.theta)
     assert spec.init_state.theta[237] == 7.0  # g, not INITP's
+
+
+def test_aid_resume_goes_on_from_the_last_runs_file(tmp_path, monkeypatch, capsys):
+    """``resume``: the first run starts from initial_params/INITP, later runs from save_path
+    (the working directory's, where the daemon wrote it); a bad file there is an error."""
+    from uvd.estimation.aid import INITP_6DOF
+    from uvd.model.params import UVParams, save_params
+    from uvd.runtime.daemon import build_core
+
+    work = tmp_path / "state"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    _, errs = errors_of(tmp_path, "[estimation]\naid = true\nresume = true\n" + MINIMAL)
+    assert "needs save_path" in errs["estimation.resume"]
+
+    text = "[estimation]\naid = true\nresume = true\nsave_path = \"aid.toml\"\n" + MINIMAL
+    cfg_path = write(tmp_path, text)
+    cfg = load_config(cfg_path)  # the first run: no file yet
+    assert cfg.estimation.start_path(tmp_path) is None
+    np.testing.assert_array_equal(build_core(cfg).estimators[0].init_state.theta,
+                                  INITP_6DOF.theta)
+    assert main(["check-config", str(cfg_path)]) == 0
+    assert "AID on (from INITP, saved to aid.toml; resume: later runs go on from it)" \
+        in capsys.readouterr().out
+
+    last = UVParams(M=INITP_6DOF.M, D=INITP_6DOF.D, g=3.0, b=INITP_6DOF.b)
+    save_params(last, work / "aid.toml")  # what a run leaves
+    cfg = load_config(cfg_path)
+    assert cfg.estimation.start_path(tmp_path) == work / "aid.toml"
+    np.testing.assert_array_equal(build_core(cfg).estimators[0].init_state.theta, last.theta)
+    assert main(["check-config", str(cfg_path)]) == 0
+    assert f"AID on (from the last run's {work / 'aid.toml'}, saved to aid.toml)" \
+        in capsys.readouterr().out
+
+    # the file wins over initial_params (still checked: it is the start once the file goes)
+    save_params(INITP_6DOF, tmp_path / "init.toml")
+    both = text.replace("resume = true", "resume = true\ninitial_params = \"init.toml\"")
+    cfg = load_config(write(tmp_path, both))
+    assert cfg.estimation.start_path(tmp_path) == work / "aid.toml"
+    (work / "aid.toml").unlink()
+    assert cfg.estimation.start_path(tmp_path) == tmp_path / "init.toml"
+
+    # a damaged file is not silently replaced by INITP: the start is refused, naming it
+    (work / "aid.toml").write_text("[parameters]\nM = 3\n")
+    _, errs = errors_of(tmp_path, text)
+    assert str(work / "aid.toml") in errs["estimation.save_path"]
+    assert "move it away to start afresh" in errs["estimation.save_path"]

@@ -5,7 +5,7 @@ pseudo-terminals and ``udp_multicast`` CAN bus): the loop publishes ``"estimate"
 (θ̂ ∈ R²⁴¹ of 6-DOF AID) at ``publish_every_s``; ``save_path`` holds the newest θ̂ as a
 parameters file, rewritten once more at shutdown; AID replayed offline over the daemon's
 JSON-lines telemetry ends at the online estimate; a second daemon configured with the saved
-file as ``initial_params`` starts its AID from it.
+file as ``initial_params``, or with ``resume = true``, starts its AID from it.
 """
 
 from __future__ import annotations
@@ -97,6 +97,12 @@ def test_aid_estimate_is_published_saved_and_resumed(hil, tmp_path):
     cfg2 = load_config(cfg2_path)
     d2 = Daemon(cfg2)
     np.testing.assert_array_equal(d2.state.est[0].theta, saved.theta)
+    # ... and so does one with resume = true and the same save_path, with no initial_params
+    cfg3_path = tmp_path / "resume3.toml"
+    cfg3_path.write_text(cfg_path.read_text().replace("[estimation]",
+                                                      "[estimation]\nresume = true", 1))
+    d3 = Daemon(load_config(cfg3_path))
+    np.testing.assert_array_equal(d3.state.est[0].theta, saved.theta)
 
 
 def _with_initial_params(text: str, path: str) -> str:

@@ -63,6 +63,8 @@ def _run(args) -> int:
 def _aid_summary(est) -> str:
     if not est.aid:
         return ""
-    start = est.initial_params or "INITP"
+    found = est.resume_path()
+    start = f"the last run's {found}" if found else est.initial_params or "INITP"
     saved = f", saved to {est.save_path}" if est.save_path else ", not saved"
-    return f", AID on (from {start}{saved})"
+    resume = "; resume: later runs go on from it" if est.resume and not found else ""
+    return f", AID on (from {start}{saved}{resume})"

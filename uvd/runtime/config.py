@@ -197,6 +197,10 @@ class EstimationSection:
                 "$STATE_DIRECTORY); empty = not saved")
     save_every_s: float = setting(60.0, unit="s", min=1.0, max=86400.0,
                                   doc="how often save_path is rewritten while running")
+    resume: bool = setting(
+        False, doc="go on from the last run: AID starts from save_path's file when it exists "
+                   "(checked like initial_params), else from initial_params / INITP (the first "
+                   "run); needs save_path")
 
     def initial_params_path(self, base_dir: Path) -> Path | None:
         """``initial_params`` resolved against the config file's folder (None: INITP)."""
@@ -204,6 +208,18 @@ class EstimationSection:
             return None
         p = Path(self.initial_params)
         return p if p.is_absolute() else base_dir / p
+
+    def resume_path(self) -> Path | None:
+        """``save_path`` if ``resume`` and the file is there (resolved against the working
+        directory, where the daemon writes it), else None."""
+        if self.resume and self.save_path and Path(self.save_path).is_file():
+            return Path(self.save_path).absolute()
+        return None
+
+    def start_path(self, base_dir: Path) -> Path | None:
+        """The parameters file θ̂(0) of AID comes from: :meth:`resume_path`, else
+        :meth:`initial_params_path` (None: INITP)."""
+        return self.resume_path() or self.initial_params_path(base_dir)
 
     def aid_params(self):
         """The :class:`uvd.estimation.aid.AID6Params` of these settings."""
@@ -215,19 +231,31 @@ class EstimationSection:
             self.aid_params()
         except ValueError as exc:
             return [("gains", str(exc))]
-        p = self.initial_params_path(ctx.base_dir)
-        if p is None:
-            return []
-        from uvd.errors import ParameterError
-        from uvd.model.params import params_from_toml
-        try:
-            lam = params_from_toml(p).mass_min_eigenvalue()
-        except ParameterError as exc:
-            return [("initial_params", str(exc))]
-        if not lam > 0.0:
-            return [("initial_params", f"{p}: M is not positive definite (smallest eigenvalue "
-                                       f"{lam:.4g}); AID needs M̂(t₀) > 0 (Theorem 4.3.1)")]
-        return []
+        if self.resume and not self.save_path:
+            return [("resume", "needs save_path: the file a run leaves and the next one "
+                               "starts from")]
+        errors = []
+        for key, p in (("initial_params", self.initial_params_path(ctx.base_dir)),
+                       ("save_path", self.resume_path())):
+            if p is not None:
+                errors += _check_start_params(key, p)
+        return errors
+
+
+def _check_start_params(key: str, p: Path) -> list[tuple[str, str]]:
+    """A parameters file AID may start from: readable, M positive definite."""
+    from uvd.errors import ParameterError
+    from uvd.model.params import params_from_toml
+    how = " (resume = true starts AID from it; move it away to start afresh)" \
+        if key == "save_path" else ""
+    try:
+        lam = params_from_toml(p).mass_min_eigenvalue()
+    except ParameterError as exc:
+        return [(key, f"{exc}{how}")]
+    if not lam > 0.0:
+        return [(key, f"{p}: M is not positive definite (smallest eigenvalue {lam:.4g}); AID "
+                      f"needs M̂(t₀) > 0 (Theorem 4.3.1){how}")]
+    return []
 
 
 def _check_port(port: str | None, key: str = "port") -> list[tuple[str, str]]:

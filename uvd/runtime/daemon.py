@@ -178,12 +178,14 @@ def build_core(cfg: Config, vehicle=None, estimators: tuple | None = None
 
 
 def aid_theta0(cfg: Config) -> np.ndarray | None:
-    """θ̂(0) of online AID: ``[estimation] initial_params`` or None (INITP of §4.6)."""
+    """θ̂(0) of online AID: the last run's ``save_path`` file (``resume``), else
+    ``[estimation] initial_params``, else None (INITP of §4.6)."""
     base = Path(cfg.source).parent if cfg.source else Path.cwd()
-    path = cfg.estimation.initial_params_path(base)
+    path = cfg.estimation.start_path(base)
     if path is None:
         return None
     from uvd.model.params import params_from_toml
+    log.info("AID starts from %s", path)
     return params_from_toml(path).theta
 
 
