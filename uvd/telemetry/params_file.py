@@ -29,7 +29,7 @@ RECORD_TYPE = "estimate"
 
 def _title(rec: Mapping[str, Any]) -> str:
     parts = [f"{rec.get('estimator', 'estimator')}: online estimate θ̂ of uvd run",
-             f"{rec.get('steps', '?')} adaptation steps",
+             f"{rec.get('steps', '?')} adaptation steps in this run",
              f"M̂ eigenvalues {rec.get('m_min_eig', float('nan')):.6g}"
              f"..{rec.get('m_max_eig', float('nan')):.6g}"]
     if rec.get("frozen"):
