@@ -85,3 +85,8 @@ def test_results_page_puts_each_summary_next_to_its_thesis_figure(tmp_path):
     (tmp_path / "results" / "two-step.json").write_text(json.dumps({"summary": "REUSED"}))
     assert results.main(["--reuse", "--out", str(tmp_path), "--only", "two-step"]) == 0
     assert "REUSED" in (tmp_path / "RESULTS.md").read_text()
+    # --only: the experiments not run keep their section, in the page's order
+    (tmp_path / "results" / "pitch-reversal.json").write_text(json.dumps({"summary": "KEPT"}))
+    assert results.main(["--reuse", "--out", str(tmp_path), "--only", "two-step"]) == 0
+    page = (tmp_path / "RESULTS.md").read_text()
+    assert "KEPT" in page and page.index("## pitch-reversal") < page.index("## two-step")

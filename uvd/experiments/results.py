@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     reg = experiments.registry()
-    names = [n for n in ORDER if n in reg] + sorted(n for n in reg if n not in ORDER)
+    names = all_names = [n for n in ORDER if n in reg] + sorted(n for n in reg if n not in ORDER)
     if args.only:
         unknown = set(args.only) - set(reg)
         if unknown:
@@ -106,12 +106,12 @@ def main(argv: list[str] | None = None) -> int:
         write_json(path, result)
         results[name] = result
         _progress(f"[results] {name} done in {result['wall_seconds']:.0f} s")
-    # keep the results of experiments not run this time on the page
-    for name in names:
+    # keep the results of experiments not run this time (--only) on the page, in page order
+    for name in all_names:
         path = res_dir / f"{name}.json"
         if name not in results and path.exists():
             results[name] = json.loads(path.read_text())
-    page = render(results, reg)
+    page = render({n: results[n] for n in all_names if n in results}, reg)
     (args.out / "RESULTS.md").write_text(page)
     _progress(f"[results] wrote {args.out / 'RESULTS.md'} ({time.perf_counter() - t_all:.0f} s)")
     return 0
