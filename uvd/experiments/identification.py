@@ -368,6 +368,8 @@ def _record_job(args):
                                         name="oracle"),
                          init_state=replace(aid6_init(load_vehicle(VEHICLE).params.theta),
                                             frozen=True, freeze_reason="oracle")))
+    elif est_kind == "aid6-true":  # from the plant's own θ, §4.6's gains, nothing beside it
+        est = aid6_estimator(load_vehicle(VEHICLE).params.theta, AID6Params(gains=AID6Gains()))
     elif est_kind == "aid3":
         est = aid3_estimator(INITP_ROT, AID3Params(gains=AID3Gains()))
         extra = (aid3_estimator(INITP_ROT, AID3Params(gains=AID3Gains(), sampling="euler"),
