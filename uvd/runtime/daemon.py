@@ -182,10 +182,10 @@ def aid_theta0(cfg: Config) -> np.ndarray | None:
     ``[estimation] initial_params``, else None (INITP of §4.6)."""
     base = Path(cfg.source).parent if cfg.source else Path.cwd()
     path = cfg.estimation.start_path(base)
+    log.info("AID starts from %s", path or "INITP (§4.6, Tables 4.6-4.7)")
     if path is None:
         return None
     from uvd.model.params import params_from_toml
-    log.info("AID starts from %s", path)
     return params_from_toml(path).theta
 
 
