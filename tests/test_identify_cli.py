@@ -41,6 +41,10 @@ def test_identify_then_xval(run_file, tmp_path, capsys, method):
     if method == "ls-consistent":
         params.validate()
         assert info["validity"].startswith("valid")
+        # four minutes of IDDAT leave the roll drag D4 undetermined: the unconstrained fit's
+        # D4 is not dissipative (symmetric-part eigenvalue +132, like the thesis's Table 4.11)
+        # and the consistent fit puts it on its bound — and says so
+        assert info["active_bounds"] == ["D4"] and info["unobserved"] == []
     if method == "aid":
         assert info["frozen"] is False and info["steps"] == 2399
         assert params.mass_min_eigenvalue() > 0
@@ -52,6 +56,9 @@ def test_identify_then_xval(run_file, tmp_path, capsys, method):
     res = json.loads(xv.read_text())
     assert set(res["mae"]) == {"roll_deg", "pitch_deg", "u_mps", "v_mps", "w_mps", "p_degps",
                                "q_degps", "r_degps"}
+    assert ("WARNING: the fit rests on its consistency bound for D4 " in text) \
+        == (method == "ls-consistent")
+    assert "no data for" not in text and "may diverge" not in text
     if method.startswith("ls"):  # LS of the same run predicts it well
         assert res["mae"]["u_mps"] < 0.02 and res["mae"]["roll_deg"] < 1.0
     # an --out that cannot be written is a clear error, not a traceback
@@ -128,3 +135,30 @@ def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
     empty.write_text(lines[0] + "\n")
     assert main(["xval", "--params", str(out), "--log", str(empty)]) == 2
     assert "0 cycle record(s) with valid navigation" in capsys.readouterr().err
+
+
+def test_identify_says_what_the_data_do_not_determine(run_file, tmp_path, capsys):
+    """30 s of IDDAT with sway, roll and pitch rate held at exactly 0: ls-consistent is still
+    admissible, but says which blocks had no data and which rest on their bounds."""
+    run = RunLog.load(run_file)
+    n = 300
+    v = run.v[:n].copy()
+    v[:, [1, 3, 4]] = 0.0
+    short = tmp_path / "short.npz"
+    RunLog(t=run.t[:n], R=run.R[:n], p=run.p[:n], v=v, u=run.u[:n],
+           input_interp=run.input_interp, name="short").save(short)
+    summary = tmp_path / "lsc.json"
+    assert main(["identify", "--log", str(short), "--method", "ls-consistent", "--out",
+                 str(tmp_path / "lsc.toml"), "--json", str(summary)]) == 0
+    text = capsys.readouterr().out
+    info = json.loads(summary.read_text())
+    assert info["unobserved"] == ["D2", "D4", "D5"]
+    assert "WARNING: no data for D2, D4, D5: sway v, roll rate p, pitch rate q stayed " \
+           "exactly 0" in text
+    params = params_from_toml(tmp_path / "lsc.toml")
+    params.validate()
+    np.testing.assert_allclose(params.D[3], -1e-3 * np.eye(6), rtol=0, atol=1e-9)
+    bound = [b for b in info["active_bounds"] if b not in info["unobserved"]]
+    assert bound, info["active_bounds"]  # 0.5 min for 241 parameters: some rest on a bound
+    assert f"WARNING: the fit rests on its consistency bound for {', '.join(bound)}" in text
+    assert "not identified by this run (0.5 min;" in text

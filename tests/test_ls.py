@@ -110,6 +110,7 @@ def test_ls_recovers_the_plant_from_noise_free_data(plant_run):
     resc = ls_identify(plant_run, filt=DiffFilter(window_s=1.1), consistent=True, reduced=red)
     assert np.linalg.norm(resc.theta - res.theta) / np.linalg.norm(res.theta) < 1e-3
     resc.params.validate()
+    assert resc.active_bounds == ()  # the data, not the bounds, set every block
 
 
 def test_rotational_ls_from_the_same_run(plant_run):
@@ -126,6 +127,18 @@ def test_rank_deficient_data_is_reported_and_consistent_still_valid():
     resc = ls_identify(run, consistent=True)
     resc.params.validate()
     assert resc.mass_min_eig > 0 and resc.drag_max_sym_eig < 0
+    # D2, D4, D5 multiply |v_i| = 0 everywhere: no data. LS leaves them 0 (gelsd's minimum
+    # norm); the consistent fit puts them at −ε_D I, the admissible value of smallest norm
+    # (left to the solver they ended at ≈ −4·10⁵ I), and says that the bound set them
+    assert res.unobserved == resc.unobserved == ("D2", "D4", "D5")
+    for i in (1, 3, 4):
+        assert np.allclose(res.params.D[i], 0.0, rtol=0, atol=1e-9)
+        assert np.allclose(resc.params.D[i], -1e-3 * np.eye(6), rtol=0, atol=1e-9)
+    assert {"D2", "D4", "D5"} <= set(resc.active_bounds)
+    # the random wrenches, unrelated to the motion, push M onto its bound too
+    assert "M" in resc.active_bounds and resc.mass_min_eig < 1e-2
+    assert resc.summary()["active_bounds"] == list(resc.active_bounds)
+    assert res.active_bounds == ()  # only a consistent fit has bounds
 
 
 # Table 4.11 (the thesis's LS drag D₄): its symmetric part has eigenvalue +1034

@@ -53,6 +53,32 @@ def identify_aid(run, theta0, gains):
     return st
 
 
+def _bounds_note(bounds, duration_s: float) -> str:
+    """The warning for a consistent fit that rests on its bounds (uvd.estimation.ls,
+    "Admissible is not identified")."""
+    text = (f"WARNING: the fit rests on its consistency bound for {', '.join(bounds)} (smallest "
+            f"mass eigenvalue or largest symmetric drag eigenvalue within 10x of the 1e-3 "
+            f"margin): the constraint, not the data, set these parameters. They are admissible "
+            f"but not identified by this run ({duration_s / 60:.1f} min; Chapter 4 identified "
+            f"from 32-35 min runs that excite every DOF, Table 4.5).")
+    if "M" in bounds:
+        text += " With M on its bound, a simulation with these parameters may diverge."
+    return text
+
+
+_DOF = {"1": "surge u", "2": "sway v", "3": "heave w", "4": "roll rate p", "5": "pitch rate q",
+        "6": "yaw rate r"}
+
+
+def _unobserved_note(blocks) -> str:
+    """The note for drag blocks without data (uvd.estimation.ls.unobserved_drag)."""
+    dofs = ", ".join(_DOF[b[1:]] for b in blocks)
+    return (f"WARNING: no data for {', '.join(blocks)}: {dofs} stayed exactly 0 throughout the "
+            f"run. These blocks, and the columns of the other drag blocks that multiply these "
+            f"velocities, are not identified (ls leaves the blocks 0, ls-consistent sets them "
+            f"to -1e-3 I, the least dissipative admissible drag).")
+
+
 def _parse_gains(text):
     from uvd.estimation.aid import AID6Gains
 
@@ -84,6 +110,7 @@ def _run(args) -> int:
         print(f"{args.log}: {run.stretch_note()}")
     summary: dict = {"log": str(args.log), "method": args.method, "samples": len(run.t),
                      "duration_s": float(len(run.t) * run.dt)}
+    notes: list[str] = []
     if args.method == "aid":
         init = params_from_toml(args.init) if args.init else INITP_6DOF
         try:
@@ -106,6 +133,11 @@ def _run(args) -> int:
         summary.update(res.summary())
         title = (f"{args.method} (§4.4) on {args.log.name}: rank {res.rank}/241, "
                  f"condition {res.condition:.3g}")
+        if res.unobserved:
+            notes.append(_unobserved_note(res.unobserved))
+        bound = tuple(b for b in res.active_bounds if b not in res.unobserved)
+        if bound:
+            notes.append(_bounds_note(bound, summary["duration_s"]))
     lam = params.mass_min_eigenvalue()
     try:
         params.validate(where="identified parameters")
@@ -120,6 +152,8 @@ def _run(args) -> int:
     print(title)
     print(f"M min eigenvalue {lam:.4g}; g = {params.g:.4g} N; b = "
           f"{np.array2string(params.b, precision=4)} N m; {valid}")
+    for note in notes:
+        print(note)
     print(f"wrote {args.out}")
     if args.json:
         write_json(args.json, summary)

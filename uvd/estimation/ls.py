@@ -32,6 +32,14 @@ solver (SCS as fall-back). A final eigenvalue projection onto the same set guard
 solver tolerance (and is the whole answer, applied to the unconstrained solution, if no solver
 succeeds), so the result *always* has M positive definite and dissipative drag and passes
 :meth:`UVParams.validate`; :class:`LSResult` says whether the projection moved anything.
+
+**Admissible is not identified.** The margins ε_M = ε_D = 10⁻³ are far below any vehicle's
+figures (the JHU ROV's smallest mass eigenvalue is 261.6 kg, its least dissipative drag
+eigenvalue −30.2). A consistent fit that ends on (or within ten times) a margin was decided by
+the constraint, not by the data — typically a run too short or too poorly excited for 241
+parameters: admissible, but no model of the vehicle (its forward simulation can diverge at
+once). :func:`active_bounds` names those blocks and :class:`LSResult` carries them
+(``active_bounds``) so that ``uvd identify`` can say so.
 """
 
 from __future__ import annotations
@@ -57,7 +65,7 @@ from uvd.model.params import (
 
 __all__ = ["DiffFilter", "LSResult", "differentiate", "regressor_uv_batch",
            "regressor_uvr_batch", "ls_reduce", "ls_identify", "ls_solve", "project_consistent",
-           "consistency_margins"]
+           "consistency_margins", "active_bounds", "unobserved_drag"]
 
 _UPPER6 = [(i, j) for i in range(6) for j in range(i, 6)]
 _UPPER3 = [(i, j) for i in range(3) for j in range(i, 3)]
@@ -183,6 +191,10 @@ class LSResult:
     consistent : whether the physically consistent variant was asked for.
     solver, solver_status : "lstsq/gelsd" or the cvxpy solver and its status.
     projected : the final projection onto {M ⪰ ε_M I, sym Dᵢ ⪯ −ε_D I} changed the solution.
+    active_bounds : consistent fits only: the blocks that rest on their bound
+        (:func:`active_bounds`) — set by the constraint, not identified by the data.
+    unobserved : the drag blocks without data (:func:`unobserved_drag`): 0 from ``ls``, −ε_D I
+        from the consistent fit.
     """
 
     model: str
@@ -201,6 +213,8 @@ class LSResult:
     projected: bool = False
     mass_min_eig: float = float("nan")
     drag_max_sym_eig: float = float("nan")
+    active_bounds: tuple[str, ...] = ()
+    unobserved: tuple[str, ...] = ()
     notes: tuple[str, ...] = field(default_factory=tuple)
 
     def summary(self) -> dict:
@@ -210,6 +224,7 @@ class LSResult:
                 "consistent": self.consistent, "solver": self.solver,
                 "solver_status": self.solver_status, "projected": self.projected,
                 "mass_min_eig": self.mass_min_eig, "drag_max_sym_eig": self.drag_max_sym_eig,
+                "active_bounds": list(self.active_bounds), "unobserved": list(self.unobserved),
                 "notes": list(self.notes)}
 
 
@@ -340,6 +355,27 @@ def consistency_margins(model: str, theta: np.ndarray) -> tuple[float, float]:
     return lam_m, lam_d
 
 
+def unobserved_drag(model: str, colnorm: np.ndarray) -> tuple[int, ...]:
+    """Indices i (from 0) of the drag blocks Dᵢ (Cᵢ) the data say nothing about: every column of
+    the block is zero in the regressor, i.e. |vᵢ| = 0 (|ωᵢ| = 0) on the whole run."""
+    n, d0 = (6, 21) if model == "6dof" else (3, 6)
+    return tuple(i for i in range(n)
+                 if not np.any(colnorm[d0 + n * n * i: d0 + n * n * (i + 1)] > 0.0))
+
+
+def active_bounds(model: str, theta: np.ndarray, eps_mass: float, eps_drag: float,
+                  within: float = 10.0) -> tuple[str, ...]:
+    """The consistency bounds θ rests on: ``"M"`` (``"I"``) when λ_min ≤ within·ε_M, ``"D<i>"``
+    (``"C<i>"``, i from 1) when λ_max(½(Dᵢ + Dᵢᵀ)) ≥ −within·ε_D. See "Admissible is not
+    identified" in the module docstring."""
+    M, Ds = _blocks(model, theta)
+    m_name, d_name = ("M", "D") if model == "6dof" else ("I", "C")
+    out = [m_name] if np.linalg.eigvalsh(M)[0] <= within * eps_mass else []
+    out += [f"{d_name}{i + 1}" for i, D in enumerate(Ds)
+            if np.linalg.eigvalsh(0.5 * (D + D.T))[-1] >= -within * eps_drag]
+    return tuple(out)
+
+
 def project_consistent(model: str, theta: np.ndarray, eps_mass: float, eps_drag: float
                        ) -> tuple[np.ndarray, bool]:
     """Nearest (Frobenius) θ with M ⪰ ε_M I and sym(Dᵢ) ⪯ −ε_D I: eigenvalue clipping of M and
@@ -373,9 +409,16 @@ def project_consistent(model: str, theta: np.ndarray, eps_mass: float, eps_drag:
 
 
 def _solve_consistent(model: str, Rs: np.ndarray, z: np.ndarray, c: np.ndarray,
-                      eps_mass: float, eps_drag: float) -> tuple[np.ndarray | None, str, str]:
+                      eps_mass: float, eps_drag: float, empty: tuple[int, ...] = ()
+                      ) -> tuple[np.ndarray | None, str, str]:
     """min ‖Rs x − z‖ (+ a 1e-7 ridge for strict convexity) over the consistent set with
-    θ = c ∘ x (column equilibration), by cvxpy; returns (θ or None, solver, status)."""
+    θ = c ∘ x (column equilibration), by cvxpy; returns (θ or None, solver, status).
+
+    The drag blocks ``empty`` (no data, :func:`unobserved_drag`) are fixed at −ε_D I, the
+    consistent value of smallest norm — what gelsd's minimum-norm zero becomes after the
+    projection. Left to the solver, such a block takes whatever value the interior-point method
+    stops at (≈ −4·10⁵ I on a random run without sway, roll or pitch rate): the ridge is too
+    weak to steer it."""
     import cvxpy as cp
 
     if model == "6dof":
@@ -389,7 +432,11 @@ def _solve_consistent(model: str, Rs: np.ndarray, z: np.ndarray, c: np.ndarray,
     I_n = np.eye(n)
     cons = [0.5 * (M + M.T) - eps_mass * I_n >> 0]
     for i in range(n):
-        D = cp.reshape(theta[d0 + n * n * i: d0 + n * n * (i + 1)], (n, n), order="F")
+        block = slice(d0 + n * n * i, d0 + n * n * (i + 1))
+        if i in empty:
+            cons.append(theta[block] == (-eps_drag * I_n).reshape(-1, order="F"))
+            continue
+        D = cp.reshape(theta[block], (n, n), order="F")
         cons.append(-0.5 * (D + D.T) - eps_drag * I_n >> 0)
     obj = cp.Minimize(cp.norm(cp.hstack([(Rs / scale) @ x - z / scale, 1e-7 * x]), 2))
     prob = cp.Problem(obj, cons)
@@ -425,7 +472,8 @@ def ls_solve(model: str, Rfac: np.ndarray, z: np.ndarray, colnorm: np.ndarray, *
     cond = float(sv[0] / sv[-1]) if full else math.inf  # rank deficient: singular
     solver, status, projected = "scipy.linalg.lstsq (gelsd)", "optimal", False
     if consistent:
-        th_c, solver, status = _solve_consistent(model, Rs, z, c, eps_mass, eps_drag)
+        th_c, solver, status = _solve_consistent(model, Rs, z, c, eps_mass, eps_drag,
+                                                 unobserved_drag(model, colnorm))
         if th_c is None:
             th_c, status = theta, f"solver failed ({status}); projected the LS solution"
         theta, projected = project_consistent(model, th_c, eps_mass, eps_drag)
@@ -481,8 +529,12 @@ def ls_identify(run, model: str = "6dof", *, filt: DiffFilter = DiffFilter(),
             params.validate(where="ls-consistent")
         except ParameterError as exc:  # must not happen: the projection guarantees it
             notes.append(f"validate failed: {exc}")
+    active = active_bounds(model, theta, eps_mass, eps_drag) if consistent else ()
+    d_name = "D" if model == "6dof" else "C"
+    unobserved = tuple(f"{d_name}{i + 1}" for i in unobserved_drag(model, colnorm))
     return LSResult(model=model, params=params, theta=theta, rank=rank, n_params=theta.size,
                     condition=cond, singular_values=sv, residual_rms=np.sqrt(ss / n),
                     n_samples=n, filter=filt.describe(run.dt), consistent=consistent,
                     solver=solver, solver_status=status, projected=projected,
-                    mass_min_eig=lam_m, drag_max_sym_eig=lam_d, notes=tuple(notes))
+                    mass_min_eig=lam_m, drag_max_sym_eig=lam_d, active_bounds=active,
+                    unobserved=unobserved, notes=tuple(notes))

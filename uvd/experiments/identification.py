@@ -610,9 +610,9 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
         f"b {rel_b[-1]:.3f}",
         f"LS: rank {ls.rank}/241, condition {ls.condition:.3g}; consistent LS: "
         f"{lsc.solver} {lsc.solver_status}, projected {lsc.projected}, M min eig "
-        f"{lsc.mass_min_eig:.1f}, max sym drag eig {lsc.drag_max_sym_eig:.2f}; "
-        f"unconstrained LS M min eig {ls.mass_min_eig:.1f}, max sym drag eig "
-        f"{ls.drag_max_sym_eig:.2f}",
+        f"{lsc.mass_min_eig:.1f}, max sym drag eig {lsc.drag_max_sym_eig:.2f}, on a bound: "
+        f"{', '.join(lsc.active_bounds) or 'none'}; unconstrained LS M min eig "
+        f"{ls.mass_min_eig:.1f}, max sym drag eig {ls.drag_max_sym_eig:.2f}",
         f"acceptance CROSS (<= thesis AIDPM and <= INITPM/3): AIDPM {all(acc_aid.values())}, "
         f"LSPM_consistent {all(acc_lsc.values())}",
         f"wall: lockstep {t_sim:.1f} s, LS {t_ls:.1f} s, cross-validation {t_xval:.1f} s",
