@@ -26,8 +26,8 @@ from uvd.experiments.identification import (
     EXACT_DVL,
     VEHICLE,
     Dataset,
-    _downsample,
-    _run_jobs,
+    downsample,
+    run_jobs,
 )
 
 NAMES = ("theta", "M", "D", "g", "b")
@@ -44,9 +44,9 @@ def _drift(rec) -> dict:
     h = rec.hist
     t = rec.run.t
     rel = h["theta_err"] / h["theta_norms"][None, :]
-    series = {"t_s": _downsample(t, rel[:, 0], 60.0)[0]}
+    series = {"t_s": downsample(t, rel[:, 0], 60.0)[0]}
     for i, nm in enumerate(NAMES):
-        series[nm] = _downsample(t, rel[:, i], 60.0)[1]
+        series[nm] = downsample(t, rel[:, i], 60.0)[1]
     hours = t / 3600.0
     rate = {nm: float(np.polyfit(hours, rel[:, i], 1)[0]) for i, nm in enumerate(NAMES)}
     v = rec.run.v
@@ -74,7 +74,7 @@ def run_aid_hover(opts: ExperimentOptions) -> dict:
     jobs = [(ds, {"kind": "6dof", "seed": opts.seed}, "aid6-true"),
             (ds, {"kind": "6dof", "seed": opts.seed, "instruments": EXACT_DVL}, "aid6-true")]
     t0 = time.perf_counter()
-    noisy, exact = (_drift(r) for r in _run_jobs(jobs, progress))
+    noisy, exact = (_drift(r) for r in run_jobs(jobs, progress))
     t_sim = time.perf_counter() - t0
     g = AID6Gains()
     lines = [

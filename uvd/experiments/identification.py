@@ -377,7 +377,7 @@ def _record_job(args):
     return record(ds, estimator=est, extra_estimators=extra, **kwargs)
 
 
-def _run_jobs(jobs, progress):
+def run_jobs(jobs, progress):
     """Run the recordings, two at a time in child processes when 2 CPUs are available."""
     if (os.cpu_count() or 1) >= 2 and len(jobs) > 1:
         try:
@@ -445,7 +445,9 @@ def first_time_below_for_good(t_s: list[float], values: list[float], level: floa
     return None if idx is None else float(t_s[idx])
 
 
-def _downsample(t: np.ndarray, x: np.ndarray, every_s: float) -> tuple[list, list]:
+def downsample(t: np.ndarray, x: np.ndarray, every_s: float) -> tuple[list, list]:
+    """Every ``every_s`` seconds of a uniformly sampled series (the last sample of each span),
+    as lists for the JSON output."""
     dt = float(t[1] - t[0])
     m = max(1, int(round(every_s / dt)))
     sel = np.r_[np.arange(m - 1, len(t), m)]
@@ -506,7 +508,7 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
     t0 = time.perf_counter()
     progress(f"aid-6dof: simulating IDDAT ({jobs[0][1]['minutes']:.1f} min, with AID), "
              f"CROSS ({jobs[1][1]['minutes']:.1f} min) and IDDAT with an exact DVL in lockstep")
-    iddat, cross, iddat_exact = _run_jobs(jobs, progress)
+    iddat, cross, iddat_exact = run_jobs(jobs, progress)
     t_sim = time.perf_counter() - t0
     true_p = load_vehicle(VEHICLE).params
     aidp = UVParams.from_theta(iddat.aid_theta)
@@ -536,11 +538,11 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
                                          iddat_exact.run.v)
     t_below_exact = first_time_below_for_good(vel_exact["t_s"], vel_exact["relative"], 0.01)
     rel = h["theta_err"] / h["theta_norms"][None, :]
-    ts, rel_theta = _downsample(run.t, rel[:, 0], 30.0)
-    _, rel_M = _downsample(run.t, rel[:, 1], 30.0)
-    _, rel_D = _downsample(run.t, rel[:, 2], 30.0)
-    _, rel_g = _downsample(run.t, rel[:, 3], 30.0)
-    _, rel_b = _downsample(run.t, rel[:, 4], 30.0)
+    ts, rel_theta = downsample(run.t, rel[:, 0], 30.0)
+    _, rel_M = downsample(run.t, rel[:, 1], 30.0)
+    _, rel_D = downsample(run.t, rel[:, 2], 30.0)
+    _, rel_g = downsample(run.t, rel[:, 3], 30.0)
+    _, rel_b = downsample(run.t, rel[:, 4], 30.0)
     m_pd = bool(np.all(h["min_eig"] > 0.0) and not np.any(h["frozen"]))
 
     def ok_cross(model: str) -> dict:
@@ -635,7 +637,7 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
                                         "exact_dvl": vel_exact},
         "relative_parameter_error": {"t_s": ts, "theta": rel_theta, "M": rel_M, "D": rel_D,
                                      "g": rel_g, "b": rel_b},
-        "M_min_eigenvalue": dict(zip(("t_s", "value"), _downsample(run.t, h["min_eig"],
+        "M_min_eigenvalue": dict(zip(("t_s", "value"), downsample(run.t, h["min_eig"],
                                                                     30.0), strict=True)),
         "aid": {"frozen": bool(np.any(h["frozen"])), "freeze_reason": h["freeze_reason"],
                 "steps": h["steps"], "parameters": _param_summary(aidp)},
@@ -677,7 +679,7 @@ def run_aid_rot(opts: ExperimentOptions) -> dict:
     t0 = time.perf_counter()
     progress(f"aid-rot: simulating IDDAT ({jobs[0][1]['minutes']:.1f} min, with AID) and "
              f"CROSS ({jobs[1][1]['minutes']:.1f} min)")
-    iddat, cross = _run_jobs(jobs, progress)
+    iddat, cross = run_jobs(jobs, progress)
     t_sim = time.perf_counter() - t0
     true_rot = RotParams.from_theta(load_vehicle(VEHICLE).params.theta[ROTATIONAL_INDEX])
     aidp = RotParams.from_theta(iddat.aid_theta)
@@ -690,9 +692,9 @@ def run_aid_rot(opts: ExperimentOptions) -> dict:
     run = iddat.run
     vel = velocity_estimate_errors(run.t, h["dv"], run.v[:, 3:])
     rel = h["theta_err"] / np.where(h["theta_norms"] > 0, h["theta_norms"], 1.0)[None, :]
-    ts, rel_theta = _downsample(run.t, rel[:, 0], 30.0)
-    _, rel_I = _downsample(run.t, rel[:, 1], 30.0)
-    _, rel_b = _downsample(run.t, rel[:, 4], 30.0)
+    ts, rel_theta = downsample(run.t, rel[:, 0], 30.0)
+    _, rel_I = downsample(run.t, rel[:, 1], 30.0)
+    _, rel_b = downsample(run.t, rel[:, 4], 30.0)
     rows = [(m, d, mae[m][d]) for d in ("CROSS", "IDDAT") for m in mae]
     rows += [("TRUEPM", d, mae_true[d]) for d in ("CROSS", "IDDAT")]
     thesis_rows = [(f"{m} (thesis)", d, dict(zip(STATES_ROT, vals, strict=True)))
@@ -761,9 +763,9 @@ def run_aid_truth(opts: ExperimentOptions) -> dict:
     h = rec.hist
     rel = h["theta_err"] / h["theta_norms"][None, :]
     names = ("theta", "M", "D", "g", "b")
-    series = {"t_s": _downsample(rec.run.t, rel[:, 0], 30.0)[0]}
+    series = {"t_s": downsample(rec.run.t, rel[:, 0], 30.0)[0]}
     for i, nm in enumerate(names):
-        series[nm] = _downsample(rec.run.t, rel[:, i], 30.0)[1]
+        series[nm] = downsample(rec.run.t, rel[:, i], 30.0)[1]
     final = {nm: float(rel[-1, i]) for i, nm in enumerate(names)}
     within = {nm: first_time_below_for_good(list(rec.run.t), list(rel[:, i]), 0.10)
               for i, nm in enumerate(names)}
