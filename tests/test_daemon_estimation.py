@@ -85,7 +85,7 @@ def test_aid_estimate_is_published_saved_and_resumed(hil, tmp_path):
     run = RunLog.load(cfg.telemetry.jsonl.path)
     assert run.extra["bad_lines"] == 0 and len(run) >= len(cycles) - 2, run.extra
     assert abs(run.dt - 0.1) < 1e-6
-    st = identify_aid(run, INITP_6DOF.theta, AID6Gains())
+    st, _ = identify_aid(run, INITP_6DOF.theta, AID6Gains())
     assert st.steps == last["steps"]
     rel = np.linalg.norm(st.theta - last["theta"]) / np.linalg.norm(last["theta"])
     jitter = max(abs(r["dt"] - 0.1) / 0.1 for r in cycles[1:])  # the loop's, this run

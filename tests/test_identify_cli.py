@@ -47,12 +47,27 @@ def test_identify_then_xval(run_file, tmp_path, capsys, method):
         assert info["active_bounds"] == ["D4"] and info["unobserved"] == []
     if method == "aid":
         assert info["frozen"] is False and info["steps"] == 2399
+        # the convergence figures are the aid-6dof experiment's measure over the last minute
+        from uvd.commands.identify import identify_aid
+        from uvd.estimation.aid import INITP_6DOF, AID6Gains
+        from uvd.experiments.identification import velocity_estimate_errors
+
+        run = RunLog.load(run_file)
+        st, dv = identify_aid(run, INITP_6DOF.theta, AID6Gains())
+        ref = velocity_estimate_errors(run.t, dv, run.v, width_s=60.0)
+        for part in ("translational", "angular"):
+            assert info[f"velocity_estimate_{part}_relative"] == pytest.approx(
+                ref[f"{part}_relative"][-1], rel=1e-12)
+        assert info["theta_moved_relative"] == pytest.approx(
+            np.linalg.norm(st.theta - INITP_6DOF.theta) / np.linalg.norm(INITP_6DOF.theta))
+        assert info["velocity_estimate_window_s"] == pytest.approx(60.0)
         assert params.mass_min_eigenvalue() > 0
     xv = tmp_path / f"{method}-xval.json"
     assert main(["xval", "--params", str(out), "--log", str(run_file), "--json",
                  str(xv)]) == 0
     text = capsys.readouterr().out
     assert "Roll (deg)" in text
+    assert ("velocity estimate over the last 60 s: RMS error " in text) == (method == "aid")
     res = json.loads(xv.read_text())
     assert set(res["mae"]) == {"roll_deg", "pitch_deg", "u_mps", "v_mps", "w_mps", "p_degps",
                                "q_degps", "r_degps"}
