@@ -8,7 +8,10 @@ Identifies the 6-DOF UV parameters θ_UV (2.48) of a recorded run (format:
 * ``ls`` — least squares (§4.4); ``ls-consistent`` — the constrained fit with M positive
   definite and dissipative drag.
 
-Writes a ``[parameters]`` TOML (loadable by every ``--params`` option) and prints a summary.
+Writes a ``[parameters]`` TOML (loadable by every ``--params`` option) and prints a summary:
+for ``aid`` how far it got (velocity-estimate error over the last minute, how far θ̂ moved);
+for ``ls-consistent`` a warning naming the blocks the constraint set rather than the data
+(``LSResult.active_bounds``) and, for both LS methods, the drag blocks without data.
 """
 
 from __future__ import annotations
