@@ -203,8 +203,8 @@ def test_stuck_depth_latches_until_operator_reset(hil):
     ev = fired(d, "depth_stuck")
     assert ev["action"] == "zero-thrust"
     cur, prev = cycle_at(cycles, ev["t_ns"])
-    value = cur["eta"][2]
-    first = next(r for r in cycles if r["eta"][2] == value)
+    value = cur["p"][2]
+    first = next(r for r in cycles if r["p"][2] == value)
     held = (cur["t_ns"] - first["t_ns"]) * 1e-9
     assert held >= stuck_s > (prev["t_ns"] - first["t_ns"]) * 1e-9
     print(f"depth_stuck: fired {held:.2f} s after the value froze (threshold {stuck_s} s)")

@@ -12,6 +12,9 @@ from uvd.estimation.runlog import RunLog
 from uvd.experiments.identification import dataset_6dof, record
 from uvd.model.params import params_from_toml
 
+#: the pose of a cycle record at the origin, level, heading north (p and row-major R)
+ZERO_POSE = {"p": [0.0] * 3, "R": np.eye(3).ravel().tolist()}
+
 
 @pytest.fixture(scope="module")
 def run_file(tmp_path_factory):
@@ -104,8 +107,6 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
 
 def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
     """The daemon's JSON-lines cycle records as a run: nominal grid, longest stretch."""
-    from drivers.samples import R_to_euler
-
     run = RunLog.load(run_file)
     rng = np.random.default_rng(1)
     lines = [json.dumps({"type": "lifecycle", "to": "STANDBY"})]
@@ -113,19 +114,19 @@ def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
         if 100 <= k < 103:  # an overrun and a navigation outage: a gap
             if k == 101:
                 lines.append(json.dumps({"type": "cycle", "t_ns": k * 100_000_000,
-                                         "nav_valid": False, "eta": [0] * 6, "v": [0] * 6,
+                                         "nav_valid": False, **ZERO_POSE, "v": [0] * 6,
                                          "u": [0] * 6}))
             continue
-        eta = [*run.p[k], *R_to_euler(run.R[k])]
+        pose = {"p": run.p[k].tolist(), "R": run.R[k].ravel().tolist()}
         jitter = int(rng.integers(0, 50_000))  # the loop wakes up to 50 µs late
         lines.append(json.dumps({"type": "cycle", "t_ns": 5_000_000_000 + k * 100_000_000
-                                 + jitter, "nav_valid": True, "eta": eta,
+                                 + jitter, "nav_valid": True, **pose,
                                  "v": run.v[k].tolist(), "u": run.u[k].tolist()}))
-    lines.append(json.dumps({"type": "cycle", "nav_valid": True, "eta": [0] * 6, "v": [0] * 6,
+    lines.append(json.dumps({"type": "cycle", "nav_valid": True, **ZERO_POSE, "v": [0] * 6,
                              "u": [0] * 6}))  # no time stamp: unusable
     for k in range(50):  # the daemon restarted after a reboot: its clock starts lower
         lines.append(json.dumps({"type": "cycle", "t_ns": 1_000_000 + k * 100_000_000,
-                                 "nav_valid": True, "eta": [0] * 6, "v": [0] * 6,
+                                 "nav_valid": True, **ZERO_POSE, "v": [0] * 6,
                                  "u": [0] * 6}))
     lines.append('{"type": "cycle", "t_ns": 9')  # cut by a crash
     f = tmp_path / "telemetry.jsonl"

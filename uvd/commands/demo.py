@@ -82,6 +82,7 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
     from drivers.samples import euler_to_R
     from uvd.control.errors import error_coordinates
     from uvd.experiments.lockstep import DOF_NAMES, VEL_NAMES
+    from uvd.telemetry.records import CycleRecord
 
     t, ref_eta, ref_v = [], [], []
     with telemetry.open(encoding="utf-8") as fh:
@@ -91,11 +92,12 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
             except ValueError:
                 continue
             if r.get("type") != "cycle" or r.get("state") not in ("ARMED", "FAILSAFE") \
-                    or "eta_ref" not in r:
+                    or r.get("p_ref") is None:
                 continue
-            t.append(r["t_ns"] * 1e-9)
-            ref_eta.append(r["eta_ref"])
-            ref_v.append(r["v_ref"])
+            rec = CycleRecord.from_dict(r)
+            t.append(rec.t_ns * 1e-9)
+            ref_eta.append(rec.eta_ref())
+            ref_v.append(rec.v_ref)
     if len(t) < 2 or truth.shape[0] < 2:
         return {"samples": 0}
     t = np.asarray(t)

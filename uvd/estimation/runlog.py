@@ -38,6 +38,14 @@ import numpy as np
 
 from uvd.errors import ConfigError
 
+
+def _eta_of(rec: dict) -> np.ndarray:
+    """[north, east, down, roll, pitch, heading] of a cycle record (``p`` and row-major
+    ``R``, uvd.telemetry.records.CycleRecord's JSON form)."""
+    from drivers.samples import R_to_euler
+    return np.array([*np.asarray(rec["p"], dtype=float),
+                     *R_to_euler(np.asarray(rec["R"], dtype=float).reshape(3, 3))])
+
 _INTERP = ("linear", "hold")
 
 
@@ -202,10 +210,10 @@ class RunLog:
                     if not isinstance(rec, dict) or rec.get("type") != "cycle" \
                             or not rec.get("nav_valid") or rec.get("u") is None:
                         continue
-                    row = (rec.get("eta"), rec.get("v"), rec.get("u"))
                     try:
-                        arr = [np.asarray(x, dtype=float) for x in row]
-                    except (TypeError, ValueError):
+                        arr = [np.asarray(x, dtype=float) for x in
+                               (_eta_of(rec), rec.get("v"), rec.get("u"))]
+                    except (KeyError, TypeError, ValueError):
                         bad += 1
                         continue
                     if [a.shape for a in arr] != [(6,)] * 3 \

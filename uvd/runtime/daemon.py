@@ -60,6 +60,7 @@ from uvd.runtime.lifecycle import State
 from uvd.runtime.loop import CpuLatencyRequest
 from uvd.runtime.mailbox import Mailbox
 from uvd.runtime.supervisor import Supervisor
+from uvd.telemetry.records import CycleRecord
 
 __all__ = ["Daemon", "SerialSensor", "CanComponent", "build_core", "nav_config",
            "make_reference", "start_pose", "theta_hat_of", "m_hat_min_eig"]
@@ -467,7 +468,7 @@ class CanComponent:
 # ----------------------------------------------------------------------------- the daemon
 
 @dataclass
-class CycleRecord:
+class LastCycle:
     """What the last cycle decided (for tests and the demo)."""
 
     t_ns: int = 0
@@ -562,7 +563,7 @@ class Daemon:
         self.arm_refusal: str | None = None
         self.armed_at_ns: int | None = None
         self._hold_ref: Reference | None = None
-        self.last = CycleRecord()
+        self.last = LastCycle()
         self.counters = {"cycles": 0, "guard_nonfinite": 0, "guard_clamped": 0,
                          "write_failed": 0, "feedback_invalid": 0}
         self.commands_max_abs = 0.0
@@ -795,19 +796,19 @@ class Daemon:
                     self._last_refusal_log_ns = t_ns
                     log.info("%s", step.refused)
 
-        self.last = CycleRecord(t_ns, d.action, sup.state, out.status, thrust, mode)
+        self.last = LastCycle(t_ns, d.action, sup.state, out.status, thrust, mode)
         ref = out.reference
-        rec = {"type": "cycle", "t_ns": t_ns, "dt": dt, "state": sup.state.value,
-               "action": d.action.label, "mode": mode, "status": out.status,
-               "eta": _eta(nav.H).tolist(), "v": nav.v.tolist(), "nav_valid": nav.valid,
-               "u": out.u_applied.tolist(), "thrust": thrust.tolist(),
-               "ins_rx_ns": ins.t_ns if ins is not None else None,
-               "ages": [h.ins_age_s, h.dvl_age_s, h.depth_age_s, fb_age]}
-        if ref is not None:
-            rec["eta_ref"] = _eta(ref.H).tolist()
-            rec["v_ref"] = np.asarray(ref.v).tolist()
-        if self.armed_at_ns is not None:
-            rec["armed_at_ns"] = self.armed_at_ns
+        rec = CycleRecord(
+            t_ns=t_ns, dt=dt, state=sup.state.value, action=d.action.label, mode=mode,
+            status=out.status, p=nav.H[:3, 3], R=nav.H[:3, :3], v=nav.v, nav_valid=nav.valid,
+            u=out.u_applied, u_cmd=self.allocator.B @ thrust, thrust=thrust,
+            ages=(h.ins_age_s, h.dvl_age_s, h.depth_age_s, fb_age),
+            ins_rx_ns=ins.t_ns if ins is not None else None,
+            triggers=tuple(a.name for a in d.active),
+            p_ref=None if ref is None else ref.H[:3, 3],
+            R_ref=None if ref is None else ref.H[:3, :3],
+            v_ref=None if ref is None else np.asarray(ref.v),
+            armed_at_ns=self.armed_at_ns).to_dict()
         self.app.hub.publish(rec)
         # within half a period of the due time: a cycle a few µs early is not skipped
         if self.core_cfg.estimators and t_ns >= self._next_estimate_ns - int(dt * 5e8):

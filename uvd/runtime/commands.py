@@ -1,0 +1,156 @@
+"""Commands from outside the loop — ground stations, Zenoh, tests — as data the cycle reads.
+
+A link (MAVLink, a test, a tool) never calls into the loop. It builds a command and
+:meth:`CommandQueue.put`\\ s it, from any thread; the daemon's cycle drains the queue at its next
+start, applies each command at that cycle boundary (arming through the lifecycle's checks, a
+mode through the arbiter's rules, gains as a reload does) and resolves the command's future with
+a :class:`CommandResult`. Each command and its result is also published on the telemetry hub
+as a ``"command"`` record, so every sink sees who asked for what and what came of it.
+
+The queue is bounded: when full, :meth:`~CommandQueue.put` resolves the new command at once
+with ``ok=False, reason="command queue full"`` and counts it — never blocks, never grows.
+
+Operator modes (:class:`SetMode`) are the values of :data:`OPERATOR_MODES`; the arbiter's
+failsafe action always overrides them when it is more restrictive (docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from collections.abc import Mapping
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["CommandResult", "Arm", "Disarm", "SetMode", "ManualWrench", "HoldPose",
+           "ResetFailsafe", "SetParams", "Command", "CommandQueue", "OPERATOR_MODES"]
+
+#: the operator's modes: ``auto`` runs the configured controller (PDC, AMBC, two-step AMBC);
+#: ``pdc`` PD control with adaptation frozen; ``hold-depth`` depth, roll and pitch only;
+#: ``manual`` the operator's body wrench (:class:`ManualWrench`); ``observe`` zero thrust while
+#: the online estimators run (identification only)
+OPERATOR_MODES = ("auto", "pdc", "hold-depth", "manual", "observe")
+
+
+@dataclass(frozen=True)
+class CommandResult:
+    """What became of a command: ``ok``, and why not (``reason``) when refused."""
+
+    ok: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class Arm:
+    """Run the arming checks and arm."""
+
+    cause: str = "operator request"
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class Disarm:
+    cause: str = "operator request"
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class SetMode:
+    """Switch the operator mode (one of :data:`OPERATOR_MODES`)."""
+
+    mode: str
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class ManualWrench:
+    """Body force and torque for ``manual`` mode, [f; τ] in N and N m (body frame).
+
+    It holds until ``timeout_s`` after the cycle that took it; then the manual wrench is zero
+    (a silent joystick stops the vehicle).
+    """
+
+    u: tuple[float, float, float, float, float, float]
+    timeout_s: float = 0.5
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class HoldPose:
+    """A setpoint to hold: position NED (m) and heading (rad), level attitude."""
+
+    north_m: float
+    east_m: float
+    down_m: float
+    heading_rad: float
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class ResetFailsafe:
+    """Reset latched failsafe triggers (all when ``names`` is None)."""
+
+    names: tuple[str, ...] | None = None
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class SetParams:
+    """Change reloadable configuration keys (``{"control.kp": 300.0, …}``), applied at a cycle
+    boundary exactly as a SIGHUP reload applies them; refused as a whole if any key is unknown,
+    not reloadable or invalid (the reason names it)."""
+
+    values: Mapping[str, Any]
+    source: str = ""
+
+
+Command = Arm | Disarm | SetMode | ManualWrench | HoldPose | ResetFailsafe | SetParams
+
+
+@dataclass
+class _Pending:
+    command: Any
+    future: Future = field(default_factory=Future)
+
+
+class CommandQueue:
+    """Bounded, thread-safe queue of commands for the cycle.
+
+    Parameters
+    ----------
+    capacity : int
+        Commands waiting at most; more are refused at once (``dropped`` counts them).
+    """
+
+    def __init__(self, capacity: int = 64) -> None:
+        self.capacity = int(capacity)
+        self._q: deque[_Pending] = deque()
+        self._lock = threading.Lock()
+        self.accepted = 0
+        self.dropped = 0
+
+    def put(self, command: Any) -> Future:
+        """Queue ``command``; returns a future resolved with its :class:`CommandResult` at the
+        next cycle (``asyncio.wrap_future`` awaits it from a coroutine)."""
+        p = _Pending(command)
+        with self._lock:
+            if len(self._q) >= self.capacity:
+                self.dropped += 1
+                p.future.set_result(CommandResult(False, "command queue full"))
+                return p.future
+            self._q.append(p)
+            self.accepted += 1
+        return p.future
+
+    def drain(self) -> list[_Pending]:
+        """From the cycle: every waiting command, oldest first."""
+        with self._lock:
+            if not self._q:
+                return []
+            out = list(self._q)
+            self._q.clear()
+        return out
+
+    def stats(self) -> dict[str, int]:
+        return {"accepted": self.accepted, "dropped": self.dropped, "waiting": len(self._q)}

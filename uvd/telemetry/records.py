@@ -1,0 +1,164 @@
+"""The telemetry records the daemon publishes on its :class:`~uvd.telemetry.sink.TelemetryHub`.
+
+One typed record per cycle, shared by the writer (the daemon, lockstep runs) and every reader
+(JSON-lines files, ``uvd identify``, ``uvd demo``, the Zenoh, MAVLink and MCAP sinks). On the
+hub a record travels as a plain mapping (``to_dict``) whose ``"type"`` names its kind:
+
+=============  =================================================================================
+``type``       what
+=============  =================================================================================
+``cycle``      :class:`CycleRecord` — one per control cycle (decimated per sink)
+``estimate``   one per online estimator every ``[estimation] publish_every_s`` (θ̂, M̂'s
+               eigenvalues, frozen flag and reason, steps …; see ``Daemon.estimate_records``)
+``failsafe``   a failsafe event (trigger raised / cleared / reset), ``FailsafeEvent.as_dict``
+``lifecycle``  a lifecycle transition (BOOT → STANDBY → ARMED …), ``Transition.as_dict``
+``command``    an operator command and its result (:mod:`uvd.runtime.commands`)
+=============  =================================================================================
+
+The pose travels as the position ``p`` (north, east, down, m) and the rotation matrix ``R``
+(body → world, row-major 3×3), not as Euler angles: a reader that wants angles calls
+:func:`euler_of`. Arrays stay numpy arrays on the hub (no conversion on the loop's path); the
+sinks convert (:func:`uvd.jsonio.to_jsonable`). :meth:`CycleRecord.from_dict` reads both forms.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from drivers.samples import R_to_euler
+
+__all__ = ["CycleRecord", "euler_of", "eta_of_record", "CYCLE"]
+
+CYCLE = "cycle"
+
+
+def _arr(x: Any, shape: tuple[int, ...] | None = None) -> np.ndarray | None:
+    if x is None:
+        return None
+    a = np.asarray(x, dtype=float)
+    return a.reshape(shape) if shape is not None else a
+
+
+def _age(x: Any) -> float:
+    return math.inf if x is None else float(x)
+
+
+@dataclass(frozen=True, slots=True)
+class CycleRecord:
+    """What one control cycle saw, decided and commanded.
+
+    Attributes
+    ----------
+    t_ns : int
+        Monotonic time of the cycle (ns).
+    dt : float
+        Measured period handed to the cycle (s).
+    state : str
+        Lifecycle state (``standby``, ``armed`` …).
+    action : str
+        Failsafe action in force (``none``, ``fallback``, ``hold-depth`` …).
+    mode : str
+        Control mode the cycle applied (:class:`uvd.core.Mode` value).
+    status : str
+        The core's status (``ok``, ``disarmed``, ``nav-invalid``, ``non-finite``).
+    p : ndarray, shape (3,)
+        Navigation position, world NED (m).
+    R : ndarray, shape (3, 3)
+        Navigation attitude, body → world.
+    v : ndarray, shape (6,)
+        Navigation body velocity [ν; ω] (m/s, rad/s).
+    nav_valid : bool
+    u : ndarray, shape (6,)
+        Wrench applied over the last cycle as the estimators saw it (N, N m).
+    u_cmd : ndarray, shape (6,)
+        Wrench of this cycle's thruster command (N, N m).
+    thrust : ndarray, shape (n,)
+        Per-thruster command (N) — exactly what the amplifiers were sent.
+    ages : tuple of float
+        Ages of INS, DVL, depth and amplifier feedback (s; inf: none yet).
+    ins_rx_ns : int or None
+        Receive stamp of the INS sample this cycle used (None: none new).
+    triggers : tuple of str
+        Active failsafe triggers.
+    p_ref, R_ref, v_ref : ndarray or None
+        The reference (None while there is none).
+    armed_at_ns : int or None
+        When the vehicle was last armed.
+    """
+
+    t_ns: int
+    dt: float
+    state: str
+    action: str
+    mode: str
+    status: str
+    p: np.ndarray
+    R: np.ndarray
+    v: np.ndarray
+    nav_valid: bool
+    u: np.ndarray
+    u_cmd: np.ndarray
+    thrust: np.ndarray
+    ages: tuple[float, float, float, float]
+    ins_rx_ns: int | None = None
+    triggers: tuple[str, ...] = ()
+    p_ref: np.ndarray | None = None
+    R_ref: np.ndarray | None = None
+    v_ref: np.ndarray | None = None
+    armed_at_ns: int | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The hub's form: ``{"type": "cycle", field: value, …}`` (arrays kept as arrays)."""
+        d = {f: getattr(self, f) for f in self.__slots__}
+        d["type"] = CYCLE
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> CycleRecord:
+        """Read a record from its hub or JSON form (lists, ``null`` for inf ages).
+
+        Raises
+        ------
+        KeyError
+            A required field is missing (the message names it).
+        ValueError
+            A field has the wrong shape.
+        """
+        ages = d.get("ages") or (None, None, None, None)
+        return cls(
+            t_ns=int(d["t_ns"]), dt=float(d["dt"]), state=str(d["state"]),
+            action=str(d["action"]), mode=str(d["mode"]), status=str(d["status"]),
+            p=_arr(d["p"], (3,)), R=_arr(d["R"], (3, 3)), v=_arr(d["v"], (6,)),
+            nav_valid=bool(d["nav_valid"]), u=_arr(d["u"], (6,)),
+            u_cmd=_arr(d.get("u_cmd", d["u"]), (6,)), thrust=_arr(d["thrust"]),
+            ages=tuple(_age(a) for a in ages),
+            ins_rx_ns=None if d.get("ins_rx_ns") is None else int(d["ins_rx_ns"]),
+            triggers=tuple(d.get("triggers") or ()),
+            p_ref=_arr(d.get("p_ref"), (3,)), R_ref=_arr(d.get("R_ref"), (3, 3)),
+            v_ref=_arr(d.get("v_ref"), (6,)),
+            armed_at_ns=None if d.get("armed_at_ns") is None else int(d["armed_at_ns"]))
+
+    def eta(self) -> np.ndarray:
+        """[north, east, down, roll, pitch, heading] of the navigation pose."""
+        return np.array([*self.p, *euler_of(self.R)])
+
+    def eta_ref(self) -> np.ndarray | None:
+        """The same of the reference (None without one)."""
+        if self.p_ref is None or self.R_ref is None:
+            return None
+        return np.array([*self.p_ref, *euler_of(self.R_ref)])
+
+
+def euler_of(R: Any) -> tuple[float, float, float]:
+    """(roll, pitch, heading) of a rotation given as 3×3 or 9 row-major numbers (App. A)."""
+    return R_to_euler(np.asarray(R, dtype=float).reshape(3, 3))
+
+
+def eta_of_record(d: Mapping[str, Any]) -> np.ndarray:
+    """[north, east, down, roll, pitch, heading] of a cycle record in hub or JSON form."""
+    return np.array([*np.asarray(d["p"], dtype=float), *euler_of(d["R"])])
