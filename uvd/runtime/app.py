@@ -62,6 +62,7 @@ from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 from uvd.runtime.clock import Clock
+from uvd.runtime.commands import CommandQueue
 from uvd.runtime.config import Config, ConfigValidationError, load_config
 from uvd.runtime.failsafe import Decision, FailsafeEvent, Health
 from uvd.runtime.lifecycle import Transition
@@ -177,6 +178,8 @@ class App:
         self._user_on_transition = self.supervisor.on_transition
         self.supervisor.on_event = self._on_failsafe_event
         self.supervisor.on_transition = self._on_transition
+        #: commands from links and tools; the integration's cycle drains it at its start
+        self.commands = CommandQueue()
         tel = config.telemetry
         self.hub = TelemetryHub(sinks, queue_size=tel.queue_size,
                                 flush_interval_s=tel.flush_interval_s)

@@ -53,6 +53,7 @@ from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.types import Reference, VehicleState
 from uvd.estimation.navigation import NavConfig
 from uvd.runtime.app import App, ShutdownStep
+from uvd.runtime.commands import CommandResult
 from uvd.runtime.config import Config
 from uvd.runtime.failsafe import Action, Health, nav_health
 from uvd.runtime.leak import LeakInput, leak_sensor_fault_trigger
@@ -682,8 +683,37 @@ class Daemon:
 
     _nav_H = np.eye(4)
 
+    def _apply_commands(self, t_ns: int) -> None:
+        """The commands queued since the previous cycle, applied at this cycle boundary; each
+        one's result resolves its future and is published as a ``"command"`` record."""
+        for p in self.app.commands.drain():
+            cmd = p.command
+            try:
+                res = self._apply_command(cmd, t_ns)
+            except Exception as exc:  # noqa: BLE001 - a bad command never breaks the cycle
+                res = CommandResult(False, f"{type(exc).__name__}: {exc}")
+            self.app.hub.publish({"type": "command", "t_ns": t_ns,
+                                  "command": type(cmd).__name__,
+                                  "source": getattr(cmd, "source", ""), "ok": res.ok,
+                                  "reason": res.reason}, always=True)
+            p.future.set_result(res)
+
+    def _apply_command(self, cmd, t_ns: int) -> CommandResult:
+        from uvd.runtime import commands as c
+        if isinstance(cmd, c.Arm):
+            step = self.request_arm(t_ns, cause=cmd.cause)
+            return CommandResult(bool(step.ok and self.supervisor.armed), step.refused or "")
+        if isinstance(cmd, c.Disarm):
+            step = self.supervisor.request_disarm(t_ns, cause=cmd.cause)
+            return CommandResult(True, "" if step.transitions else "not armed")
+        if isinstance(cmd, c.ResetFailsafe):
+            refused = self.supervisor.reset_failsafe(t_ns, cmd.names)
+            return CommandResult(not refused, "; ".join(f"{n}: {r}" for n, r in refused))
+        return CommandResult(False, f"{type(cmd).__name__} is not supported")
+
     def cycle(self, t_ns: int, dt: float) -> None:
         """One control cycle (called by the fixed-rate loop; see the module docstring)."""
+        self._apply_commands(t_ns)
         ins = self.ins_box.take()
         dvl = self.dvl_box.take()
         depth = self.depth_box.take()
