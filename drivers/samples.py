@@ -80,3 +80,9 @@ def R_to_euler(R: np.ndarray) -> tuple[float, float, float]:
     roll = float(np.arctan2(R[2, 1], R[2, 2]))
     heading = float(np.arctan2(R[1, 0], R[0, 0]))
     return roll, pitch, heading
+
+
+def eta_of(H: np.ndarray) -> np.ndarray:
+    """[north, east, down, roll, pitch, heading] of a pose H (4×4, body → world)."""
+    roll, pitch, heading = R_to_euler(H[:3, :3])
+    return np.array([H[0, 3], H[1, 3], H[2, 3], roll, pitch, heading])

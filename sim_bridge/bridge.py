@@ -46,14 +46,14 @@ import socket
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from drivers.samples import R_to_euler
-from sim_bridge.instruments.models import InstrumentConfig, Instruments
+from sim_bridge.instruments.faults import SENSOR_MODES, FaultyInstruments, SensorFaults
+from sim_bridge.instruments.models import InstrumentConfig
 from sim_bridge.instruments.pty_emulators import EmulatorConfig, InstrumentEmulators, PtyPort
 from sim_bridge.plant import Plant, PlantConfig
 from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
@@ -63,74 +63,11 @@ __all__ = ["SimBridge", "SensorFaults", "TRUTH_COLUMNS", "read_truth", "write_lo
 
 log = logging.getLogger("sim_bridge")
 
-SENSOR_MODES = ("ok", "silence", "garbage", "nan", "stuck")
 TRUTH_COLUMNS = ("t_s", "x", "y", "z", "roll", "pitch", "heading", "u", "v", "w", "p", "q",
                  "r", "f1", "f2", "f3", "f4", "f5", "f6")
 
 
 # ----------------------------------------------------------------------------- fault injection
-
-class SensorFaults:
-    """The injected fault of each instrument: a mode and when it ends (monotonic ns, 0 =
-    until cleared). Written by the control channel, read by the emulators (plain attribute
-    swaps, safe across threads)."""
-
-    def __init__(self, clock: Callable[[], int] = time.monotonic_ns) -> None:
-        self.clock = clock
-        self.mode: dict[str, str] = {"ins": "ok", "dvl": "ok", "depth": "ok"}
-        self.until: dict[str, int] = {"ins": 0, "dvl": 0, "depth": 0}
-        self.since: dict[str, int] = {"ins": 0, "dvl": 0, "depth": 0}
-        self.stuck_value: dict[str, Any] = {}
-
-    def set(self, name: str, mode: str, seconds: float | None = None) -> int:
-        if name not in self.mode:
-            raise KeyError(f"unknown instrument {name!r}; have {sorted(self.mode)}")
-        if mode not in SENSOR_MODES:
-            raise ValueError(f"unknown mode {mode!r}; known: {', '.join(SENSOR_MODES)}")
-        now = self.clock()
-        self.stuck_value.pop(name, None)
-        self.until[name] = now + int(seconds * 1e9) if seconds else 0
-        self.since[name] = now
-        self.mode[name] = mode
-        return now
-
-    def get(self, name: str) -> str:
-        m = self.mode[name]
-        if m != "ok" and self.until[name] and self.clock() >= self.until[name]:
-            self.mode[name] = m = "ok"
-            self.stuck_value.pop(name, None)
-        return m
-
-
-class FaultyInstruments(Instruments):
-    """The instrument models with the injected faults applied to their samples."""
-
-    def __init__(self, config: InstrumentConfig, rng: np.random.Generator,
-                 faults: SensorFaults) -> None:
-        super().__init__(config, rng)
-        self.faults = faults
-
-    def sample(self, t_ns, H, v):
-        ins, dvl, depth = super().sample(t_ns, H, v)
-        f = self.faults
-        out = []
-        for name, s in (("ins", ins), ("dvl", dvl), ("depth", depth)):
-            mode = f.get(name) if s is not None else "ok"
-            if mode == "silence":
-                s = None
-            elif mode == "nan":
-                if name == "ins":
-                    s = replace(s, heading=float("nan"))
-                elif name == "depth":
-                    s = replace(s, depth_m=float("nan"))
-                else:
-                    s = replace(s, velocity_body=np.full(3, np.nan))
-            elif mode == "stuck":
-                held = f.stuck_value.setdefault(name, s)
-                s = replace(held, t_ns=s.t_ns)
-            out.append(s)
-        return tuple(out)
-
 
 class FaultyPort(PtyPort):
     """A pty whose frames are replaced by random bytes of the same length in ``garbage``."""
@@ -208,11 +145,13 @@ class SimBridge:
     def __init__(self, config, *, seed: int = 0, hold: bool = False,
                  truth_log: str | Path | None = None, plant_rate_hz: float = 100.0,
                  clock: Callable[[], int] = time.monotonic_ns) -> None:
-        from uvd.runtime.daemon import start_pose
+        from uvd.control.trajectory import start_pose
         self.config = config
         self.clock = clock
         self.vehicle = config.load_vehicle()
-        self.H0, self.v0 = start_pose(config)
+        nav = config.navigation
+        self.H0, self.v0 = start_pose(config.control.reference, nav.initial_north_m,
+                                      nav.initial_east_m)
         self.plant = Plant(self.vehicle, PlantConfig(rate_hz=plant_rate_hz), H0=self.H0,
                            v0=self.v0)
         self.rng = np.random.default_rng(seed)

@@ -14,15 +14,13 @@ import time
 from pathlib import Path
 
 from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
-from uvd.jsonio import to_jsonable
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.lifecycle import State
 from uvd.runtime.loop import drop_realtime
 
 
 class ListSink:
-    """A telemetry sink keeping every record in memory, in its JSON form (lists, ``None`` for
-    non-finite numbers) as a file or network sink would carry it."""
+    """A telemetry sink keeping every record in memory (as published: arrays stay arrays)."""
 
     name = "test"
 
@@ -33,7 +31,7 @@ class ListSink:
         pass
 
     async def write(self, records) -> None:
-        self.records.extend(to_jsonable(r) for r in records)
+        self.records.extend(records)
 
     async def flush(self) -> None:
         pass

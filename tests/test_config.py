@@ -269,7 +269,7 @@ def test_aid_initial_params_is_checked_at_load(tmp_path):
     assert "exactly 5 values" in errs["estimation.gains"]
     # the configured gains and θ̂(0) reach the daemon's estimator
     from uvd.estimation.aid import AID6Gains
-    from uvd.runtime.daemon import build_core
+    from uvd.runtime.build import build_core
     resume = UVParams(M=INITP_6DOF.M, D=INITP_6DOF.D, g=7.0, b=INITP_6DOF.b)
     save_params(resume, tmp_path / "resume.toml")
     cfg = load_config(write(tmp_path, "[estimation]\naid = true\ninitial_params = "
@@ -285,7 +285,7 @@ def test_aid_resume_goes_on_from_the_last_runs_file(tmp_path, monkeypatch, capsy
     (the working directory's, where the daemon wrote it); a bad file there is an error."""
     from uvd.estimation.aid import INITP_6DOF
     from uvd.model.params import UVParams, save_params
-    from uvd.runtime.daemon import build_core
+    from uvd.runtime.build import build_core
 
     work = tmp_path / "state"
     work.mkdir()

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from uvd.cli import main
+from uvd.runtime.build import build_core, nav_config, start_pose
 from uvd.runtime.config import DEFAULT_CONFIG, load_config
-from uvd.runtime.daemon import build_core, nav_config, start_pose
 
 SIM = DEFAULT_CONFIG.read_text()
 

@@ -148,5 +148,5 @@ def test_a_reload_keeps_the_running_estimate_and_does_not_read_initial_params(tm
     (tmp_path / "start.toml").unlink()
     new = replace(d.config, control=replace(d.config.control, kp=123.0))
     d._on_reload(new, ["control.kp"])
-    assert d.pd_gains.kp == 123.0
+    assert d.core_cfg.pd.kp == 123.0
     assert d.core_cfg.estimators == (spec,)

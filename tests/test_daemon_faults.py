@@ -136,8 +136,8 @@ def test_silence_fires_the_stale_trigger_and_clears(hil, sensor, trigger, action
     cleared = events(d, "cleared", trigger)[0]
     assert cleared["t_ns"] > ev["t_ns"]
     after = [r for r in cycles if r["t_ns"] > cleared["t_ns"]]
-    assert after and after[-1]["mode"] == "control" and any(r["thrust"] != [0.0] * 6
-                                                            for r in after)
+    assert after and after[-1]["mode"] == "control"
+    assert any(np.any(np.asarray(r["thrust"]) != 0.0) for r in after)
     commands_were_safe(d, cycles, proc)
 
 
@@ -179,7 +179,7 @@ def test_nan_attitude_fires_nonfinite_input_at_once_and_clears(hil):
     cur, prev = cycle_at(cycles, ev["t_ns"])
     # the NaN frame arrived after the previous cycle: it fired at the first cycle that saw it
     assert prev["t_ns"] < cur["ins_rx_ns"] <= cur["t_ns"]
-    assert cur["thrust"] == [0.0] * 6
+    assert np.all(np.asarray(cur["thrust"]) == 0.0)
     commands_were_safe(d, cycles, proc)
 
 
@@ -237,7 +237,7 @@ def test_parameter_divergence_falls_back_to_pdc_with_adaptation_frozen(hil):
     assert prev["mode"] == "control" and cur["mode"] == "pdc-fallback"
     after = [r for r in cycles if r["t_ns"] >= ev["t_ns"] and r["state"] == "ARMED"]
     assert len(after) >= 8 and all(r["mode"] == "pdc-fallback" for r in after)
-    assert any(r["thrust"] != [0.0] * 6 for r in after)
+    assert any(np.any(np.asarray(r["thrust"]) != 0.0) for r in after)
     commands_were_safe(d, cycles, proc)
 
 
@@ -269,7 +269,7 @@ def test_amplifier_fault_disarms_and_latches(hil):
     assert info["refused"] and info["refused"][0][0] == "amplifier_fault"
     assert not info["arm"].ok and "amplifier" in info["arm"].refused
     after = [r for r in cycles if r["t_ns"] >= ev["t_ns"]]
-    assert all(r["thrust"] == [0.0] * 6 and r["state"] == "STANDBY" for r in after)
+    assert all(np.all(np.asarray(r["thrust"]) == 0.0) and r["state"] == "STANDBY" for r in after)
     commands_were_safe(d, cycles, proc)
 
 
@@ -290,7 +290,7 @@ def test_silent_node_fires_feedback_missing_then_its_timeout_fault_latches(hil):
     assert ev["action"] == "zero-thrust"
     cur, prev = cycle_at(cycles, ev["t_ns"])
     assert cur["ages"][3] > threshold >= prev["ages"][3]
-    assert cur["thrust"] == [0.0] * 6
+    assert np.all(np.asarray(cur["thrust"]) == 0.0)
     print(f"feedback_missing: fired {cur['ages'][3] * 1e3:.0f} ms after node 2's last TPDO")
     # back on the bus the drive reports the command timeout it suffered: latched, disarmed
     af = fired(d, "amplifier_fault")
@@ -318,7 +318,7 @@ def test_bus_off_disarms_at_the_next_cycle_and_latches(hil):
     assert [e["to"] for e in hist if e["t_ns"] == ev["t_ns"]] == ["FAILSAFE", "STANDBY"]
     assert not events(d, "cleared", "bus_off")  # latched, also after the bus recovered
     assert info["bus_after"] == "active"  # the bus itself recovered
-    assert all(r["thrust"] == [0.0] * 6 for r in cycles if r["t_ns"] >= ev["t_ns"])
+    assert all(np.all(np.asarray(r["thrust"]) == 0.0) for r in cycles if r["t_ns"] >= ev["t_ns"])
     # the error frame arrived after the previous cycle: it fired at the first cycle after it
     assert prev["t_ns"] < info["since"] <= cur["t_ns"]
     print(f"bus_off: fired {(cur['t_ns'] - info['since']) / 1e6:.1f} ms after the bus-off "
@@ -357,7 +357,7 @@ def test_leak_disarms_within_a_poll_and_a_cycle_and_latches_until_dry_and_reset(
     cur, prev = cycle_at(cycles, ev["t_ns"])
     hist = [e for e in d.supervisor.failsafe_events() if e["type"] == "lifecycle"]
     assert [e["to"] for e in hist if e["t_ns"] == ev["t_ns"]] == ["FAILSAFE", "STANDBY"]
-    assert all(r["thrust"] == [0.0] * 6 for r in cycles if r["t_ns"] >= ev["t_ns"])
+    assert all(np.all(np.asarray(r["thrust"]) == 0.0) for r in cycles if r["t_ns"] >= ev["t_ns"])
     assert prev["state"] == "ARMED" and cur["state"] == "STANDBY"
     # latched: an operator reset is refused while wet, still active once dry, cleared by a
     # reset once dry; the vehicle stays disarmed (re-arming is the operator's call)
@@ -436,7 +436,7 @@ def test_overrun_streak_zeroes_thrust_and_clears(hil, tmp_path):
     # the streak is known when the 5th overrunning cycle ends: it fires at the next cycle
     assert ev["t_ns"] == d.stalled[streak]
     cur, _ = cycle_at(cycles, ev["t_ns"])
-    assert cur["thrust"] == [0.0] * 6
+    assert np.all(np.asarray(cur["thrust"]) == 0.0)
     assert d.app.loop.overruns >= streak
     commands_were_safe(d, cycles, proc)
 

@@ -10,8 +10,8 @@ import pytest
 
 from sim_bridge.instruments.models import InstrumentConfig
 from uvd.experiments.lockstep import Lockstep, LockstepConfig, run, tracking_errors
+from uvd.runtime.build import build_core, start_pose
 from uvd.runtime.config import load_config
-from uvd.runtime.daemon import build_core, start_pose
 
 DURATION_S = 120.0
 

@@ -15,8 +15,9 @@ from numba.core.registry import CPUDispatcher
 from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
 from sim_bridge.bridge import write_local_config
 from uvd import core
+from uvd.runtime.build import start_pose
 from uvd.runtime.config import load_config
-from uvd.runtime.daemon import Daemon, start_pose
+from uvd.runtime.daemon import Daemon
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,6 +1,30 @@
 """One control cycle — the pure core that the daemon, lockstep simulation and replay all drive.
 
     step(config, inputs, state, dt) -> (outputs, state)
+         = act(config, sense(config, inputs, state, dt), inputs, state, dt)
+
+:func:`sense` is navigation and estimation; :func:`act` is reference, control in the cycle's
+:class:`Mode`, allocation and the output guard. The split lets the failsafe arbiter
+(:mod:`uvd.runtime.cycle`) decide the mode from what :func:`sense` found before anything is
+commanded: the mode is an *input* of :func:`act`, and what :func:`act` returns is exactly what
+the amplifiers get.
+
+**Modes** (docs/architecture.md, "where each failsafe acts"):
+
+==============  ===============================================================================
+``CONTROL``     the configured controller (PDC, MBC, AMBC, two-step AMBC); its state advances
+``PDC``         PD control (``CoreConfig.pd``) on the reference; the controller is not stepped,
+                so its adaptation is frozen (θ̂ held) — the arbiter's FALLBACK, or the operator
+``HOLD_DEPTH``  PD on depth, roll and pitch toward the pose held at entry (level, following the
+                heading), allocated to the vertical thrusters alone: exactly zero surge, sway
+                and yaw thrust; translational velocity feedback only while the DVL is valid
+``MANUAL``      the operator's body wrench (``CoreInputs.manual_wrench``), allocated
+``ZERO``        zero thrust; the controller is not stepped
+==============  ===============================================================================
+
+Disarmed, every mode commands zero. ``CoreInputs.thruster_mask`` restricts allocation to a
+subset of thrusters in every mode (a dead thruster). The estimators (AID) run in every mode:
+they identify the vehicle whatever drives it.
 
 navigation → reference → control → estimation → allocation (DESIGN.md). Pure and
 deterministic: no I/O, no clock (time arrives in ``inputs.t_ns``), no logging. Safety is
@@ -32,33 +56,36 @@ feed-forward (:func:`uvd.control.ambc.ambc_step`) to offset the actuation chain'
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 from typing import Any
 
 import numba
 import numpy as np
 
-from drivers.samples import DepthSample, DvlSample, InsSample
+from drivers.samples import DepthSample, DvlSample, InsSample, euler_to_R
 from uvd.control.allocation import Allocator, allocate_kernel, lag_compensate
-from uvd.control.types import Reference, VehicleState
+from uvd.control.pdc import PDGains, PDState, pdc_step
+from uvd.control.types import ControllerSpec, EstimatorSpec, Reference, VehicleState
 from uvd.estimation.navigation import NavConfig, NavMemory, NavState, nav_init, nav_step
 
-
-@dataclass(frozen=True)
-class ControllerSpec:
-    name: str
-    step: Callable[..., tuple[np.ndarray, Any]]
-    params: Any
-    init_state: Any
+__all__ = ["Mode", "CoreConfig", "CoreInputs", "CoreState", "CoreOutputs", "Sensed",
+           "ControllerSpec", "EstimatorSpec", "core_init", "sense", "act", "step",
+           "HOLD_DEPTH_MASK"]
 
 
-@dataclass(frozen=True)
-class EstimatorSpec:
-    name: str
-    step: Callable[..., Any]
-    params: Any
-    init_state: Any
+class Mode(StrEnum):
+    """How :func:`act` computes the command (module docstring)."""
+
+    CONTROL = "control"
+    PDC = "pdc-fallback"
+    HOLD_DEPTH = "hold-depth"
+    MANUAL = "manual"
+    ZERO = "zero"
+
+
+#: closed-loop mask of the hold-depth mode: depth, roll and pitch; no surge, sway, yaw
+HOLD_DEPTH_MASK = np.array([False, False, True, True, True, False])
 
 
 @dataclass(frozen=True)
@@ -73,6 +100,7 @@ class CoreConfig:
     estimators: tuple[EstimatorSpec, ...] = ()
     lag_compensation: bool = False  # lead set-points from measured propeller speeds
     ff_preview_s: float = 0.0  # δ of the feed-forward preview (s); 0: off
+    pd: PDGains = field(default_factory=PDGains)  # gains of the PDC and HOLD_DEPTH modes
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.ff_preview_s) and self.ff_preview_s >= 0.0):
@@ -86,6 +114,19 @@ class CoreConfig:
         object.__setattr__(self, "_glue", (
             B, np.ascontiguousarray(alloc.B_pinv, dtype=np.float64),
             np.ascontiguousarray(alloc.max_thrust_n, dtype=np.float64), k, n))
+        object.__setattr__(self, "_vertical", alloc.vertical())
+        object.__setattr__(self, "_restricted", {})  # mask bytes → contiguous B⁺ of the subset
+
+    def pinv_for(self, mask: np.ndarray | None) -> np.ndarray:
+        """B⁺ of the thrusters in ``mask`` (all: None), computed once per mask."""
+        if mask is None:
+            return self._glue[1]
+        key = mask.tobytes()
+        p = self._restricted.get(key)
+        if p is None:
+            p = np.ascontiguousarray(self.allocator.restricted(mask).B_pinv, dtype=np.float64)
+            self._restricted[key] = p
+        return p
 
 
 @dataclass(frozen=True)
@@ -98,6 +139,9 @@ class CoreInputs:
     depth: DepthSample | None = None
     propeller_speed_rad_s: np.ndarray | None = None  # amplifier feedback, per thruster
     armed: bool = True
+    mode: Mode = Mode.CONTROL
+    manual_wrench: np.ndarray | None = None  # (6,) body [f; τ] for Mode.MANUAL (N, N m)
+    thruster_mask: np.ndarray | None = None  # (n,) bool: thrusters allocation may use
 
 
 @dataclass
@@ -109,6 +153,7 @@ class CoreState:
     est_t_ns: int | None = None  # when the estimators last ran (they skip invalid navigation)
     cycles: int = 0
     u_last: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    hold: Reference | None = None  # the pose HOLD_DEPTH holds, taken when the mode was entered
 
 
 @dataclass(frozen=True)
@@ -122,6 +167,21 @@ class CoreOutputs:
     saturated: np.ndarray
     status: str                   # "ok", "disarmed", "nav-invalid", "non-finite"
     lead_fraction: float = float("nan")  # lag compensation's common fraction s (nan: not used)
+    mode: str = Mode.CONTROL.value  # the mode applied ("disarmed" when not armed)
+    guard: int = 0  # the output guard acted: 1 clamped to ±max thrust, 2 non-finite → zero
+
+
+@dataclass(frozen=True, slots=True)
+class Sensed:
+    """What :func:`sense` found: the navigation state and the estimators' new states."""
+
+    nav: NavState
+    nav_mem: NavMemory
+    nav_ok: bool  # valid and finite
+    est: tuple
+    est_t_ns: int | None
+    u_applied: np.ndarray
+    speeds: np.ndarray | None  # the measured propeller speeds as a float64 (n,) array
 
 
 def core_init(cfg: CoreConfig, *, north_m: float = 0.0, east_m: float = 0.0) -> CoreState:
@@ -238,17 +298,31 @@ def _as_vec(a, n: int) -> np.ndarray | None:
     return a if a.shape == (n,) else None
 
 
-def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
-         ) -> tuple[CoreOutputs, CoreState]:
-    """One control cycle. ``state`` is not modified; a new state is returned."""
-    B, B_pinv, f_max, k_thr, n_thr = cfg._glue
+@numba.njit(cache=True)
+def _guard(f, f_max):
+    """The output guard, in place: a non-finite entry zeroes every command (returns 2); an
+    entry beyond ±f_max is clamped (returns 1); else 0."""
+    n = f.shape[0]
+    for j in range(n):
+        if not np.isfinite(f[j]):
+            for m in range(n):
+                f[m] = 0.0
+            return 2
+    code = 0
+    for j in range(n):
+        if f[j] > f_max[j]:
+            f[j] = f_max[j]
+            code = 1
+        elif f[j] < -f_max[j]:
+            f[j] = -f_max[j]
+            code = 1
+    return code
+
+
+def sense(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float) -> Sensed:
+    """Navigation, the applied wrench and the estimators of one cycle (pure)."""
+    B, _, _, k_thr, n_thr = cfg._glue
     nav, nav_mem = nav_step(cfg.nav, state.nav, inputs.t_ns, inputs.ins, inputs.dvl, inputs.depth)
-    t0 = state.t0_ns if state.t0_ns is not None else inputs.t_ns
-    t_s = (inputs.t_ns - t0) * 1e-9
-    ref = cfg.reference.at(t_s)
-    if cfg.ff_preview_s > 0.0:
-        ref = replace(ref, preview=cfg.reference.at(t_s + cfg.ff_preview_s))
-    vs = VehicleState(nav.H, nav.v)
     nav_ok = nav.valid and _finite_hv(nav.H, nav.v)
 
     # the wrench applied over the last cycle, for the estimators: from measured propeller
@@ -268,9 +342,62 @@ def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
         # the time since the estimators last ran, not one period: after a navigation outage
         # an estimator sees the gap (AID re-synchronises v̂ = v after one, Theorem 4.3.1's t₀)
         dt_est = dt if est_t_ns is None else (inputs.t_ns - est_t_ns) * 1e-9
+        vs = VehicleState(nav.H, nav.v)
         est = tuple(e.step(vs, u_applied, e.params, s, dt_est)
                     for e, s in zip(cfg.estimators, state.est, strict=True))
         est_t_ns = inputs.t_ns
+    return Sensed(nav, nav_mem, nav_ok, est, est_t_ns, u_applied, speeds)
+
+
+def _hold_depth(cfg: CoreConfig, nav: NavState, hold: Reference, dt: float) -> np.ndarray:
+    """PD on depth, roll and pitch toward ``hold`` (HOLD_DEPTH_MASK), level and following the
+    vehicle's heading; horizontal position is not controlled, and without a valid DVL the
+    translational velocity is unknown, so only the attitude rates feed the derivative term."""
+    H = nav.H.copy()
+    H[0, 3], H[1, 3] = hold.H[0, 3], hold.H[1, 3]
+    heading = math.atan2(H[1, 0], H[0, 0])
+    ref_H = hold.H.copy()
+    ref_H[:3, :3] = euler_to_R(0.0, 0.0, heading)
+    v = np.array(nav.v, dtype=float)
+    if not nav.dvl_valid:
+        v[:3] = 0.0
+    u, _ = pdc_step(VehicleState(H=H, v=v), replace(hold, H=ref_H), cfg.pd, PDState(), dt)
+    return u
+
+
+def _hold_pose(nav: NavState) -> Reference:
+    """The pose HOLD_DEPTH holds: here, level, at rest (taken when the mode is entered)."""
+    H = nav.H
+    heading = math.atan2(H[1, 0], H[0, 0])
+    Hh = np.eye(4)
+    Hh[:3, :3] = euler_to_R(0.0, 0.0, heading)
+    Hh[:3, 3] = H[:3, 3]
+    return Reference(H=Hh, v=np.zeros(6), vdot=np.zeros(6), closed_loop=HOLD_DEPTH_MASK)
+
+
+def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, dt: float
+        ) -> tuple[CoreOutputs, CoreState]:
+    """Reference, control in ``inputs.mode``, allocation and the output guard (pure).
+
+    ``state`` is not modified; a new state is returned. The returned ``thrust_n`` is what the
+    amplifiers get: finite, within ±max thrust, zero when disarmed or in Mode.ZERO."""
+    B, B_pinv, f_max, _, n_thr = cfg._glue
+    nav = sensed.nav
+    t0 = state.t0_ns if state.t0_ns is not None else inputs.t_ns
+    t_s = (inputs.t_ns - t0) * 1e-9
+    ref = cfg.reference.at(t_s)
+    if cfg.ff_preview_s > 0.0:
+        ref = replace(ref, preview=cfg.reference.at(t_s + cfg.ff_preview_s))
+
+    mode = inputs.mode if inputs.armed else Mode.ZERO
+    mask = inputs.thruster_mask
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != (n_thr,):
+            mask = np.zeros(n_thr, dtype=bool)  # not a mask of these thrusters: use none
+        elif mask.all():
+            mask = None
+    hold = state.hold if mode is Mode.HOLD_DEPTH else None
 
     status = "ok"
     ctrl = state.ctrl
@@ -279,10 +406,30 @@ def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
     ol = _ZERO6
     if not inputs.armed:
         status = "disarmed"
-    elif not nav_ok:
+    elif mode is Mode.ZERO:
+        pass
+    elif mode is Mode.MANUAL:
+        if inputs.manual_wrench is not None:
+            u_ctrl = _as_vec(inputs.manual_wrench, 6)
+            if u_ctrl is None:
+                u_ctrl, status = _ZERO6, "non-finite"
+    elif mode is Mode.HOLD_DEPTH:
+        if hold is None:
+            hold = _hold_pose(nav)
+        if nav.ins_valid and nav.depth_valid and _finite_hv(nav.H, nav.v):
+            u_ctrl = _hold_depth(cfg, nav, hold, dt)
+            vertical = cfg._vertical if mask is None else (cfg._vertical & mask)
+            mask = vertical
+        else:
+            status = "nav-invalid"
+    elif not sensed.nav_ok:
         status = "nav-invalid"
     else:
-        u_new, ctrl_new = cfg.controller.step(vs, ref, cfg.controller.params, state.ctrl, dt)
+        vs = VehicleState(nav.H, nav.v)
+        if mode is Mode.PDC:
+            u_new = pdc_step(vs, ref, cfg.pd, PDState(), dt)[0]
+        else:
+            u_new, ctrl_new = cfg.controller.step(vs, ref, cfg.controller.params, state.ctrl, dt)
         u_ctrl = _as_vec(u_new, 6)
         if ref.open_loop_wrench is not None:
             ol = _as_vec(ref.open_loop_wrench, 6)
@@ -292,7 +439,8 @@ def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
             ctrl_new = None
 
     thrust, saturated, u_cmd = np.empty(n_thr), np.empty(n_thr, dtype=np.bool_), np.empty(6)
-    code = _command(B, B_pinv, f_max, u_ctrl, ol, ol is not _ZERO6, thrust, saturated, u_cmd)
+    pinv = B_pinv if mask is None else cfg.pinv_for(mask)
+    code = _command(B, pinv, f_max, u_ctrl, ol, ol is not _ZERO6, thrust, saturated, u_cmd)
     if ctrl_new is not None:
         if code == _OK:
             ctrl = ctrl_new  # the controller's new state only with a finite command
@@ -301,12 +449,24 @@ def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
     elif code != _OK:
         status = "non-finite"
     lead = math.nan
-    if cfg.lag_compensation and status == "ok":
+    if cfg.lag_compensation and status == "ok" and mode is Mode.CONTROL and mask is None:
         # lead set-points from the speeds measured at the start of the cycle; u_cmd stays the
         # wrench of the allocated thrusts, which the propellers reach by the cycle's end
-        f_cmd, s = lag_compensate(cfg.allocator, thrust, speeds, dt)
+        f_cmd, s = lag_compensate(cfg.allocator, thrust, sensed.speeds, dt)
         if s == s:
-            thrust, lead = f_cmd, s
+            thrust, lead = np.array(f_cmd, dtype=np.float64), s
+    guard = _guard(thrust, f_max)
+    if guard == 2:
+        status = "non-finite"
+    label = mode.value if inputs.armed else "disarmed"
     # positional, in field order (a frozen dataclass's keyword __init__ costs ~1.5× as much)
-    out = CoreOutputs(thrust, u_cmd, u_applied, nav, ref, saturated, status, lead)
-    return out, CoreState(nav_mem, ctrl, est, t0, est_t_ns, state.cycles + 1, u_cmd)
+    out = CoreOutputs(thrust, u_cmd, sensed.u_applied, nav, ref, saturated, status, lead, label,
+                      guard)
+    return out, CoreState(sensed.nav_mem, ctrl, sensed.est, t0, sensed.est_t_ns,
+                          state.cycles + 1, u_cmd, hold)
+
+
+def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
+         ) -> tuple[CoreOutputs, CoreState]:
+    """One control cycle, :func:`act` after :func:`sense`. ``state`` is not modified."""
+    return act(cfg, sense(cfg, inputs, state, dt), inputs, state, dt)

@@ -138,7 +138,7 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
 def lockstep_run(cfg, duration_s: float, seed: int):
     """The same configuration (same core, same controller) in lockstep simulation; the log."""
     from uvd.experiments.lockstep import Lockstep, LockstepConfig, run
-    from uvd.runtime.daemon import build_core, start_pose
+    from uvd.runtime.build import build_core, start_pose
 
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)

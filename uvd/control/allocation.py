@@ -62,6 +62,32 @@ class Allocator:
     def n_thrusters(self) -> int:
         return self.B.shape[1]
 
+    def restricted(self, mask: np.ndarray) -> Allocator:
+        """The same allocator using only the thrusters where ``mask`` is True.
+
+        B⁺ becomes the (weighted) least-norm, least-squares inverse of B's columns in
+        ``mask`` — f = W^{-1/2} (B_m W^{-1/2})⁺ u on those thrusters, exactly zero on the
+        others — so a wrench the subset cannot produce is met as closely as it can be (a
+        failed thruster, or the hold-depth failsafe's vertical thrusters alone). Limits and
+        thruster data are unchanged.
+        """
+        m = np.asarray(mask, dtype=bool).reshape(-1)
+        if m.shape != (self.n_thrusters,):
+            raise ValueError(f"mask must have {self.n_thrusters} entries, got {m.shape[0]}")
+        w = np.ones(self.n_thrusters) if self.weights is None else self.weights
+        s = 1.0 / np.sqrt(w[m])
+        pinv = np.zeros((self.n_thrusters, 6))
+        if m.any():
+            pinv[m] = s[:, None] * np.linalg.pinv(self.B[:, m] * s[None, :])
+        return Allocator(B=self.B, B_pinv=np.ascontiguousarray(pinv),
+                         max_thrust_n=self.max_thrust_n, k_thrust=self.k_thrust,
+                         weights=self.weights, time_constant_s=self.time_constant_s)
+
+    def vertical(self, tol: float = 1e-9) -> np.ndarray:
+        """Mask of the thrusters that produce no surge, sway or yaw (|B| ≤ tol in those
+        rows): the ones the hold-depth failsafe may use."""
+        return np.all(np.abs(self.B[[0, 1, 5], :]) <= tol, axis=0)
+
 
 def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """B_W⁺ = W⁻¹Bᵀ(BW⁻¹Bᵀ)⁻¹ (W = diag(weights) > 0; None: Moore–Penrose B⁺).

@@ -43,7 +43,7 @@ import numpy as np
 
 from uvd.control import _kernels
 from uvd.control.pdc import gain_vector
-from uvd.control.types import Reference, VehicleState
+from uvd.control.types import ControllerSpec, Diagnostics, Reference, VehicleState
 from uvd.model.params import (
     IDX_G,
     N_DECOUPLED,
@@ -442,3 +442,23 @@ __all__ = [
     "epsilon_bound", "gravity_index", "lyapunov_V1", "lyapunov_V2", "mass_index", "drag_index",
     "mbc_step", "params_of", "theta_of", "with_theta",
 ]
+
+
+def m_hat_min_eig(theta: np.ndarray) -> float:
+    """Smallest eigenvalue of M̂ of a decoupled (16: the six masses) or full (P_M of (2.46))
+    parameter vector."""
+    if theta.shape[0] == 16:
+        return float(theta[:6].min())
+    from uvd.model.params import SL_M, M_from_theta
+    return float(np.linalg.eigvalsh(M_from_theta(theta[SL_M]))[0])
+
+
+def ambc_diagnostics(ctrl: AMBCState) -> Diagnostics:
+    """The diagnostics hook of AMBC's spec: θ̂ (a copy), M̂'s smallest eigenvalue, frozen."""
+    theta = np.array(ctrl.theta, dtype=float)
+    return Diagnostics(theta=theta, m_min_eig=m_hat_min_eig(theta), frozen=bool(ctrl.frozen))
+
+
+def ambc_spec(params: AMBCParams, theta0: np.ndarray, name: str = "ambc") -> ControllerSpec:
+    """AMBC (Theorem 5.2.2) as the core runs it, starting from θ̂(t₀) = ``theta0``."""
+    return ControllerSpec(name, ambc_step, params, ambc_init(params, theta0), ambc_diagnostics)

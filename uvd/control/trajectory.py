@@ -343,3 +343,30 @@ def pitch_only(mean_pitch_rad: float, amplitude_rad: float, frequency_rad_s: flo
     c[4] = float(mean_pitch_rad)
     terms = ((), (), (), (), (CosineTerm(amplitude_rad, frequency_rad_s),), ())
     return CosineTrajectory(center=tuple(c), terms=terms, name="PitchOnly")
+
+
+def named(name: str, center=DEFAULT_CENTER) -> CosineTrajectory | None:
+    """The trajectory a configuration names (``[control] reference``): ``reftraj1``,
+    ``reftraj2`` (Table 5.1), or None for ``hold`` (the pose held is taken when armed)."""
+    if name == "reftraj1":
+        return reftraj1(center)
+    if name == "reftraj2":
+        return reftraj2(center)
+    if name == "hold":
+        return None
+    raise ValueError(f"unknown reference {name!r} (reftraj1, reftraj2 or hold)")
+
+
+def start_pose(name: str, north_m: float, east_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where a run of the trajectory ``name`` starts (:func:`named`): depth and attitude of the
+    reference at t = 0 (for ``hold`` the centre depth, level, heading north), at the given
+    north and east; at rest. Returns (H, v)."""
+    traj = named(name)
+    H = np.eye(4)
+    if traj is not None:
+        H = np.array(traj.at(0.0).H, dtype=float)
+    else:
+        H[2, 3] = DEFAULT_CENTER[2]
+    H[0, 3] = north_m
+    H[1, 3] = east_m
+    return H, np.zeros(6)

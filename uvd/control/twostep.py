@@ -29,6 +29,7 @@ from uvd.control.ambc import (
     ambc_params,
     ambc_step,
     gravity_index,
+    m_hat_min_eig,
 )
 from uvd.control.trajectory import (
     DEFAULT_CENTER,
@@ -37,7 +38,7 @@ from uvd.control.trajectory import (
     quasi_static,
     reftraj1,
 )
-from uvd.control.types import Reference, VehicleState
+from uvd.control.types import ControllerSpec, Diagnostics, Reference, VehicleState
 
 STEP1_DURATION_S = 90 * 60.0
 """Step 1 lasts 90 minutes in §5.3.5."""
@@ -161,3 +162,16 @@ def two_step_reference(step2: CosineTrajectory | None = None, *,
                                         (float("inf"), step2)),
                               blend_s=blend_s, name=f"two-step ({step2.name})")
 
+
+def two_step_diagnostics(ctrl: TwoStepState) -> Diagnostics:
+    """The diagnostics hook of two-step AMBC's spec: the inner AMBC's, with the phase; step 1
+    holds M̂ = 0 by design (the quasi-static model (5.37)), so no M̂ eigenvalue there."""
+    theta = np.array(ctrl.ambc.theta, dtype=float)
+    m = m_hat_min_eig(theta) if ctrl.phase == 2 else None
+    return Diagnostics(theta=theta, m_min_eig=m, frozen=bool(ctrl.ambc.frozen), phase=ctrl.phase)
+
+
+def two_step_spec(params: TwoStepParams, name: str = "two-step-ambc") -> ControllerSpec:
+    """Two-step AMBC (§5.2.6) as the core runs it."""
+    return ControllerSpec(name, two_step_step, params, two_step_init(params),
+                          two_step_diagnostics)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -33,3 +35,71 @@ class Reference:
     open_loop_wrench: np.ndarray | None = None
     closed_loop: np.ndarray | None = None
     preview: Reference | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Diagnostics:
+    """What a controller's or an estimator's state says about its health — the one hook
+    (``ControllerSpec.diagnostics``, ``EstimatorSpec.diagnostics``) through which the cycle,
+    the failsafe arbiter and telemetry read it. ``None``: not applicable.
+
+    Attributes
+    ----------
+    theta : ndarray or None
+        θ̂ (the controller's model parameters, or the estimator's θ_UV of (2.48)).
+    m_min_eig, m_max_eig : float or None
+        Extreme eigenvalues of M̂ (None where M̂ is not adapted, e.g. step 1 of two-step AMBC,
+        whose quasi-static model (5.37) holds M̂ = 0).
+    frozen : bool
+        Adaptation stopped; ``freeze_reason`` says why.
+    phase : int or None
+        Two-step AMBC's step (1 or 2).
+    steps, skipped, resyncs : int or None
+        Estimator counters (adaptation steps, ignored calls, v̂ re-synchronisations).
+    velocity_error : float or None
+        ‖v̂ − v‖ of an observer-based estimator (AID's (4.23)).
+    """
+
+    theta: np.ndarray | None = None
+    m_min_eig: float | None = None
+    m_max_eig: float | None = None
+    frozen: bool = False
+    freeze_reason: str = ""
+    phase: int | None = None
+    steps: int | None = None
+    skipped: int | None = None
+    resyncs: int | None = None
+    velocity_error: float | None = None
+
+
+NO_DIAGNOSTICS = Diagnostics()
+
+
+def no_diagnostics(state) -> Diagnostics:
+    """The diagnostics of a memoryless controller (PDC): nothing to report."""
+    return NO_DIAGNOSTICS
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """A controller as the core runs it: ``step(VehicleState, Reference, params, state, dt)
+    -> (u, state)``, its constant ``params``, its initial state and its ``diagnostics(state)``
+    hook."""
+
+    name: str
+    step: Callable[..., tuple[np.ndarray, Any]]
+    params: Any
+    init_state: Any
+    diagnostics: Callable[[Any], Diagnostics] = no_diagnostics
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """An estimator as the core runs it: ``step(VehicleState, u_applied, params, state, dt)
+    -> state``, with its ``diagnostics(state)`` hook."""
+
+    name: str
+    step: Callable[..., Any]
+    params: Any
+    init_state: Any
+    diagnostics: Callable[[Any], Diagnostics] = no_diagnostics

@@ -68,6 +68,7 @@ from dataclasses import dataclass, field, replace
 import numba
 import numpy as np
 
+from uvd.control.types import Diagnostics, EstimatorSpec
 from uvd.model.params import (
     N_THETA_UV,
     N_THETA_UVR,
@@ -502,6 +503,15 @@ class _AIDState:
     t_s: float = 0.0
 
 
+def aid_diagnostics(st: _AIDState) -> Diagnostics:
+    """The diagnostics hook of AID's spec: θ̂ (a copy), M̂'s extreme eigenvalues (the health
+    of Theorem 4.3.1's (4.36)), the freeze and its reason, the counters and ‖v̂ − v‖."""
+    return Diagnostics(theta=np.array(st.theta, dtype=float), m_min_eig=float(st.m_min_eig),
+                       m_max_eig=float(st.m_max_eig), frozen=bool(st.frozen),
+                       freeze_reason=st.freeze_reason, steps=st.steps, skipped=st.skipped,
+                       resyncs=st.resyncs, velocity_error=float(np.linalg.norm(st.dv)))
+
+
 @dataclass(frozen=True)
 class AID6State(_AIDState):
     """State of 6-DOF AID. Read θ̂ as ``theta`` (order of (2.48)) or :func:`aid6_params`.
@@ -576,12 +586,11 @@ def aid_unfreeze(st: AID6State | AID3State) -> AID6State | AID3State:
 
 def aid6_estimator(theta0: np.ndarray | UVParams | None = None,
                    params: AID6Params | None = None, name: str = "aid6"):
-    """An :class:`uvd.core.EstimatorSpec` running 6-DOF AID (INITP of §4.6 by default)."""
-    from uvd.core import EstimatorSpec
-
+    """An :class:`~uvd.control.types.EstimatorSpec` running 6-DOF AID (INITP of §4.6 by
+    default)."""
     theta0 = INITP_6DOF.theta if theta0 is None else theta0
     return EstimatorSpec(name=name, step=aid6_step, params=params or AID6Params(),
-                         init_state=aid6_init(theta0))
+                         init_state=aid6_init(theta0), diagnostics=aid_diagnostics)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -653,12 +662,11 @@ def aid3_params(st: AID3State) -> RotParams:
 
 def aid3_estimator(theta0: np.ndarray | RotParams | None = None,
                    params: AID3Params | None = None, name: str = "aid3"):
-    """An :class:`uvd.core.EstimatorSpec` running rotational AID (INITP of §4.5 by default)."""
-    from uvd.core import EstimatorSpec
-
+    """An :class:`~uvd.control.types.EstimatorSpec` running rotational AID (INITP of §4.5 by
+    default)."""
     theta0 = INITP_ROT.theta if theta0 is None else theta0
     return EstimatorSpec(name=name, step=aid3_step, params=params or AID3Params(),
-                         init_state=aid3_init(theta0))
+                         init_state=aid3_init(theta0), diagnostics=aid_diagnostics)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -85,6 +85,9 @@ class CycleRecord:
         Receive stamp of the INS sample this cycle used (None: none new).
     triggers : tuple of str
         Active failsafe triggers.
+    operator_mode : str
+        The operator's mode (``uvd.runtime.commands.OPERATOR_MODES``); ``mode`` is what the
+        cycle applied after the failsafe arbiter.
     p_ref, R_ref, v_ref : ndarray or None
         The reference (None while there is none).
     armed_at_ns : int or None
@@ -107,6 +110,7 @@ class CycleRecord:
     ages: tuple[float, float, float, float]
     ins_rx_ns: int | None = None
     triggers: tuple[str, ...] = ()
+    operator_mode: str = "auto"
     p_ref: np.ndarray | None = None
     R_ref: np.ndarray | None = None
     v_ref: np.ndarray | None = None
@@ -139,6 +143,7 @@ class CycleRecord:
             ages=tuple(_age(a) for a in ages),
             ins_rx_ns=None if d.get("ins_rx_ns") is None else int(d["ins_rx_ns"]),
             triggers=tuple(d.get("triggers") or ()),
+            operator_mode=str(d.get("operator_mode", "auto")),
             p_ref=_arr(d.get("p_ref"), (3,)), R_ref=_arr(d.get("R_ref"), (3, 3)),
             v_ref=_arr(d.get("v_ref"), (6,)),
             armed_at_ns=None if d.get("armed_at_ns") is None else int(d["armed_at_ns"]))

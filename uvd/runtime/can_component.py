@@ -1,0 +1,152 @@
+"""The CAN side of the daemon: the bus, the amplifier group and the optional CiA 404 depth
+sensor as one component, and the amplifiers' feedback as the cycle's typed
+:class:`~uvd.runtime.cycle.ActuatorStatus` (:func:`actuator_status`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import logging
+
+import numpy as np
+
+from uvd.runtime.config import Config
+from uvd.runtime.cycle import ActuatorStatus
+from uvd.runtime.mailbox import Mailbox
+
+__all__ = ["CanComponent", "GcFreeze", "actuator_status"]
+
+log = logging.getLogger("uvd.daemon")
+
+#: feedback faults the failsafe handles as missing feedback (``feedback_missing``), not as
+#: amplifier faults: a silent node is an absence of data
+_FEEDBACK_FAULTS = frozenset({"feedback_lost", "heartbeat_lost"})
+
+
+def actuator_status(fb, first_write_ns: int) -> ActuatorStatus:
+    """The cycle's view of a :class:`drivers.can.amplifier.GroupFeedback`.
+
+    Speeds only when every node's feedback is valid; faults named per node (node 0's are the
+    bus's: ``bus_off``/``bus_closed`` set ``bus_off``, ``send_failed`` is a fault); the
+    feedback's age counts from the first command at the earliest."""
+    faults: list[str] = []
+    bus_off = False
+    for nid, names in fb.faults.items():
+        if nid == 0:
+            for n in names:
+                if n in ("bus_off", "bus_closed"):
+                    bus_off = True
+                elif n == "send_failed":
+                    faults.append(f"bus: {n}")
+            continue
+        real = [n for n in names if n not in _FEEDBACK_FAULTS]
+        if real:
+            faults.append(f"node {nid}: {', '.join(real)}")
+    oldest = max(min(n.t_ns for n in fb.nodes), first_write_ns)
+    return ActuatorStatus(omega_rad_s=fb.omega_rad_s if bool(fb.valid.all()) else None,
+                          enabled=bool(fb.enabled.all()), faults=tuple(faults),
+                          feedback_t_ns=oldest if oldest > 0 else None, bus_off=bus_off)
+
+
+class GcFreeze:
+    """Last component to start: collect once, then freeze every object that exists.
+
+    A full collection of the daemon's heap (numba, llvmlite, scipy: ~10⁵ objects) takes
+    70–80 ms — a stall the loop would feel whenever Python decides to run one. Objects alive
+    once the drivers are up live as long as the process; :func:`gc.freeze` moves them out of
+    the collector's reach, so later collections only walk what the cycles allocate (µs).
+    """
+
+    name = "gc-freeze"
+
+    async def start(self) -> None:
+        gc.collect()
+        gc.freeze()
+
+    async def run(self) -> None:
+        return None
+
+    async def stop(self) -> None:
+        return None
+
+
+class CanComponent:
+    """The CAN bus, the amplifier group and (optionally) the CiA 404 depth sensor.
+
+    :meth:`start` opens the bus, configures and starts the amplifiers (SDO + NMT, blocking
+    and bounded, in a worker thread), clears faults left from a previous run and sets the
+    goal OPERATION ENABLED — reached over the next cycles with zero targets. A node that does
+    not answer does not stop the start: it carries a fault and arming is refused.
+    """
+
+    name = "can"
+
+    def __init__(self, cfg: Config, vehicle, depth_box: Mailbox | None = None) -> None:
+        self.cfg = cfg
+        self.vehicle = vehicle
+        self.depth_box = depth_box
+        self.bus = None
+        self.group = None
+        self.depth = None
+        self.recorder = None
+        self.start_report = None
+        self.last_can_depth = None
+
+    def _open_bus(self) -> None:
+        """Open the bus from the event loop's thread: its receive thread inherits that
+        thread's scheduling (SCHED_FIFO when configured; the App then puts it one below the
+        loop, with every other thread, :mod:`uvd.runtime.rtthreads`). A normally scheduled
+        thread that holds the GIL while other processes preempt it would delay the loop by
+        milliseconds (priority inversion through the GIL)."""
+        from drivers.can import CanBus, CanRecorder
+        c = self.cfg.can
+        self.recorder = CanRecorder.from_config(c.log)
+        self.bus = CanBus(c.bus, recorder=self.recorder).open()
+
+    def _open(self) -> None:
+        from drivers.can import AmplifierGroup, CanDepthSensor
+        c = self.cfg.can
+        self.group = AmplifierGroup.from_config(self.bus, c.amplifiers, self.vehicle.thrusters)
+        if c.depth.enabled:
+            use = self.cfg.sensors.depth.source == "can" and self.depth_box is not None
+            box = self.depth_box
+
+            def on_sample(sample) -> None:
+                self.last_can_depth = sample
+                if use:
+                    box.put(sample)
+            self.depth = CanDepthSensor(self.bus, c.depth, on_sample=on_sample)
+        self.start_report = self.group.start()
+        if not self.start_report.ok:
+            log.error("amplifiers not all started: %s", self.start_report.nodes)
+        self.group.reset_faults()
+        self.group.enable()
+        if self.depth is not None and not self.depth.start():
+            log.warning("CAN depth sensor %d: no sample within 1 s", c.depth.node_id)
+
+    async def start(self) -> None:
+        self._open_bus()
+        await asyncio.to_thread(self._open)  # SDO configuration: blocking, bounded
+
+    async def run(self) -> None:
+        return None
+
+    def zero(self) -> None:
+        """Zero target on every amplifier (one cycle: RPDOs + SYNC); never raises."""
+        if self.group is not None:
+            self.group.write(np.zeros(len(self.group.nodes)))
+
+    def disable(self) -> None:
+        """Zero and disable voltage, release the heartbeat consumers, NMT pre-operational."""
+        if self.group is not None:
+            self.group.shutdown(cycles=2, period_s=0.01, release_consumer=True)
+
+    async def stop(self) -> None:
+        def close() -> None:
+            if self.bus is not None:
+                self.bus.close()
+            if self.recorder is not None:
+                self.recorder.stop(timeout=0.5)
+        await asyncio.to_thread(close)
+

@@ -1,0 +1,157 @@
+"""The serial (or network) instruments of ``[sensors]``: a framed reader, a frame → sample
+converter and a :class:`~uvd.runtime.mailbox.Mailbox` each — the read side of the daemon's
+sensors. Reader tasks only decode and convert; the cycle takes the newest sample.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from uvd.runtime.config import Config
+from uvd.runtime.mailbox import Mailbox
+
+__all__ = ["SerialSensor", "make_sensors"]
+
+log = logging.getLogger("uvd.daemon")
+
+
+class SerialSensor:
+    """One instrument: a framed reader, a frame → sample converter, a mailbox.
+
+    The reader decodes in the event loop's read callback; :meth:`run` converts each frame
+    (a few µs) and puts the sample in the mailbox. Nothing else happens on this path.
+
+    Parameters
+    ----------
+    name : str
+        ``ins``, ``dvl`` or ``depth``.
+    reader : drivers.transport.FrameReader
+    convert : callable
+        ``convert(stamped) -> sample or None``.
+    box : Mailbox
+    on_connect : callable, optional
+        ``on_connect(reader)`` after the port opened (the Digiquartz gets ``P4``).
+    connect_timeout_s : float
+        :meth:`start` waits this long for the port to open.
+    """
+
+    def __init__(self, name: str, reader, convert: Callable[[Any], Any], box: Mailbox, *,
+                 on_connect: Callable[[Any], None] | None = None,
+                 connect_timeout_s: float = 5.0) -> None:
+        self.name = name
+        self.reader = reader
+        self.convert = convert
+        self.box = box
+        self.on_connect = on_connect
+        self.connect_timeout_s = connect_timeout_s
+        self.samples = 0
+        self.rejected = 0
+
+    async def start(self) -> None:
+        self.reader.start()
+        try:
+            await self.reader.wait_connected(self.connect_timeout_s)
+        except asyncio.CancelledError:  # the App's start timeout: say which port it was
+            log.error("%s: %s did not open%s", self.name, self.reader.where,
+                      f" ({self.reader.last_error})" if self.reader.last_error else "")
+            raise
+        if self.on_connect is not None:
+            self.on_connect(self.reader)
+
+    async def run(self) -> None:
+        was_connected = True
+        while True:
+            st = await self.reader.get()
+            if not was_connected and self.on_connect is not None:
+                self.on_connect(self.reader)
+            was_connected = self.reader.connected
+            try:
+                sample = self.convert(st)
+            except Exception as exc:  # noqa: BLE001 - a bad frame is dropped and counted
+                self.rejected += 1
+                log.warning("%s: frame not converted: %s: %s", self.name, type(exc).__name__,
+                            exc)
+                continue
+            if sample is not None:
+                self.samples += 1
+                self.box.put(sample)
+
+    async def stop(self, timeout_s: float = 0.3) -> None:
+        await self.reader.close()
+        # pyserial-asyncio-fast closes the port in a background task (flush and close in the
+        # default executor); wait for it, bounded, so the exclusive lock is released before
+        # the App shuts its executor down
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while self.reader._transport is not None and loop.time() < deadline:
+            await asyncio.sleep(0.005)
+
+    def force_close(self) -> None:
+        """Close the port under the transport if its graceful close never completed."""
+        tr = self.reader._transport
+        ser = getattr(tr, "serial", None) if tr is not None else None
+        if ser is not None:
+            try:
+                ser.close()
+            except OSError:
+                pass
+
+    def stats(self) -> dict[str, Any]:
+        return {"samples": self.samples, "rejected": self.rejected,
+                "connected": bool(self.reader.connected),
+                "last_error": self.reader.last_error or "",
+                "counters": self.reader.counters.as_dict()
+                if hasattr(self.reader.counters, "as_dict") else {},
+                "mailbox": self.box.stats()}
+
+
+def _open_reader(port: str, codec, baud: int, name: str):
+    from urllib.parse import urlsplit
+    if port.startswith(("udp://", "tcp://")):
+        from drivers.net_transport import TcpFrameReader, UdpFrameReader
+        u = urlsplit(port)
+        kind = UdpFrameReader if u.scheme == "udp" else TcpFrameReader
+        return kind(u.hostname, u.port, codec, name=name)
+    from drivers.serial_transport import SerialFrameReader
+    return SerialFrameReader(port, codec, baudrate=baud, name=name)
+
+
+def make_sensors(cfg: Config, ins_box: Mailbox, dvl_box: Mailbox, depth_box: Mailbox
+                 ) -> list[SerialSensor]:
+    """The serial (or network) instruments of ``[sensors]``."""
+    from drivers import digiquartz, pd0, phins_ascii, phins_stdbin
+    s = cfg.sensors
+    out = []
+    if s.ins.format == "phins-stdbin":
+        def ins_convert(st):
+            return phins_stdbin.to_ins_sample(st.frame, st.t_ns)
+        ins_codec = phins_stdbin.StdbinCodec()
+    else:
+        asm = phins_ascii.AsciiInsAssembler()
+
+        def ins_convert(st):
+            return asm.push(st.t_ns, st.frame)
+        ins_codec = phins_ascii.PhinsAsciiCodec()
+    out.append(SerialSensor("ins", _open_reader(s.ins.port, ins_codec, s.ins.baud, "ins"),
+                            ins_convert, ins_box))
+
+    def dvl_convert(st):
+        return pd0.to_dvl_sample(st.frame, st.t_ns)
+    out.append(SerialSensor("dvl", _open_reader(s.dvl.port, pd0.Pd0Codec(), s.dvl.baud, "dvl"),
+                            dvl_convert, dvl_box))
+    if s.depth.source == "serial" and s.depth.port is not None:
+        conv = s.depth.conversion
+
+        def depth_convert(st):
+            return conv.to_sample(st.frame, st.t_ns)
+
+        def start_continuous(reader) -> None:
+            reader.write(digiquartz.command("P4"))  # continuous pressure output
+        out.append(SerialSensor("depth", _open_reader(s.depth.port, digiquartz.DigiquartzCodec(),
+                                                      s.depth.baud, "depth"),
+                                depth_convert, depth_box, on_connect=start_continuous))
+    return out
+
