@@ -5,6 +5,14 @@ Each control period the plant takes ``plant_rate_hz / control_rate_hz`` RKMK4 st
 thrust command held (zero-order hold, as the thesis's 100 ms cycle, §5.3.1); the instruments
 sample the true state at their own rates (Table A.1); the samples that arrived during the
 period, and the propeller speeds, are the next cycle's :class:`uvd.core.CoreInputs`.
+
+With a ``supervisor`` the cycle is the daemon's very update (:class:`uvd.runtime.cycle.Cycle`):
+health, the failsafe arbiter, the lifecycle and the operator's commands
+(:meth:`Lockstep.command`), every failsafe mode included. Instrument faults
+(:attr:`Lockstep.faults`, :mod:`sim_bridge.instruments.faults`) and amplifier faults
+(:attr:`Lockstep.amplifier_faults`) are injected on the simulated clock — the same faulty
+samples the real-time bridge produces. Without one (the thesis experiments, which ran no
+failsafes) the core is stepped directly, always armed in the configured controller's mode.
 """
 
 from __future__ import annotations
@@ -16,8 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drivers.samples import R_to_euler
-from sim_bridge.instruments.models import InstrumentConfig, Instruments
+from drivers.samples import eta_of
+from sim_bridge.instruments.faults import FaultyInstruments, SensorFaults
+from sim_bridge.instruments.models import InstrumentConfig
 from sim_bridge.plant import Plant, PlantConfig
 from uvd import core
 from uvd.control.errors import error_coordinates
@@ -60,39 +69,64 @@ class LockstepLog:
     wall_s: float = 0.0
 
 
-def eta_of(H: np.ndarray) -> np.ndarray:
-    roll, pitch, heading = R_to_euler(H[:3, :3])
-    return np.array([H[0, 3], H[1, 3], H[2, 3], roll, pitch, heading])
-
-
 class Lockstep:
     """A plant + instruments + core, stepped one control cycle at a time."""
 
     def __init__(self, vehicle: Vehicle, core_cfg: core.CoreConfig, cfg: LockstepConfig, *,
-                 H0: np.ndarray | None = None, v0: np.ndarray | None = None) -> None:
+                 H0: np.ndarray | None = None, v0: np.ndarray | None = None,
+                 supervisor=None, hold_on_arm: bool = False) -> None:
         self.cfg = cfg
         self.core_cfg = core_cfg
         self.plant = Plant(vehicle, PlantConfig(rate_hz=cfg.plant_rate_hz,
                                                 thrusters=cfg.plant.thrusters), H0=H0, v0=v0)
         self.rng = np.random.default_rng(cfg.seed)
-        self.instruments = Instruments(cfg.instruments, self.rng)
+        self.t_ns = 0
+        #: instrument faults, on the simulated clock (``faults.set("ins", "silence", 0.5)``)
+        self.faults = SensorFaults(clock=lambda: self.t_ns)
+        self.instruments = FaultyInstruments(cfg.instruments, self.rng, self.faults)
+        #: amplifier faults the cycle sees (names, e.g. ``("node 3: overcurrent",)``)
+        self.amplifier_faults: tuple[str, ...] = ()
         self.substeps = int(round(cfg.plant_rate_hz / cfg.control_rate_hz))
         self.dt_control = 1.0 / cfg.control_rate_hz
         self.plant_dt_ns = int(round(1e9 / cfg.plant_rate_hz))
-        self.t_ns = 0
         north, east = self.plant.H[0, 3], self.plant.H[1, 3]
         self.instruments.dr_north, self.instruments.dr_east = north, east
         self.state = core.core_init(core_cfg, north_m=north, east_m=east)
+        self.runner = None
+        if supervisor is not None:
+            from uvd.runtime.cycle import Cycle
+            self.runner = Cycle(core_cfg, supervisor, hold_on_arm=hold_on_arm, north_m=north,
+                                east_m=east)
+            supervisor.boot_complete(0, "lockstep")
+        self.last_result = None
         self.thrust_cmd = np.zeros(vehicle.n_thrusters)
         # prime the instruments so the first cycle has every source
         self._pending = list(self.instruments.sample(0, self.plant.H, self.plant.v))
 
+    def command(self, c):
+        """Apply an operator command (:mod:`uvd.runtime.commands`) before the next cycle, as
+        the daemon applies a queued one; returns its result. Needs a supervisor."""
+        if self.runner is None:
+            raise RuntimeError("commands need the supervised cycle (Lockstep(supervisor=…))")
+        return self.runner.apply(c, self.t_ns)
+
     def cycle(self, *, armed: bool = True) -> core.CoreOutputs:
+        """One control cycle and one control period of the plant. ``armed`` applies to the
+        unsupervised core only (the supervised cycle's lifecycle decides)."""
         ins, dvl, depth = self._pending
-        inputs = core.CoreInputs(t_ns=self.t_ns, ins=ins, dvl=dvl, depth=depth,
-                                 propeller_speed_rad_s=self.plant.thrusters.omega.copy(),
-                                 armed=armed)
-        out, self.state = core.step(self.core_cfg, inputs, self.state, self.dt_control)
+        omega = self.plant.thrusters.omega.copy()
+        if self.runner is not None:
+            from uvd.runtime.cycle import ActuatorStatus, CycleInputs
+            act = ActuatorStatus(omega_rad_s=omega, enabled=True, faults=self.amplifier_faults,
+                                 feedback_t_ns=self.t_ns)
+            self.last_result = r = self.runner.update(
+                CycleInputs(self.t_ns, ins, dvl, depth, act), self.dt_control)
+            out = r.out
+            self.state = self.runner.state
+        else:
+            inputs = core.CoreInputs(t_ns=self.t_ns, ins=ins, dvl=dvl, depth=depth,
+                                     propeller_speed_rad_s=omega, armed=armed)
+            out, self.state = core.step(self.core_cfg, inputs, self.state, self.dt_control)
         self.thrust_cmd = out.thrust_n
         newest = [None, None, None]
         for _ in range(self.substeps):
