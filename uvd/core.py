@@ -26,7 +26,7 @@ Disarmed, every mode commands zero. ``CoreInputs.thruster_mask`` restricts alloc
 subset of thrusters in every mode (a dead thruster). The estimators (AID) run in every mode:
 they identify the vehicle whatever drives it.
 
-navigation → reference → control → estimation → allocation (DESIGN.md). Pure and
+navigation → reference → control → estimation → allocation (docs/architecture.md). Pure and
 deterministic: no I/O, no clock (time arrives in ``inputs.t_ns``), no logging. Safety is
 structural: when navigation is invalid, the vehicle is disarmed, or any number on the way to
 the thrusters is not finite, the thrust command is zero and ``outputs.status`` says why — the

@@ -1,5 +1,5 @@
 """Lockstep simulation: the plant, its instruments and the core advance together on a simulated
-clock — no I/O, no sleeping (DESIGN.md, "the three ways one core runs", way 2).
+clock — no I/O, no sleeping (docs/architecture.md, "the three ways of running the one cycle").
 
 Each control period the plant takes ``plant_rate_hz / control_rate_hz`` RKMK4 steps with the
 thrust command held (zero-order hold, as the thesis's 100 ms cycle, §5.3.1); the instruments
