@@ -58,7 +58,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -83,6 +83,9 @@ class Mode(StrEnum):
     MANUAL = "manual"
     ZERO = "zero"
 
+
+_CONTROL, _PDC, _HOLD_DEPTH, _MANUAL, _ZERO_MODE = (Mode.CONTROL, Mode.PDC, Mode.HOLD_DEPTH,
+                                                   Mode.MANUAL, Mode.ZERO)
 
 #: closed-loop mask of the hold-depth mode: depth, roll and pitch; no surge, sway, yaw
 HOLD_DEPTH_MASK = np.array([False, False, True, True, True, False])
@@ -129,9 +132,10 @@ class CoreConfig:
         return p
 
 
-@dataclass(frozen=True)
-class CoreInputs:
-    """What arrived since the previous cycle, stamped on one monotonic clock (ns)."""
+class CoreInputs(NamedTuple):
+    """What arrived since the previous cycle, stamped on one monotonic clock (ns), and how to
+    act on it. Immutable (a named tuple: built every cycle, it costs a fraction of a frozen
+    dataclass)."""
 
     t_ns: int
     ins: InsSample | None = None
@@ -156,8 +160,10 @@ class CoreState:
     hold: Reference | None = None  # the pose HOLD_DEPTH holds, taken when the mode was entered
 
 
-@dataclass(frozen=True)
-class CoreOutputs:
+class CoreOutputs(NamedTuple):
+    """What one cycle commands and why. Immutable (a named tuple, as :class:`CoreInputs`):
+    ``thrust_n`` is what the amplifiers get, and nothing downstream changes it."""
+
     thrust_n: np.ndarray          # per-thruster command (N), always finite
     u_cmd: np.ndarray             # wrench after allocation/saturation (N, N m); with lag
                                   # compensation the wrench the propellers reach by cycle end
@@ -167,17 +173,18 @@ class CoreOutputs:
     saturated: np.ndarray
     status: str                   # "ok", "disarmed", "nav-invalid", "non-finite"
     lead_fraction: float = float("nan")  # lag compensation's common fraction s (nan: not used)
-    mode: str = Mode.CONTROL.value  # the mode applied ("disarmed" when not armed)
+    mode: str = Mode.CONTROL  # the mode applied (a Mode, a str; "disarmed" when not armed)
     guard: int = 0  # the output guard acted: 1 clamped to ±max thrust, 2 non-finite → zero
 
 
-@dataclass(frozen=True, slots=True)
-class Sensed:
-    """What :func:`sense` found: the navigation state and the estimators' new states."""
+class Sensed(NamedTuple):
+    """What :func:`sense` found: the navigation state and the estimators' new states (a named
+    tuple: built every cycle, it costs a third of a frozen dataclass)."""
 
     nav: NavState
     nav_mem: NavMemory
     nav_ok: bool  # valid and finite
+    vs: VehicleState  # the navigation state as the controllers take it
     est: tuple
     est_t_ns: int | None
     u_applied: np.ndarray
@@ -338,15 +345,15 @@ def sense(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float) -> S
 
     est = state.est
     est_t_ns = state.est_t_ns
+    vs = VehicleState(nav.H, nav.v)
     if nav_ok:
         # the time since the estimators last ran, not one period: after a navigation outage
         # an estimator sees the gap (AID re-synchronises v̂ = v after one, Theorem 4.3.1's t₀)
         dt_est = dt if est_t_ns is None else (inputs.t_ns - est_t_ns) * 1e-9
-        vs = VehicleState(nav.H, nav.v)
         est = tuple(e.step(vs, u_applied, e.params, s, dt_est)
                     for e, s in zip(cfg.estimators, state.est, strict=True))
         est_t_ns = inputs.t_ns
-    return Sensed(nav, nav_mem, nav_ok, est, est_t_ns, u_applied, speeds)
+    return Sensed(nav, nav_mem, nav_ok, vs, est, est_t_ns, u_applied, speeds)
 
 
 def _hold_depth(cfg: CoreConfig, nav: NavState, hold: Reference, dt: float) -> np.ndarray:
@@ -389,7 +396,8 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     if cfg.ff_preview_s > 0.0:
         ref = replace(ref, preview=cfg.reference.at(t_s + cfg.ff_preview_s))
 
-    mode = inputs.mode if inputs.armed else Mode.ZERO
+    armed = inputs.armed
+    mode = inputs.mode if armed else _ZERO_MODE
     mask = inputs.thruster_mask
     if mask is not None:
         mask = np.asarray(mask, dtype=bool)
@@ -397,46 +405,43 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
             mask = np.zeros(n_thr, dtype=bool)  # not a mask of these thrusters: use none
         elif mask.all():
             mask = None
-    hold = state.hold if mode is Mode.HOLD_DEPTH else None
+    hold = None
 
     status = "ok"
     ctrl = state.ctrl
     ctrl_new = None
     u_ctrl = _ZERO6
     ol = _ZERO6
-    if not inputs.armed:
+    if (mode is _CONTROL or mode is _PDC) and armed:
+        if sensed.nav_ok:
+            if mode is _CONTROL:
+                u_new, ctrl_new = cfg.controller.step(sensed.vs, ref, cfg.controller.params,
+                                                      state.ctrl, dt)
+            else:
+                u_new = pdc_step(sensed.vs, ref, cfg.pd, PDState(), dt)[0]
+            u_ctrl = _as_vec(u_new, 6)
+            if ref.open_loop_wrench is not None:
+                ol = _as_vec(ref.open_loop_wrench, 6)
+            if u_ctrl is None or ol is None:  # not a 6-vector: treated as non-finite
+                u_ctrl, ol = _ZERO6, _ZERO6
+                status = "non-finite"
+                ctrl_new = None
+        else:
+            status = "nav-invalid"
+    elif not armed:
         status = "disarmed"
-    elif mode is Mode.ZERO:
-        pass
-    elif mode is Mode.MANUAL:
+    elif mode is _MANUAL:
         if inputs.manual_wrench is not None:
             u_ctrl = _as_vec(inputs.manual_wrench, 6)
             if u_ctrl is None:
                 u_ctrl, status = _ZERO6, "non-finite"
-    elif mode is Mode.HOLD_DEPTH:
-        if hold is None:
-            hold = _hold_pose(nav)
+    elif mode is _HOLD_DEPTH:
+        hold = state.hold if state.hold is not None else _hold_pose(nav)
         if nav.ins_valid and nav.depth_valid and _finite_hv(nav.H, nav.v):
             u_ctrl = _hold_depth(cfg, nav, hold, dt)
-            vertical = cfg._vertical if mask is None else (cfg._vertical & mask)
-            mask = vertical
+            mask = cfg._vertical if mask is None else (cfg._vertical & mask)
         else:
             status = "nav-invalid"
-    elif not sensed.nav_ok:
-        status = "nav-invalid"
-    else:
-        vs = VehicleState(nav.H, nav.v)
-        if mode is Mode.PDC:
-            u_new = pdc_step(vs, ref, cfg.pd, PDState(), dt)[0]
-        else:
-            u_new, ctrl_new = cfg.controller.step(vs, ref, cfg.controller.params, state.ctrl, dt)
-        u_ctrl = _as_vec(u_new, 6)
-        if ref.open_loop_wrench is not None:
-            ol = _as_vec(ref.open_loop_wrench, 6)
-        if u_ctrl is None or ol is None:  # not a 6-vector: treated as non-finite
-            u_ctrl, ol = _ZERO6, _ZERO6
-            status = "non-finite"
-            ctrl_new = None
 
     thrust, saturated, u_cmd = np.empty(n_thr), np.empty(n_thr, dtype=np.bool_), np.empty(6)
     pinv = B_pinv if mask is None else cfg.pinv_for(mask)
@@ -449,17 +454,20 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     elif code != _OK:
         status = "non-finite"
     lead = math.nan
-    if cfg.lag_compensation and status == "ok" and mode is Mode.CONTROL and mask is None:
+    if cfg.lag_compensation and status == "ok" and mode is _CONTROL and mask is None:
         # lead set-points from the speeds measured at the start of the cycle; u_cmd stays the
         # wrench of the allocated thrusts, which the propellers reach by the cycle's end
         f_cmd, s = lag_compensate(cfg.allocator, thrust, sensed.speeds, dt)
         if s == s:
             thrust, lead = np.array(f_cmd, dtype=np.float64), s
-    guard = _guard(thrust, f_max)
-    if guard == 2:
-        status = "non-finite"
-    label = mode.value if inputs.armed else "disarmed"
-    # positional, in field order (a frozen dataclass's keyword __init__ costs ~1.5× as much)
+    # the output guard: _command's thrust is finite and within ±f_max by construction (zero and
+    # status non-finite otherwise); the lead set-points are the one later change, re-checked
+    guard = 0
+    if lead == lead:
+        guard = _guard(thrust, f_max)
+        if guard == 2:
+            status = "non-finite"
+    label = mode if armed else "disarmed"
     out = CoreOutputs(thrust, u_cmd, sensed.u_applied, nav, ref, saturated, status, lead, label,
                       guard)
     return out, CoreState(sensed.nav_mem, ctrl, sensed.est, t0, sensed.est_t_ns,

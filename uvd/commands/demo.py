@@ -225,10 +225,129 @@ def _fmt_table(hil: dict, lock: dict) -> str:
     return "\n".join(lines)
 
 
+def _figures(cfg, duration_s: float, seed: int, run_dir: Path, truth_path: Path,
+             summary_path: Path, lock_log, watch: dict[str, Any], code: int, stop_s: float,
+             bridge_stats: dict, prio, ready: dict, start_s: float) -> dict[str, Any]:
+    """The demo's figures from what the run left behind (summary, telemetry, truth)."""
+    from sim_bridge.bridge import read_truth
+    c = cfg.control
+    samples, loads, steal = watch["samples"], watch["loads"], watch["steal"]
+    daemon_hwm, bridge_hwm = watch["daemon_hwm"], watch["bridge_hwm"]
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    loop = summary.get("loop", {})
+    fs_events = [e for e in summary.get("failsafe_events", []) if e.get("type") == "failsafe"]
+    lifecycle = [e for e in summary.get("failsafe_events", [])
+                 if e.get("type") == "lifecycle"]
+    hil = hil_tracking(run_dir / "telemetry.jsonl", read_truth(truth_path)) \
+        if truth_path.is_file() and (run_dir / "telemetry.jsonl").is_file() \
+        else {"samples": 0}
+    mem = _memory(samples, duration_s)
+    mem["daemon_peak_rss_mb"] = daemon_hwm
+    mem["bridge_peak_rss_mb"] = bridge_hwm
+    figures: dict[str, Any] = {
+        "duration_s": duration_s,
+        "config": {"controller": c.controller, "model": c.model,
+                   "robust_adaptation": c.robust_adaptation, "reference": c.reference,
+                   "rate_hz": cfg.loop.rate_hz, "vehicle": cfg.vehicle.name, "seed": seed},
+        "loop": {k: loop.get(k) for k in ("rate_hz", "cycles", "overruns", "skipped",
+                                           "max_overrun_streak", "cycle_errors",
+                                           "lateness_us", "compute_us", "timer")},
+        "tracking": hil,
+        "failsafe_events": fs_events,
+        "lifecycle": lifecycle,
+        "memory": mem,
+        "daemon": {"exit_code": code, "stop_s": stop_s,
+                   "shutdown": summary.get("shutdown", {}).get("steps"),
+                   "counters": summary.get("daemon"),
+                   "warm_up_and_start_s": start_s},
+        "sim_bridge": {"counters": bridge_stats.get("counters"),
+                       "ports": bridge_stats.get("ports")},
+        # scheduling of every thread of both processes (uvd.runtime.rtthreads)
+        "realtime": {"daemon": summary.get("realtime"),
+                     "sim_bridge": {"sched_fifo_priority": prio,
+                                    "threads": ready.get("threads"),
+                                    "messages": ready.get("thread_messages")}},
+        "load_average_1min": {"min": min(loads), "max": max(loads),
+                              "mean": sum(loads) / len(loads)} if loads else None,
+        "host_steal": _steal_summary(steal),
+    }
+    if hil.get("samples"):
+        # the same span of tracking: a run cut short by a failsafe disarm compares with
+        # the lockstep run's same first seconds (dead-reckoning drift grows with time)
+        lock = lockstep_tracking(lock_log, hil["duration_s"] + 1.0 / cfg.loop.rate_hz)
+        ratio = {k: hil["position_mae"][k] / v if v > 0 else math.nan
+                 for k, v in lock["position_mae"].items()}
+        figures["lockstep"] = {"span_s": hil["duration_s"],
+                               "position_mae": lock["position_mae"],
+                               "velocity_mae": lock["velocity_mae"],
+                               "position_mne": lock["position_mne"],
+                               "velocity_mne": lock["velocity_mne"],
+                               "ratio": ratio,
+                               "within_25pct": {k: bool(abs(r - 1.0) <= 0.25)
+                                                for k, r in ratio.items()},
+                               "cycles_not_ok": lock["cycles_not_ok"]}
+    return figures
+
+
+def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str], pump,
+           tail, progress) -> dict[str, Any]:
+    """Follow the run for ``duration_s`` after arming: the daemon's log lines, both processes'
+    memory, the load average and the host's steal, a progress line every 10 s."""
+    samples: list[tuple[float, float, float]] = []
+    loads: list[float] = []  # 1-minute load average, once a second
+    steal: list[tuple[float, float]] = []  # (monotonic s, cumulative steal s), ~1 Hz
+    next_report = 10.0
+    while True:
+        el = time.monotonic() - armed_at
+        if el >= duration_s:
+            break
+        pump(min(1.0, duration_s - el))
+        rd, _ = _rss_mb(daemon.pid)
+        rb, _ = _rss_mb(bridge.pid)
+        samples.append((time.monotonic() - armed_at, rd, rb))
+        with contextlib.suppress(OSError, ValueError):
+            loads.append(float(Path("/proc/loadavg").read_text().split()[0]))
+        st = host_steal_s()
+        if st is not None:
+            steal.append((time.monotonic(), st))
+        if daemon.poll() is not None:
+            progress("uvd demo: the daemon exited during the run:\n" + tail.tail())
+            break
+        if el >= next_report:
+            next_report += 10.0
+            n_fs = sum("failsafe fired" in e for e in events)
+            progress(f"  {el:5.0f} / {duration_s:g} s   daemon RSS {rd:6.1f} MB   sim-bridge "
+                     f"RSS {rb:6.1f} MB   failsafe events {n_fs}")
+    _, daemon_hwm = _rss_mb(daemon.pid)
+    _, bridge_hwm = _rss_mb(bridge.pid)
+
+    return {"samples": samples, "loads": loads, "steal": steal, "daemon_hwm": daemon_hwm,
+            "bridge_hwm": bridge_hwm}
+
+
+def _stop(daemon, bridge, pump) -> tuple[int, float, dict]:
+    """SIGTERM to the daemon as systemd would (killed after 5 s), then the bridge; returns
+    the daemon's exit code, how long it took to stop and the bridge's statistics."""
+    t_sig = time.monotonic()
+    if daemon.poll() is None:
+        daemon.send_signal(signal.SIGTERM)
+    try:
+        code = daemon.wait(timeout=5.0)
+    except subprocess.TimeoutExpired:
+        daemon.kill()
+        code = daemon.wait(timeout=5.0)
+    stop_s = time.monotonic() - t_sig
+    pump(0.5)
+    bridge_stats = bridge.stop(timeout_s=10.0) or {}
+    bridge.kill()
+
+    return code, stop_s, bridge_stats
+
+
 def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path | None = None,
              seed: int = 0, progress=print) -> tuple[dict[str, Any], int]:
     """Run the demo; returns (figures, exit code). See the module docstring."""
-    from sim_bridge.bridge import BridgeProcess, cpu_split, read_truth, write_local_config
+    from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
     from uvd.runtime.config import load_config
 
     tmp = None
@@ -308,103 +427,15 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         progress(f"  armed {armed_at - t_start:.1f} s after start; tracking for "
                  f"{duration_s:g} s")
 
-        samples: list[tuple[float, float, float]] = []
-        loads: list[float] = []  # 1-minute load average, once a second
-        steal: list[tuple[float, float]] = []  # (monotonic s, cumulative steal s), ~1 Hz
-        next_report = 10.0
-        while True:
-            el = time.monotonic() - armed_at
-            if el >= duration_s:
-                break
-            pump(min(1.0, duration_s - el))
-            rd, _ = _rss_mb(daemon.pid)
-            rb, _ = _rss_mb(bridge.pid)
-            samples.append((time.monotonic() - armed_at, rd, rb))
-            with contextlib.suppress(OSError, ValueError):
-                loads.append(float(Path("/proc/loadavg").read_text().split()[0]))
-            st = host_steal_s()
-            if st is not None:
-                steal.append((time.monotonic(), st))
-            if daemon.poll() is not None:
-                progress("uvd demo: the daemon exited during the run:\n" + tail.tail())
-                break
-            if el >= next_report:
-                next_report += 10.0
-                n_fs = sum("failsafe fired" in e for e in events)
-                progress(f"  {el:5.0f} / {duration_s:g} s   daemon RSS {rd:6.1f} MB   sim-bridge "
-                         f"RSS {rb:6.1f} MB   failsafe events {n_fs}")
-        _, daemon_hwm = _rss_mb(daemon.pid)
-        _, bridge_hwm = _rss_mb(bridge.pid)
-
+        watch = _watch(daemon, bridge, armed_at, duration_s, events, pump, tail, progress)
         # -- stop: SIGTERM as systemd would --
-        t_sig = time.monotonic()
-        if daemon.poll() is None:
-            daemon.send_signal(signal.SIGTERM)
-        try:
-            code = daemon.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            daemon.kill()
-            code = daemon.wait(timeout=5.0)
-        stop_s = time.monotonic() - t_sig
-        pump(0.5)
-        bridge_stats = bridge.stop(timeout_s=10.0) or {}
-        bridge.kill()
-
+        code, stop_s, bridge_stats = _stop(daemon, bridge, pump)
         # -- figures --
-        summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
-        loop = summary.get("loop", {})
-        fs_events = [e for e in summary.get("failsafe_events", []) if e.get("type") == "failsafe"]
-        lifecycle = [e for e in summary.get("failsafe_events", [])
-                     if e.get("type") == "lifecycle"]
-        hil = hil_tracking(run_dir / "telemetry.jsonl", read_truth(truth_path)) \
-            if truth_path.is_file() and (run_dir / "telemetry.jsonl").is_file() \
-            else {"samples": 0}
-        mem = _memory(samples, duration_s)
-        mem["daemon_peak_rss_mb"] = daemon_hwm
-        mem["bridge_peak_rss_mb"] = bridge_hwm
-        figures: dict[str, Any] = {
-            "duration_s": duration_s,
-            "config": {"controller": c.controller, "model": c.model,
-                       "robust_adaptation": c.robust_adaptation, "reference": c.reference,
-                       "rate_hz": cfg.loop.rate_hz, "vehicle": cfg.vehicle.name, "seed": seed},
-            "loop": {k: loop.get(k) for k in ("rate_hz", "cycles", "overruns", "skipped",
-                                               "max_overrun_streak", "cycle_errors",
-                                               "lateness_us", "compute_us", "timer")},
-            "tracking": hil,
-            "failsafe_events": fs_events,
-            "lifecycle": lifecycle,
-            "memory": mem,
-            "daemon": {"exit_code": code, "stop_s": stop_s,
-                       "shutdown": summary.get("shutdown", {}).get("steps"),
-                       "counters": summary.get("daemon"),
-                       "warm_up_and_start_s": armed_at - t_start},
-            "sim_bridge": {"counters": bridge_stats.get("counters"),
-                           "ports": bridge_stats.get("ports")},
-            # scheduling of every thread of both processes (uvd.runtime.rtthreads)
-            "realtime": {"daemon": summary.get("realtime"),
-                         "sim_bridge": {"sched_fifo_priority": prio,
-                                        "threads": (bridge.ready or {}).get("threads"),
-                                        "messages": (bridge.ready or {}).get(
-                                            "thread_messages")}},
-            "load_average_1min": {"min": min(loads), "max": max(loads),
-                                  "mean": sum(loads) / len(loads)} if loads else None,
-            "host_steal": _steal_summary(steal),
-        }
-        if hil.get("samples"):
-            # the same span of tracking: a run cut short by a failsafe disarm compares with
-            # the lockstep run's same first seconds (dead-reckoning drift grows with time)
-            lock = lockstep_tracking(lock_log, hil["duration_s"] + 1.0 / cfg.loop.rate_hz)
-            ratio = {k: hil["position_mae"][k] / v if v > 0 else math.nan
-                     for k, v in lock["position_mae"].items()}
-            figures["lockstep"] = {"span_s": hil["duration_s"],
-                                   "position_mae": lock["position_mae"],
-                                   "velocity_mae": lock["velocity_mae"],
-                                   "position_mne": lock["position_mne"],
-                                   "velocity_mne": lock["velocity_mne"],
-                                   "ratio": ratio,
-                                   "within_25pct": {k: bool(abs(r - 1.0) <= 0.25)
-                                                    for k, r in ratio.items()},
-                                   "cycles_not_ok": lock["cycles_not_ok"]}
+        figures = _figures(cfg, duration_s, seed, run_dir, truth_path, summary_path, lock_log,
+                           watch, code, stop_s, bridge_stats, prio, bridge.ready or {},
+                           armed_at - t_start)
+        hil = figures["tracking"]
+        fs_events = figures["failsafe_events"]
         _report(figures, progress)
         ok = code == 0 and bool(hil.get("samples")) and not fs_events
         return figures, 0 if ok else 1

@@ -309,7 +309,7 @@ class Daemon:
             except Exception as exc:  # noqa: BLE001 - a bad command never breaks the cycle
                 res = CommandResult(False, f"{type(exc).__name__}: {exc}")
             self.app.hub.publish({"type": "command", "t_ns": t_ns, "command": type(c).__name__,
-                                  "source": getattr(c, "source", ""), "ok": res.ok,
+                                  "source": c.source, "ok": res.ok,
                                   "reason": res.reason}, always=True)
             p.future.set_result(res)
 
