@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from uvd.cli import main
+from uvd.io.vehicle import vehicle_path
 from uvd.runtime.config import (
     DEFAULT_CONFIG,
     Config,
@@ -161,8 +162,7 @@ def test_driver_sections_plug_in_and_their_errors_name_keys(tmp_path):
 
 
 def test_vehicle_file_relative_to_the_config(tmp_path):
-    src = Path(sys.modules["uvd.model.vehicle"].__file__).resolve().parents[2] / \
-        "sim_bridge" / "vehicles" / "jhu-rov.toml"
+    src = vehicle_path("jhu-rov")
     (tmp_path / "v").mkdir()
     (tmp_path / "v" / "mine.toml").write_text(src.read_text())
     cfg = load_config(write(tmp_path, "[vehicle]\nname = \"v/mine.toml\"\n" + MINIMAL))
@@ -240,7 +240,8 @@ def test_check_config_as_a_process(tmp_path):
 
 def test_aid_initial_params_is_checked_at_load(tmp_path):
     from uvd.estimation.aid import INITP_6DOF
-    from uvd.model.params import UVParams, save_params
+    from uvd.io.params import save_params
+    from uvd.model.params import UVParams
 
     _, errs = errors_of(tmp_path, "[estimation]\naid = true\ninitial_params = \"none.toml\"\n"
                         + MINIMAL)
@@ -284,7 +285,8 @@ def test_aid_resume_goes_on_from_the_last_runs_file(tmp_path, monkeypatch, capsy
     """``resume``: the first run starts from initial_params/INITP, later runs from save_path
     (the working directory's, where the daemon wrote it); a bad file there is an error."""
     from uvd.estimation.aid import INITP_6DOF
-    from uvd.model.params import UVParams, save_params
+    from uvd.io.params import save_params
+    from uvd.model.params import UVParams
     from uvd.runtime.daemon import build_core
 
     work = tmp_path / "state"

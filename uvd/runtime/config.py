@@ -104,7 +104,7 @@ class VehicleSection:
                                        "vehicle TOML file, relative to this config file")
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
-        from uvd.model.vehicle import builtin_vehicles
+        from uvd.io.vehicle import builtin_vehicles
         if self.name in builtin_vehicles():
             return []
         p = Path(self.name)
@@ -245,7 +245,7 @@ class EstimationSection:
 def _check_start_params(key: str, p: Path) -> list[tuple[str, str]]:
     """A parameters file AID may start from: readable, M positive definite."""
     from uvd.errors import ParameterError
-    from uvd.model.params import params_from_toml
+    from uvd.io.params import params_from_toml
     how = " (resume = true starts AID from it; move it away to start afresh)" \
         if key == "save_path" else ""
     try:
@@ -429,7 +429,7 @@ class Config:
 
     def vehicle_ref(self, base_dir: Path | None = None) -> str:
         """Built-in vehicle name, or the vehicle file's path resolved against the config."""
-        from uvd.model.vehicle import builtin_vehicles
+        from uvd.io.vehicle import builtin_vehicles
         name = self.vehicle.name
         if name in builtin_vehicles():
             return name
@@ -441,7 +441,7 @@ class Config:
 
     def load_vehicle(self, base_dir: Path | None = None):
         """The :class:`uvd.model.vehicle.Vehicle` of ``[vehicle]``."""
-        from uvd.model.vehicle import load_vehicle
+        from uvd.io.vehicle import load_vehicle
         return load_vehicle(self.vehicle_ref(base_dir))
 
 
