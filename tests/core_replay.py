@@ -22,7 +22,7 @@ from uvd.control.allocation import Allocator
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.trajectory import reftraj2
 from uvd.estimation.navigation import NavConfig, nav_set_position
-from uvd.model.vehicle import load_vehicle
+from uvd.io.vehicle import load_vehicle
 
 SCENARIOS = ("ambc-aid", "pdc-reftraj2")
 N_CYCLES = 600

@@ -28,9 +28,9 @@ from uvd.estimation.aid import (
     aid6_step,
     aid_unfreeze,
 )
+from uvd.io.vehicle import load_vehicle
 from uvd.model.lie import J, ad, exp_so3, make_H
 from uvd.model.params import ROTATIONAL_INDEX, RotParams, UVParams, theta_M_from
-from uvd.model.vehicle import load_vehicle
 
 TRUE = load_vehicle("jhu-rov-coupled").params
 

@@ -14,7 +14,7 @@ from uvd.control.allocation import (
     thrust_from_measured_speed,
     weighted_pinv,
 )
-from uvd.model.vehicle import load_vehicle
+from uvd.io.vehicle import load_vehicle
 
 VEH = load_vehicle("jhu-rov")
 ALLOC = Allocator.from_vehicle(VEH)

@@ -21,7 +21,7 @@ from drivers.can.amplifier import AmplifierGroup
 from drivers.can.config import AmplifierConfig, CanBusConfig
 from sim_bridge.amplifiers.harness import free_udp_port, local_group
 from uvd.errors import BusError, TransportError
-from uvd.model.vehicle import load_vehicle
+from uvd.io.vehicle import load_vehicle
 
 VEHICLE = load_vehicle("jhu-rov")
 

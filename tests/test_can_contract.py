@@ -19,7 +19,7 @@ from drivers.can.bus import CanBus
 from drivers.can.config import AmplifierConfig, DepthConfig
 from drivers.can.depth import CanDepthSensor
 from sim_bridge.amplifiers.harness import KINDS, realtime_priority, run_cycles, start_rig
-from uvd.model.vehicle import load_vehicle
+from uvd.io.vehicle import load_vehicle
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -17,7 +17,7 @@ from drivers.can.bus import CAN_ERR_PROT, CanBus, make_error_frame
 from drivers.can.config import AmplifierConfig, CanBusConfig, DepthConfig
 from drivers.can.depth import CanDepthSensor
 from sim_bridge.amplifiers.harness import realtime_priority, run_cycles, start_rig
-from uvd.model.vehicle import load_vehicle
+from uvd.io.vehicle import load_vehicle
 
 VEHICLE = load_vehicle("jhu-rov")
 NODES = (1, 2, 3, 4, 5, 6)

@@ -19,7 +19,7 @@ from drivers.can.logging import CanRecorder
 from sim_bridge.amplifiers.harness import run_cycles, start_rig
 from sim_bridge.thrusters import ThrusterBank
 from uvd.errors import ConfigError
-from uvd.model.vehicle import load_vehicle
+from uvd.io.vehicle import load_vehicle
 
 VEHICLE = load_vehicle("jhu-rov")
 

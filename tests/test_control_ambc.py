@@ -29,10 +29,10 @@ from uvd.control.ambc import (
 from uvd.control.errors import error_coordinates, error_state
 from uvd.control.trajectory import reftraj1, setpoint
 from uvd.control.types import Reference, VehicleState
+from uvd.io.vehicle import load_vehicle
 from uvd.model.lie import A_inv_se3, ad, exp_se3
 from uvd.model.params import DECOUPLED_INDEX, UVParams
 from uvd.model.regressors import W_UV
-from uvd.model.vehicle import load_vehicle
 
 ROV = load_vehicle("jhu-rov")
 COUPLED = load_vehicle("jhu-rov-coupled")

@@ -9,8 +9,8 @@ from uvd.control.allocation import Allocator
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.trajectory import setpoint
 from uvd.estimation.navigation import NavConfig
+from uvd.io.vehicle import load_vehicle
 from uvd.model.thrusters import speed_from_thrust
-from uvd.model.vehicle import load_vehicle
 
 VEHICLE = load_vehicle("jhu-rov")
 

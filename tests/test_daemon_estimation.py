@@ -20,8 +20,8 @@ from sim_bridge.bridge import write_local_config
 from tests.hil_daemon import ListSink, run_scenario, running_bridge
 from uvd.commands.identify import identify_aid
 from uvd.estimation.aid import INITP_6DOF, AID6Gains
-from uvd.estimation.runlog import RunLog
-from uvd.model.params import params_from_toml
+from uvd.io.params import params_from_toml
+from uvd.io.runlog import load_runlog
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 
@@ -82,7 +82,7 @@ def test_aid_estimate_is_published_saved_and_resumed(hil, tmp_path):
     # the daemon's own telemetry is an identification log: AID replayed over it offline
     # (uvd identify --method aid) ends where the online estimate ended — same samples, same
     # steps; only the period differs (measured in the loop, nominal in the replay)
-    run = RunLog.load(cfg.telemetry.jsonl.path)
+    run = load_runlog(cfg.telemetry.jsonl.path)
     assert run.extra["bad_lines"] == 0 and len(run) >= len(cycles) - 2, run.extra
     assert abs(run.dt - 0.1) < 1e-6
     st, _ = identify_aid(run, INITP_6DOF.theta, AID6Gains())
@@ -134,7 +134,8 @@ def test_a_frozen_estimate_is_published_and_logged_once(tmp_path, caplog):
 def test_a_reload_keeps_the_running_estimate_and_does_not_read_initial_params(tmp_path):
     from dataclasses import replace
 
-    from uvd.model.params import params_from_theta, save_params
+    from uvd.io.params import save_params
+    from uvd.model.params import params_from_theta
 
     start = params_from_theta(INITP_6DOF.theta * 1.01)
     save_params(start, tmp_path / "start.toml")

@@ -25,10 +25,10 @@ from uvd.control.ambc import (
 from uvd.control.trajectory import reftraj1
 from uvd.control.types import VehicleState
 from uvd.estimation.navigation import NavConfig
+from uvd.io.vehicle import load_vehicle
 from uvd.model.lie import exp_se3
 from uvd.model.params import DECOUPLED_INDEX
 from uvd.model.regressors import W_UV
-from uvd.model.vehicle import load_vehicle
 
 VEH = load_vehicle("jhu-rov")
 TAU = VEH.thrusters[0].time_constant_s

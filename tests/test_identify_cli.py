@@ -10,7 +10,8 @@ import pytest
 from uvd.cli import main
 from uvd.estimation.runlog import RunLog
 from uvd.experiments.identification import dataset_6dof, record
-from uvd.model.params import params_from_toml
+from uvd.io.params import params_from_toml
+from uvd.io.runlog import load_runlog, save_runlog
 
 #: the pose of a cycle record at the origin, level, heading north (p and row-major R)
 ZERO_POSE = {"p": [0.0] * 3, "R": np.eye(3).ravel().tolist()}
@@ -22,12 +23,12 @@ def run_file(tmp_path_factory):
     the run-log format the commands read."""
     rec = record(dataset_6dof("IDDAT"), kind="6dof", seed=5, minutes=4.0)
     path = tmp_path_factory.mktemp("runs") / "iddat-short.npz"
-    rec.run.save(path)
+    save_runlog(rec.run, path)
     return path
 
 
 def test_runlog_round_trip(run_file):
-    run = RunLog.load(run_file)
+    run = load_runlog(run_file)
     assert len(run.t) == 2400 and run.input_interp == "linear" and run.name == "IDDAT"
     assert run.R_true is not None and np.allclose(run.dt, 0.1)
 
@@ -55,7 +56,7 @@ def test_identify_then_xval(run_file, tmp_path, capsys, method):
         from uvd.estimation.aid import INITP_6DOF, AID6Gains
         from uvd.experiments.identification import velocity_estimate_errors
 
-        run = RunLog.load(run_file)
+        run = load_runlog(run_file)
         st, dv = identify_aid(run, INITP_6DOF.theta, AID6Gains())
         ref = velocity_estimate_errors(run.t, dv, run.v, width_s=60.0)
         for part in ("translational", "angular"):
@@ -98,7 +99,7 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
     assert "cannot read parameters" in capsys.readouterr().err
     good = tmp_path / "p.toml"
     from uvd.estimation.aid import INITP_6DOF
-    from uvd.model.params import save_params
+    from uvd.io.params import save_params
 
     save_params(INITP_6DOF, good)
     assert main(["xval", "--params", str(good), "--log", str(tmp_path / "partial.npz")]) == 2
@@ -107,7 +108,7 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
 
 def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
     """The daemon's JSON-lines cycle records as a run: nominal grid, longest stretch."""
-    run = RunLog.load(run_file)
+    run = load_runlog(run_file)
     rng = np.random.default_rng(1)
     lines = [json.dumps({"type": "lifecycle", "to": "STANDBY"})]
     for k in range(len(run.t)):
@@ -131,7 +132,7 @@ def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
     lines.append('{"type": "cycle", "t_ns": 9')  # cut by a crash
     f = tmp_path / "telemetry.jsonl"
     f.write_text("\n".join(lines))
-    tel = RunLog.load(f)
+    tel = load_runlog(f)
     assert tel.extra["segments"] == [[0, 100], [100, 2297], [2397, 50]]
     assert tel.extra["kept_segment"] == [100, 2297] and tel.extra["bad_lines"] == 2
     assert len(tel) == 2297 and abs(tel.dt - 0.1) < 1e-6 and tel.input_interp == "linear"
@@ -156,13 +157,13 @@ def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
 def test_identify_says_what_the_data_do_not_determine(run_file, tmp_path, capsys):
     """30 s of IDDAT with sway, roll and pitch rate held at exactly 0: ls-consistent is still
     admissible, but says which blocks had no data and which rest on their bounds."""
-    run = RunLog.load(run_file)
+    run = load_runlog(run_file)
     n = 300
     v = run.v[:n].copy()
     v[:, [1, 3, 4]] = 0.0
     short = tmp_path / "short.npz"
-    RunLog(t=run.t[:n], R=run.R[:n], p=run.p[:n], v=v, u=run.u[:n],
-           input_interp=run.input_interp, name="short").save(short)
+    save_runlog(RunLog(t=run.t[:n], R=run.R[:n], p=run.p[:n], v=v, u=run.u[:n],
+                       input_interp=run.input_interp, name="short"), short)
     summary = tmp_path / "lsc.json"
     assert main(["identify", "--log", str(short), "--method", "ls-consistent", "--out",
                  str(tmp_path / "lsc.toml"), "--json", str(summary)]) == 0

@@ -14,7 +14,7 @@ from uvd.control.allocation import Allocator, allocate, lag_compensate
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.trajectory import setpoint
 from uvd.estimation.navigation import NavConfig
-from uvd.model.vehicle import load_vehicle
+from uvd.io.vehicle import load_vehicle
 
 VEH = load_vehicle("jhu-rov")
 ALLOC = Allocator.from_vehicle(VEH)

@@ -21,10 +21,10 @@ from uvd.estimation.ls import (
     regressor_uvr_batch,
 )
 from uvd.estimation.runlog import RunLog
+from uvd.io.vehicle import load_vehicle
 from uvd.model.lie import exp_so3
 from uvd.model.params import RotParams, UVParams
 from uvd.model.regressors import W_UV, W_UVR
-from uvd.model.vehicle import load_vehicle
 
 TRUE = load_vehicle("jhu-rov-coupled").params
 

@@ -26,8 +26,8 @@ from uvd.control.ambc import (
 )
 from uvd.control.trajectory import reftraj1
 from uvd.control.types import VehicleState
+from uvd.io.vehicle import load_vehicle
 from uvd.model.lie import A_inv_se3, exp_se3
-from uvd.model.vehicle import load_vehicle
 
 ROV = load_vehicle("jhu-rov")
 COUPLED = load_vehicle("jhu-rov-coupled")

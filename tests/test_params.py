@@ -6,6 +6,7 @@ from hypothesis import given, settings
 
 from tests.strategies import spd, theta_uv, vec
 from uvd.errors import ParameterError
+from uvd.io.params import params_from_toml, save_params
 from uvd.model import params as P
 from uvd.model.lie import stack
 
@@ -116,8 +117,8 @@ def test_toml_round_trip(tmp_path):
     A = rng.normal(size=(6, 6))
     p = P.UVParams(M=A @ A.T + np.eye(6), D=rng.normal(size=(6, 6, 6)), g=1.5, b=[1, 2, 3])
     f = tmp_path / "p.toml"
-    P.save_params(p, f, title="test")
-    q = P.params_from_toml(f)
+    save_params(p, f, title="test")
+    q = params_from_toml(f)
     np.testing.assert_array_equal(q.theta, p.theta)
 
 
@@ -126,23 +127,23 @@ def test_toml_errors_name_the_key(tmp_path):
     f.write_text("[parameters]\nm = [1,1,1,1,1,1]\nd = [-1,-1,-1,-1,-1,-1]\ng = 0\nb = [0,0,1]\n"
                  "mass = 3\n")
     with pytest.raises(ParameterError, match="unknown key.*mass"):
-        P.params_from_toml(f)
+        params_from_toml(f)
     f.write_text("[parameters]\nm = [1,1,1,1,1,1]\ng = 0\nb = [0,0,1]\n")
     with pytest.raises(ParameterError, match="missing key.*'d'"):
-        P.params_from_toml(f)
+        params_from_toml(f)
 
 
 def test_toml_file_errors_and_atomic_save(tmp_path):
     with pytest.raises(ParameterError, match="cannot read parameters"):
-        P.params_from_toml(tmp_path / "none.toml")
+        params_from_toml(tmp_path / "none.toml")
     f = tmp_path / "p.toml"
     f.write_text("[parameters\n")
     with pytest.raises(ParameterError, match=f"{f}: not valid TOML"):
-        P.params_from_toml(f)
+        params_from_toml(f)
     p = P.UVParams.decoupled([1] * 6, [-1] * 6, 2.0, [0, 0, 1])
-    P.save_params(p, f)  # replaces the bad file whole
-    assert P.params_from_toml(f).g == 2.0
+    save_params(p, f)  # replaces the bad file whole
+    assert params_from_toml(f).g == 2.0
     assert sorted(x.name for x in tmp_path.iterdir()) == ["p.toml"]
     with pytest.raises(FileNotFoundError):
-        P.save_params(p, tmp_path / "no" / "dir.toml")
+        save_params(p, tmp_path / "no" / "dir.toml")
     assert sorted(x.name for x in tmp_path.iterdir()) == ["p.toml"]

@@ -7,11 +7,12 @@ import pytest
 
 from sim_bridge.plant import Plant, PlantConfig
 from sim_bridge.thrusters import ThrusterEffects
+from uvd.io.vehicle import load_vehicle
 from uvd.model.dynamics import UVModel, kinetic_energy, uv_accel
 from uvd.model.integrate import kernel_accel, simulate
 from uvd.model.lie import exp_so3, inv_H, log_se3, make_H
 from uvd.model.params import UVParams
-from uvd.model.vehicle import Vehicle, load_vehicle
+from uvd.model.vehicle import Vehicle
 
 
 def _with(vehicle: Vehicle, **changes) -> Vehicle:

@@ -250,7 +250,7 @@ def _estimate(k, theta):
 
 def test_params_file_sink_keeps_the_newest_estimate(tmp_path):
     from uvd.estimation.aid import INITP_6DOF
-    from uvd.model.params import params_from_toml
+    from uvd.io.params import params_from_toml
     from uvd.telemetry import ParamsFileSink
 
     path = tmp_path / "state" / "aid.toml"

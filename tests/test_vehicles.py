@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from uvd.errors import ConfigError
-from uvd.model.vehicle import builtin_vehicles, load_vehicle
+from uvd.io.vehicle import builtin_vehicles, load_vehicle
 
 
 def test_builtins_exist():

@@ -22,10 +22,10 @@ from uvd.estimation.xval import (
     simulate_run,
     states_of,
 )
+from uvd.io.vehicle import load_vehicle
 from uvd.model.dynamics import rot_accel
 from uvd.model.lie import J
 from uvd.model.params import ROTATIONAL_INDEX, RotParams, UVParams
-from uvd.model.vehicle import load_vehicle
 
 TRUE = load_vehicle("jhu-rov-coupled").params
 

@@ -51,6 +51,7 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import canopen
 import numpy as np
@@ -59,9 +60,17 @@ from drivers.can import cia402
 from drivers.can.bus import ACTIVE, BUS_OFF, CLOSED, CanBus, FrameDropped
 from drivers.can.config import AmplifierConfig, CanConfig
 from uvd.errors import ConfigError
-from uvd.model.thrusters import ThrusterSpec
 
 log = logging.getLogger(__name__)
+
+
+class Thruster(Protocol):
+    """What the amplifiers need of a thruster (``uvd.model.thrusters.ThrusterSpec`` is one;
+    drivers do not import uvd)."""
+
+    name: str
+    k_thrust: float  # f = k ω|ω|, N/(rad/s)²
+    max_thrust_n: float
 
 NMT_OPERATIONAL = 5
 NMT_PRE_OPERATIONAL = 127
@@ -266,7 +275,7 @@ class AmplifierGroup:
         An open bus.
     cfg : AmplifierConfig
         ``[can.amplifiers]``.
-    thrusters : sequence of ThrusterSpec
+    thrusters : sequence of Thruster
         The vehicle's thrusters, in the order of ``cfg.node_ids`` (k, max thrust, names).
     clock : callable, optional
         Monotonic nanoseconds (default :func:`time.monotonic_ns`).
@@ -278,7 +287,7 @@ class AmplifierGroup:
         driver needs (0x6040 + 0x6071 in one RPDO; 0x6041 and 0x606C in the TPDOs).
     """
 
-    def __init__(self, bus: CanBus, cfg: AmplifierConfig, thrusters: Sequence[ThrusterSpec],
+    def __init__(self, bus: CanBus, cfg: AmplifierConfig, thrusters: Sequence[Thruster],
                  *, clock: Callable[[], int] | None = None) -> None:
         where = "[can.amplifiers]"
         if len(thrusters) != len(cfg.node_ids):
@@ -311,14 +320,14 @@ class AmplifierGroup:
 
     @classmethod
     def from_config(cls, bus: CanBus, cfg: AmplifierConfig | CanConfig,
-                    thrusters: Sequence[ThrusterSpec], **kw) -> AmplifierGroup:
+                    thrusters: Sequence[Thruster], **kw) -> AmplifierGroup:
         """Build the group from ``[can.amplifiers]`` (or the whole ``[can]`` config)."""
         if isinstance(cfg, CanConfig):
             cfg = cfg.amplifiers
         return cls(bus, cfg, thrusters, **kw)
 
     # -- construction --
-    def _make_node(self, nid: int, spec: ThrusterSpec, tpp: float, where: str) -> _Node:
+    def _make_node(self, nid: int, spec: Thruster, tpp: float, where: str) -> _Node:
         od = load_od(self.cfg.eds, nid, where)
         remote = canopen.RemoteNode(nid, od)
         remote.sdo.RESPONSE_TIMEOUT = self.cfg.sdo_timeout_s

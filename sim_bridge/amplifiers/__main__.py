@@ -26,7 +26,7 @@ from sim_bridge.amplifiers.emulators import CanEmulators
 from sim_bridge.control_channel import JsonLines, serve_commands
 from sim_bridge.thrusters import ThrusterEffects
 from uvd.errors import UvdError
-from uvd.model.vehicle import load_vehicle
+from uvd.io.vehicle import load_vehicle
 
 
 def build_parser() -> argparse.ArgumentParser:

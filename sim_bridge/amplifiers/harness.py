@@ -24,7 +24,7 @@ import numpy as np
 from drivers.can.config import CanBusConfig, DepthConfig
 from sim_bridge.amplifiers.emulators import CanEmulators
 from sim_bridge.amplifiers.process import EmulatorProcess
-from uvd.model.vehicle import load_vehicle
+from uvd.io.vehicle import load_vehicle
 
 KINDS = ("virtual", "udp_multicast")
 

@@ -10,13 +10,18 @@ import argparse
 import importlib
 import os
 import pkgutil
+import platform
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
+from uvd.blas import single_threaded_blas
 
-from uvd.errors import ExperimentError
+single_threaded_blas()  # measure what `uvd` runs (one BLAS thread): before numpy is imported
+
+import numpy as np  # noqa: E402
+
+from uvd.errors import ExperimentError  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -30,7 +35,7 @@ class Bench:
 def registry() -> dict[str, Bench]:
     found: dict[str, Bench] = {}
     for info in pkgutil.iter_modules(__path__):
-        if info.name.startswith("_") or info.name == "all":
+        if info.name.startswith("_") or info.name in ("all", "page"):
             continue
         module = importlib.import_module(f"{__name__}.{info.name}")
         bench = getattr(module, "BENCH", None)
@@ -44,6 +49,28 @@ def get(name: str) -> Bench:
     if name not in reg:
         raise ExperimentError(f"unknown benchmark {name!r}; known: {', '.join(sorted(reg))}")
     return reg[name]
+
+
+def default_args(bench: Bench) -> argparse.Namespace:
+    """The arguments ``uvd bench NAME`` gets without options (what ``make bench`` runs)."""
+    parser = argparse.ArgumentParser(prog=f"uvd bench {bench.name}")
+    if bench.add_arguments:
+        bench.add_arguments(parser)
+    return parser.parse_args([])
+
+
+def machine() -> dict[str, Any]:
+    """The machine a benchmark runs on, recorded with its figures."""
+    return {"python": platform.python_version(), "processor": platform.machine(),
+            "cpus": os.cpu_count()}
+
+
+def run(bench: Bench, args: argparse.Namespace) -> dict[str, Any]:
+    """Run ``bench``; its figures with ``bench`` and ``machine`` added."""
+    figures = bench.run(args)
+    figures.setdefault("bench", bench.name)
+    figures.setdefault("machine", machine())
+    return figures
 
 
 def percentiles(samples_s, scale: float = 1e6) -> dict[str, float]:

@@ -63,7 +63,7 @@ def _encode_decode(samples: int) -> dict:
     from drivers.can.amplifier import AmplifierGroup
     from drivers.can.bus import CanBus
     from drivers.can.config import AmplifierConfig, CanBusConfig
-    from uvd.model.vehicle import load_vehicle
+    from uvd.io.vehicle import load_vehicle
 
     thrusters = load_vehicle("jhu-rov").thrusters
     cfg = CanBusConfig(interface="virtual", channel=f"bench-{uuid.uuid4().hex[:8]}")
@@ -102,7 +102,7 @@ def _exchange(duration_s: float, rate_hz: float, realtime: bool) -> dict:
     from drivers.can.bus import CanBus
     from drivers.can.config import AmplifierConfig
     from sim_bridge.amplifiers.harness import start_rig
-    from uvd.model.vehicle import load_vehicle
+    from uvd.io.vehicle import load_vehicle
 
     vehicle = load_vehicle("jhu-rov")
     n = vehicle.n_thrusters

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> dict:
         two_step_reference,
         two_step_step,
     )
-    from uvd.model.vehicle import load_vehicle
+    from uvd.io.vehicle import load_vehicle
 
     cycles = int(getattr(args, "cycles", 20000))
     coupled = load_vehicle("jhu-rov-coupled")

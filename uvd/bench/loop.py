@@ -59,7 +59,7 @@ def _cycle_pdc() -> Callable[[int, float], None]:
     from uvd.control.pdc import PDGains, PDState, pdc_step
     from uvd.control.trajectory import reftraj1
     from uvd.estimation.navigation import NavConfig
-    from uvd.model.vehicle import load_vehicle
+    from uvd.io.vehicle import load_vehicle
 
     vehicle = load_vehicle("jhu-rov")
     traj = reftraj1()
@@ -109,7 +109,7 @@ def ambc_aid_config():
     from uvd.control.trajectory import reftraj1
     from uvd.estimation.aid import aid6_estimator
     from uvd.estimation.navigation import NavConfig
-    from uvd.model.vehicle import load_vehicle
+    from uvd.io.vehicle import load_vehicle
 
     vehicle = load_vehicle("jhu-rov-coupled")
     alloc = Allocator.from_vehicle(vehicle)

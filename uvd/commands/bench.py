@@ -1,13 +1,14 @@
-"""``uvd bench NAME --json OUT [--report FILE]``: print figures, write them, optionally append."""
+"""``uvd bench NAME [--json OUT] [--history FILE]``: print figures, write them, optionally record
+them in the benchmark history (``make bench``: ``docs/bench/history.jsonl``, rendered as
+``docs/BENCHMARKS.md`` by :mod:`uvd.bench.page`)."""
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
-import platform
 from pathlib import Path
 
 from uvd import bench as benches
+from uvd.bench.page import append_history, current_commit, new_record
 from uvd.jsonio import write_json
 
 
@@ -17,9 +18,10 @@ def register(sub) -> None:
     for name, b in sorted(benches.registry().items()):
         bp = bsub.add_parser(name, help=b.summary, description=b.summary)
         bp.add_argument("--json", type=Path, metavar="OUT", help="write the figures to this file")
-        bp.add_argument("--report", type=Path, metavar="MD",
-                        help="append the figures to this Markdown file "
-                             "(make bench: docs/BENCHMARKS.md)")
+        bp.add_argument("--history", type=Path, metavar="JSONL",
+                        help="append the figures as one record to this benchmark history "
+                             "(make bench: docs/bench/history.jsonl; python -m uvd.bench.page "
+                             "renders docs/BENCHMARKS.md from it)")
         if b.add_arguments:
             b.add_arguments(bp)
         bp.set_defaults(handler=_run, bench_obj=b)
@@ -33,19 +35,11 @@ def _usage(args) -> int:
 
 def _run(args) -> int:
     b = args.bench_obj
-    figures = b.run(args)
-    figures.setdefault("bench", b.name)
-    figures.setdefault("machine", {"python": platform.python_version(),
-                                   "processor": platform.machine(),
-                                   "cpus": __import__("os").cpu_count()})
-    text = json.dumps(figures, indent=2, default=float)
-    print(text)
+    figures = benches.run(b, args)
+    print(json.dumps(figures, indent=2, default=float))
     if args.json:
         write_json(args.json, figures)
-    if args.report:
-        args.report.parent.mkdir(parents=True, exist_ok=True)
-        stamp = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
-        with args.report.open("a") as fh:
-            fh.write(f"\n## `uvd bench {b.name}` — {stamp}\n\n{b.summary}\n\n"
-                     f"```json\n{text}\n```\n")
+    if args.history:
+        append_history(args.history, new_record(b.name, b.summary, figures,
+                                                commit=current_commit()))
     return 0

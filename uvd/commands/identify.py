@@ -131,13 +131,13 @@ def _parse_gains(text):
 def _run(args) -> int:
     from uvd.estimation.aid import INITP_6DOF, aid6_params
     from uvd.estimation.ls import DiffFilter, ls_identify
-    from uvd.estimation.runlog import RunLog
+    from uvd.io.params import params_from_toml, save_params
+    from uvd.io.runlog import load_runlog
     from uvd.jsonio import write_json
-    from uvd.model.params import params_from_toml, save_params
 
     if not args.out.parent.is_dir():  # before minutes of identification, not after
         raise ConfigError(f"--out {args.out}: cannot write: no folder {args.out.parent}")
-    run = RunLog.load(args.log)
+    run = load_runlog(args.log)
     if run.stretch_note():
         print(f"{args.log}: {run.stretch_note()}")
     summary: dict = {"log": str(args.log), "method": args.method, "samples": len(run.t),

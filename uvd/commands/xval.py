@@ -27,15 +27,16 @@ def register(sub) -> None:
 
 def _run(args) -> int:
     from uvd.errors import ConfigError
-    from uvd.estimation.runlog import RunLog
-    from uvd.estimation.xval import STATES_6DOF, cross_validate, format_mae_table, write_figures
+    from uvd.estimation.xval import STATES_6DOF, cross_validate, format_mae_table
+    from uvd.io.figures import write_xval_figures
+    from uvd.io.params import params_from_toml
+    from uvd.io.runlog import load_runlog
     from uvd.jsonio import write_json
-    from uvd.model.params import params_from_toml
 
     if args.substeps < 1:
         raise ConfigError(f"--substeps must be >= 1, got {args.substeps}")
     params = params_from_toml(args.params)
-    run = RunLog.load(args.log)
+    run = load_runlog(args.log)
     if run.stretch_note():
         print(f"{args.log}: {run.stretch_note()}")
     res = cross_validate(params, run, substeps=args.substeps)
@@ -46,7 +47,7 @@ def _run(args) -> int:
     if res.diverged_at_s is not None:
         print(f"the simulation diverged at t = {res.diverged_at_s:.1f} s")
     if args.plots:
-        files = write_figures(args.plots, run, {name: (res.R_sim, res.v_sim)}, STATES_6DOF)
+        files = write_xval_figures(args.plots, run, {name: (res.R_sim, res.v_sim)}, STATES_6DOF)
         print(f"wrote {len(files)} figure file(s) into {args.plots}")
     if args.json:
         write_json(args.json, {"params": str(args.params), "log": str(args.log),

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numba
 import numpy as np
@@ -40,15 +39,16 @@ from uvd.model.integrate import _rkmk4
 from uvd.model.params import RotParams, UVParams
 
 __all__ = ["STATES_6DOF", "STATES_ROT", "XvalResult", "embed_rotational", "simulate_run",
-           "states_of", "mae", "cross_validate", "format_mae_table", "write_figures"]
+           "states_of", "mae", "cross_validate", "format_mae_table", "STATE_LABELS"]
 
 STATES_6DOF = ("roll_deg", "pitch_deg", "u_mps", "v_mps", "w_mps", "p_degps", "q_degps",
                "r_degps")
 STATES_ROT = ("roll_deg", "pitch_deg", "p_degps", "q_degps", "r_degps")
-_LABELS = {"roll_deg": ("Roll", "deg"), "pitch_deg": ("Pitch", "deg"),
-           "u_mps": ("BodVelX", "m/s"), "v_mps": ("BodVelY", "m/s"), "w_mps": ("BodVelZ", "m/s"),
-           "p_degps": ("AngVelX", "deg/s"), "q_degps": ("AngVelY", "deg/s"),
-           "r_degps": ("AngVelZ", "deg/s")}
+#: per state key: (label of the thesis figures, unit)
+STATE_LABELS = {"roll_deg": ("Roll", "deg"), "pitch_deg": ("Pitch", "deg"),
+                "u_mps": ("BodVelX", "m/s"), "v_mps": ("BodVelY", "m/s"),
+                "w_mps": ("BodVelZ", "m/s"), "p_degps": ("AngVelX", "deg/s"),
+                "q_degps": ("AngVelY", "deg/s"), "r_degps": ("AngVelZ", "deg/s")}
 V_LIMIT = 100.0
 
 
@@ -195,7 +195,7 @@ def format_mae_table(rows, states=STATES_6DOF, title: str = "") -> str:
 
     ``rows`` is an iterable of (model name, experiment name, {state: MAE}).
     """
-    head = ["UV Model", "Exp"] + [f"{_LABELS[s][0]} ({_LABELS[s][1]})" for s in states]
+    head = ["UV Model", "Exp"] + [f"{STATE_LABELS[s][0]} ({STATE_LABELS[s][1]})" for s in states]
     widths = [max(10, len(h)) for h in head]
     lines = [title] if title else []
     lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
@@ -205,63 +205,9 @@ def format_mae_table(rows, states=STATES_6DOF, title: str = "") -> str:
             x = vals.get(s, math.nan)
             if not math.isfinite(x):
                 cells.append("diverged" if x == math.inf else "-")
-            elif _LABELS[s][1] == "m/s":
+            elif STATE_LABELS[s][1] == "m/s":
                 cells.append(f"{x:.4f}")
             else:
                 cells.append(f"{x:.3g}" if x >= 1 else f"{x:.3f}")
         lines.append("  ".join(c.rjust(w) for c, w in zip(cells, widths, strict=True)))
     return "\n".join(lines)
-
-
-def write_figures(directory: Path, run, sims: dict[str, tuple[np.ndarray, np.ndarray]],
-                  states=STATES_6DOF, *, window_s: tuple[float, float] = (0.0, 180.0),
-                  prefix: str = "") -> list[Path]:
-    """Figures in the style of Figs. 4.3–4.7 (a 3-minute window): per state, measured vs each
-    model (top) and each model's error with its MAE (bottom).
-
-    Uses matplotlib when it is installed (PNG); otherwise writes the plotted series as CSV so
-    any tool can draw them. Returns the files written.
-    """
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    t = run.t - run.t[0]
-    sel = (t >= window_s[0]) & (t <= window_s[1])
-    meas = states_of(run.R, run.v)
-    simst = {name: states_of(R, v) for name, (R, v) in sims.items()}
-    maes = {name: mae(meas, s, states) for name, s in simst.items()}
-    written = []
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        plt = None
-    for s in states:
-        label, unit = _LABELS[s]
-        stem = f"{prefix}{s}"
-        if plt is None:
-            path = directory / f"{stem}.csv"
-            cols = [t[sel], meas[s][sel]] + [simst[m][s][sel] for m in sims]
-            header = "t_s,measured," + ",".join(sims)
-            np.savetxt(path, np.column_stack(cols), delimiter=",", header=header, comments="")
-            written.append(path)
-            continue
-        fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
-        ax1.plot(t[sel] / 60, meas[s][sel], "k-", label="MEAS")
-        for m in sims:
-            ax1.plot(t[sel] / 60, simst[m][s][sel], label=m)
-            ax2.plot(t[sel] / 60, simst[m][s][sel] - meas[s][sel], label=m)
-        ax1.set_ylabel(f"{label} ({unit})")
-        ax1.set_title(f"{run.name} - simulated vs measured {label}")
-        ax1.legend(loc="upper right", fontsize=7)
-        ax2.set_ylabel(f"{label} error ({unit})")
-        ax2.set_xlabel("Time (min)")
-        ax2.set_title("Mean Absolute Error: " + ", ".join(
-            f"{m} {maes[m][s]:.3g}" for m in sims), fontsize=8)
-        fig.tight_layout()
-        path = directory / f"{stem}.png"
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        written.append(path)
-    return written

@@ -23,7 +23,6 @@ Choices the thesis leaves open (documented in ``docs/experiments.md``):
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 
@@ -57,9 +56,10 @@ from uvd.experiments._control_runner import (
     tracking_stats,
     windows,
 )
+from uvd.io.figures import write_series
+from uvd.io.vehicle import load_vehicle
 from uvd.model.dynamics import UVModel
 from uvd.model.integrate import simulate
-from uvd.model.vehicle import load_vehicle
 
 KP = 300.0
 KD = 100.0          # §5.3.2, §5.3.4, step 1 of §5.3.5, Fig. 5.4's caption
@@ -139,24 +139,7 @@ def _write_csv(opts: ExperimentOptions, name: str, header: list[str], cols: np.n
     """--plots DIR: plot-ready CSV (and a PNG when matplotlib is installed)."""
     if opts.plots is None:
         return
-    d = Path(opts.plots)
-    d.mkdir(parents=True, exist_ok=True)
-    np.savetxt(d / f"{name}.csv", cols, delimiter=",", header=",".join(header), comments="")
-    try:
-        import matplotlib  # noqa: PLC0415 (optional)
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt  # noqa: PLC0415
-    except ImportError:
-        return
-    fig, ax = plt.subplots(figsize=(8, 4))
-    for j, h in enumerate(header[1:], start=1):
-        ax.plot(cols[:, 0], cols[:, j], label=h)
-    ax.set_xlabel(header[0])
-    ax.legend(fontsize="small")
-    fig.tight_layout()
-    fig.savefig(d / f"{name}.png", dpi=120)
-    plt.close(fig)
+    write_series(opts.plots, name, header, cols)
 
 
 def _pdc_run(vehicle, traj, seconds: float, seed: int, progress=None,

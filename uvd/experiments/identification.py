@@ -62,12 +62,13 @@ from uvd.estimation.xval import (
     STATES_ROT,
     cross_validate,
     format_mae_table,
-    write_figures,
 )
 from uvd.experiments import Experiment, ExperimentOptions
 from uvd.experiments.lockstep import Lockstep, LockstepConfig
+from uvd.io.figures import write_xval_figures
+from uvd.io.runlog import save_runlog
+from uvd.io.vehicle import load_vehicle
 from uvd.model.params import ROTATIONAL_INDEX, RotParams, UVParams
-from uvd.model.vehicle import load_vehicle
 
 VEHICLE = "jhu-rov-coupled"
 _DEG = math.pi / 180.0
@@ -658,10 +659,10 @@ def _plots(directory, prefix, runs, sims, models, states, run_prefix: str = "") 
     ``directory/<run_prefix><dataset>-run.npz`` (for ``uvd identify`` / ``uvd xval``)."""
     directory = Path(directory)
     for d, run in runs.items():
-        write_figures(directory / f"{prefix}-{d.lower()}", run,
+        write_xval_figures(directory / f"{prefix}-{d.lower()}", run,
                       {m: sims[(m, d)] for m in models if sims[(m, d)] is not None}, states,
                       prefix="")
-        run.save(directory / f"{run_prefix}{d.lower()}-run.npz")
+        save_runlog(run, directory / f"{run_prefix}{d.lower()}-run.npz")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,26 +1,18 @@
 """A vehicle description: the UV parameters of (2.44) plus its thrusters.
 
-Built-in vehicles are data files under ``sim_bridge/vehicles/`` (``jhu-rov``,
-``jhu-rov-coupled``); any other TOML file of the same form can be given by path.
+Vehicle files (the built-in ``uvd/vehicles/*.toml`` or any other) are read by
+:func:`uvd.io.vehicle.load_vehicle`.
 """
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from functools import cached_property
-from importlib import resources
-from pathlib import Path
 
 import numpy as np
 
-from uvd.errors import ConfigError, ParameterError
-from uvd.model.params import UVParams, params_from_mapping
+from uvd.model.params import UVParams
 from uvd.model.thrusters import ThrusterSpec, thruster_matrix
-
-_THRUSTER_KEYS = {"name", "position_m", "direction", "k_thrust", "max_thrust_n",
-                  "time_constant_s", "stiction_n"}
-_TOP_KEYS = {"name", "description", "parameters", "thruster_defaults", "thrusters"}
 
 
 @dataclass(frozen=True)
@@ -46,61 +38,3 @@ class Vehicle:
     @property
     def max_thrust_n(self) -> np.ndarray:
         return np.array([t.max_thrust_n for t in self.thrusters])
-
-
-def builtin_vehicles() -> list[str]:
-    root = resources.files("sim_bridge") / "vehicles"
-    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
-
-
-def vehicle_path(name_or_path: str | Path) -> Path:
-    p = Path(name_or_path)
-    if p.suffix == ".toml" and p.exists():
-        return p
-    root = resources.files("sim_bridge") / "vehicles" / f"{name_or_path}.toml"
-    if root.is_file():
-        return Path(str(root))
-    raise ConfigError(f"unknown vehicle {str(name_or_path)!r}: not a file, and not one of the "
-                      f"built-in vehicles {builtin_vehicles()}")
-
-
-def load_vehicle(name_or_path: str | Path) -> Vehicle:
-    """Load a built-in vehicle by name or a vehicle TOML file by path; validates it."""
-    path = vehicle_path(name_or_path)
-    with path.open("rb") as fh:
-        try:
-            doc = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{path}: {exc}") from exc
-    unknown = set(doc) - _TOP_KEYS
-    if unknown:
-        raise ConfigError(f"{path}: unknown key(s) {sorted(unknown)}")
-    if "parameters" not in doc:
-        raise ConfigError(f"{path}: missing [parameters]")
-    params = params_from_mapping(doc["parameters"], where=f"{path}: [parameters]")
-    try:
-        params.validate(where=f"{path}: [parameters]")
-    except ParameterError as exc:
-        raise ConfigError(str(exc)) from exc
-    defaults = dict(doc.get("thruster_defaults", {}))
-    bad = set(defaults) - _THRUSTER_KEYS
-    if bad:
-        raise ConfigError(f"{path}: [thruster_defaults]: unknown key(s) {sorted(bad)}")
-    specs = []
-    for i, t in enumerate(doc.get("thrusters", [])):
-        bad = set(t) - _THRUSTER_KEYS
-        if bad:
-            raise ConfigError(f"{path}: thrusters[{i}]: unknown key(s) {sorted(bad)}")
-        try:
-            specs.append(ThrusterSpec(**{**defaults, **t}))
-        except (TypeError, ParameterError) as exc:
-            raise ConfigError(f"{path}: thrusters[{i}]: {exc}") from exc
-    if len(specs) < 6:
-        raise ConfigError(
-            f"{path}: a fully actuated vehicle needs >= 6 thrusters, got {len(specs)}")
-    v = Vehicle(name=doc.get("name", path.stem), description=doc.get("description", ""),
-                params=params, thrusters=tuple(specs))
-    rank = np.linalg.matrix_rank(v.B)
-    if rank < 6:
-        raise ConfigError(f"{path}: thruster matrix has rank {rank} < 6 (not fully actuated)")
-    return v

@@ -123,6 +123,6 @@ def aid_theta0(cfg: Config) -> np.ndarray | None:
     log.info("AID starts from %s", path or "INITP (§4.6, Tables 4.6-4.7)")
     if path is None:
         return None
-    from uvd.model.params import params_from_toml
+    from uvd.io.params import params_from_toml
     return params_from_toml(path).theta
 

@@ -23,9 +23,9 @@ Sections and where their dataclass lives:
 ``[sensors.*]``      :class:`InsSection`, :class:`DvlSection`, :class:`DepthSection`; the depth
                      conversion is the driver's own :class:`drivers.digiquartz.DepthConverter`;
                      ``[sensors.leak]`` is :class:`uvd.runtime.leak.LeakSection`
-``[can]``            the CAN driver's :class:`drivers.can.config.CanConfig` (validated by its own
-                     ``from_mapping``; ``[can]`` bus keys, ``[can.amplifiers]``, ``[can.depth]``,
-                     ``[can.log]``)
+``[can]``            :class:`CanSection` (bus keys; ``[can.amplifiers]``, ``[can.depth]``,
+                     ``[can.log]``), converted into the CAN driver's plain
+                     :class:`drivers.can.config.CanConfig`
 ``[telemetry]``      :class:`TelemetrySection`
 ``[daemon]``         :class:`DaemonSection` — start/stop timeouts, the shutdown sequence
 ===================  =========================================================================
@@ -34,14 +34,15 @@ Sections and where their dataclass lives:
 it in a :class:`Config` (or nested section) field with :func:`~uvd.runtime.schema.section`.
 Fields declared with :func:`~uvd.runtime.schema.setting` carry unit, range, doc and the
 reload flag; plain fields are validated by type and documented from the class's numpydoc
-``Attributes``/``Parameters``. A class with its own ``from_mapping(mapping, where)`` classmethod
-(like ``CanConfig``) validates itself; its :class:`~uvd.errors.ConfigError` messages are folded
-into the same report, and :data:`uvd.runtime.schema.TOML_LAYOUTS` says how its tables are laid
-out for the documentation.
+``Attributes``/``Parameters``. A plain dataclass of a driver (drivers never import uvd) can
+instead be declared here by a section of settings that converts into it
+(:data:`uvd.runtime.schema.DECLARED_BY`; how ``[can]`` becomes ``CanConfig``).
 """
 
 from __future__ import annotations
 
+import ipaddress
+import math
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -49,6 +50,11 @@ from pathlib import Path
 from typing import Any, Literal
 
 from drivers.can.config import (
+    DEFAULT_AMPLIFIER_EDS,
+    DEFAULT_PRESSURE_EDS,
+    DEFAULT_UDP_GROUP,
+    DEFAULT_UDP_PORT,
+    LOG_SUFFIXES,
     AmplifierConfig,
     CanBusConfig,
     CanConfig,
@@ -66,7 +72,8 @@ from uvd.runtime.schema import section, setting
 __all__ = ["Config", "ConfigValidationError", "load_config", "parse_config",
            "render_config_doc", "DEFAULT_CONFIG", "VehicleSection", "ControlSection",
            "InsSection", "DvlSection", "DepthSection", "SensorsSection", "TelemetrySection",
-           "JsonlSection", "DaemonSection", "NavigationSection", "EstimationSection"]
+           "JsonlSection", "DaemonSection", "NavigationSection", "EstimationSection",
+           "CanSection", "CanAmplifiersSection", "CanDepthSection", "CanLogSection"]
 
 #: The embedded default: the simulated vehicle, everything local (``config/sim.toml``).
 DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim.toml"
@@ -104,7 +111,7 @@ class VehicleSection:
                                        "vehicle TOML file, relative to this config file")
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
-        from uvd.model.vehicle import builtin_vehicles
+        from uvd.io.vehicle import builtin_vehicles
         if self.name in builtin_vehicles():
             return []
         p = Path(self.name)
@@ -245,7 +252,7 @@ class EstimationSection:
 def _check_start_params(key: str, p: Path) -> list[tuple[str, str]]:
     """A parameters file AID may start from: readable, M positive definite."""
     from uvd.errors import ParameterError
-    from uvd.model.params import params_from_toml
+    from uvd.io.params import params_from_toml
     how = " (resume = true starts AID from it; move it away to start afresh)" \
         if key == "save_path" else ""
     try:
@@ -400,13 +407,6 @@ class Config:
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
         out: list[tuple[str, str]] = []
-        try:
-            from can.interfaces import VALID_INTERFACES
-        except ImportError:  # pragma: no cover - python-can is a dependency
-            VALID_INTERFACES = ()
-        if VALID_INTERFACES and self.can.bus.interface not in VALID_INTERFACES:
-            out.append(("can.interface", f"{self.can.bus.interface!r} is not a python-can "
-                                         f"interface ({', '.join(sorted(VALID_INTERFACES))})"))
         helper = self.daemon.helper_thread_priority
         if helper > self.loop.sched_fifo_priority:
             out.append(("daemon.helper_thread_priority",
@@ -429,7 +429,7 @@ class Config:
 
     def vehicle_ref(self, base_dir: Path | None = None) -> str:
         """Built-in vehicle name, or the vehicle file's path resolved against the config."""
-        from uvd.model.vehicle import builtin_vehicles
+        from uvd.io.vehicle import builtin_vehicles
         name = self.vehicle.name
         if name in builtin_vehicles():
             return name
@@ -441,12 +441,218 @@ class Config:
 
     def load_vehicle(self, base_dir: Path | None = None):
         """The :class:`uvd.model.vehicle.Vehicle` of ``[vehicle]``."""
-        from uvd.model.vehicle import load_vehicle
+        from uvd.io.vehicle import load_vehicle
         return load_vehicle(self.vehicle_ref(base_dir))
 
 
-schema.TOML_LAYOUTS[CanConfig] = (("", CanBusConfig), ("amplifiers", AmplifierConfig),
-                                  ("depth", CanDepthConfig), ("log", CanLogConfig))
+# ------------------------------------------------------------------------------------ CAN
+# The CAN driver keeps plain dataclasses (drivers/can/config.py; drivers never import uvd):
+# the [can] tables are declared here, validated with everything else and converted.
+
+def _finite(obj, keys) -> list[tuple[str, str]]:
+    return [(k, f"{getattr(obj, k)!r} is not a finite number") for k in keys
+            if not math.isfinite(getattr(obj, k))]
+
+
+@dataclass(frozen=True)
+class CanAmplifiersSection:
+    """The thruster amplifiers (``[can.amplifiers]``): one CiA 402 node per thruster."""
+
+    node_ids: tuple[int, ...] = setting(
+        (1, 2, 3, 4, 5, 6), min=1, max=127,
+        doc="CANopen node id of each thruster's amplifier, in the vehicle's thruster order")
+    eds: Path = setting(DEFAULT_AMPLIFIER_EDS, doc="object dictionary (EDS/DCF) of the "
+                                                   "amplifier; the PDO mapping is taken from it")
+    master_node_id: int = setting(127, min=1, max=127, doc="node id under which the daemon "
+                                  "produces its heartbeat (0x700 + id); no amplifier's")
+    mode: Literal["cst", "pt"] = setting(
+        "cst", doc="cst: cyclic synchronous torque (0x6060 = 10); pt: profile torque (4)")
+    heartbeat_period_ms: int = setting(100, unit="ms", min=0, max=10_000,
+                                       doc="the daemon's heartbeat period, sent from the "
+                                           "control cycle (a hung daemon stops it)")
+    node_heartbeat_ms: int = setting(100, unit="ms", min=0, max=10_000,
+                                     doc="heartbeat period written to each amplifier (0x1017)")
+    heartbeat_timeout_ms: int = setting(350, unit="ms", min=1, max=60_000,
+                                        doc="an amplifier whose heartbeat is older is "
+                                            "reported heartbeat_lost")
+    node_consumer_ms: int = setting(500, unit="ms", min=0, max=60_000,
+                                    doc="heartbeat consumer time for the daemon's heartbeat "
+                                        "written to each amplifier (0x1016:01); 0 = off; "
+                                        "longer than heartbeat_period_ms")
+    command_timeout_ms: int = setting(200, unit="ms", min=10, max=10_000,
+                                      doc="RPDO deadline written to each amplifier (0x1400:05): "
+                                          "without a command for this long it zeroes its "
+                                          "output, sends EMCY 0x8250 and faults")
+    max_failed_cycles: int = setting(5, min=1, max=1000,
+                                     doc="consecutive cycles without feedback (per node) or "
+                                         "with a failed send (per group) before a fault")
+    thrust_per_permille_n: tuple[float, ...] | None = setting(
+        None, unit="N", gt=0, doc="steady-state calibration, thrust per 1/1000 of rated "
+                                  "torque, one per node id; absent: max_thrust_n / 1000 of "
+                                  "each thruster")
+    max_torque_permille: int = setting(1000, min=1, max=32767,
+                                       doc="largest target torque ever sent (also 0x6072)")
+    velocity_rad_s_per_count: float = setting(0.001, unit="rad/s", gt=0,
+                                              doc="unit of the velocity actual value (0x606C)")
+    configure: bool = setting(True, doc="write the objects above to every amplifier by SDO "
+                                        "at start")
+    sdo_timeout_s: float = setting(0.3, unit="s", min=0.01, max=5,
+                                   doc="time allowed for one SDO response")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        out = []
+        if len(self.node_ids) == 0:
+            out.append(("node_ids", "needs at least one node id"))
+        if len(set(self.node_ids)) != len(self.node_ids):
+            out.append(("node_ids", f"{list(self.node_ids)}: node ids must be distinct"))
+        if self.master_node_id in self.node_ids:
+            out.append(("master_node_id", f"{self.master_node_id} is an amplifier's node id"))
+        if self.node_consumer_ms and not self.heartbeat_period_ms:
+            out.append(("node_consumer_ms", "the amplifiers would consume a heartbeat the "
+                                            "daemon does not produce (heartbeat_period_ms = 0)"))
+        elif self.node_consumer_ms and self.node_consumer_ms <= self.heartbeat_period_ms:
+            out.append(("node_consumer_ms", f"{self.node_consumer_ms} must be longer than "
+                                            f"heartbeat_period_ms {self.heartbeat_period_ms} "
+                                            "(or 0)"))
+        t = self.thrust_per_permille_n
+        if t is not None and len(t) != len(self.node_ids):
+            out.append(("thrust_per_permille_n", f"{len(t)} values for {len(self.node_ids)} "
+                                                 "node ids (one per node id)"))
+        if t is not None and not all(math.isfinite(x) for x in t):
+            out.append(("thrust_per_permille_n", f"{list(t)}: not all finite"))
+        return out + _finite(self, ("velocity_rad_s_per_count",))
+
+    def convert(self) -> AmplifierConfig:
+        return AmplifierConfig(**{**vars(self), "eds": self.eds.expanduser()})
+
+
+@dataclass(frozen=True)
+class CanDepthSection:
+    """A CiA 404 pressure transmitter as a depth source (``[can.depth]``): d = (p − p_atm)/(ρg).
+    """
+
+    enabled: bool = setting(False, doc="use the transmitter")
+    node_id: int = setting(32, min=1, max=127, doc="its CANopen node id (no amplifier's, not "
+                                                   "the daemon's)")
+    eds: Path = setting(DEFAULT_PRESSURE_EDS, doc="its object dictionary (EDS/DCF)")
+    pressure_pa_per_count: float = setting(0.1, unit="Pa", gt=0, doc="unit of the AI value")
+    atmospheric_pa: float = setting(101_325.0, unit="Pa", min=0, max=2e5,
+                                    doc="pressure at the surface")
+    density_kg_m3: float = setting(998.0, unit="kg/m³", gt=0, doc="water density ρ")
+    gravity_m_s2: float = setting(9.80665, unit="m/s²", gt=0, doc="gravity g")
+    max_age_ms: int = setting(500, unit="ms", min=1, doc="a sample older than this is stale")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        return _finite(self, ("pressure_pa_per_count", "density_kg_m3", "gravity_m_s2"))
+
+    def convert(self) -> CanDepthConfig:
+        return CanDepthConfig(**{**vars(self), "eds": self.eds.expanduser()})
+
+
+@dataclass(frozen=True)
+class CanLogSection:
+    """Recording of every frame sent and received (``[can.log]``, python-can writers)."""
+
+    path: Path | None = setting(None, doc="the file; its suffix picks the format: .log "
+                                          "(candump), .asc (Vector ASCII), .blf (Vector "
+                                          "binary); absent: nothing recorded")
+    max_bytes: int = setting(0, unit="B", min=0, doc="rotate the file past this size; 0 = never")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        if self.path is not None and self.path.suffix.lower() not in LOG_SUFFIXES:
+            return [("path", f"{str(self.path)!r} must end in one of "
+                             f"{', '.join(LOG_SUFFIXES)}")]
+        return []
+
+    def convert(self) -> CanLogConfig:
+        return CanLogConfig(path=None if self.path is None else self.path.expanduser(),
+                            max_bytes=self.max_bytes)
+
+
+@dataclass(frozen=True)
+class CanSection:
+    """The CAN bus (``[can]``): how to open it and how to judge its health."""
+
+    interface: str = setting("socketcan", doc="python-can interface: socketcan, slcan, pcan, "
+                                              "virtual, udp_multicast, …")
+    channel: str = setting("can0", doc="its channel: can0, /dev/ttyACM0, PCAN_USBBUS1, any "
+                                       "name (virtual), a multicast group (udp_multicast)")
+    bitrate: int | None = setting(1_000_000, unit="bit/s", min=10_000, max=8_000_000,
+                                  doc="for interfaces that take one (not virtual, "
+                                      "udp_multicast, nor socketcan: set with ip link)")
+    port: int = setting(DEFAULT_UDP_PORT, min=1, max=65535, doc="UDP port of udp_multicast")
+    loopback_only: bool = setting(True, doc="udp_multicast: refuse a group whose packets could "
+                                            "leave this machine (anything but an "
+                                            "interface-local ff11:: IPv6 group); hop limit 0")
+    send_timeout_s: float = setting(0.0, unit="s", min=0, max=0.1,
+                                    doc="how long a send may wait for room in the transmit "
+                                        "queue; 0: a full queue drops the frame at once")
+    busoff_send_failures: int = setting(10, min=1, doc="consecutive failed sends after which "
+                                                       "the bus is taken as bus-off")
+    busoff_holdoff_s: float = setting(0.2, unit="s", min=0, doc="after bus-off, sends are "
+                                      "suppressed this long before the bus is probed again")
+    error_passive_frames: int = setting(32, min=1, doc="bus-error frames within one second "
+                                        "taken as error-passive when the interface reports no "
+                                        "error counters")
+    reopen_after_s: float = setting(1.0, unit="s", gt=0, doc="the bus is closed and opened "
+                                    "again when reception, or every send, has failed this long")
+    reopen_backoff_s: tuple[float, float] = setting(
+        (0.5, 10.0), unit="s", gt=0, doc="first and largest wait between reopen attempts "
+                                         "(doubling)")
+    options: dict[str, Any] = setting({}, doc="extra keyword arguments for can.Bus (e.g. "
+                                             "{serial_port = …})")
+    amplifiers: CanAmplifiersSection = section(CanAmplifiersSection)
+    depth: CanDepthSection = section(CanDepthSection)
+    log: CanLogSection = section(CanLogSection)
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        out = []
+        try:
+            from can.interfaces import VALID_INTERFACES
+        except ImportError:  # pragma: no cover - python-can is a dependency
+            VALID_INTERFACES = ()
+        if VALID_INTERFACES and self.interface not in VALID_INTERFACES:
+            out.append(("interface", f"{self.interface!r} is not a python-can interface "
+                                     f"({', '.join(sorted(VALID_INTERFACES))})"))
+        if not self.channel:
+            out.append(("channel", "must not be empty"))
+        first, largest = self.reopen_backoff_s
+        if first > largest:
+            out.append(("reopen_backoff_s", f"first {first:g} s is above largest {largest:g} s"))
+        if self.interface == "udp_multicast":
+            out += self._check_group()
+        amps = self.amplifiers
+        if self.depth.enabled and self.depth.node_id in amps.node_ids + (amps.master_node_id,):
+            out.append(("depth.node_id", f"{self.depth.node_id} is already used by an "
+                                         "amplifier or the daemon"))
+        return out
+
+    def _check_group(self) -> list[tuple[str, str]]:
+        try:
+            group = ipaddress.ip_address(self.channel)
+        except ValueError:
+            return [("channel", f"udp_multicast needs a multicast IP group, got "
+                                f"{self.channel!r}")]
+        if not group.is_multicast:
+            return [("channel", f"{self.channel!r} is not a multicast group")]
+        scope = int(group) >> 112 & 0xF if group.version == 6 else None
+        if self.loopback_only and scope != 1:
+            return [("channel", f"{self.channel!r} could leave this machine; with "
+                                "loopback_only = true use an interface-local IPv6 group "
+                                f"(ff11::/16, e.g. {DEFAULT_UDP_GROUP!r}) or set "
+                                "loopback_only = false deliberately")]
+        return []
+
+    def convert(self) -> CanConfig:
+        keys = ("interface", "channel", "bitrate", "port", "loopback_only", "send_timeout_s",
+                "busoff_send_failures", "busoff_holdoff_s", "error_passive_frames",
+                "reopen_after_s", "reopen_backoff_s", "options")
+        return CanConfig(bus=CanBusConfig(**{k: getattr(self, k) for k in keys}),
+                         amplifiers=self.amplifiers.convert(), depth=self.depth.convert(),
+                         log=self.log.convert())
+
+
+schema.DECLARED_BY[CanConfig] = CanSection
 
 
 # ------------------------------------------------------------------------------ loading

@@ -18,13 +18,15 @@ type and default), which is how a driver's own configuration dataclass plugs in 
 Cross-field rules go in an optional method ``_check(self, ctx) -> list[tuple[str, str]]``
 returning ``(relative key, reason)`` pairs.
 
+A lower layer's plain dataclass (drivers never import uvd) can be declared by a section of
+this schema instead: :data:`DECLARED_BY` maps it to a dataclass of :func:`setting` fields,
+which is built, validated and documented in its place and whose ``convert()`` returns the
+plain dataclass.
+
 Supported field types: ``bool``, ``int``, ``float`` (an integer is accepted), ``str``,
 ``pathlib.Path``, ``typing.Literal[...]`` (choices), ``X | None`` (absent means ``None``; TOML
 has no null), ``tuple[T, ...]`` and fixed ``tuple[T, T]`` of the scalar types, mappings (a
-free-form table), and nested dataclasses. A dataclass with a ``from_mapping(mapping, where)``
-classmethod validates itself; its ``ConfigError``/``ValueError`` messages of the form
-``[table] key: reason`` are folded into the report under ``table.key``, and
-:data:`TOML_LAYOUTS` says how its tables are laid out for :func:`describe`.
+free-form table), and nested dataclasses.
 """
 
 from __future__ import annotations
@@ -40,16 +42,14 @@ from pathlib import Path
 from typing import Any, Literal, get_args, get_origin
 
 __all__ = ["Meta", "setting", "section", "build", "describe", "KeyDoc", "BuildContext",
-           "reloadable_changes", "as_dict", "TOML_LAYOUTS"]
+           "reloadable_changes", "as_dict", "DECLARED_BY"]
 
 _META = "uvd.schema"
 
-#: How a self-validating section (one with ``from_mapping``) lays its dataclasses out in TOML,
-#: for the documentation: ``cls -> ((sub-table or "" for the table itself, dataclass), …)``.
-TOML_LAYOUTS: dict[type, tuple[tuple[str, type], ...]] = {}
-
-_HOOK_MSG = re.compile(r"^\[(?P<table>[\w.\-]+)\]:?\s*(?:(?P<key>[\w\-]+):\s*)?(?P<reason>.*)$",
-                       re.S)
+#: ``plain dataclass -> the schema section declaring it``: where a configuration field has the
+#: plain type, the section is built, validated and documented instead, and its ``convert()``
+#: gives the value (the CAN driver's ``CanConfig`` is declared in uvd.runtime.config).
+DECLARED_BY: dict[type, type] = {}
 
 
 @dataclass(frozen=True)
@@ -92,6 +92,8 @@ def setting(default: Any = MISSING, *, unit: str = "", doc: str = "", min: float
                         length=length, reload=reload)}
     if isinstance(default, list):
         default = tuple(default)
+    if isinstance(default, dict):  # a free-form table: each instance gets its own copy
+        return field(default_factory=lambda d=dict(default): dict(d), metadata=meta)
     return field(default=default, metadata=meta)
 
 
@@ -239,8 +241,10 @@ def _value(value: Any, tp: Any, meta: Meta, key: str, errors: list, ctx: BuildCo
         if not isinstance(value, Mapping):
             errors.append((key, f"expected a table [{key}], got {_toml_type(value)} {value!r}"))
             return MISSING
-        if hasattr(tp, "from_mapping"):
-            return _from_mapping(tp, value, key, errors)
+        declared = DECLARED_BY.get(tp)
+        if declared is not None:
+            sec = _build(declared, value, key, errors, ctx)
+            return MISSING if sec is MISSING else sec.convert()
         return _build(tp, value, key, errors, ctx)
     if _is_mapping(tp):
         if not isinstance(value, Mapping):
@@ -327,22 +331,6 @@ def _build(cls: type, data: Mapping[str, Any], prefix: str, errors: list,
         if len(errors) != n_err:
             return MISSING
     return obj
-
-
-def _from_mapping(cls: type, data: Mapping[str, Any], key: str, errors: list) -> Any:
-    """A section that validates itself (``cls.from_mapping(mapping, where)``)."""
-    from uvd.errors import ConfigError
-    try:
-        return cls.from_mapping(dict(data), f"[{key}]")
-    except (ConfigError, ValueError, TypeError) as exc:
-        msg = str(exc)
-        m = _HOOK_MSG.match(msg)
-        if m:
-            k = m.group("table") + (f".{m.group('key')}" if m.group("key") else "")
-            errors.append((k, m.group("reason")))
-        else:
-            errors.append((key, msg))
-        return MISSING
 
 
 def build(cls: type, data: Mapping[str, Any], *, ctx: BuildContext | None = None,
@@ -445,13 +433,8 @@ def _fmt_default(f: dataclasses.Field, tp: Any) -> str:
 
 def describe(cls: type, prefix: str = "") -> list[tuple[str, str, list[KeyDoc]]]:
     """Every table of ``cls`` as ``(dotted table name, table doc, [KeyDoc, …])``, depth first."""
-    layout = TOML_LAYOUTS.get(cls)
-    if layout is not None:
-        out: list[tuple[str, str, list[KeyDoc]]] = []
-        for sub, sub_cls in layout:
-            name = f"{prefix}.{sub}" if sub and prefix else (sub or prefix)
-            out.extend(describe(sub_cls, name))
-        return out
+    if cls in DECLARED_BY:
+        return describe(DECLARED_BY[cls], prefix)
     hints = _hints(cls)
     own: list[KeyDoc] = []
     nested: list[tuple[str, str, list[KeyDoc]]] = []

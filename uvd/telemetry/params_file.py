@@ -4,7 +4,7 @@ It takes the loop's ``"estimate"`` records (:meth:`uvd.runtime.daemon.Daemon.est
 and rewrites ``path`` with the newest θ̂ at most every ``every_s`` seconds and once more when
 closed, so a run that identified the vehicle for an hour leaves its result behind — also
 after a crash, up to ``every_s`` old. Each write is atomic
-(:func:`uvd.model.params.save_params`); the file loads wherever parameters are taken
+(:func:`uvd.io.params.save_params`); the file loads wherever parameters are taken
 (``[estimation] initial_params``, ``uvd xval --params``, ``uvd identify --init``).
 
 The encoding and the disk write run in the sink's own daemon thread: never in the loop.
@@ -71,7 +71,8 @@ class ParamsFileSink:
         self.path.parent.mkdir(parents=True, exist_ok=True)
 
     def _save(self, rec: Mapping[str, Any]) -> None:
-        from uvd.model.params import params_from_theta, save_params
+        from uvd.io.params import save_params
+        from uvd.model.params import params_from_theta
         rec = {**rec, "wall_time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         save_params(params_from_theta(np.asarray(rec["theta"], dtype=float)), self.path,
                     title=_title(rec))

@@ -1,0 +1,108 @@
+"""Parameter files: a ``[parameters]`` TOML table holding θ_UV (2.48) in the full form
+(M, D1…D6, g, b) or the decoupled form (m, d, g, b) of §5.3.1.
+
+:func:`params_to_toml` / :func:`save_params` write the full form (atomically);
+:func:`params_from_toml` reads either; :func:`params_from_mapping` builds the parameters from
+an already parsed table (the ``[parameters]`` of a vehicle file, :mod:`uvd.io.vehicle`).
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from uvd.errors import ParameterError
+from uvd.model.params import UVParams
+
+
+def params_to_toml(p: UVParams, *, title: str = "") -> str:
+    """TOML text of a parameter set, loadable by :func:`params_from_toml`."""
+
+    def row(xs) -> str:
+        return "[" + ", ".join(repr(float(x)) for x in xs) + "]"
+
+    def mat(A) -> str:
+        return "[\n" + "".join(f"  {row(r)},\n" for r in A) + "]"
+
+    lines = []
+    if title:
+        lines.append(f"# {title}")
+    lines.append("[parameters]")
+    lines.append(f"g = {float(p.g)!r}")
+    lines.append(f"b = {row(p.b)}")
+    lines.append(f"M = {mat(p.M)}")
+    for i, Di in enumerate(p.D, start=1):
+        lines.append(f"D{i} = {mat(Di)}")
+    return "\n".join(lines) + "\n"
+
+
+def params_from_mapping(table: dict, *, where: str = "parameters") -> UVParams:
+    """Build parameters from a TOML table in either the full form (M, D1…D6, g, b) or the
+    decoupled form (m, d, g, b) of §5.3.1. Unknown keys are an error."""
+    full = {"M", "D1", "D2", "D3", "D4", "D5", "D6", "g", "b"}
+    dec = {"m", "d", "g", "b"}
+    keys = set(table)
+    try:
+        if "M" in keys:
+            unknown = keys - full
+            if unknown:
+                raise ParameterError(f"{where}: unknown key(s) {sorted(unknown)}")
+            missing = full - keys
+            if missing:
+                raise ParameterError(f"{where}: missing key(s) {sorted(missing)}")
+            D = np.stack([np.asarray(table[f"D{i}"], dtype=float) for i in range(1, 7)])
+            return UVParams(M=np.asarray(table["M"], dtype=float), D=D, g=table["g"],
+                            b=table["b"])
+        unknown = keys - dec
+        if unknown:
+            raise ParameterError(f"{where}: unknown key(s) {sorted(unknown)}")
+        missing = dec - keys
+        if missing:
+            raise ParameterError(f"{where}: missing key(s) {sorted(missing)} "
+                                 "(give M, D1..D6, g, b or m, d, g, b)")
+        return UVParams.decoupled(table["m"], table["d"], table["g"], table["b"])
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, ParameterError):
+            raise
+        raise ParameterError(f"{where}: {exc}") from exc
+
+
+def params_from_toml(path: str | Path) -> UVParams:
+    """Load a ``[parameters]`` TOML (:func:`params_to_toml`'s layout or the decoupled form).
+
+    Raises :class:`~uvd.errors.ParameterError` naming the file: unreadable, not TOML, no
+    ``[parameters]`` table, a missing or unknown key, a wrong shape or a non-finite entry.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            doc = tomllib.load(fh)
+    except OSError as exc:
+        raise ParameterError(f"{path}: cannot read parameters: {exc.strerror or exc}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"{path}: not valid TOML: {exc}") from exc
+    if "parameters" not in doc:
+        raise ParameterError(f"{path}: no [parameters] table")
+    return params_from_mapping(doc["parameters"], where=f"{path}: [parameters]")
+
+
+def save_params(p: UVParams, path: str | Path, *, title: str = "") -> None:
+    """Write :func:`params_to_toml` to ``path`` atomically.
+
+    The text goes to a temporary file in the same folder, is flushed to disk and renamed over
+    ``path``: a reader (or a crash mid-write) sees the old file or the new one, never half.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        with tmp.open("w", encoding="utf-8") as fh:
+            fh.write(params_to_toml(p, title=title))
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
