@@ -258,9 +258,90 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
     return out
 
 
+# §5.3.2's divergence: the thruster effect that reproduces Table 5.2's drift of g and b3.
+# Scanned on 15-30 min runs (then 2 h and 6 h), seed 0: dead band 10 and 25 N, reverse_ratio
+# 0.6, 0.8, 1.25, 1.35, 1.5, with and without lag. Only reverse thrust stronger than forward
+# (vertical thrusters weaker pushing keel-down) moves g and b3 the thesis's way (g 3.6 -> -5.7,
+# b3 300 -> 261 in 2 h): 1.25 gives -2.1 / 263, 1.35 -3.9 / 258, 1.5 -6.2 / 251. The rest move
+# g up or leave it, and raise every mass.
+UNSTABLE_THRUSTERS = ThrusterEffects(reverse_ratio=1.35)
+ROBUST_NOTE = ("ROBUST_DAEMON_DEFAULT: projection, dead zone, freeze on saturation; no lag "
+               "compensation, no preview")
+
+
+def _pd_summary(th: np.ndarray, t: np.ndarray) -> dict:
+    """Smallest eigenvalue of the decoupled M-hat (= min m_i) over the samples θ̂(t)."""
+    mm = th[:, :6].min(axis=1)
+    return {"min_mass_eigenvalue": float(mm.min()),
+            "t_of_min_s": float(t[int(np.argmin(mm))]),
+            "positive_definite_throughout": bool(mm.min() > 0.0),
+            "m4_min": float(th[:, 3].min()), "m5_min": float(th[:, 4].min()),
+            "final": th[-1].tolist()}
+
+
 def run_ambc_6dof_unstable(opts: ExperimentOptions) -> dict:
-    """§5.3.2, Tables 5.2/5.3, Fig. 5.1."""
-    return _single_step(opts, robust=False, default_h=2.0, name="ambc-6dof-unstable")
+    """§5.3.2, Tables 5.2/5.3, Fig. 5.1: single-step AMBC on the default plant, then on a plant
+    with asymmetric thrusters (:data:`UNSTABLE_THRUSTERS`), where robust single-step AMBC and
+    two-step AMBC run too."""
+    out = _single_step(opts, robust=False, default_h=2.0, name="ambc-6dof-unstable")
+    sub = ExperimentOptions(seed=opts.seed, hours=opts.hours, progress=opts.progress)
+    asym = {}
+    for robust in (False, True):
+        key = "robust" if robust else "plain"
+        asym[key] = _single_step(sub, robust=robust, default_h=2.0,
+                                 name=f"ambc-6dof-unstable {key}, asymmetric thrusters",
+                                 thrusters=UNSTABLE_THRUSTERS)
+    total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
+    scale = total_h * 3600.0 / (STEP1_DURATION_S + STEP2_DURATION_S)
+    step1_s, step2_s = STEP1_DURATION_S * scale, STEP2_DURATION_S * scale
+    run, _ = _two_step_run(opts, step1_s, step2_s, "ambc-6dof-unstable two-step",
+                           thrusters=UNSTABLE_THRUSTERS, lag_compensation=False,
+                           ff_preview=False)
+    sel = run.theta_t >= step1_s + 0.5 * step2_s  # second half of step 2 (M-hat starts at 0)
+    two = _pd_summary(run.theta[sel], run.theta_t[sel])
+    two.update({"step1_s": step1_s, "step2_s": step2_s, "kd_step2": KD_STEP2,
+                "window": "second half of step 2",
+                "eps_step2": EPS_STEP2,
+                "final_relative_error": _rel(run.theta[-1], theta_of(_vehicle().params,
+                                                                     "decoupled"))})
+    neg = {k: [m for m, v in r["m4_m5"].items() if v["went_negative"]] for k, r in asym.items()}
+    out["asymmetric_thrusters"] = {
+        "thruster_effects": vars(UNSTABLE_THRUSTERS),
+        "plain": {k: v for k, v in asym["plain"].items() if k != "summary"},
+        "robust": {k: v for k, v in asym["robust"].items() if k != "summary"},
+        "two_step": two,
+        "m4_or_m5_went_negative": bool(neg["plain"]),
+        "robust_positive_definite_throughout":
+            asym["robust"]["min_mass_eigenvalue"]["positive_definite_throughout"],
+    }
+    p = asym["plain"]
+    gi, b3i = DEC_NAMES.index("g"), DEC_NAMES.index("b3")
+    out["summary"] += "\n".join([
+        "",
+        "",
+        f"[asymmetric thrusters] the same run on a plant whose thrusters give "
+        f"{UNSTABLE_THRUSTERS.reverse_ratio:g}x the thrust in reverse (vertical thrusters: "
+        "weaker pushing keel-down); lag, stiction, saturation, noise as above — Table 5.2's "
+        "g and b3 drift",
+        asym["plain"]["summary"].split("\n", 1)[1],
+        f"g {p['initial'][gi]:.2f} -> {p['final'][gi]:.2f} (thesis 3.63 -> -5.71), b3 "
+        f"{p['initial'][b3i]:.0f} -> {p['final'][b3i]:.0f} (thesis 300 -> 261); m4 min "
+        f"{p['m4_m5']['m4']['min']:.1f}, m5 min {p['m4_m5']['m5']['min']:.1f} (thesis final "
+        f"-1.35, 42.5): m4/m5 went negative: {', '.join(neg['plain']) or 'no'}",
+        f"robust adaptation on the same plant ({ROBUST_NOTE}), "
+        f"{asym['robust']['duration_s'] / 3600:.2f} h: min eigenvalue of M-hat "
+        f"{asym['robust']['min_mass_eigenvalue']['min']:.1f} (positive definite throughout: "
+        f"{asym['robust']['min_mass_eigenvalue']['positive_definite_throughout']}); worst "
+        f"mass/drag error {100 * asym['robust']['worst_mass_drag_relative_error']:.1f} %",
+        f"two-step AMBC on the same plant (step 1 {step1_s / 60:.0f} min, step 2 "
+        f"{step2_s / 3600:.2f} h from zero, k_d={KD_STEP2:g}, eps={EPS_STEP2:g}, plain): min "
+        f"eigenvalue of M-hat over the second half of step 2 "
+        f"{two['min_mass_eigenvalue']:.1f} (positive definite: "
+        f"{two['positive_definite_throughout']}); final m4 {two['final'][3]:.1f}, "
+        f"m5 {two['final'][4]:.1f}, "
+        f"g {two['final'][gi]:.2f}, b3 {two['final'][b3i]:.0f}",
+    ])
+    return out
 
 
 def run_ambc_robust(opts: ExperimentOptions) -> dict:
