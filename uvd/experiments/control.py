@@ -67,6 +67,7 @@ EPS = 0.1           # single-step AMBC about known values: inside Theorem 5.2.2'
 EPS_STEP1 = 2.0     # ε of step 1 (quasi-static: the position error carries g and b)
 KD_STEP2 = 1000.0   # step 2 of §5.3.5 as the text gives it; also PDC's in pdc-vs-ambc
 EPS_STEP2 = 2.0     # ε of step 2
+EPS_STEP2_KD100 = 0.5  # ε of step 2 at k_d = 100 (pdc-vs-ambc's thesis row): 2 diverges there
 KD_FULL = 1000.0    # ambc-full (and its PDC): from zero, k_d = 100 tracks worse than PDC
 EPS_FULL = 2.0
 # Per-entry gains of the full model: a force/torque row of W_MBC has 6 mass and 36 drag entries
@@ -434,12 +435,12 @@ def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label
                   thrusters: ThrusterEffects | None = None,
                   lag_compensation: bool = LAG_COMPENSATION,
                   ff_preview: bool | None = None, kd2: float = KD_STEP2,
-                  vehicle: str = "jhu-rov") -> tuple[ControlRun, dict]:
+                  vehicle: str = "jhu-rov", eps2: float = EPS_STEP2) -> tuple[ControlRun, dict]:
     veh = _vehicle(vehicle)
     ff_preview = FF_PREVIEW if ff_preview is None else ff_preview
     alloc = Allocator.from_vehicle(veh)
     params = two_step_params("decoupled", kp=KP, kd1=KD, eps1=EPS_STEP1, kd2=kd2,
-                             eps2=EPS_STEP2, allocator=alloc, step1_duration_s=step1_s)
+                             eps2=eps2, allocator=alloc, step1_duration_s=step1_s)
     ref = two_step_reference(step1_duration_s=step1_s)
     spec = core.ControllerSpec("two-step-ambc", two_step_step, params, two_step_init(params))
     opts.progress(f"[{label}] two-step AMBC: step 1 {step1_s / 60:.0f} min (g, b; quasi-static "
@@ -557,10 +558,14 @@ def table_5_6_row(block: dict) -> list[float]:
 # k_p = 300, k_d = 100 for both controllers; plain two-step AMBC, steady-state thruster model),
 # then our departures from it, each named, each with its own PDC at the same k_d and options.
 PDC_VS_AMBC_ROWS = (
-    {"name": "thesis", "kd": KD, "lag_compensation": False, "ff_preview": False,
-     "vehicle": "jhu-rov",
+    {"name": "thesis", "kd": KD, "eps2": EPS_STEP2_KD100, "lag_compensation": False,
+     "ff_preview": False, "vehicle": "jhu-rov",
      "title": "as the thesis ran it (Fig. 5.4 caption): k_d = 100 for both, plain two-step AMBC "
-              "(no lag compensation, no feed-forward preview)"},
+              "(no lag compensation, no feed-forward preview); eps = 0.5 in step 2 (not "
+              "reported; eps = 2 diverges after ~150 min at k_d = 100, row thesis-eps2)"},
+    {"name": "thesis-eps2", "kd": KD, "eps2": EPS_STEP2, "lag_compensation": False,
+     "ff_preview": False, "vehicle": "jhu-rov",
+     "title": "the thesis row with eps = 2 in step 2 (our two-step's eps)"},
     {"name": "kd1000", "kd": KD_STEP2, "lag_compensation": False, "ff_preview": False,
      "vehicle": "jhu-rov",
      "title": "k_d = 1000 for both (step 2 as §5.3.5's text gives it), plain two-step AMBC"},
@@ -568,7 +573,8 @@ PDC_VS_AMBC_ROWS = (
      "ff_preview": True, "vehicle": "jhu-rov",
      "title": "ours: k_d = 1000 for both, propeller-lag compensation (both), feed-forward "
               "preview (AMBC)"},
-    {"name": "thesis-coupled-plant", "kd": KD, "lag_compensation": False, "ff_preview": False,
+    {"name": "thesis-coupled-plant", "kd": KD, "eps2": EPS_STEP2_KD100,
+     "lag_compensation": False, "ff_preview": False,
      "vehicle": "jhu-rov-coupled",
      "title": "diagnostic: the thesis row on the coupled plant jhu-rov-coupled (Tables 4.8/4.9) — "
               "the 16-parameter decoupled AMBC then lacks the plant's couplings, as on the "
@@ -590,8 +596,8 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
     pdc_s = min(PDC_MINUTES * 60.0, max(60.0, step2_s))
     rows: dict[str, dict] = {}
     lines = [f"pdc-vs-ambc (Fig. 5.4, Table 5.6): RefTraj1, k_p={KP:g}; PDC {pdc_s / 60:.0f} min, "
-             f"two-step AMBC (step 1 {step1_s / 60:.0f} min k_d={KD:g}, step 2 "
-             f"{step2_s / 3600:.2f} h, eps={EPS_STEP2:g}) last {win_s / 60:.0f} min of step 2; "
+             f"two-step AMBC (step 1 {step1_s / 60:.0f} min k_d={KD:g} eps={EPS_STEP1:g}, step 2 "
+             f"{step2_s / 3600:.2f} h) last {win_s / 60:.0f} min of step 2; "
              "errors measured (navigation vs reference), true state in parentheses",
              "thesis (Fig. 5.4, §5.3.5.1): position_ratio 0.70, velocity_ratio 1.08"]
     for spec in PDC_VS_AMBC_ROWS:
@@ -599,7 +605,7 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
         run, _ = _two_step_run(opts, step1_s, step2_s, f"pdc-vs-ambc {spec['name']}",
                                lag_compensation=spec["lag_compensation"],
                                ff_preview=spec["ff_preview"], kd2=spec["kd"],
-                               vehicle=spec["vehicle"])
+                               vehicle=spec["vehicle"], eps2=spec.get("eps2", EPS_STEP2))
         win = windows(run, win_s, start_s=step1_s)
         ambc = tracking_stats(run, step1_s + step2_s - win_s)  # last window: converged
         opts.progress(f"[pdc-vs-ambc {spec['name']}] PDC on RefTraj1, {pdc_s / 60:.0f} min")
@@ -610,7 +616,7 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
         th = run.theta[-1]
         row = {"title": spec["title"], "vehicle": veh.name,
                "gains": {"kp": KP, "kd": spec["kd"], "kd_step1": KD, "eps_step1": EPS_STEP1,
-                         "eps_step2": EPS_STEP2},
+                         "eps_step2": spec.get("eps2", EPS_STEP2)},
                "lag_compensation": spec["lag_compensation"], "ff_preview_s": preview_s,
                "ambc_window_s": [step1_s + step2_s - win_s, step1_s + step2_s],
                "pdc_duration_s": pdc_s, **_ratio_block(pdc, ambc),
@@ -629,6 +635,7 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
             "",
             f"[{spec['name']}] {spec['title']}",
             f"  vehicle {veh.name}; k_p={KP:g}, k_d={spec['kd']:g} (PDC and step 2), "
+            f"eps={spec.get('eps2', EPS_STEP2):g} (step 2), "
             f"lag compensation {'on' if spec['lag_compensation'] else 'off'}, feed-forward "
             f"preview " + (f"{1e3 * preview_s:.1f} ms" if preview_s else "off"),
             f"{'':>10} {'pos MNE':>9} {'vel MNE':>9}",

@@ -65,8 +65,9 @@ SETUP = {
                           "k_d = 1000 in step 2, ε = 2) on that plant.",
     "pdc-vs-ambc": "row `thesis` is like for like: k_p = 300, k_d = 100 for PDC and step 2 "
                    "(Fig. 5.4's caption; §5.3.5's text gives k_d = 1000 for step 2), plain "
-                   "two-step AMBC, no lag compensation, no feed-forward preview; ε = 2 in both "
-                   "steps (not reported). Common to all rows: the plant is the decoupled "
+                   "two-step AMBC, no lag compensation, no feed-forward preview; ε (not "
+                   "reported) 2 in step 1, 0.5 in step 2 (ε = 2 diverges there: row "
+                   "`thesis-eps2`). Common to all rows: the plant is the decoupled "
                    "`jhu-rov` model (except the `thesis-coupled-plant` diagnostic), errors are "
                    "the navigation solution against the reference. The other rows change only "
                    "what their header says.",
