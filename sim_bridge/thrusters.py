@@ -8,6 +8,16 @@ Each thruster receives a thrust command (N). Effects, each switchable:
 * **stiction** — after the command changes sign the thrust stays zero (propeller stopped)
   until |command| ≥ stiction_n (5 N on the JHU ROV, §5.3.4).
 
+Two more effects of real thrusters, off by default (every vehicle and experiment runs without
+them unless it asks; ``ambc-6dof-unstable`` turns them on to reproduce §5.3.2):
+
+* **dead band** (``dead_band_n`` > 0) — a command with |command| < dead_band_n turns nothing
+  (the amplifier's dead band; the propeller spins down to zero);
+* **asymmetry** (``reverse_ratio`` ≠ 1) — for negative propeller speed the thrust is
+  reverse_ratio · k ω|ω|: a propeller shaped for forward thrust delivers less in reverse. The
+  speed ω (what the amplifier reports) is unchanged, so a controller that estimates thrust as
+  k ω|ω| (App. A.1) does not see it.
+
 The thrust produced is the steady-state law f = k ω|ω| (App. A.1) of the current propeller
 speed; ``omega`` is what a propeller-speed sensor (an amplifier's velocity feedback) reads.
 ``health`` scales each thruster's thrust (1 healthy, 0.5 weak, 0 dead) for fault injection.
@@ -25,9 +35,25 @@ from uvd.model.thrusters import ThrusterSpec
 
 @dataclass(frozen=True)
 class ThrusterEffects:
+    """Which thruster effects the plant applies (module docstring).
+
+    ``dead_band_n`` (N, 0: off) and ``reverse_ratio`` (thrust in reverse over thrust forward at
+    the same propeller speed, 1: symmetric) are off by default.
+    """
+
     lag: bool = True
     stiction: bool = True
     saturation: bool = True
+    dead_band_n: float = 0.0
+    reverse_ratio: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.dead_band_n) and self.dead_band_n >= 0.0):
+            raise ValueError(f"ThrusterEffects.dead_band_n must be finite and >= 0, "
+                             f"got {self.dead_band_n!r}")
+        if not (np.isfinite(self.reverse_ratio) and self.reverse_ratio > 0.0):
+            raise ValueError(f"ThrusterEffects.reverse_ratio must be finite and > 0, "
+                             f"got {self.reverse_ratio!r}")
 
 
 class ThrusterBank:
@@ -72,13 +98,14 @@ class ThrusterBank:
         """Arguments of :func:`_thruster_step` (the plant fuses it with its integrator)."""
         e = self.effects
         return (np.asarray(command_n, dtype=float), self._alpha(dt), self.k, self.max_thrust,
-                self.stiction, self.health, e.saturation, e.stiction, e.lag, self.omega,
+                self.stiction, self.health, e.saturation, e.stiction, e.lag,
+                float(e.dead_band_n), float(e.reverse_ratio), self.omega,
                 self._last_sign, self._stuck, self.thrust)
 
 
 @numba.njit(cache=True)
 def _thruster_step(cmd_in, alpha, k, max_thrust, stiction, health, saturate, stick, lag,
-                   omega, last_sign, stuck, thrust_out):
+                   dead_band, reverse_ratio, omega, last_sign, stuck, thrust_out):
     """The per-thruster effects of the module docstring, in place (compiled: ~1 µs for six)."""
     for i in range(cmd_in.shape[0]):
         c = cmd_in[i]
@@ -86,6 +113,8 @@ def _thruster_step(cmd_in, alpha, k, max_thrust, stiction, health, saturate, sti
             c = 0.0
         if saturate:
             c = min(max(c, -max_thrust[i]), max_thrust[i])
+        if dead_band > 0.0 and abs(c) < dead_band:
+            c = 0.0
         if stick:
             s = np.sign(c)
             if s != 0.0 and last_sign[i] != 0.0 and s != last_sign[i]:
@@ -104,3 +133,5 @@ def _thruster_step(cmd_in, alpha, k, max_thrust, stiction, health, saturate, sti
         else:
             omega[i] = target
         thrust_out[i] = health[i] * k[i] * omega[i] * abs(omega[i])
+        if reverse_ratio != 1.0 and omega[i] < 0.0:
+            thrust_out[i] *= reverse_ratio

@@ -1,7 +1,10 @@
-"""Thruster dynamics: saturation, propeller lag, reversal stiction (§5.3.4), f = kω|ω|."""
+"""Thruster dynamics: saturation, propeller lag, reversal stiction (§5.3.4), f = kω|ω|; dead band
+and asymmetry (off by default)."""
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
 from uvd.model.thrusters import ThrusterSpec, speed_from_thrust, thrust_from_speed, thruster_matrix
@@ -62,3 +65,46 @@ def test_thruster_matrix_columns_are_force_and_moment():
     s = ThrusterSpec("a", (1.0, 2.0, 0.0), (0.0, 0.0, 2.0))
     B = thruster_matrix([s])
     np.testing.assert_allclose(B[:, 0], [0, 0, 1, 2, -1, 0])
+
+
+# dead band and asymmetry (off by default; ambc-6dof-unstable turns them on, §5.3.2)
+_CMD = st.floats(min_value=-99.0, max_value=99.0, allow_nan=False)
+
+
+@given(cmd=_CMD, band=st.floats(min_value=0.1, max_value=30.0))
+def test_dead_band_turns_nothing_below_it_and_the_command_above(cmd, band):
+    b = bank(ThrusterEffects(lag=False, stiction=False, saturation=False, dead_band_n=band))
+    f = b.step(np.array([cmd, cmd]), 0.01)[0]
+    if abs(cmd) < band:
+        assert f == 0.0 and b.omega[0] == 0.0
+    else:
+        assert f == pytest.approx(cmd, rel=1e-12)
+
+
+@given(cmd=st.floats(min_value=0.01, max_value=99.0), ratio=st.floats(min_value=0.2,
+                                                                       max_value=2.0))
+def test_reverse_thrust_is_ratio_times_forward_at_the_same_speed(cmd, ratio):
+    b = bank(ThrusterEffects(lag=False, stiction=False, saturation=False, reverse_ratio=ratio))
+    f = b.step(np.array([cmd, -cmd]), 0.01).copy()
+    assert f[0] == pytest.approx(cmd, rel=1e-12)            # forward: the steady-state law
+    assert f[1] == pytest.approx(-ratio * cmd, rel=1e-12)   # reverse: scaled
+    assert b.omega[1] == pytest.approx(-b.omega[0], rel=1e-12)  # the speed does not show it
+
+
+@given(cmds=st.lists(_CMD, min_size=1, max_size=30))
+def test_new_effects_at_their_defaults_change_nothing(cmds):
+    """dead_band_n = 0 and reverse_ratio = 1 reproduce the bank without them bit for bit, so
+    every vehicle and experiment that does not ask for them is unchanged."""
+    a = bank()
+    b = bank(ThrusterEffects(dead_band_n=0.0, reverse_ratio=1.0))
+    for c in cmds:
+        fa = a.step(np.array([c, -c]), 0.01).copy()
+        fb = b.step(np.array([c, -c]), 0.01)
+        assert np.array_equal(fa, fb) and np.array_equal(a.omega, b.omega)
+
+
+@pytest.mark.parametrize("kw", [{"dead_band_n": -1.0}, {"dead_band_n": float("nan")},
+                                {"reverse_ratio": 0.0}, {"reverse_ratio": float("inf")}])
+def test_bad_effect_settings_are_refused_by_name(kw):
+    with pytest.raises(ValueError, match=next(iter(kw))):
+        ThrusterEffects(**kw)

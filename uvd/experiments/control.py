@@ -67,6 +67,7 @@ EPS = 0.1           # single-step AMBC about known values: inside Theorem 5.2.2'
 EPS_STEP1 = 2.0     # ε of step 1 (quasi-static: the position error carries g and b)
 KD_STEP2 = 1000.0   # step 2 of §5.3.5 as the text gives it; also PDC's in pdc-vs-ambc
 EPS_STEP2 = 2.0     # ε of step 2
+EPS_STEP2_KD100 = 0.5  # ε of step 2 at k_d = 100 (pdc-vs-ambc's thesis row): 2 diverges there
 KD_FULL = 1000.0    # ambc-full (and its PDC): from zero, k_d = 100 tracks worse than PDC
 EPS_FULL = 2.0
 # Per-entry gains of the full model: a force/torque row of W_MBC has 6 mass and 36 drag entries
@@ -166,11 +167,12 @@ def _ratio_block(pdc: dict, ambc: dict) -> dict:
 # ambc-6dof-unstable (§5.3.2) and ambc-robust
 # ---------------------------------------------------------------------------------------------
 def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, name: str,
-                 lag_compensation: bool = False, ff_preview: bool = False) -> dict:
+                 lag_compensation: bool = False, ff_preview: bool = False,
+                 thrusters: ThrusterEffects | None = None) -> dict:
     veh = _vehicle()
     alloc = Allocator.from_vehicle(veh)
     truth = theta_of(veh.params, "decoupled")
-    preview_s = _preview_s(veh, ff_preview, lag_compensation)
+    preview_s = _preview_s(veh, ff_preview, lag_compensation, thrusters)
     p = ambc_params("decoupled", kp=KP, kd=KD, eps=EPS, allocator=alloc,
                     robust=ROBUST_DAEMON_DEFAULT if robust else None)
     spec = core.ControllerSpec("ambc", ambc_step, p, ambc_init(p, truth))
@@ -179,7 +181,7 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
                   f"{seconds / 3600:.2f} simulated h" + (", robust adaptation on" if robust
                                                         else ""))
     run = run_control(veh, spec, reftraj1(), seconds, seed=opts.seed, theta_every_s=10.0,
-                      progress=opts.progress, label=f"{name}: ",
+                      progress=opts.progress, label=f"{name}: ", thrusters=thrusters,
                       lag_compensation=lag_compensation, ff_preview_s=preview_s)
     th = run.theta
     final = th[-1]
@@ -240,9 +242,90 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
     return out
 
 
+# §5.3.2's divergence: the thruster effect that reproduces Table 5.2's drift of g and b3.
+# Scanned on 15-30 min runs (then 2 h and 6 h), seed 0: dead band 10 and 25 N, reverse_ratio
+# 0.6, 0.8, 1.25, 1.35, 1.5, with and without lag. Only reverse thrust stronger than forward
+# (vertical thrusters weaker pushing keel-down) moves g and b3 the thesis's way (g 3.6 -> -5.7,
+# b3 300 -> 261 in 2 h): 1.25 gives -2.1 / 263, 1.35 -3.9 / 258, 1.5 -6.2 / 251. The rest move
+# g up or leave it, and raise every mass.
+UNSTABLE_THRUSTERS = ThrusterEffects(reverse_ratio=1.35)
+ROBUST_NOTE = ("ROBUST_DAEMON_DEFAULT: projection, dead zone, freeze on saturation; no lag "
+               "compensation, no preview")
+
+
+def _pd_summary(th: np.ndarray, t: np.ndarray) -> dict:
+    """Smallest eigenvalue of the decoupled M-hat (= min m_i) over the samples θ̂(t)."""
+    mm = th[:, :6].min(axis=1)
+    return {"min_mass_eigenvalue": float(mm.min()),
+            "t_of_min_s": float(t[int(np.argmin(mm))]),
+            "positive_definite_throughout": bool(mm.min() > 0.0),
+            "m4_min": float(th[:, 3].min()), "m5_min": float(th[:, 4].min()),
+            "final": th[-1].tolist()}
+
+
 def run_ambc_6dof_unstable(opts: ExperimentOptions) -> dict:
-    """§5.3.2, Tables 5.2/5.3, Fig. 5.1."""
-    return _single_step(opts, robust=False, default_h=2.0, name="ambc-6dof-unstable")
+    """§5.3.2, Tables 5.2/5.3, Fig. 5.1: single-step AMBC on the default plant, then on a plant
+    with asymmetric thrusters (:data:`UNSTABLE_THRUSTERS`), where robust single-step AMBC and
+    two-step AMBC run too."""
+    out = _single_step(opts, robust=False, default_h=2.0, name="ambc-6dof-unstable")
+    sub = ExperimentOptions(seed=opts.seed, hours=opts.hours, progress=opts.progress)
+    asym = {}
+    for robust in (False, True):
+        key = "robust" if robust else "plain"
+        asym[key] = _single_step(sub, robust=robust, default_h=2.0,
+                                 name=f"ambc-6dof-unstable {key}, asymmetric thrusters",
+                                 thrusters=UNSTABLE_THRUSTERS)
+    total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
+    scale = total_h * 3600.0 / (STEP1_DURATION_S + STEP2_DURATION_S)
+    step1_s, step2_s = STEP1_DURATION_S * scale, STEP2_DURATION_S * scale
+    run, _ = _two_step_run(opts, step1_s, step2_s, "ambc-6dof-unstable two-step",
+                           thrusters=UNSTABLE_THRUSTERS, lag_compensation=False,
+                           ff_preview=False)
+    sel = run.theta_t >= step1_s + 0.5 * step2_s  # second half of step 2 (M-hat starts at 0)
+    two = _pd_summary(run.theta[sel], run.theta_t[sel])
+    two.update({"step1_s": step1_s, "step2_s": step2_s, "kd_step2": KD_STEP2,
+                "window": "second half of step 2",
+                "eps_step2": EPS_STEP2,
+                "final_relative_error": _rel(run.theta[-1], theta_of(_vehicle().params,
+                                                                     "decoupled"))})
+    neg = {k: [m for m, v in r["m4_m5"].items() if v["went_negative"]] for k, r in asym.items()}
+    out["asymmetric_thrusters"] = {
+        "thruster_effects": vars(UNSTABLE_THRUSTERS),
+        "plain": {k: v for k, v in asym["plain"].items() if k != "summary"},
+        "robust": {k: v for k, v in asym["robust"].items() if k != "summary"},
+        "two_step": two,
+        "m4_or_m5_went_negative": bool(neg["plain"]),
+        "robust_positive_definite_throughout":
+            asym["robust"]["min_mass_eigenvalue"]["positive_definite_throughout"],
+    }
+    p = asym["plain"]
+    gi, b3i = DEC_NAMES.index("g"), DEC_NAMES.index("b3")
+    out["summary"] += "\n".join([
+        "",
+        "",
+        f"[asymmetric thrusters] the same run on a plant whose thrusters give "
+        f"{UNSTABLE_THRUSTERS.reverse_ratio:g}x the thrust in reverse (vertical thrusters: "
+        "weaker pushing keel-down); lag, stiction, saturation, noise as above — Table 5.2's "
+        "g and b3 drift",
+        asym["plain"]["summary"].split("\n", 1)[1],
+        f"g {p['initial'][gi]:.2f} -> {p['final'][gi]:.2f} (thesis 3.63 -> -5.71), b3 "
+        f"{p['initial'][b3i]:.0f} -> {p['final'][b3i]:.0f} (thesis 300 -> 261); m4 min "
+        f"{p['m4_m5']['m4']['min']:.1f}, m5 min {p['m4_m5']['m5']['min']:.1f} (thesis final "
+        f"-1.35, 42.5): m4/m5 went negative: {', '.join(neg['plain']) or 'no'}",
+        f"robust adaptation on the same plant ({ROBUST_NOTE}), "
+        f"{asym['robust']['duration_s'] / 3600:.2f} h: min eigenvalue of M-hat "
+        f"{asym['robust']['min_mass_eigenvalue']['min']:.1f} (positive definite throughout: "
+        f"{asym['robust']['min_mass_eigenvalue']['positive_definite_throughout']}); worst "
+        f"mass/drag error {100 * asym['robust']['worst_mass_drag_relative_error']:.1f} %",
+        f"two-step AMBC on the same plant (step 1 {step1_s / 60:.0f} min, step 2 "
+        f"{step2_s / 3600:.2f} h from zero, k_d={KD_STEP2:g}, eps={EPS_STEP2:g}, plain): min "
+        f"eigenvalue of M-hat over the second half of step 2 "
+        f"{two['min_mass_eigenvalue']:.1f} (positive definite: "
+        f"{two['positive_definite_throughout']}); final m4 {two['final'][3]:.1f}, "
+        f"m5 {two['final'][4]:.1f}, "
+        f"g {two['final'][gi]:.2f}, b3 {two['final'][b3i]:.0f}",
+    ])
+    return out
 
 
 def run_ambc_robust(opts: ExperimentOptions) -> dict:
@@ -334,12 +417,13 @@ def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label
                   theta_times_s: tuple[float, ...] = (),
                   thrusters: ThrusterEffects | None = None,
                   lag_compensation: bool = LAG_COMPENSATION,
-                  ff_preview: bool | None = None) -> tuple[ControlRun, dict]:
-    veh = _vehicle()
+                  ff_preview: bool | None = None, kd2: float = KD_STEP2,
+                  vehicle: str = "jhu-rov", eps2: float = EPS_STEP2) -> tuple[ControlRun, dict]:
+    veh = _vehicle(vehicle)
     ff_preview = FF_PREVIEW if ff_preview is None else ff_preview
     alloc = Allocator.from_vehicle(veh)
-    params = two_step_params("decoupled", kp=KP, kd1=KD, eps1=EPS_STEP1, kd2=KD_STEP2,
-                             eps2=EPS_STEP2, allocator=alloc, step1_duration_s=step1_s)
+    params = two_step_params("decoupled", kp=KP, kd1=KD, eps1=EPS_STEP1, kd2=kd2,
+                             eps2=eps2, allocator=alloc, step1_duration_s=step1_s)
     ref = two_step_reference(step1_duration_s=step1_s)
     spec = core.ControllerSpec("two-step-ambc", two_step_step, params, two_step_init(params))
     opts.progress(f"[{label}] two-step AMBC: step 1 {step1_s / 60:.0f} min (g, b; quasi-static "
@@ -430,48 +514,168 @@ def run_two_step_no_lag(opts: ExperimentOptions) -> dict:
                         lag_compensation=False, ff_preview=False)
 
 
+# Table 5.6 of the thesis (MAE per DOF; m, rad, m/s, rad/s): PDC over 10 minutes and two-step
+# AMBC (step 2) over consecutive 15-minute windows. Order: PosX PosY PosZ Hea Pit Rol, then
+# BodVelX BodVelY BodVelZ AngVelX AngVelY AngVelZ.
+THESIS_TABLE_5_6 = {
+    "PDC": [0.076, 0.061, 0.058, 0.028, 0.047, 0.04, 0.0172, 0.021, 0.0156, 0.021, 0.028, 0.0078],
+    "0-14": [0.059, 0.051, 0.064, 0.021, 0.023, 0.0181, 0.022, 0.023, 0.0194, 0.0136, 0.017,
+             0.0134],
+    "120-134": [0.048, 0.044, 0.05, 0.022, 0.0162, 0.0153, 0.021, 0.025, 0.021, 0.0133, 0.0159,
+                0.0151],
+    "240-255": [0.047, 0.046, 0.054, 0.022, 0.0172, 0.0147, 0.025, 0.026, 0.023, 0.0145, 0.0164,
+                0.0169],
+}
+TABLE_5_6_POS = ("x", "y", "z", "heading", "pitch", "roll")
+TABLE_5_6_COLS = ("PosX", "PosY", "PosZ", "Hea", "Pit", "Rol", "BodVelX", "BodVelY", "BodVelZ",
+                  "AngVelX", "AngVelY", "AngVelZ")
+
+
+def table_5_6_row(block: dict) -> list[float]:
+    """A tracking block's MAE in the column order of Table 5.6."""
+    return ([block["position_mae"][d] for d in TABLE_5_6_POS]
+            + [block["velocity_mae"][d] for d in ("u", "v", "w", "p", "q", "r")])
+
+
+# The rows of pdc-vs-ambc: the thesis's comparison first (§5.3.5.1 and the caption of Fig. 5.4:
+# k_p = 300, k_d = 100 for both controllers; plain two-step AMBC, steady-state thruster model),
+# then our departures from it, each named, each with its own PDC at the same k_d and options.
+PDC_VS_AMBC_ROWS = (
+    {"name": "thesis", "kd": KD, "eps2": EPS_STEP2_KD100, "lag_compensation": False,
+     "ff_preview": False, "vehicle": "jhu-rov",
+     "title": "as the thesis ran it (Fig. 5.4 caption): k_d = 100 for both, plain two-step AMBC "
+              "(no lag compensation, no feed-forward preview); eps = 0.5 in step 2 (not "
+              "reported; eps = 2 diverges after ~150 min at k_d = 100, row thesis-eps2)"},
+    {"name": "thesis-eps2", "kd": KD, "eps2": EPS_STEP2, "lag_compensation": False,
+     "ff_preview": False, "vehicle": "jhu-rov",
+     "title": "the thesis row with eps = 2 in step 2 (our two-step's eps)"},
+    {"name": "kd1000", "kd": KD_STEP2, "lag_compensation": False, "ff_preview": False,
+     "vehicle": "jhu-rov",
+     "title": "k_d = 1000 for both (step 2 as §5.3.5's text gives it), plain two-step AMBC"},
+    {"name": "kd1000-lagcomp-preview", "kd": KD_STEP2, "lag_compensation": True,
+     "ff_preview": True, "vehicle": "jhu-rov",
+     "title": "ours: k_d = 1000 for both, propeller-lag compensation (both), feed-forward "
+              "preview (AMBC)"},
+    {"name": "thesis-coupled-plant", "kd": KD, "eps2": EPS_STEP2_KD100,
+     "lag_compensation": False, "ff_preview": False,
+     "vehicle": "jhu-rov-coupled",
+     "title": "diagnostic: the thesis row on the coupled plant jhu-rov-coupled (Tables 4.8/4.9) — "
+              "the 16-parameter decoupled AMBC then lacks the plant's couplings, as on the "
+              "real vehicle"},
+)
+
+
+def _ratio_text(ours: float, thesis: float) -> str:
+    r = ours / thesis
+    return f"{r:6.2f}" + ("*" if r > 2.0 or r < 0.5 else " ")
+
+
 def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
-    veh = _vehicle()
+    """§5.3.5.1, Fig. 5.4 and Table 5.6: PDC vs converged two-step AMBC, like for like first."""
     total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
     scale = total_h * 3600.0 / (STEP1_DURATION_S + STEP2_DURATION_S)
     step1_s, step2_s = STEP1_DURATION_S * scale, STEP2_DURATION_S * scale
-    run, _ = _two_step_run(opts, step1_s, step2_s, "pdc-vs-ambc")
     win_s = min(900.0, step2_s)
-    win = windows(run, win_s, start_s=step1_s)
-    ambc = tracking_stats(run, step1_s + step2_s - win_s)  # last window: converged
     pdc_s = min(PDC_MINUTES * 60.0, max(60.0, step2_s))
-    opts.progress(f"[pdc-vs-ambc] PDC on RefTraj1, {pdc_s / 60:.0f} min")
-    prun = _pdc_run(veh, reftraj1(), pdc_s, opts.seed, opts.progress, kd=KD_STEP2)
-    pdc = tracking_stats(prun, 0.0)
-    out = {"vehicle": veh.name, "gains": {"kp": KP, "kd": KD_STEP2, "eps_step2": EPS_STEP2},
-           "lag_compensation": LAG_COMPENSATION,
-           "ff_preview_s": _preview_s(veh, FF_PREVIEW, LAG_COMPENSATION),
-           "ambc_window_s": [step1_s + step2_s - win_s, step1_s + step2_s],
-           "pdc_duration_s": pdc_s, **_ratio_block(pdc, ambc),
-           "ambc_windows": [{"start_min": w["start_min"], "position_mne": w["position_mne"],
-                             "velocity_mne": w["velocity_mne"]} for w in win],
-           "thesis": {"position_ratio": 0.70, "velocity_ratio": 1.08}}
+    rows: dict[str, dict] = {}
+    lines = [f"pdc-vs-ambc (Fig. 5.4, Table 5.6): RefTraj1, k_p={KP:g}; PDC {pdc_s / 60:.0f} min, "
+             f"two-step AMBC (step 1 {step1_s / 60:.0f} min k_d={KD:g} eps={EPS_STEP1:g}, step 2 "
+             f"{step2_s / 3600:.2f} h) last {win_s / 60:.0f} min of step 2; "
+             "errors measured (navigation vs reference), true state in parentheses",
+             "thesis (Fig. 5.4, §5.3.5.1): position_ratio 0.70, velocity_ratio 1.08"]
+    for spec in PDC_VS_AMBC_ROWS:
+        veh = _vehicle(spec["vehicle"])
+        run, _ = _two_step_run(opts, step1_s, step2_s, f"pdc-vs-ambc {spec['name']}",
+                               lag_compensation=spec["lag_compensation"],
+                               ff_preview=spec["ff_preview"], kd2=spec["kd"],
+                               vehicle=spec["vehicle"], eps2=spec.get("eps2", EPS_STEP2))
+        win = windows(run, win_s, start_s=step1_s)
+        ambc = tracking_stats(run, step1_s + step2_s - win_s)  # last window: converged
+        opts.progress(f"[pdc-vs-ambc {spec['name']}] PDC on RefTraj1, {pdc_s / 60:.0f} min")
+        prun = _pdc_run(veh, reftraj1(), pdc_s, opts.seed, opts.progress, kd=spec["kd"],
+                        lag_compensation=spec["lag_compensation"])
+        pdc = tracking_stats(prun, 0.0)
+        preview_s = _preview_s(veh, spec["ff_preview"], spec["lag_compensation"])
+        th = run.theta[-1]
+        row = {"title": spec["title"], "vehicle": veh.name,
+               "gains": {"kp": KP, "kd": spec["kd"], "kd_step1": KD, "eps_step1": EPS_STEP1,
+                         "eps_step2": spec.get("eps2", EPS_STEP2)},
+               "lag_compensation": spec["lag_compensation"], "ff_preview_s": preview_s,
+               "ambc_window_s": [step1_s + step2_s - win_s, step1_s + step2_s],
+               "pdc_duration_s": pdc_s, **_ratio_block(pdc, ambc),
+               "ambc_windows": [{"start_min": w["start_min"], "position_mne": w["position_mne"],
+                                 "velocity_mne": w["velocity_mne"],
+                                 "table_5_6": table_5_6_row(w)} for w in win],
+               "pdc_table_5_6": table_5_6_row(pdc),
+               # what sets PDC's heading error: the yaw torque it must apply, k_p Δψ_z ≈ τ_z
+               "pdc_mean_abs_yaw_torque_nm": float(np.mean(np.abs(prun.u_applied[:, 5]))),
+               "pdc_mean_abs_yaw_torque_over_kp_rad": float(
+                   np.mean(np.abs(prun.u_applied[:, 5])) / KP),
+               "final_theta": th.tolist(),
+               "saturated_fraction": float(run.saturated.mean())}
+        rows[spec["name"]] = row
+        lines += [
+            "",
+            f"[{spec['name']}] {spec['title']}",
+            f"  vehicle {veh.name}; k_p={KP:g}, k_d={spec['kd']:g} (PDC and step 2), "
+            f"eps={spec.get('eps2', EPS_STEP2):g} (step 2), "
+            f"lag compensation {'on' if spec['lag_compensation'] else 'off'}, feed-forward "
+            f"preview " + (f"{1e3 * preview_s:.1f} ms" if preview_s else "off"),
+            f"{'':>10} {'pos MNE':>9} {'vel MNE':>9}",
+            f"{'PDC':>10} {pdc['position_mne']:9.4f} {pdc['velocity_mne']:9.4f}   "
+            f"({pdc['true']['position_mne']:.4f}, {pdc['true']['velocity_mne']:.4f})",
+            f"{'AMBC':>10} {ambc['position_mne']:9.4f} {ambc['velocity_mne']:9.4f}   "
+            f"({ambc['true']['position_mne']:.4f}, {ambc['true']['velocity_mne']:.4f})",
+            f"  position_ratio {row['position_ratio']:.3f} (thesis 0.70), velocity_ratio "
+            f"{row['velocity_ratio']:.3f} (thesis 1.08); final m1..m6 "
+            + " ".join(f"{v:.4g}" for v in th[:6]),
+        ]
+        lines.append(f"  PDC heading: mean |yaw torque applied| "
+                     f"{row['pdc_mean_abs_yaw_torque_nm']:.1f} N m = k_p x "
+                     f"{row['pdc_mean_abs_yaw_torque_over_kp_rad']:.3f} rad "
+                     f"(heading MAE {pdc['position_mae']['heading']:.3f} rad; thesis 0.028 rad "
+                     f"would leave k_p x 0.028 = {KP * 0.028:.1f} N m)")
+        if spec["name"] == "thesis":
+            lines.append(format_windows(win, "  Table 5.6 layout, this row (AMBC 15-minute "
+                                              "windows of step 2, PDC 10 min):", pdc=pdc))
+        # Table 5.6 beside ours: thesis value, ours, ours/thesis (* where off by more than 2x)
+        ours = {"PDC": table_5_6_row(pdc)}
+        for w in win:
+            for key in THESIS_TABLE_5_6:
+                lo = int(key.split("-")[0]) if key != "PDC" else -1
+                if lo >= 0 and abs(w["start_min"] - lo * scale) < 1e-6:
+                    ours[key] = table_5_6_row(w)
+        if len(win):  # the thesis's last window is 240-255: compare our last
+            ours["240-255"] = table_5_6_row(win[-1])
+        lines.append("  Table 5.6 beside ours: ours/thesis per column (* = off by more than 2x)")
+        lines.append(f"{'block':>10} " + " ".join(f"{c:>8}" for c in TABLE_5_6_COLS))
+        for key, tv in THESIS_TABLE_5_6.items():
+            if key not in ours:
+                continue
+            lines.append(f"{key + ' th':>10} " + " ".join(f"{v:8.4f}" for v in tv))
+            lines.append(f"{key + ' us':>10} " + " ".join(f"{v:8.4f}" for v in ours[key]))
+            lines.append(f"{'ratio':>10} " + " ".join(f"{_ratio_text(o, t):>8}"
+                                                     for o, t in zip(ours[key], tv,
+                                                                     strict=True)))
+        row["table_5_6_beside_thesis"] = {k: {"ours": v, "thesis": THESIS_TABLE_5_6[k]}
+                                          for k, v in ours.items()}
+    head = rows["thesis"]
+    out = {"vehicle": head["vehicle"], "headline": "thesis", "rows": rows,
+           **{k: head[k] for k in ("gains", "lag_compensation", "ff_preview_s",
+                                   "ambc_window_s", "pdc_duration_s", "pdc", "ambc",
+                                   "position_ratio", "velocity_ratio", "true_position_ratio",
+                                   "true_velocity_ratio", "ambc_windows")},
+           "thesis": {"position_ratio": 0.70, "velocity_ratio": 1.08,
+                      "table_5_6": THESIS_TABLE_5_6}}
     out["acceptance"] = {"position_ratio_le_0.70": out["position_ratio"] <= 0.70,
                          "velocity_ratio_le_1.08": out["velocity_ratio"] <= 1.08}
     _write_csv(opts, "pdc-vs-ambc-mne", ["window_start_min", "ambc_position_mne",
                                          "ambc_velocity_mne", "pdc_position_mne",
                                          "pdc_velocity_mne"],
                np.array([[w["start_min"], w["position_mne"], w["velocity_mne"],
-                          pdc["position_mne"], pdc["velocity_mne"]] for w in win]))
-    out["summary"] = "\n".join([
-        f"pdc-vs-ambc (Fig. 5.4): RefTraj1, k_p={KP:g}, k_d={KD_STEP2:g}; PDC "
-        f"{pdc_s / 60:.0f} min, "
-        f"two-step AMBC last {win_s / 60:.0f} min of step 2",
-        f"{'':>10} {'pos MNE':>9} {'vel MNE':>9}   (measured; true state in parentheses)",
-        f"{'PDC':>10} {pdc['position_mne']:9.4f} {pdc['velocity_mne']:9.4f}   "
-        f"({pdc['true']['position_mne']:.4f}, {pdc['true']['velocity_mne']:.4f})",
-        f"{'AMBC':>10} {ambc['position_mne']:9.4f} {ambc['velocity_mne']:9.4f}   "
-        f"({ambc['true']['position_mne']:.4f}, {ambc['true']['velocity_mne']:.4f})",
-        f"position_ratio {out['position_ratio']:.3f} (thesis 0.70), velocity_ratio "
-        f"{out['velocity_ratio']:.3f} (thesis 1.08)",
-        format_windows(win, "AMBC 15-minute windows of step 2 and PDC (Table 5.6 layout):",
-                       pdc=pdc),
-    ])
+                          head["pdc"]["position_mne"], head["pdc"]["velocity_mne"]]
+                         for w in head["ambc_windows"]]))
+    out["summary"] = "\n".join(lines)
     return out
 
 
