@@ -10,6 +10,10 @@ as a ``"command"`` record, so every sink sees who asked for what and what came o
 The queue is bounded: when full, :meth:`~CommandQueue.put` resolves the new command at once
 with ``ok=False, reason="command queue full"`` and counts it — never blocks, never grows.
 
+A ``"command"`` record carries ``t_ns`` (the cycle that applied it), ``command`` (the class
+name), ``args`` (its fields), ``source``, ``ok`` and ``reason``: a replay applies the same
+commands at the same cycles (:func:`command_from_record`).
+
 Operator modes (:class:`SetMode`) are the values of :data:`OPERATOR_MODES`; the arbiter's
 failsafe action always overrides them when it is more restrictive (docs/architecture.md).
 """
@@ -23,8 +27,8 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["CommandResult", "Arm", "Disarm", "SetMode", "ManualWrench", "HoldPose",
-           "ResetFailsafe", "SetParams", "Command", "CommandQueue", "OPERATOR_MODES"]
+__all__ = ["CommandResult", "command_from_record", "Arm", "Disarm", "SetMode", "ManualWrench",
+           "HoldPose", "ResetFailsafe", "SetParams", "Command", "CommandQueue", "OPERATOR_MODES"]
 
 #: the operator's modes: ``auto`` runs the configured controller (PDC, AMBC, two-step AMBC);
 #: ``pdc`` PD control with adaptation frozen; ``hold-depth`` depth, roll and pitch only;
@@ -106,6 +110,29 @@ class SetParams:
 
 
 Command = Arm | Disarm | SetMode | ManualWrench | HoldPose | ResetFailsafe | SetParams
+_BY_NAME = {c.__name__: c for c in (Arm, Disarm, SetMode, ManualWrench, HoldPose, ResetFailsafe,
+                                    SetParams)}
+
+
+def command_from_record(rec: Mapping[str, Any]) -> Any:
+    """The command of a ``"command"`` record (hub or JSON form).
+
+    Raises
+    ------
+    ValueError
+        Unknown command or arguments that do not fit it (the message names them).
+    """
+    cls = _BY_NAME.get(str(rec.get("command")))
+    if cls is None:
+        raise ValueError(f"unknown command {rec.get('command')!r} (one of {', '.join(_BY_NAME)})")
+    args = dict(rec.get("args") or {})
+    for key in ("u", "names"):
+        if isinstance(args.get(key), list):
+            args[key] = tuple(args[key])
+    try:
+        return cls(**args)
+    except TypeError as exc:
+        raise ValueError(f"{cls.__name__}: {exc}") from exc
 
 
 @dataclass

@@ -46,7 +46,7 @@ from uvd.runtime.lifecycle import State
 from uvd.runtime.supervisor import Supervisor
 
 __all__ = ["ActuatorStatus", "CycleInputs", "CycleResult", "Cycle", "mode_for",
-           "nonfinite_inputs"]
+           "nonfinite_inputs", "inputs_record", "inputs_from_record"]
 
 _OPERATOR_MODE = {"auto": Mode.CONTROL, "pdc": Mode.PDC, "hold-depth": Mode.HOLD_DEPTH,
                   "manual": Mode.MANUAL, "observe": Mode.ZERO}
@@ -99,6 +99,37 @@ class CycleInputs:
     overrun_streak_exceeded: bool = False
     leak: bool | None = None
     extra: Mapping[str, Any] | None = None
+
+
+def inputs_record(inp: CycleInputs) -> dict[str, Any]:
+    """Everything of ``inp`` but the sensor samples, as plain data for the cycle record (the
+    samples travel as raw frames and their receive stamps); :func:`inputs_from_record` reads
+    it back."""
+    a = inp.actuators
+    return {"actuators": None if a is None else {
+                "omega_rad_s": a.omega_rad_s, "enabled": a.enabled, "faults": list(a.faults),
+                "feedback_t_ns": a.feedback_t_ns, "bus_off": a.bus_off},
+            "overrun_streak": inp.overrun_streak,
+            "overrun_streak_exceeded": inp.overrun_streak_exceeded,
+            "leak": inp.leak, "extra": None if inp.extra is None else dict(inp.extra)}
+
+
+def inputs_from_record(t_ns: int, rec: Mapping[str, Any], ins=None, dvl=None, depth=None
+                       ) -> CycleInputs:
+    """The :class:`CycleInputs` of a recorded cycle: ``rec`` from :func:`inputs_record` (hub or
+    JSON form) and the samples decoded again from the recorded frames."""
+    a = rec.get("actuators")
+    act = None
+    if a is not None:
+        w = a.get("omega_rad_s")
+        act = ActuatorStatus(
+            omega_rad_s=None if w is None else np.asarray(w, dtype=float),
+            enabled=bool(a["enabled"]), faults=tuple(a.get("faults") or ()),
+            feedback_t_ns=None if a.get("feedback_t_ns") is None else int(a["feedback_t_ns"]),
+            bus_off=bool(a.get("bus_off", False)))
+    return CycleInputs(t_ns, ins, dvl, depth, act, int(rec.get("overrun_streak", 0)),
+                       bool(rec.get("overrun_streak_exceeded", False)), rec.get("leak"),
+                       rec.get("extra"))
 
 
 @dataclass(frozen=True, slots=True)

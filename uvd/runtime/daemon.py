@@ -21,19 +21,20 @@ import gc
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from drivers.samples import R_to_euler
-from uvd import _jitcache, core
+from uvd import __version__, _jitcache, core
 from uvd.runtime.app import App, ShutdownStep
 from uvd.runtime.build import build_core, start_pose
 from uvd.runtime.can_component import CanComponent, GcFreeze, actuator_status
-from uvd.runtime.commands import CommandResult, SetParams
+from uvd.runtime.commands import Arm, CommandResult, SetParams
 from uvd.runtime.config import Config
-from uvd.runtime.cycle import Cycle, CycleInputs, CycleResult
+from uvd.runtime.cycle import Cycle, CycleInputs, CycleResult, inputs_record
 from uvd.runtime.failsafe import Action
 from uvd.runtime.leak import LeakInput, leak_sensor_fault_trigger
 from uvd.runtime.lifecycle import State
@@ -118,6 +119,7 @@ class Daemon:
             # them (and save_path) however long ago the last periodic record went out
             self.app.add_shutdown_step(ShutdownStep("publish the final estimate",
                                                     self._publish_final_estimates))
+        self.app.hub.publish(self.start_record(), always=True)
         self.auto_arm = auto_arm
         self._last_arm_try_ns = 0
         self._last_refusal_log_ns = 0
@@ -137,6 +139,21 @@ class Daemon:
         # add when they start (the loop's thread may be real-time by then)
         gc.collect()
         gc.freeze()
+
+    def start_record(self) -> dict[str, Any]:
+        """The ``"start"`` record: what a replay needs besides the cycles — the configuration
+        file's text and the online estimators' θ̂(0) (a resumed estimate starts elsewhere
+        than the file says)."""
+        text = None
+        if self.config.source:
+            try:
+                text = Path(self.config.source).read_text(encoding="utf-8")
+            except OSError as exc:
+                log.warning("the start record carries no configuration: %s", exc)
+        return {"type": "start", "t_ns": time.monotonic_ns(), "version": __version__,
+                "config_path": str(self.config.source or ""), "config_toml": text,
+                "estimators": {spec.name: spec.diagnostics(st).theta for spec, st in
+                               zip(self.core_cfg.estimators, self.state.est, strict=True)}}
 
     # -- the cycle's state, for tests and tools --
 
@@ -285,7 +302,10 @@ class Daemon:
             status=out.status, p=nav.H[:3, 3], R=nav.H[:3, :3], v=nav.v, nav_valid=nav.valid,
             u=out.u_applied, u_cmd=out.u_cmd, thrust=thrust,
             ages=(h.ins_age_s, h.dvl_age_s, h.depth_age_s, h.feedback_age_s),
-            ins_rx_ns=inp.ins.t_ns if inp.ins is not None else None,
+            ins_rx_ns=None if inp.ins is None else inp.ins.t_ns,
+            dvl_rx_ns=None if inp.dvl is None else inp.dvl.t_ns,
+            depth_rx_ns=None if inp.depth is None else inp.depth.t_ns,
+            inputs=inputs_record(inp),
             triggers=tuple(a.name for a in d.active), operator_mode=r.operator_mode,
             p_ref=None if ref is None else ref.H[:3, 3],
             R_ref=None if ref is None else ref.H[:3, :3],
@@ -299,29 +319,32 @@ class Daemon:
     # -- commands --
 
     def _apply_commands(self, t_ns: int) -> None:
-        """The commands queued since the previous cycle, applied at this cycle boundary; each
-        one's result resolves its future and is published as a ``"command"`` record."""
+        """The commands queued since the previous cycle, applied at this cycle boundary."""
         for p in self.app.commands.drain():
-            c = p.command
-            try:
-                res = CommandResult(False, "SetParams is not supported yet") \
-                    if isinstance(c, SetParams) else self.control.apply(c, t_ns)
-            except Exception as exc:  # noqa: BLE001 - a bad command never breaks the cycle
-                res = CommandResult(False, f"{type(exc).__name__}: {exc}")
-            self.app.hub.publish({"type": "command", "t_ns": t_ns, "command": type(c).__name__,
-                                  "source": c.source, "ok": res.ok,
-                                  "reason": res.reason}, always=True)
-            p.future.set_result(res)
+            p.future.set_result(self._apply(p.command, t_ns))
+
+    def _apply(self, c, t_ns: int) -> CommandResult:
+        """Apply one command; its result is published as a ``"command"`` record (what a
+        replay applies again at the same cycle)."""
+        try:
+            res = CommandResult(False, "SetParams is not supported yet") \
+                if isinstance(c, SetParams) else self.control.apply(c, t_ns)
+        except Exception as exc:  # noqa: BLE001 - a bad command never breaks the cycle
+            res = CommandResult(False, f"{type(exc).__name__}: {exc}")
+        self.app.hub.publish({"type": "command", "t_ns": t_ns, "command": type(c).__name__,
+                              "args": asdict(c), "source": c.source, "ok": res.ok,
+                              "reason": res.reason}, always=True)
+        return res
 
     def _auto_arm(self, t_ns: int) -> None:
-        """``uvd run --arm``: request arming every 200 ms until it succeeds once."""
-        sup = self.supervisor
+        """``uvd run --arm``: an ``Arm`` command every 200 ms until one succeeds."""
         if not self.auto_arm or self.control.armed_at_ns is not None \
-                or sup.state is not State.STANDBY or t_ns - self._last_arm_try_ns < 200_000_000:
+                or self.supervisor.state is not State.STANDBY \
+                or t_ns - self._last_arm_try_ns < 200_000_000:
             return
         self._last_arm_try_ns = t_ns
-        step = sup.request_arm(t_ns, cause="uvd run --arm")
-        self.arm_refusal = None if step.ok and sup.armed else step.refused
+        res = self._apply(Arm(cause="uvd run --arm", source="uvd run --arm"), t_ns)
+        self.arm_refusal = None if res.ok else res.reason
         if self.arm_refusal and t_ns - self._last_refusal_log_ns >= 2_000_000_000:
             self._last_refusal_log_ns = t_ns
             log.info("%s", self.arm_refusal)

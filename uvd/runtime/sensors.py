@@ -119,39 +119,41 @@ def _open_reader(port: str, codec, baud: int, name: str):
     return SerialFrameReader(port, codec, baudrate=baud, name=name)
 
 
+def decoders(cfg: Config) -> dict[str, tuple[Any, Callable[[Any], Any]]]:
+    """Per instrument of ``[sensors]`` (``ins``, ``dvl``, and ``depth`` when read from a serial
+    port): its wire codec and its converter ``convert(stamped frame) -> sample or None`` —
+    the one decoding path the daemon's readers and a replay of recorded bytes share. Each
+    call makes fresh converters (the PHINS ASCII assembler keeps state between sentences)."""
+    from drivers import digiquartz, pd0, phins_ascii, phins_stdbin
+    s = cfg.sensors
+    out: dict[str, tuple[Any, Callable[[Any], Any]]] = {}
+    if s.ins.format == "phins-stdbin":
+        out["ins"] = (phins_stdbin.StdbinCodec(),
+                      lambda st: phins_stdbin.to_ins_sample(st.frame, st.t_ns))
+    else:
+        asm = phins_ascii.AsciiInsAssembler()
+        out["ins"] = (phins_ascii.PhinsAsciiCodec(), lambda st: asm.push(st.t_ns, st.frame))
+    out["dvl"] = (pd0.Pd0Codec(), lambda st: pd0.to_dvl_sample(st.frame, st.t_ns))
+    if s.depth.source == "serial" and s.depth.port is not None:
+        conv = s.depth.conversion
+        out["depth"] = (digiquartz.DigiquartzCodec(), lambda st: conv.to_sample(st.frame, st.t_ns))
+    return out
+
+
 def make_sensors(cfg: Config, ins_box: Mailbox, dvl_box: Mailbox, depth_box: Mailbox
                  ) -> list[SerialSensor]:
     """The serial (or network) instruments of ``[sensors]``."""
-    from drivers import digiquartz, pd0, phins_ascii, phins_stdbin
+    from drivers import digiquartz
     s = cfg.sensors
+    boxes = {"ins": ins_box, "dvl": dvl_box, "depth": depth_box}
+    ports = {"ins": s.ins, "dvl": s.dvl, "depth": s.depth}
     out = []
-    if s.ins.format == "phins-stdbin":
-        def ins_convert(st):
-            return phins_stdbin.to_ins_sample(st.frame, st.t_ns)
-        ins_codec = phins_stdbin.StdbinCodec()
-    else:
-        asm = phins_ascii.AsciiInsAssembler()
-
-        def ins_convert(st):
-            return asm.push(st.t_ns, st.frame)
-        ins_codec = phins_ascii.PhinsAsciiCodec()
-    out.append(SerialSensor("ins", _open_reader(s.ins.port, ins_codec, s.ins.baud, "ins"),
-                            ins_convert, ins_box))
-
-    def dvl_convert(st):
-        return pd0.to_dvl_sample(st.frame, st.t_ns)
-    out.append(SerialSensor("dvl", _open_reader(s.dvl.port, pd0.Pd0Codec(), s.dvl.baud, "dvl"),
-                            dvl_convert, dvl_box))
-    if s.depth.source == "serial" and s.depth.port is not None:
-        conv = s.depth.conversion
-
-        def depth_convert(st):
-            return conv.to_sample(st.frame, st.t_ns)
-
-        def start_continuous(reader) -> None:
-            reader.write(digiquartz.command("P4"))  # continuous pressure output
-        out.append(SerialSensor("depth", _open_reader(s.depth.port, digiquartz.DigiquartzCodec(),
-                                                      s.depth.baud, "depth"),
-                                depth_convert, depth_box, on_connect=start_continuous))
+    for name, (codec, convert) in decoders(cfg).items():
+        port = ports[name]
+        on_connect = None
+        if name == "depth":
+            def on_connect(reader) -> None:
+                reader.write(digiquartz.command("P4"))  # continuous pressure output
+        out.append(SerialSensor(name, _open_reader(port.port, codec, port.baud, name), convert,
+                                boxes[name], on_connect=on_connect))
     return out
-

@@ -44,6 +44,10 @@ def _arr(x: Any, shape: tuple[int, ...] | None = None) -> np.ndarray | None:
     return a.reshape(shape) if shape is not None else a
 
 
+def _opt_int(x: Any) -> int | None:
+    return None if x is None else int(x)
+
+
 def _age(x: Any) -> float:
     return math.inf if x is None else float(x)
 
@@ -81,8 +85,13 @@ class CycleRecord:
         Per-thruster command (N) — exactly what the amplifiers were sent.
     ages : tuple of float
         Ages of INS, DVL, depth and amplifier feedback (s; inf: none yet).
-    ins_rx_ns : int or None
-        Receive stamp of the INS sample this cycle used (None: none new).
+    ins_rx_ns, dvl_rx_ns, depth_rx_ns : int or None
+        Receive stamps of the samples this cycle took (None: none new) — which recorded
+        frames a replay feeds to this cycle.
+    inputs : mapping or None
+        The rest of the cycle's inputs, as the read phase gathered them
+        (``uvd.runtime.cycle.inputs_record``: amplifier status, loop overrun streak, leak,
+        plug-in signals) — with the frames, everything a replay needs.
     triggers : tuple of str
         Active failsafe triggers.
     operator_mode : str
@@ -109,6 +118,9 @@ class CycleRecord:
     thrust: np.ndarray
     ages: tuple[float, float, float, float]
     ins_rx_ns: int | None = None
+    dvl_rx_ns: int | None = None
+    depth_rx_ns: int | None = None
+    inputs: Mapping[str, Any] | None = None
     triggers: tuple[str, ...] = ()
     operator_mode: str = "auto"
     p_ref: np.ndarray | None = None
@@ -141,12 +153,13 @@ class CycleRecord:
             nav_valid=bool(d["nav_valid"]), u=_arr(d["u"], (6,)),
             u_cmd=_arr(d.get("u_cmd", d["u"]), (6,)), thrust=_arr(d["thrust"]),
             ages=tuple(_age(a) for a in ages),
-            ins_rx_ns=None if d.get("ins_rx_ns") is None else int(d["ins_rx_ns"]),
+            ins_rx_ns=_opt_int(d.get("ins_rx_ns")), dvl_rx_ns=_opt_int(d.get("dvl_rx_ns")),
+            depth_rx_ns=_opt_int(d.get("depth_rx_ns")), inputs=d.get("inputs"),
             triggers=tuple(d.get("triggers") or ()),
             operator_mode=str(d.get("operator_mode", "auto")),
             p_ref=_arr(d.get("p_ref"), (3,)), R_ref=_arr(d.get("R_ref"), (3, 3)),
             v_ref=_arr(d.get("v_ref"), (6,)),
-            armed_at_ns=None if d.get("armed_at_ns") is None else int(d["armed_at_ns"]))
+            armed_at_ns=_opt_int(d.get("armed_at_ns")))
 
     def eta(self) -> np.ndarray:
         """[north, east, down, roll, pitch, heading] of the navigation pose."""
