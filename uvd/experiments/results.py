@@ -99,12 +99,12 @@ def _note_aid_6dof(result: dict) -> str | None:
 
 def _note_aid_rot(result: dict) -> str | None:
     """The CROSS pitch figure accepted as measured, with its cause (plant resonance)."""
+    from uvd.experiments.identification import dataset_rot
+    from uvd.io.vehicle import load_vehicle
     try:
         ours = result["mae"]["AIDPM"]["CROSS"]["pitch_deg"]
         thesis = result["thesis"]["AIDPM.CROSS"]["pitch_deg"]
-        from uvd.experiments.identification import dataset_rot  # noqa: PLC0415
-        from uvd.model.vehicle import load_vehicle  # noqa: PLC0415
-    except (KeyError, TypeError, ImportError):
+    except (KeyError, TypeError):
         return None
     p = load_vehicle(result.get("vehicle", "jhu-rov-coupled")).params
     wn = (p.b[2] / p.M[4, 4]) ** 0.5
