@@ -47,6 +47,11 @@ def wrap_pi(angle_rad: float) -> float:
     return a - math.pi
 
 
+def wrap_pi_array(angle_rad):
+    """:func:`wrap_pi` of every entry of an array: angles wrapped to (−π, π]."""
+    return np.pi - np.mod(np.pi - np.asarray(angle_rad, dtype=float), _TWO_PI)
+
+
 def phins_heading_to_ours(heading_deg: float) -> float:
     """PHINS heading (degrees, 0–360, clockwise from true north) → ours (radians, (−π, π]).
 

@@ -51,6 +51,17 @@ def test_wrap_pi_range(a):
     assert math.sin(w) == pytest.approx(math.sin(a), abs=1e-9)
 
 
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(-1e4, 1e4), min_size=1, max_size=8))
+def test_wrap_pi_array_is_wrap_pi_entrywise(angles):
+    w = frames.wrap_pi_array(np.array(angles))
+    assert np.all((w > -math.pi) & (w <= math.pi))
+    ref = np.array([frames.wrap_pi(a) for a in angles])
+    # the same angle (equal, or ±π on either side of the cut at one rounding)
+    np.testing.assert_allclose(np.cos(w), np.cos(ref), atol=1e-9)
+    np.testing.assert_allclose(np.sin(w), np.sin(ref), atol=1e-9)
+
+
 def test_phins_vessel_frame_y_port_z_up():
     # forward 1, to port 2, up 3 → x 1, starboard −2, keel −3
     np.testing.assert_array_equal(frames.phins_vessel_to_body(1.0, 2.0, 3.0), [1, -2, -3])

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.frames import wrap_pi_array
 from uvd import _jitcache
 from uvd.bench import host_steal_s
 from uvd.jsonio import write_json
@@ -69,10 +70,6 @@ def _rss_mb(pid: int | None) -> tuple[float, float]:
             k, v = line.split(":", 1)
             vals[k] = int(v.split()[0]) / 1024.0
     return vals.get("VmRSS", math.nan), vals.get("VmHWM", math.nan)
-
-
-def _wrap(a):
-    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
 
 
 def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
@@ -114,7 +111,7 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
         eta[:, i] = np.interp(t, tt, col)
     v = np.stack([np.interp(t, tt, truth[:, 7 + i]) for i in range(6)], axis=1)
     e = eta - ref_eta
-    e[:, 3:] = _wrap(e[:, 3:])
+    e[:, 3:] = wrap_pi_array(e[:, 3:])
     dpsi = np.empty((t.size, 6))
     dv = np.empty((t.size, 6))
     for k in range(t.size):

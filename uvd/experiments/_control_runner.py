@@ -22,6 +22,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from drivers.frames import wrap_pi_array
 from sim_bridge.instruments.models import InstrumentConfig
 from sim_bridge.plant import PlantConfig
 from sim_bridge.thrusters import ThrusterEffects
@@ -57,9 +58,6 @@ def _record(k, H, v, H_nav, H_ref, v_ref, vdot_ref, err, eta_true, eta_nav, eta_
         dpsi_true[k, i] = err[0, i]
         dv_true[k, i] = err[1, i]
 
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 def errors_of(ctrl: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -220,7 +218,7 @@ def tracking_stats(run: ControlRun, start_s: float = 0.0, end_s: float | None = 
 
     def block(eta: np.ndarray, dpsi: np.ndarray, dv: np.ndarray) -> dict:
         e = eta[sel] - run.eta_ref[sel]
-        e[:, 3:] = _wrap(e[:, 3:])
+        e[:, 3:] = wrap_pi_array(e[:, 3:])
         return {
             "position_mae": {nm: float(np.mean(np.abs(e[:, i])))
                              for i, nm in enumerate(DOF_NAMES)},

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from drivers.frames import wrap_pi_array
 from drivers.samples import eta_of
 from sim_bridge.instruments.faults import FaultyInstruments, SensorFaults
 from sim_bridge.instruments.models import InstrumentConfig
@@ -175,9 +176,6 @@ def run(sim: Lockstep, duration_s: float, *, progress: Callable[[str], None] | N
     return log
 
 
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
 
 def tracking_errors(log: LockstepLog, start_s: float = 0.0, end_s: float | None = None) -> dict:
     """Per-DOF tracking MAE (SI: m and rad; body velocities m/s and rad/s) and the MNE of
@@ -186,7 +184,7 @@ def tracking_errors(log: LockstepLog, start_s: float = 0.0, end_s: float | None 
     if end_s is not None:
         sel &= log.t < end_s
     e = log.eta[sel] - log.eta_ref[sel]
-    e[:, 3:] = wrap_angle(e[:, 3:])
+    e[:, 3:] = wrap_pi_array(e[:, 3:])
     return {
         "position_mae": {n: float(np.mean(np.abs(e[:, i]))) for i, n in enumerate(DOF_NAMES)},
         "velocity_mae": {n: float(np.mean(np.abs(log.dv[sel, i])))
