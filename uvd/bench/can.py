@@ -97,6 +97,8 @@ def _encode_decode(samples: int) -> dict:
             "decode_check": ok}
 
 
+# _exchange is long (~130 lines) because it owns a second process and a bus for its whole
+# duration: set-up, the timed exchange and the teardown share one try/finally.
 def _exchange(duration_s: float, rate_hz: float, realtime: bool) -> dict:
     from drivers.can.amplifier import AmplifierGroup
     from drivers.can.bus import CanBus

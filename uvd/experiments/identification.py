@@ -494,6 +494,8 @@ def _ls_and_cross_validation(model, iddat, cross, aidp, initp, aidp_euler, truep
 # ---------------------------------------------------------------------------------------------
 # aid-6dof
 # ---------------------------------------------------------------------------------------------
+# run_aid_6dof is long (~160 lines): it is the experiment's report, a sequence of measured
+# figures each computed once and printed once; split, the pieces would pass ~25 values around.
 def run_aid_6dof(opts: ExperimentOptions) -> dict:
     scale = 1.0 if opts.hours is None else opts.hours * 60.0 / 66.7
     progress = opts.progress
