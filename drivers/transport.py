@@ -96,6 +96,9 @@ class FrameReader:
         self._task: asyncio.Task | None = None
         self._closed = False
         self._opened_once = False
+        #: ``tap(name, t_ns, data)`` sees every chunk of bytes as it arrives, stamped as the
+        #: frames it completes (a black-box recorder); must be cheap and must not raise
+        self.tap: Callable[[str, int, bytes], None] | None = None
 
     # ---- to implement ------------------------------------------------------------------------
     async def _open(self, protocol: _Protocol):
@@ -107,6 +110,8 @@ class FrameReader:
     # ---- callbacks (event loop) -------------------------------------------------------------
     def _on_bytes(self, data: bytes) -> None:
         t_ns = self.clock()
+        if self.tap is not None:
+            self.tap(self.name, t_ns, data)
         frames = self.decoder.feed(data)
         if not frames:
             return

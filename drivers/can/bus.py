@@ -431,6 +431,10 @@ class CanBus:
                  tx_gate: Callable[[can.Message], bool] | None = None) -> None:
         self.cfg = cfg
         self.recorder = recorder
+        #: ``tap(msg, t_ns, is_rx)`` sees every frame sent and received (a black-box
+        #: recorder); called from the sending thread and the notifier thread, must be cheap
+        #: and must not raise
+        self.tap: Callable[[can.Message, int, bool], None] | None = None
         self.clock = clock
         self.tx_gate = tx_gate
         self.monitor = BusMonitor(cfg)
@@ -568,6 +572,8 @@ class CanBus:
                 self.monitor.on_send_ok(now)
         if self.recorder is not None:
             self.recorder.record(msg, is_rx=False)
+        if self.tap is not None:
+            self.tap(msg, now, False)
         return True
 
     # -- receiving (notifier thread) --
@@ -582,6 +588,8 @@ class CanBus:
         c["rx_frames"] += 1
         if self.recorder is not None:
             self.recorder.record(msg, is_rx=True)
+        if self.tap is not None:
+            self.tap(msg, now, True)
         if msg.is_error_frame:
             c["rx_error_frames"] += 1
             info = decode_error_frame(msg)

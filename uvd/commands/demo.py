@@ -364,6 +364,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         bridge_args, changes = cpu_split()
         if record:
             changes["can"] = {"log": {"path": str(run_dir / "can.log")}}
+            changes["recording"] = {"enabled": True, "dir": str(run_dir)}
         cfg_path = write_local_config(run_dir, base=base, changes=changes)
         cfg = load_config(cfg_path)
         c = cfg.control

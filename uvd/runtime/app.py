@@ -289,6 +289,9 @@ class App:
         except ConfigValidationError as exc:
             log.error("reload refused, the running configuration is kept:\n%s", exc)
             self.last_reload = {"error": str(exc), "applied": [], "refused": []}
+            self.hub.publish({"type": "reload", "t_ns": time.monotonic_ns(), "ok": False,
+                              "applied": [], "restart_needed": [], "error": str(exc)},
+                             always=True)
             self.notifier.ready(self.supervisor.status_text())
             return self.last_reload
         merged, applied, refused = reloadable_changes(self.config, new)
@@ -309,6 +312,9 @@ class App:
         if not applied and not refused:
             log.info("reload: nothing changed")
         self.last_reload = {"applied": applied, "refused": refused}
+        self.hub.publish({"type": "reload", "t_ns": time.monotonic_ns(), "ok": True,
+                          "applied": list(applied), "restart_needed": list(refused),
+                          "error": None}, always=True)
         self.notifier.ready(self.supervisor.status_text())
         return self.last_reload
 

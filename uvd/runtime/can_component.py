@@ -82,8 +82,10 @@ class CanComponent:
 
     name = "can"
 
-    def __init__(self, cfg: Config, vehicle, depth_box: Mailbox | None = None) -> None:
+    def __init__(self, cfg: Config, vehicle, depth_box: Mailbox | None = None, *,
+                 tap=None) -> None:
         self.cfg = cfg
+        self.tap = tap  # the bus's frame tap (a black-box recorder), set when it opens
         self.vehicle = vehicle
         self.depth_box = depth_box
         self.bus = None
@@ -102,7 +104,9 @@ class CanComponent:
         from drivers.can import CanBus, CanRecorder
         c = self.cfg.can
         self.recorder = CanRecorder.from_config(c.log)
-        self.bus = CanBus(c.bus, recorder=self.recorder).open()
+        self.bus = CanBus(c.bus, recorder=self.recorder)
+        self.bus.tap = self.tap
+        self.bus.open()
 
     def _open(self) -> None:
         from drivers.can import AmplifierGroup, CanDepthSensor

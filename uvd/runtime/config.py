@@ -359,6 +359,29 @@ class TelemetrySection:
 
 
 @dataclass(frozen=True)
+class RecordingSection:
+    """The black-box recorder (``[recording]``, docs/recording.md): every cycle record, event
+    and raw input frame to MCAP files, written off the loop."""
+
+    enabled: bool = setting(False, doc="record the run to MCAP (uvd demo --record turns it on)")
+    dir: str = setting("uvd-recordings",
+                       doc="folder of the .mcap files (relative to the working directory; "
+                           "under systemd $STATE_DIRECTORY)")
+    flush_interval_s: float = setting(
+        0.25, unit="s", gt=0.0, max=1.0,
+        doc="how often written data is handed to the operating system: after a crash or "
+            "SIGKILL the file is readable up to at most this long before it")
+    rotate_mb: float = setting(512.0, unit="MB", min=0.0, max=1e6,
+                               doc="start a new file past this size; 0 never")
+    rotate_s: float = setting(0.0, unit="s", min=0.0, max=1e7,
+                              doc="start a new file after this long; 0 never")
+    raw_queue_size: int = setting(
+        65536, min=64, max=10_000_000,
+        doc="raw frames that may wait for the writer; when full the oldest is dropped and "
+            "counted (a replay of that stretch then reports the missing frames)")
+
+
+@dataclass(frozen=True)
 class DaemonSection:
     """Start and stop of the daemon (``[daemon]``)."""
 
@@ -402,6 +425,7 @@ class Config:
     sensors: SensorsSection = section(SensorsSection)
     can: CanConfig = section(CanConfig)
     telemetry: TelemetrySection = section(TelemetrySection)
+    recording: RecordingSection = section(RecordingSection)
     daemon: DaemonSection = section(DaemonSection)
     source: str | None = field(default=None, init=False, compare=False)
 

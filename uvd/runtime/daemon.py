@@ -87,7 +87,17 @@ class Daemon:
         self.dvl_box: Mailbox = Mailbox("dvl")
         self.depth_box: Mailbox = Mailbox("depth")
         self.sensors = make_sensors(config, self.ins_box, self.dvl_box, self.depth_box)
-        self.can = CanComponent(config, self.vehicle, self.depth_box)
+        self.recorder = None
+        if config.recording.enabled:
+            from uvd.telemetry.mcap_recorder import McapRecorder
+            r = config.recording
+            self.recorder = McapRecorder(r.dir, flush_interval_s=r.flush_interval_s,
+                                         rotate_mb=r.rotate_mb, rotate_s=r.rotate_s,
+                                         raw_queue_size=r.raw_queue_size)
+            for s in self.sensors:
+                s.reader.tap = self.recorder.tap_serial
+        self.can = CanComponent(config, self.vehicle, self.depth_box,
+                                tap=None if self.recorder is None else self.recorder.tap_can)
         self.leak = LeakInput(config.sensors.leak) if config.sensors.leak.enabled else None
         self.supervisor = Supervisor(
             config.failsafe,
@@ -101,7 +111,7 @@ class Daemon:
         self.app = App(config, self.cycle,
                        components=[*self.sensors, *([self.leak] if self.leak else []),
                                    self.can, GcFreeze()],
-                       sinks=sinks,
+                       sinks=[*sinks, *([self.recorder] if self.recorder else [])],
                        supervisor=self.supervisor, notifier=notifier, clock=clock,
                        realtime=realtime)
         self.app.set_amplifier_hooks(zero=self.can.zero, disable=self.can.disable)

@@ -1,0 +1,380 @@
+"""The black-box recorder: every hub record and every raw input frame to MCAP, off the loop.
+
+MCAP is the log format Foxglove and ROS 2 read; the ``mcap`` package writes it (the format's
+own library: its records, indexes and summary are not ours to get wrong). Channels and their
+JSON Schemas are listed in docs/recording.md; the schemas are the files of
+``uvd/telemetry/schemas/`` (:func:`schema`).
+
+Two ways in, neither of which waits:
+
+* as a :class:`~uvd.telemetry.sink.TelemetrySink` of the hub — cycle records (also as a
+  ``foxglove.PoseInFrame`` on ``/uvd/pose``), estimates, failsafe events, lifecycle
+  transitions, commands, the start record, reloads;
+* the raw-frame taps (:meth:`McapRecorder.tap_serial`, :meth:`McapRecorder.tap_can`), set on
+  the drivers' ``tap`` attributes: every chunk of bytes a serial reader received and every CAN
+  frame, stamped on the monotonic clock. They only append to a bounded deque (when full the
+  oldest frame is dropped and counted).
+
+The pump (the hub's, in the event loop) serialises messages in slices of at most
+``slice_s`` into an in-memory buffer; a worker thread hands the bytes to the operating system
+every ``flush_interval_s``. Messages are written as plain records (no chunks), so a file cut
+by SIGKILL or a crash is readable by a streaming reader (:func:`read_messages`) up to the last
+flush — at most ``flush_interval_s`` (0.25 s by default) before the kill; a clean stop writes
+MCAP's summary section too. A new file is started past ``rotate_mb`` or ``rotate_s``; the
+start record is repeated at the top of each.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import collections
+import json
+import math
+import os
+import struct
+import threading
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from functools import cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from uvd.jsonio import to_jsonable
+from uvd.telemetry._worker import DaemonWorker
+
+__all__ = ["McapRecorder", "CHANNELS", "schema", "read_messages", "RecordingError"]
+
+#: topic → (schema name, record type on the hub; None for the taps and the derived pose)
+CHANNELS: dict[str, tuple[str, str | None]] = {
+    "/uvd/start": ("uvd.start.v1", "start"),
+    "/uvd/cycle": ("uvd.cycle.v1", "cycle"),
+    "/uvd/pose": ("foxglove.PoseInFrame", None),
+    "/uvd/estimate": ("uvd.estimate.v1", "estimate"),
+    "/uvd/failsafe": ("uvd.failsafe.v1", "failsafe"),
+    "/uvd/lifecycle": ("uvd.lifecycle.v1", "lifecycle"),
+    "/uvd/command": ("uvd.command.v1", "command"),
+    "/uvd/reload": ("uvd.reload.v1", "reload"),
+    "/uvd/raw/serial": ("uvd.raw_serial.v1", None),
+    "/uvd/raw/can": ("uvd.can_frame.v1", None),
+}
+_TOPIC_OF_TYPE = {t: topic for topic, (_, t) in CHANNELS.items() if t is not None}
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be read as one (names the file and what is wrong)."""
+
+
+@cache
+def schema(name: str) -> dict[str, Any]:
+    """The JSON Schema ``name`` (``uvd.cycle.v1`` …) shipped in uvd/telemetry/schemas."""
+    text = resources.files("uvd.telemetry").joinpath("schemas", f"{name}.json").read_text(
+        encoding="utf-8")
+    return json.loads(text)
+
+
+def _quaternion(R) -> dict[str, float]:
+    """Unit quaternion (x, y, z, w) of a rotation matrix (Shepperd's method)."""
+    r = [[float(R[i][j]) for j in range(3)] for i in range(3)]
+    tr = r[0][0] + r[1][1] + r[2][2]
+    if tr > 0.0:
+        s = math.sqrt(tr + 1.0) * 2.0
+        w, x = 0.25 * s, (r[2][1] - r[1][2]) / s
+        y, z = (r[0][2] - r[2][0]) / s, (r[1][0] - r[0][1]) / s
+    elif r[0][0] > r[1][1] and r[0][0] > r[2][2]:
+        s = math.sqrt(1.0 + r[0][0] - r[1][1] - r[2][2]) * 2.0
+        w, x = (r[2][1] - r[1][2]) / s, 0.25 * s
+        y, z = (r[0][1] + r[1][0]) / s, (r[0][2] + r[2][0]) / s
+    elif r[1][1] > r[2][2]:
+        s = math.sqrt(1.0 + r[1][1] - r[0][0] - r[2][2]) * 2.0
+        w, x = (r[0][2] - r[2][0]) / s, (r[0][1] + r[1][0]) / s
+        y, z = 0.25 * s, (r[1][2] + r[2][1]) / s
+    else:
+        s = math.sqrt(1.0 + r[2][2] - r[0][0] - r[1][1]) * 2.0
+        w, x = (r[1][0] - r[0][1]) / s, (r[0][2] + r[2][0]) / s
+        y, z = (r[1][2] + r[2][1]) / s, 0.25 * s
+    return {"x": x, "y": y, "z": z, "w": w}
+
+
+def _pose(rec: Mapping[str, Any]) -> dict[str, Any]:
+    t = int(rec["t_ns"])
+    p = [float(x) for x in rec["p"]]
+    return {"timestamp": {"sec": t // 1_000_000_000, "nsec": t % 1_000_000_000},
+            "frame_id": "ned", "pose": {"position": {"x": p[0], "y": p[1], "z": p[2]},
+                                        "orientation": _quaternion(rec["R"])}}
+
+
+class _Buffer:
+    """The writer's output: bytes collected in the event loop, taken by the worker thread."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+        self.size = 0
+        self.lock = threading.Lock()
+
+    def write(self, b) -> int:
+        b = bytes(b)
+        with self.lock:
+            self.parts.append(b)
+            self.size += len(b)
+        return len(b)
+
+    def take(self) -> bytes:
+        with self.lock:
+            out, self.parts = b"".join(self.parts), []
+        return out
+
+    def flush(self) -> None:
+        return None
+
+
+class McapRecorder:
+    """Record the hub's records and the raw input frames to ``directory/uvd-<time>.mcap``.
+
+    Parameters
+    ----------
+    directory : path
+        Folder of the files (created).
+    flush_interval_s : float
+        Most data lost by a crash or SIGKILL (seconds before it).
+    rotate_mb, rotate_s : float
+        Start a new file past this size / age (0: never).
+    raw_queue_size : int
+        Raw frames that may wait; when full the oldest is dropped and counted.
+    slice_s : float
+        Longest stretch of serialising before the pump yields to the event loop.
+    clock_wall : callable
+        Wall clock for the file names only.
+    """
+
+    name = "mcap"
+
+    def __init__(self, directory: str | Path, *, flush_interval_s: float = 0.25,
+                 rotate_mb: float = 512.0, rotate_s: float = 0.0, raw_queue_size: int = 65536,
+                 slice_s: float = 2e-4, clock_wall=time.time) -> None:
+        self.directory = Path(directory)
+        self.flush_interval_s = float(flush_interval_s)
+        self.rotate_bytes = int(rotate_mb * 1e6)
+        self.rotate_ns = int(rotate_s * 1e9)
+        self.slice_s = float(slice_s)
+        self.clock_wall = clock_wall
+        self._raw: collections.deque = collections.deque(maxlen=int(raw_queue_size))
+        self.raw_taken = 0
+        self.raw_dropped = 0
+        self.messages = 0
+        self.files: list[Path] = []
+        self._writer = None
+        self._buf: _Buffer | None = None
+        self._fh = None
+        self._channels: dict[str, int] = {}
+        self._seq: dict[int, int] = {}
+        self._start_rec: Mapping[str, Any] | None = None
+        self._file_bytes = 0
+        self._file_t0_ns = 0
+        self._worker = DaemonWorker("uvd-sink-mcap")
+        self._flusher: asyncio.Task | None = None
+
+    # -- taps (any thread; cheap; never raise) --
+
+    def tap_serial(self, source: str, t_ns: int, data: bytes) -> None:
+        """``FrameReader.tap``: one chunk of bytes of ``source`` as it arrived."""
+        q = self._raw
+        if len(q) == q.maxlen:
+            self.raw_dropped += 1
+        q.append(("/uvd/raw/serial", t_ns, (source, bytes(data))))
+
+    def tap_can(self, msg, t_ns: int, is_rx: bool) -> None:
+        """``CanBus.tap``: one CAN frame sent or received."""
+        q = self._raw
+        if len(q) == q.maxlen:
+            self.raw_dropped += 1
+        q.append(("/uvd/raw/can", t_ns, (bool(is_rx), int(msg.arbitration_id),
+                                        bool(msg.is_extended_id), bool(msg.is_remote_frame),
+                                        bool(msg.is_error_frame), bytes(msg.data))))
+
+    # -- files --
+
+    def _new_file(self, t_ns: int) -> None:
+        from mcap.writer import CompressionType, Writer
+        if self._writer is not None:
+            self._finish_file()
+        stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime(self.clock_wall()))
+        path = self.directory / f"uvd-{stamp}-{len(self.files):03d}.mcap"
+        self._buf = _Buffer()
+        self._writer = Writer(self._buf, use_chunking=False, compression=CompressionType.NONE)
+        self._writer.start(profile="", library="uvd")
+        self._channels = {}
+        for topic, (schema_name, _) in CHANNELS.items():
+            sid = self._writer.register_schema(
+                schema_name, "jsonschema", json.dumps(schema(schema_name)).encode())
+            self._channels[topic] = self._writer.register_channel(topic, "json", sid)
+        self._seq = dict.fromkeys(self._channels.values(), 0)
+        self._file_bytes = 0
+        self._file_t0_ns = t_ns
+        self.files.append(path)
+        if self._start_rec is not None:
+            self._add("/uvd/start", t_ns, self._start_rec)
+
+    def _finish_file(self) -> None:
+        self._writer.finish()
+        data = self._buf.take()
+        # queued behind the earlier writes of that file (one worker thread, in order)
+        self._worker.submit(self._write_bytes, self.files[-1], data, True)
+        self._writer = None
+
+    def _write_bytes(self, path: Path, data: bytes, close: bool) -> None:
+        """Worker thread: append ``data`` to ``path`` (the file open while it is current)."""
+        if self._fh is None or self._fh.name != str(path):
+            if self._fh is not None:
+                self._fh.close()
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = open(path, "ab")  # noqa: SIM115 - kept open across calls
+        if data:
+            self._fh.write(data)
+            self._fh.flush()
+        if close:
+            os.fsync(self._fh.fileno())
+            self._fh.close()
+            self._fh = None
+
+    def _add(self, topic: str, t_ns: int, obj: Any) -> None:
+        data = json.dumps(obj, separators=(",", ":"), default=str, allow_nan=False).encode()
+        cid = self._channels[topic]
+        seq = self._seq[cid]
+        self._seq[cid] = seq + 1
+        self._writer.add_message(cid, t_ns, data, t_ns, seq)
+        self._file_bytes += len(data)
+        self.messages += 1
+
+    def _rotate_due(self, t_ns: int) -> bool:
+        return (self.rotate_bytes and self._file_bytes >= self.rotate_bytes) or \
+            (self.rotate_ns and t_ns - self._file_t0_ns >= self.rotate_ns)
+
+    # -- the sink --
+
+    async def open(self) -> None:
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self._new_file(time.monotonic_ns())
+        self._flusher = asyncio.get_running_loop().create_task(self._flush_loop(),
+                                                               name="mcap-flush")
+
+    async def _flush_loop(self) -> None:
+        while True:
+            await asyncio.sleep(self.flush_interval_s)
+            await self.flush()
+
+    async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
+        if self._writer is None:
+            raise RuntimeError(f"sink {self.name} is not open")
+        t0 = time.perf_counter()
+        for r in records:
+            kind = r.get("type")
+            t_ns = int(r.get("t_ns") or time.monotonic_ns())
+            if self._rotate_due(t_ns):
+                self._new_file(t_ns)
+            obj = to_jsonable(r)
+            if kind == "start":
+                self._start_rec = obj
+            topic = _TOPIC_OF_TYPE.get(kind)
+            if topic is not None:
+                self._add(topic, t_ns, obj)
+                if kind == "cycle":
+                    self._add("/uvd/pose", t_ns, _pose(obj))
+            if time.perf_counter() - t0 > self.slice_s:
+                await asyncio.sleep(0)
+                t0 = time.perf_counter()
+        self._drain_raw()
+
+    def _drain_raw(self) -> None:
+        q = self._raw
+        while q:
+            topic, t_ns, payload = q.popleft()
+            self.raw_taken += 1
+            if topic == "/uvd/raw/serial":
+                obj = {"source": payload[0], "t_ns": t_ns,
+                       "data": base64.b64encode(payload[1]).decode("ascii")}
+            else:
+                rx, cid, ext, rtr, err, data = payload
+                obj = {"t_ns": t_ns, "rx": rx, "id": cid, "extended": ext, "remote": rtr,
+                       "error": err, "data": base64.b64encode(data).decode("ascii")}
+            self._add(topic, t_ns, obj)
+
+    async def flush(self) -> None:
+        """Hand what is serialised to the operating system (a worker thread writes it)."""
+        if self._writer is None:
+            return
+        self._drain_raw()
+        data = self._buf.take()
+        if data:
+            await self._worker.submit(self._write_bytes, self.files[-1], data, False)
+
+    async def aclose(self) -> None:
+        if self._flusher is not None:
+            self._flusher.cancel()
+        try:
+            if self._writer is not None:
+                self._drain_raw()
+                self._writer.finish()
+                await self._worker.submit(self._write_bytes, self.files[-1], self._buf.take(),
+                                          True)
+                self._writer = None
+        finally:
+            self._worker.close()
+
+    def stats(self) -> dict[str, Any]:
+        return {"files": [str(p) for p in self.files], "messages": self.messages,
+                "raw_taken": self.raw_taken, "raw_dropped": self.raw_dropped}
+
+
+def read_messages(path: str | Path, topics: Sequence[str] | None = None
+                  ) -> Iterator[tuple[str, int, dict[str, Any]]]:
+    """(topic, log time ns, decoded JSON) of every message of an MCAP file, in file order.
+
+    Reads with MCAP's streaming reader, so a file cut by a crash yields every message written
+    before the cut (the cut itself ends the iteration quietly).
+
+    Raises
+    ------
+    RecordingError
+        Not an MCAP file, or a message that is not JSON (the message names the file).
+    """
+    from mcap.exceptions import EndOfFile, McapError
+    from mcap.reader import StreamReader
+    from mcap.records import Channel, Message
+
+    path = Path(path)
+    want = None if topics is None else set(topics)
+    channels: dict[int, str] = {}
+    try:
+        fh = path.open("rb")
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot open: {exc}") from exc
+    with fh:
+        if fh.read(8) != b"\x89MCAP0\r\n":
+            raise RecordingError(f"{path}: not an MCAP file (no MCAP magic at its start)")
+        fh.seek(0)
+        it = StreamReader(fh, validate_crcs=False).records
+        while True:
+            try:
+                rec = next(it)
+            except StopIteration:
+                return
+            except EndOfFile:
+                return  # a file cut by a crash: everything before the cut was read
+            except (McapError, ValueError, struct.error) as exc:
+                raise RecordingError(f"{path}: damaged MCAP record: {exc}") from exc
+            if isinstance(rec, Channel):
+                channels[rec.id] = rec.topic
+            elif isinstance(rec, Message):
+                topic = channels.get(rec.channel_id)
+                if topic is None:
+                    raise RecordingError(f"{path}: message on unknown channel {rec.channel_id}")
+                if want is not None and topic not in want:
+                    continue
+                try:
+                    yield topic, rec.log_time, json.loads(rec.data)
+                except ValueError as exc:
+                    raise RecordingError(f"{path}: message on {topic} at {rec.log_time} ns is "
+                                         f"not JSON: {exc}") from exc
+
