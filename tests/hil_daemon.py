@@ -51,7 +51,8 @@ def running_bridge(run_dir: Path, changes: dict | None = None, duration_s: float
     # several HIL set-ups may run at once) — the machine also runs other test suites, and a
     # 200 ms stall of either side would trip the drives' command timeout mid-test
     bridge_args, base = cpu_split(pin=False)
-    base["telemetry"] = {"jsonl": {"enabled": False}}
+    # no files, and no Zenoh on the demo's 7447 (a test that wants it names its own port)
+    base["telemetry"] = {"jsonl": {"enabled": False}, "zenoh": {"enabled": False}}
     cfg_path = write_local_config(run_dir, changes={**base, **(changes or {})})
     proc = BridgeProcess(cfg_path, duration_s=duration_s, hold=True,
                          extra=bridge_args).start(timeout_s=90.0)

@@ -81,9 +81,29 @@ from uvd.telemetry._worker import run_in_daemon_thread
 from uvd.telemetry.jsonl import JsonLinesSink
 from uvd.telemetry.sink import TelemetryHub, TelemetrySink
 
-__all__ = ["App", "Component", "ShutdownStep", "setup_logging"]
+__all__ = ["App", "Component", "ShutdownStep", "setup_logging", "zenoh_sink"]
 
 log = logging.getLogger("uvd.runtime")
+
+
+def zenoh_sink(config: Config, hub: TelemetryHub):
+    """The ``[telemetry.zenoh]`` sink of a configuration (docs/zenoh.md)."""
+    from uvd.runtime.schema import as_dict
+    from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
+    z = config.telemetry.zenoh
+    base = Path(config.source).parent if config.source else Path.cwd()
+    file = str(base / z.config_file) if z.config_file else None
+    key = z.key or Path(config.vehicle.name).stem
+    c = config.control
+    configuration = {"vehicle": config.vehicle.name, "controller": c.controller,
+                     "model": c.model, "kp": c.kp, "kd": c.kd, "eps": c.eps,
+                     "reference": c.reference, "rate_hz": config.loop.rate_hz,
+                     "failsafe": as_dict(config.failsafe)}
+    return ZenohSink(key, zenoh_config(mode=z.mode, listen=z.listen, connect=z.connect,
+                                       multicast_scouting=z.multicast_scouting,
+                                       config_file=file),
+                     state_hz=z.state_hz, health_hz=z.health_hz, configuration=configuration,
+                     dropped=lambda: sum(s["dropped"] for s in hub.stats().values()))
 
 
 @runtime_checkable
@@ -185,6 +205,8 @@ class App:
                                 flush_interval_s=tel.flush_interval_s)
         if tel.jsonl.enabled:
             self.hub.add_sink(JsonLinesSink(tel.jsonl.path), every_n=tel.jsonl.every_n_cycles)
+        if tel.zenoh.enabled:
+            self.hub.add_sink(zenoh_sink(config, self.hub))
         self.loop = FixedRateLoop(cycle, config.loop, clock=clock, on_error=self._on_cycle_error)
         self.watchdog = WatchdogPinger.from_env(self.notifier)
         if self.watchdog is not None:

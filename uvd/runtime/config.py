@@ -347,6 +347,30 @@ class JsonlSection:
 
 
 @dataclass(frozen=True)
+class ZenohSection:
+    """Live state, estimates and health over Zenoh (``[telemetry.zenoh]``, docs/zenoh.md)."""
+
+    enabled: bool = setting(False, doc="publish under uvd/<key>/… (docs/zenoh.md)")
+    key: str = setting("", doc="the <vehicle> of the key space; empty: [vehicle] name "
+                               "(a file's stem)")
+    mode: str = setting("peer", choices=("peer", "client"),
+                        doc="peer (others connect to the listen endpoints) or client (through "
+                            "a zenohd router at the connect endpoints)")
+    listen: tuple[str, ...] = setting(("tcp/127.0.0.1:7447",),
+                                      doc="endpoints to listen on (peer mode)")
+    connect: tuple[str, ...] = setting((), doc="endpoints to connect to (a router, peers)")
+    multicast_scouting: bool = setting(False, doc="find peers by UDP multicast (off: only "
+                                                  "the endpoints above)")
+    config_file: str = setting("", doc="a Zenoh JSON5 configuration file (TLS, "
+                                       "authentication, access control); replaces the keys "
+                                       "above, relative to this config file")
+    state_hz: float = setting(20.0, unit="Hz", min=0.0, max=1000.0,
+                              doc="uvd/<key>/state rate (0: off)")
+    health_hz: float = setting(2.0, unit="Hz", min=0.0, max=1000.0,
+                               doc="uvd/<key>/health rate (0: off)")
+
+
+@dataclass(frozen=True)
 class TelemetrySection:
     """Telemetry fed off the loop (``[telemetry]``)."""
 
@@ -356,6 +380,7 @@ class TelemetrySection:
     flush_interval_s: float = setting(0.05, unit="s", gt=0.0, max=10.0,
                                       doc="how often each sink's queue is drained")
     jsonl: JsonlSection = section(JsonlSection)
+    zenoh: ZenohSection = section(ZenohSection)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,133 @@
+"""Zenoh: the daemon over sim-bridge publishes; a second Zenoh session, written only against the
+documented key space and the JSON Schema files (docs/zenoh.md), subscribes, queries and
+watches liveliness. Loopback only, on a port of its own.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import jsonschema
+import pytest
+import zenoh
+
+from tests.hil_daemon import run_scenario, running_bridge
+from uvd.runtime.config import load_config
+
+pytestmark = pytest.mark.slow
+
+SCHEMAS = Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Watcher:
+    """The fault-detection side: its own session, the schema files, nothing of the daemon."""
+
+    def __init__(self, endpoint: str) -> None:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"peer"')
+        conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        self.session = zenoh.open(conf)
+        self.samples: dict[str, list[dict]] = defaultdict(list)
+        self.invalid: list[tuple[str, str]] = []
+        self.validators = {}
+        self.sub = self.session.declare_subscriber("uvd/**", self._on_sample)
+
+    def _validator(self, encoding: str):
+        name = encoding.split("schema=", 1)[1]
+        if name not in self.validators:
+            sch = json.loads((SCHEMAS / f"{name}.json").read_text())
+            self.validators[name] = jsonschema.Draft202012Validator(sch)
+        return self.validators[name]
+
+    def _on_sample(self, sample) -> None:
+        key, enc = str(sample.key_expr), str(sample.encoding)
+        try:
+            msg = json.loads(sample.payload.to_bytes())
+            errors = list(self._validator(enc).iter_errors(msg))
+        except Exception as exc:  # noqa: BLE001 - recorded and asserted on
+            self.invalid.append((key, f"{type(exc).__name__}: {exc}"))
+            return
+        if errors:
+            self.invalid.append((key, errors[0].message))
+        self.samples[key].append(msg)
+
+    def alive(self) -> list[str]:
+        return [str(r.ok.key_expr) for r in self.session.liveliness().get("uvd/*/alive",
+                                                                           timeout=1.0)
+                if r.ok is not None]
+
+    def query(self, selector: str) -> tuple[list[dict], list[dict], float]:
+        t0 = time.monotonic()
+        ok, err = [], []
+        for r in self.session.get(selector, timeout=2.0):
+            if r.ok is not None:
+                ok.append(json.loads(r.ok.payload.to_bytes()))
+            else:
+                err.append(json.loads(r.err.payload.to_bytes()))
+        return ok, err, time.monotonic() - t0
+
+
+def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path):
+    port = _free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    changes = {"telemetry": {"zenoh": {"enabled": True, "listen": [endpoint], "key": "rov7",
+                                       "state_hz": 10.0, "health_hz": 2.0}},
+               "estimation": {"aid": True, "publish_every_s": 0.5}}
+    w = Watcher(endpoint)
+    info = {}
+    try:
+        with running_bridge(tmp_path, changes) as (cfg_path, proc):
+            cfg = load_config(cfg_path)
+
+            async def scenario(d):
+                await asyncio.sleep(0.5)
+                info["alive"] = await asyncio.to_thread(w.alive)
+                info["params"] = await asyncio.to_thread(w.query, "uvd/rov7/params")
+                info["bad"] = await asyncio.to_thread(w.query,
+                                                      "uvd/rov7/params?colour=blue")
+                info["bad_what"] = await asyncio.to_thread(w.query,
+                                                           "uvd/rov7/params?what=gains")
+                await asyncio.sleep(3.0)
+
+            d, cycles = run_scenario(cfg, scenario)
+        time.sleep(0.5)
+        info["alive_after"] = w.alive()
+    finally:
+        w.session.close()
+    assert not w.invalid, w.invalid[:5]
+    state = w.samples["uvd/rov7/state"]
+    health = w.samples["uvd/rov7/health"]
+    est = w.samples["uvd/rov7/estimate/aid6"]
+    events = w.samples["uvd/rov7/event"]
+    print(f"state {len(state)}, health {len(health)}, estimate {len(est)}, events "
+          f"{len(events)}; params reply in {info['params'][2] * 1e3:.1f} ms")
+    for name, got in (("state", state), ("health", health), ("estimate", est),
+                      ("event", events)):
+        seqs = [m["seq"] for m in got]
+        assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), (name, seqs)  # no gaps
+    assert len(state) >= 0.8 * len(cycles)  # every cycle at 10 Hz (subscribed before start)
+    assert len(health) >= 6 and len(est) >= 6
+    assert any(m["kind"] == "lifecycle" and "ARMED" in m["text"] for m in events)
+    assert est[-1]["masses"] is not None and len(est[-1]["masses"]) == 6
+    assert info["alive"] == ["uvd/rov7/alive"] and info["alive_after"] == []
+    ok, err, dt = info["params"]
+    assert not err and len(ok) == 1 and dt < 0.1
+    assert ok[0]["configuration"]["controller"] == "two-step-ambc"
+    assert "aid6" in ok[0]["estimates"]
+    for key in ("bad", "bad_what"):
+        ok, err, _ = info[key]
+        assert not ok and len(err) == 1 and "uvd/rov7/params" in err[0]["error"]
+    assert "colour" in info["bad"][1][0]["error"] and "gains" in info["bad_what"][1][0]["error"]
+    assert d.app.hub.stats()["zenoh"]["errors"] == 0

@@ -1,0 +1,298 @@
+"""Live state, parameter estimates, health and events over Zenoh, for fault-detection clients.
+
+A :class:`~uvd.telemetry.sink.TelemetrySink` of the hub (so it never touches the loop: the
+hub's bounded drop-oldest queue stands between them). Key space (docs/zenoh.md):
+
+==================================  ==========================================================
+``uvd/<vehicle>/state``             pose, velocity, reference and tracking error, thrust
+                                    (``uvd.state.v1``), at ``state_hz``
+``uvd/<vehicle>/estimate/<name>``   each online estimate as the daemon publishes it
+                                    (``uvd.zestimate.v1``): θ̂, the six masses and drags, g, b,
+                                    λ_min(M̂), frozen flag and reason, steps, age
+``uvd/<vehicle>/health``            lifecycle, failsafe action and triggers, source ages,
+                                    amplifier faults, telemetry drops (``uvd.health.v1``), at
+                                    ``health_hz``
+``uvd/<vehicle>/event``             failsafe transitions, lifecycle, commands, reloads, the
+                                    start (``uvd.event.v1``)
+``uvd/<vehicle>/params``            queryable: the configuration's vehicle and gains and the
+                                    latest estimates (``uvd.params.v1``); ``?what=`` one of
+                                    ``all`` (default), ``configuration``, ``estimates``
+``uvd/<vehicle>/alive``             liveliness token while the daemon runs
+==================================  ==========================================================
+
+Every payload is JSON with its schema in the sample's encoding
+(``application/json;schema=uvd.state.v1``) and carries ``seq`` (per key, +1 a sample: a gap
+is a lost sample), ``t_ns`` (the daemon's monotonic clock) and ``wall_time``. Publishers use
+congestion control DROP: a slow or absent subscriber never makes a put wait. The puts run in
+the sink's worker thread, off the event loop.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from drivers.samples import R_to_euler
+from uvd.jsonio import to_jsonable
+from uvd.telemetry._worker import DaemonWorker
+
+__all__ = ["ZenohSink", "zenoh_config", "ENCODINGS", "QUERY_WHAT"]
+
+#: key (relative to uvd/<vehicle>) → the schema named in its samples' encoding
+ENCODINGS = {"state": "uvd.state.v1", "estimate": "uvd.zestimate.v1",
+             "health": "uvd.health.v1", "event": "uvd.event.v1", "params": "uvd.params.v1"}
+QUERY_WHAT = ("all", "configuration", "estimates")
+
+
+def zenoh_config(*, mode: str = "peer", listen: Sequence[str] = (),
+                 connect: Sequence[str] = (), multicast_scouting: bool = False,
+                 config_file: str | None = None, extra: Mapping[str, Any] | None = None):
+    """A ``zenoh.Config``: from ``config_file`` (JSON5) when given, else the keys given here
+    (``extra`` maps further JSON5 paths to values, e.g. TLS or authentication settings)."""
+    import zenoh
+    if config_file:
+        conf = zenoh.Config.from_file(str(config_file))
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", json.dumps(mode))
+        conf.insert_json5("scouting/multicast/enabled", json.dumps(bool(multicast_scouting)))
+        if listen:
+            conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+        if connect:
+            conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    for path, value in (extra or {}).items():
+        conf.insert_json5(path, json.dumps(value))
+    return conf
+
+
+def _rpy(R) -> list[float]:
+    return list(R_to_euler(np.asarray(R, dtype=float).reshape(3, 3)))
+
+
+def _wrap(a: float) -> float:
+    return math.remainder(a, 2.0 * math.pi)
+
+
+class ZenohSink:
+    """Publish the hub's records under ``uvd/<vehicle>/…`` (module docstring).
+
+    Parameters
+    ----------
+    vehicle : str
+        The ``<vehicle>`` of the key space (a single key chunk: no ``/``, ``*``, ``?``…).
+    config : zenoh.Config
+        The session's configuration (:func:`zenoh_config`).
+    state_hz, health_hz : float
+        Publication rates of ``state`` and ``health`` (cycles in between are skipped).
+    configuration : mapping
+        What the ``params`` queryable reports of the configuration (vehicle, controller,
+        gains, failsafe thresholds), as plain data.
+    dropped : callable, optional
+        ``dropped() -> int``: records the hub dropped so far (published in ``health``).
+    """
+
+    name = "zenoh"
+
+    def __init__(self, vehicle: str, config, *, state_hz: float = 20.0, health_hz: float = 2.0,
+                 configuration: Mapping[str, Any] | None = None, dropped=None) -> None:
+        if not vehicle or any(c in vehicle for c in "/*?#$ "):
+            raise ValueError(f"[telemetry.zenoh] vehicle: {vehicle!r} is not a single key "
+                             "chunk (no '/', '*', '?', '#', '$' or spaces)")
+        self.vehicle = vehicle
+        self.prefix = f"uvd/{vehicle}"
+        self.config = config
+        self.state_period_ns = int(1e9 / state_hz) if state_hz > 0 else 0
+        self.health_period_ns = int(1e9 / health_hz) if health_hz > 0 else 0
+        self.configuration = dict(configuration or {})
+        self.dropped = dropped
+        self._worker = DaemonWorker("uvd-sink-zenoh")
+        self._session = None
+        self._pubs: dict[str, Any] = {}
+        self._seq: dict[str, int] = {}
+        self._next_state = 0
+        self._next_health = 0
+        self._estimates: dict[str, dict[str, Any]] = {}
+        self._lock = threading.Lock()
+        self._token = None
+        self._queryable = None
+        self.published = 0
+        self.query_errors = 0
+
+    # -- session (worker thread) --
+
+    def _open(self) -> None:
+        import zenoh
+        self._session = zenoh.open(self.config)
+        self._token = self._session.liveliness().declare_token(f"{self.prefix}/alive")
+        self._queryable = self._session.declare_queryable(f"{self.prefix}/params",
+                                                          self._on_query)
+
+    def _publisher(self, key: str, schema_name: str):
+        import zenoh
+        pub = self._pubs.get(key)
+        if pub is None:
+            pub = self._session.declare_publisher(
+                key, encoding=zenoh.Encoding(f"application/json;schema={schema_name}"),
+                congestion_control=zenoh.CongestionControl.DROP)
+            self._pubs[key] = pub
+        return pub
+
+    def _put_all(self, items: list[tuple[str, str, dict[str, Any]]]) -> None:
+        for key, schema_name, payload in items:
+            self._publisher(key, schema_name).put(
+                json.dumps(payload, separators=(",", ":"), allow_nan=False))
+            self.published += 1
+
+    def _on_query(self, query) -> None:
+        """The ``params`` queryable (zenoh's thread): the snapshot, or an error naming what
+        was wrong with the selector."""
+        import zenoh
+        try:
+            params = dict(query.parameters) if query.parameters is not None else {}
+        except Exception:  # noqa: BLE001 - a selector zenoh hands us but we cannot read
+            params = {"?": str(query.parameters)}
+        unknown = sorted(set(params) - {"what"})
+        what = params.get("what", "all") or "all"
+        if unknown or what not in QUERY_WHAT:
+            self.query_errors += 1
+            why = (f"unknown selector parameter(s) {', '.join(unknown)} (known: what)"
+                   if unknown else f"what={what!r} is not one of {', '.join(QUERY_WHAT)}")
+            query.reply_err(json.dumps({"error": f"{self.prefix}/params: {why}"}),
+                            encoding=zenoh.Encoding("application/json"))
+            return
+        with self._lock:
+            estimates = dict(self._estimates)
+        body = {"vehicle": self.vehicle, "t_ns": time.monotonic_ns(),
+                "configuration": self.configuration if what in ("all", "configuration")
+                else {}, "estimates": estimates if what in ("all", "estimates") else {}}
+        query.reply(f"{self.prefix}/params", json.dumps(to_jsonable(body), allow_nan=False),
+                    encoding=zenoh.Encoding(f"application/json;schema={ENCODINGS['params']}"))
+
+    def _close(self) -> None:
+        try:
+            if self._token is not None:
+                self._token.undeclare()
+            if self._session is not None:
+                self._session.close()
+        finally:
+            self._session = None
+
+    # -- the sink --
+
+    async def open(self) -> None:
+        await self._worker.submit(self._open)
+
+    def _stamp(self, key: str, t_ns: int, body: dict[str, Any]) -> dict[str, Any]:
+        seq = self._seq.get(key, 0)
+        self._seq[key] = seq + 1
+        return {"seq": seq, "t_ns": int(t_ns), "wall_time": time.time(),
+                "vehicle": self.vehicle, **body}
+
+    async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
+        items: list[tuple[str, str, dict[str, Any]]] = []
+        for r in records:
+            kind = r.get("type")
+            t_ns = int(r.get("t_ns") or time.monotonic_ns())
+            if kind == "cycle":
+                if self.state_period_ns and t_ns >= self._next_state:
+                    self._next_state = t_ns + self.state_period_ns - self.state_period_ns // 10
+                    key = f"{self.prefix}/state"
+                    items.append((key, ENCODINGS["state"], self._stamp(key, t_ns,
+                                                                       _state(r))))
+                if self.health_period_ns and t_ns >= self._next_health:
+                    self._next_health = t_ns + self.health_period_ns \
+                        - self.health_period_ns // 10
+                    key = f"{self.prefix}/health"
+                    items.append((key, ENCODINGS["health"], self._stamp(
+                        key, t_ns, _health(r, self.dropped() if self.dropped else 0))))
+            elif kind == "estimate":
+                body = _estimate(r)
+                with self._lock:
+                    self._estimates[body["estimator"]] = body
+                key = f"{self.prefix}/estimate/{body['estimator']}"
+                items.append((key, ENCODINGS["estimate"], self._stamp(key, t_ns, body)))
+            elif kind in ("failsafe", "lifecycle", "command", "reload", "start"):
+                key = f"{self.prefix}/event"
+                items.append((key, ENCODINGS["event"], self._stamp(key, t_ns, _event(kind, r))))
+        if items:
+            await self._worker.submit(self._put_all, items)
+
+    async def flush(self) -> None:
+        return None
+
+    async def aclose(self) -> None:
+        try:
+            await self._worker.submit(self._close)
+        finally:
+            self._worker.close()
+
+
+# ----------------------------------------------------------------------------- payloads
+
+def _state(r: Mapping[str, Any]) -> dict[str, Any]:
+    R = np.asarray(r["R"], dtype=float)
+    out = {"state": str(r["state"]), "mode": str(r["mode"]), "action": str(r["action"]),
+           "nav_valid": bool(r["nav_valid"]), "p": r["p"], "R": R, "rpy": _rpy(R), "v": r["v"],
+           "u": r["u"], "u_cmd": r["u_cmd"], "thrust": r["thrust"], "p_ref": None,
+           "rpy_ref": None, "v_ref": None, "tracking_error": None}
+    if r.get("p_ref") is not None:
+        rpy, rpy_ref = out["rpy"], _rpy(r["R_ref"])
+        out.update(p_ref=r["p_ref"], rpy_ref=rpy_ref, v_ref=r["v_ref"], tracking_error={
+            "position_m": (np.asarray(r["p"], float) - np.asarray(r["p_ref"], float)),
+            "attitude_rad": [_wrap(a - b) for a, b in zip(rpy, rpy_ref, strict=True)]})
+    return to_jsonable(out)
+
+
+def _health(r: Mapping[str, Any], dropped: int) -> dict[str, Any]:
+    ages = r.get("ages") or (None,) * 4
+    inputs = r.get("inputs") or {}
+    act = inputs.get("actuators") or {}
+    return to_jsonable({
+        "lifecycle": str(r["state"]), "action": str(r["action"]), "mode": str(r["mode"]),
+        "operator_mode": str(r.get("operator_mode", "auto")),
+        "triggers": list(r.get("triggers") or ()),
+        "ages_s": dict(zip(("ins", "dvl", "depth", "feedback"), ages, strict=True)),
+        "amplifier_faults": list(act.get("faults") or ()),
+        "overrun_streak": inputs.get("overrun_streak"), "telemetry_dropped": int(dropped)})
+
+
+def _estimate(r: Mapping[str, Any]) -> dict[str, Any]:
+    theta = r.get("theta")
+    masses = drags = b = g = None
+    if theta is not None:
+        th = np.asarray(theta, dtype=float)
+        if th.shape == (241,):
+            from uvd.model.params import UVParams
+            p = UVParams.from_theta(th)
+            masses = np.diag(p.M)
+            drags = np.array([p.D[i][i, i] for i in range(6)])
+            g, b = float(p.g), p.b
+    return to_jsonable({"estimator": str(r["estimator"]), "theta": theta, "masses": masses,
+                        "drags": drags, "g": g, "b": b, "m_min_eig": r.get("m_min_eig"),
+                        "m_max_eig": r.get("m_max_eig"), "frozen": bool(r.get("frozen")),
+                        "freeze_reason": str(r.get("freeze_reason") or ""),
+                        "steps": r.get("steps"), "velocity_error": r.get("velocity_error"),
+                        "age_s": 0.0})
+
+
+def _event(kind: str, r: Mapping[str, Any]) -> dict[str, Any]:
+    if kind == "failsafe":
+        text = f"failsafe {r['kind']}: {r['trigger']} → {r['action']} ({r['reason']})"
+    elif kind == "lifecycle":
+        text = f"{r['from']} → {r['to']} ({r['event']}: {r['cause']})"
+    elif kind == "command":
+        text = f"{r['command']} from {r.get('source') or '?'}: " + (
+            "ok" if r["ok"] else f"refused ({r['reason']})")
+    elif kind == "reload":
+        text = "reload: " + ("applied " + ", ".join(r.get("applied") or ()) if r.get("ok")
+                             else f"refused ({r.get('error')})")
+    else:
+        text = f"started (uvd {r.get('version')})"
+    rec = {k: v for k, v in r.items() if k != "config_toml"}
+    return to_jsonable({"kind": kind, "text": text, "record": rec})
