@@ -1,0 +1,85 @@
+"""``uvd watch [--connect tcp/127.0.0.1:7447] [--vehicle '*'] [--seconds S]``.
+
+Watches vehicles over Zenoh (docs/zenoh.md) as any client would — through the documented key
+space and JSON payloads only, nothing of the daemon's classes: one line a second per vehicle
+(pose, mode, action, thrust), every event as it comes, and the vehicles coming and going
+(liveliness).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import threading
+import time
+
+
+def register(sub) -> None:
+    p = sub.add_parser("watch", help="watch running vehicles over Zenoh (docs/zenoh.md)",
+                       description="Print the state, events and liveliness of uvd vehicles.")
+    p.add_argument("--connect", default="tcp/127.0.0.1:7447", metavar="ENDPOINT",
+                   help="a daemon's (or router's) endpoint (default tcp/127.0.0.1:7447)")
+    p.add_argument("--vehicle", default="*", help="vehicle key, or * for all (default)")
+    p.add_argument("--seconds", type=float, default=0.0,
+                   help="stop after this long (default: until Ctrl-C)")
+    p.set_defaults(handler=_run)
+
+
+def _run(args) -> int:
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("connect/endpoints", json.dumps([args.connect]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    lock = threading.Lock()
+    last_line: dict[str, float] = {}
+
+    def out(text: str) -> None:
+        with lock:
+            print(text, flush=True)
+
+    def on_state(sample) -> None:
+        try:
+            m = json.loads(sample.payload.to_bytes())
+            key = str(sample.key_expr).split("/")[1]
+            now = time.monotonic()
+            if now - last_line.get(key, 0.0) < 1.0:
+                return
+            last_line[key] = now
+            p, rpy = m["p"], [math.degrees(a) for a in m["rpy"]]
+            out(f"{key:>12} {m['state']:<8} {m['mode']:<12} {m['action']:<11} "
+                f"n {p[0]:7.2f} e {p[1]:7.2f} d {p[2]:6.2f} m  roll {rpy[0]:6.1f} pitch "
+                f"{rpy[1]:6.1f} heading {rpy[2]:7.1f} deg  |thrust| max "
+                f"{max(abs(x) for x in m['thrust']):6.1f} N")
+        except (ValueError, KeyError, TypeError) as exc:
+            out(f"{sample.key_expr}: unreadable state sample ({exc})")
+
+    def on_event(sample) -> None:
+        try:
+            m = json.loads(sample.payload.to_bytes())
+            out(f"{str(sample.key_expr).split('/')[1]:>12} event: {m['text']}")
+        except (ValueError, KeyError) as exc:
+            out(f"{sample.key_expr}: unreadable event ({exc})")
+
+    def on_alive(sample) -> None:
+        what = "up" if sample.kind == zenoh.SampleKind.PUT else "gone"
+        out(f"{str(sample.key_expr).split('/')[1]:>12} {what}")
+
+    session = zenoh.open(conf)
+    try:
+        v = args.vehicle
+        session.declare_subscriber(f"uvd/{v}/state", on_state)
+        session.declare_subscriber(f"uvd/{v}/event", on_event)
+        session.liveliness().declare_subscriber(f"uvd/{v}/alive", on_alive, history=True)
+        out(f"watching uvd/{v}/… through {args.connect} (Ctrl-C to stop)")
+        deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
+        while time.monotonic() < deadline:
+            time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        session.close()
+    sys.stdout.flush()
+    return 0
