@@ -205,3 +205,22 @@ def test_sigkill_leaves_a_file_readable_to_within_a_second(tmp_path):
     lost_s = (t_kill - last) * 1e-9
     print(f"SIGKILL: the file reads up to {lost_s * 1e3:.0f} ms before the kill")
     assert 0.0 <= lost_s <= 1.0
+
+
+def test_report_writes_valid_pngs_the_html_references(recorded, tmp_path):
+    import struct
+    path, _, _, _ = recorded
+    out = tmp_path / "report"
+    assert main(["report", str(path), "--out", str(out), "--quiet"]) == 0
+    html = (out / "index.html").read_text()
+    pngs = sorted(out.glob("*.png"))
+    # no estimates.png: the run identified nothing ([estimation] aid is off)
+    assert {p.name for p in pngs} == {"tracking.png", "mne.png", "thrust.png", "failsafe.png",
+                                      "lateness.png"}
+    for p in pngs:
+        data = p.read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n", p  # a PNG
+        w, h = struct.unpack(">II", data[16:24])  # IHDR
+        assert 400 <= w <= 3000 and 200 <= h <= 3000 and len(data) > 5_000, (p, w, h)
+        assert f'src="{p.name}"' in html
+    assert main(["report", str(tmp_path / "none.mcap"), "--out", str(out), "--quiet"]) == 2

@@ -1,0 +1,36 @@
+"""``uvd report RUN.mcap --out DIR [--quiet]``: ``DIR/index.html`` with PNG figures of a
+black-box recording — tracking per DOF, MNE in windows (Fig. 5.4), commanded vs realised
+thrust (Fig. 5.2), online estimates, the failsafe timeline, the loop's period
+(:mod:`uvd.telemetry.report`)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("report", help="an HTML report with figures of a black-box recording",
+                       description="Write DIR/index.html and PNG figures of RUN.mcap.")
+    p.add_argument("recording", type=Path, metavar="RUN.mcap")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(handler=_run)
+
+
+def _run(args) -> int:
+    from uvd.telemetry.mcap_recorder import RecordingError
+    from uvd.telemetry.report import write_report
+
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"  {msg}", file=sys.stderr)
+
+    try:
+        summary = write_report(args.recording, args.out, progress=progress)
+    except RecordingError as exc:
+        print(f"uvd report: {exc}", file=sys.stderr)
+        return 2
+    print(f"uvd report: {args.out / 'index.html'} — {summary['cycles']} cycles "
+          f"({summary['armed_cycles']} armed), {len(summary['figures'])} figures")
+    return 0

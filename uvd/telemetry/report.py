@@ -1,0 +1,243 @@
+"""A report of a black-box recording: ``index.html`` and PNG figures (matplotlib, Agg backend).
+
+Figures, each from the recording's own channels (docs/recording.md):
+
+* ``tracking.png`` — per DOF, the navigation state against the reference, and the error;
+* ``mne.png`` — position and velocity MNE (mean norm of Δψ and Δv, §5.3.1) in windows:
+  15 minutes as Fig. 5.4 (shorter runs: a tenth of the run);
+* ``thrust.png`` — per thruster, the commanded thrust and the thrust the propellers produced
+  (f = k ω|ω| of the measured speed, App. A.1), as Fig. 5.2 shows them around reversals;
+* ``estimates.png`` — the online estimates over time (the six masses and drags, g, b₃) when
+  the run identified the vehicle;
+* ``failsafe.png`` — the failsafe action over time with every trigger that fired;
+* ``lateness.png`` — the distribution of the loop's measured period around its nominal one.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.frames import wrap_pi_array
+from drivers.samples import R_to_euler
+from uvd.telemetry.mcap_recorder import RecordingError, read_messages
+
+__all__ = ["write_report"]
+
+_DOF = ("north (m)", "east (m)", "down (m)", "roll (deg)", "pitch (deg)", "heading (deg)")
+_ACTIONS = ("none", "warn", "fallback", "hold-depth", "zero-thrust", "disarm")
+
+
+def _eta(p, R) -> np.ndarray:
+    return np.array([*p, *R_to_euler(np.asarray(R, dtype=float))])
+
+
+def _load(path: Path) -> dict[str, list]:
+    out: dict[str, list] = {"cycle": [], "estimate": [], "failsafe": [], "lifecycle": [],
+                            "start": []}
+    topics = {f"/uvd/{k}": k for k in out}
+    for topic, _, msg in read_messages(path, list(topics)):
+        out[topics[topic]].append(msg)
+    if not out["cycle"]:
+        raise RecordingError(f"{path}: no cycle records (/uvd/cycle): nothing to report")
+    return out
+
+
+def _k_thrust(start: list[dict]) -> np.ndarray | None:
+    """The thrusters' k of f = k ω|ω| from the recorded configuration's vehicle."""
+    if not start or not start[0].get("config_toml"):
+        return None
+    import tomllib
+
+    from uvd.io.vehicle import load_vehicle
+    try:
+        name = tomllib.loads(start[0]["config_toml"]).get("vehicle", {}).get("name", "jhu-rov")
+        return np.asarray(load_vehicle(name).k_thrust, dtype=float)
+    except Exception:  # noqa: BLE001 - a vehicle file we cannot find here: no realised thrust
+        return None
+
+
+def write_report(recording: str | Path, out_dir: str | Path, *,
+                 progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Write ``out_dir/index.html`` and its PNG figures; returns what was written.
+
+    Raises
+    ------
+    RecordingError
+        The recording cannot be read, or holds no cycles.
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(recording)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    say = progress or (lambda _msg: None)
+    say(f"reading {path}")
+    data = _load(path)
+    cyc = data["cycle"]
+    t0 = int(cyc[0]["t_ns"])
+    t = np.array([(int(r["t_ns"]) - t0) * 1e-9 for r in cyc])
+    armed = np.array([r["state"] in ("ARMED", "FAILSAFE") and r.get("p_ref") is not None
+                      for r in cyc])
+    figures: list[tuple[str, str]] = []
+
+    def save(fig, name: str, caption: str) -> None:
+        fig.tight_layout()
+        fig.savefig(out / name, dpi=100)
+        plt.close(fig)
+        figures.append((name, caption))
+        say(f"wrote {name}")
+
+    # -- tracking --
+    if armed.any():
+        ta = t[armed]
+        eta = np.array([_eta(r["p"], r["R"]) for r, a in zip(cyc, armed, strict=True) if a])
+        ref = np.array([_eta(r["p_ref"], r["R_ref"]) for r, a in zip(cyc, armed, strict=True)
+                        if a])
+        err = eta - ref
+        err[:, 3:] = wrap_pi_array(err[:, 3:])
+        scale = np.array([1, 1, 1, 180 / math.pi, 180 / math.pi, 180 / math.pi])
+        fig, axes = plt.subplots(6, 2, figsize=(12, 13), sharex=True)
+        for i in range(6):
+            a = np.unwrap(eta[:, i]) if i >= 3 else eta[:, i]
+            b = np.unwrap(ref[:, i]) if i >= 3 else ref[:, i]
+            axes[i, 0].plot(ta, b * scale[i], "k--", lw=1, label="reference")
+            axes[i, 0].plot(ta, a * scale[i], lw=1, label="navigation")
+            axes[i, 0].set_ylabel(_DOF[i])
+            axes[i, 1].plot(ta, err[:, i] * scale[i], lw=1, color="C3")
+            axes[i, 1].set_ylabel("error")
+        axes[0, 0].legend(loc="upper right", fontsize=8)
+        axes[-1, 0].set_xlabel("time (s)")
+        axes[-1, 1].set_xlabel("time (s)")
+        save(fig, "tracking.png", "Reference and navigation state per DOF (armed cycles) and "
+                                  "their difference.")
+        # -- MNE in windows --
+        from uvd.control.errors import error_coordinates
+        dpsi, dv = [], []
+        for r, a in zip(cyc, armed, strict=True):
+            if not a:
+                continue
+            H, Hr = np.eye(4), np.eye(4)
+            H[:3, :3], H[:3, 3] = np.asarray(r["R"], float), np.asarray(r["p"], float)
+            Hr[:3, :3], Hr[:3, 3] = np.asarray(r["R_ref"], float), np.asarray(r["p_ref"], float)
+            _, e_psi, e_v, _ = error_coordinates(H, np.asarray(r["v"], float), Hr,
+                                                 np.asarray(r["v_ref"], float))
+            dpsi.append(np.linalg.norm(e_psi))
+            dv.append(np.linalg.norm(e_v))
+        span = ta[-1] - ta[0]
+        win = 900.0 if span >= 1800.0 else max(span / 10.0, 1.0)
+        edges = np.arange(ta[0], ta[-1] + 1e-9, win)
+        idx = np.clip(np.searchsorted(edges, ta, side="right") - 1, 0, None)
+        mp = [float(np.mean(np.asarray(dpsi)[idx == k])) for k in range(len(edges))
+              if np.any(idx == k)]
+        mv = [float(np.mean(np.asarray(dv)[idx == k])) for k in range(len(edges))
+              if np.any(idx == k)]
+        fig, ax = plt.subplots(1, 2, figsize=(12, 4))
+        x = np.arange(len(mp)) * win / 60.0
+        ax[0].bar(x, mp, width=win / 60.0 * 0.8, align="edge")
+        ax[0].set_ylabel("position MNE (‖Δψ‖)")
+        ax[1].bar(x, mv, width=win / 60.0 * 0.8, align="edge", color="C1")
+        ax[1].set_ylabel("velocity MNE (‖Δv‖)")
+        for a in ax:
+            a.set_xlabel(f"window start (min), {win / 60.0:.3g}-minute windows")
+        save(fig, "mne.png", f"Position and velocity MNE (§5.3.1) in {win / 60.0:.3g}-minute "
+                             "windows, the layout of Fig. 5.4.")
+
+    # -- thrust --
+    thrust = np.array([r["thrust"] for r in cyc], dtype=float)
+    k = _k_thrust(data["start"])
+    realised = None
+    if k is not None:
+        rows = []
+        for r in cyc:
+            act = (r.get("inputs") or {}).get("actuators") or {}
+            w = act.get("omega_rad_s")
+            rows.append(np.full(thrust.shape[1], np.nan) if w is None
+                        else k * np.asarray(w, float) * np.abs(np.asarray(w, float)))
+        realised = np.array(rows)
+    n = thrust.shape[1]
+    fig, axes = plt.subplots(n, 1, figsize=(12, 1.8 * n + 1), sharex=True)
+    for j, ax in enumerate(np.atleast_1d(axes)):
+        ax.plot(t, thrust[:, j], lw=1, label="commanded")
+        if realised is not None:
+            ax.plot(t, realised[:, j], lw=1, label="realised (k ω|ω|)")
+        ax.set_ylabel(f"thruster {j + 1} (N)")
+    np.atleast_1d(axes)[0].legend(loc="upper right", fontsize=8)
+    np.atleast_1d(axes)[-1].set_xlabel("time (s)")
+    save(fig, "thrust.png", "Commanded and realised thrust per thruster (the realised from the "
+                            "measured propeller speed, App. A.1): the lag and the reversals "
+                            "of Fig. 5.2.")
+
+    # -- estimates --
+    est = [e for e in data["estimate"] if e.get("theta") is not None
+           and len(e["theta"]) == 241]
+    if est:
+        from uvd.model.params import UVParams
+        te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in est])
+        ps = [UVParams.from_theta(np.asarray(e["theta"], float)) for e in est]
+        fig, ax = plt.subplots(1, 3, figsize=(14, 4))
+        ax[0].plot(te, [np.diag(p.M) for p in ps])
+        ax[0].set_title("masses M̂ᵢᵢ")
+        ax[1].plot(te, [[p.D[i][i, i] for i in range(6)] for p in ps])
+        ax[1].set_title("drags D̂ᵢ(i,i)")
+        ax[2].plot(te, [[p.g, *p.b] for p in ps])
+        ax[2].set_title("g, b")
+        for a in ax:
+            a.set_xlabel("time (s)")
+        save(fig, "estimates.png", "Online estimates over the run (AID, Theorem 4.3.1; "
+                                   "cf. Figs. 4.x and 5.1).")
+
+    # -- failsafe timeline --
+    level = np.array([_ACTIONS.index(r["action"]) if r["action"] in _ACTIONS else 0
+                      for r in cyc])
+    fig, ax = plt.subplots(figsize=(12, 3))
+    ax.step(t, level, where="post")
+    ax.set_yticks(range(len(_ACTIONS)), _ACTIONS)
+    for ev in data["failsafe"]:
+        if ev.get("kind") == "fired":
+            te = (int(ev["t_ns"]) - t0) * 1e-9
+            ax.axvline(te, color="C3", lw=0.8, ls=":")
+            ax.text(te, len(_ACTIONS) - 0.8, ev["trigger"], rotation=90, fontsize=7,
+                    va="top")
+    ax.set_xlabel("time (s)")
+    save(fig, "failsafe.png", "The failsafe action in force every cycle, with each trigger "
+                              "when it fired.")
+
+    # -- loop period --
+    dt = np.array([r["dt"] for r in cyc[1:]], dtype=float)
+    nominal = float(np.median(dt)) if dt.size else 0.0
+    fig, ax = plt.subplots(figsize=(8, 4))
+    if dt.size:
+        ax.hist((dt - nominal) * 1e3, bins=50)
+    ax.set_xlabel(f"measured period − median {nominal * 1e3:.3g} ms (ms)")
+    ax.set_ylabel("cycles")
+    ax.set_yscale("log")
+    save(fig, "lateness.png", "Distribution of the loop's measured period around its median.")
+
+    summary = {"recording": str(path), "cycles": len(cyc), "armed_cycles": int(armed.sum()),
+               "duration_s": float(t[-1]) if len(t) else 0.0,
+               "failsafe_fired": sum(1 for e in data["failsafe"] if e.get("kind") == "fired"),
+               "estimates": len(est), "figures": [f for f, _ in figures]}
+    _write_html(out / "index.html", summary, figures)
+    return summary
+
+
+def _write_html(path: Path, summary: dict[str, Any], figures: list[tuple[str, str]]) -> None:
+    rows = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>"
+                   for k, v in summary.items() if k != "figures")
+    figs = "".join(f'<figure><img src="{html.escape(name)}" alt="{html.escape(name)}">'
+                   f"<figcaption>{html.escape(cap)}</figcaption></figure>"
+                   for name, cap in figures)
+    path.write_text(f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>uvd report</title>
+<style>body{{font-family:sans-serif;max-width:1200px;margin:auto}}img{{max-width:100%}}
+th{{text-align:left;padding-right:1em}}figure{{margin:2em 0}}</style></head>
+<body><h1>uvd report</h1><table>{rows}</table>{figs}</body></html>
+""", encoding="utf-8")
