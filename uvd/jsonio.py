@@ -12,12 +12,16 @@ import numpy as np
 
 def to_jsonable(obj: Any) -> Any:
     """Convert numpy scalars/arrays (recursively) to plain Python; non-finite floats to None."""
+    if isinstance(obj, np.ndarray):
+        # fast path (a telemetry record is mostly small float arrays): one finiteness check
+        # instead of a call per element
+        if obj.dtype.kind in "iub" or (obj.dtype.kind == "f" and bool(np.isfinite(obj).all())):
+            return obj.tolist()
+        return to_jsonable(obj.tolist())
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [to_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return to_jsonable(obj.tolist())
     if isinstance(obj, (np.floating, float)):
         f = float(obj)
         return f if math.isfinite(f) else None

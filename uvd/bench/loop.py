@@ -354,10 +354,25 @@ def _add(p) -> None:
                    help="garbage collection while our loop runs (LoopSettings.gc; default "
                         "slack: start-up heap frozen, collections only in slack time)")
     p.add_argument("--no-naive", action="store_true", help="skip the naive asyncio loop")
+    p.add_argument("--record", metavar="DIR", default=None,
+                   help="also publish a cycle record every cycle to the black-box recorder "
+                        "writing MCAP into DIR (its cost on the loop: compare with a run "
+                        "without)")
 
 
 async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float,
-                steal: Callable[[], float | None]) -> dict:
+                steal: Callable[[], float | None], hub=None) -> dict:
+    pump = None if hub is None else asyncio.get_running_loop().create_task(hub.run())
+    try:
+        return await _measure(settings, cycle, duration, warmup, steal)
+    finally:
+        if hub is not None:
+            await hub.aclose()
+            await pump
+
+
+async def _measure(settings: LoopSettings, cycle, duration: float, warmup: float,
+                   steal: Callable[[], float | None]) -> dict:
     n_max = int(math.ceil(duration * settings.rate_hz)) + 16
     probe = StallProbe(MonotonicClock(coarse=settings.timer, fine=settings.fine),
                        max(n_max, int(math.ceil(warmup * settings.rate_hz)) + 16))
@@ -455,6 +470,29 @@ def _fmt(d: dict) -> str:
     return "  ".join(f"{k} {d[k]:8.1f}" for k in ("p50", "p99", "p999", "max") if k in d)
 
 
+def _recorded(cycle, directory: str):
+    """``cycle`` followed by what the daemon's write phase does for the black box: build one
+    cycle record and publish it to a hub whose sink is the MCAP recorder (6 thrusters)."""
+    from uvd.telemetry.mcap_recorder import McapRecorder
+    from uvd.telemetry.records import CycleRecord
+    from uvd.telemetry.sink import TelemetryHub
+
+    hub = TelemetryHub([McapRecorder(directory)])
+    z3, z6, eye = np.zeros(3), np.zeros(6), np.eye(3)
+
+    def recorded(t_ns: int, dt: float) -> None:
+        cycle(t_ns, dt)
+        hub.publish(CycleRecord(
+            t_ns=t_ns, dt=dt, state="ARMED", action="none", mode="control", status="ok",
+            p=z3, R=eye, v=z6, nav_valid=True, u=z6, u_cmd=z6, thrust=z6,
+            ages=(0.01, 0.1, 0.05, 0.01), ins_rx_ns=t_ns, inputs={
+                "actuators": {"omega_rad_s": z6, "enabled": True, "faults": [],
+                              "feedback_t_ns": t_ns, "bus_off": False},
+                "overrun_streak": 0, "overrun_streak_exceeded": False, "leak": False,
+                "extra": None}, p_ref=z3, R_ref=eye, v_ref=z6).to_dict())
+    return recorded, hub
+
+
 def _run(args) -> dict:
     settings = LoopSettings(rate_hz=args.rate, timer=args.timer, fine=args.fine,
                             fine_margin_us=args.margin_us, gc=args.gc)
@@ -463,6 +501,9 @@ def _run(args) -> dict:
     # would hold the CPU for hundreds of ms from every lower-priority task on it — the HIL
     # demo's daemon, which the acceptance runs beside this benchmark, included.
     cycle = CYCLES[args.cycle]()
+    hub = None
+    if args.record:
+        cycle, hub = _recorded(cycle, args.record)
     for _ in range(20):
         t = time.monotonic_ns()
         cycle(t, 1.0 / args.rate)
@@ -478,13 +519,14 @@ def _run(args) -> dict:
     # the hypervisor's steal on the loop's CPUs: a paused vCPU stalls us whatever our priority
     steal_cpus = sorted(rt.cpu_affinity) if args.cpu else None
     ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup,
-                             lambda: host_steal_s(steal_cpus)))
+                             lambda: host_steal_s(steal_cpus), hub))
     warm = _back_to_back(cycle, args.rate, 2000) if args.cycle != "none" else None
     naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
     figures = {
         "rate_hz": args.rate,
         "duration_s": args.duration,
         "cycle": args.cycle,
+        "recording": bool(args.record),
         "lateness_us": ours["lateness_us"],
         "compute_us": ours["compute_us"],
         "compute_back_to_back_us": warm,

@@ -110,8 +110,8 @@ class _Buffer:
 
     def __init__(self) -> None:
         self.parts: list[bytes] = []
-        self.size = 0
-        self.lock = threading.Lock()
+        self.size = 0  # bytes written since the file began: its position (MCAP's summary
+        self.lock = threading.Lock()  # offsets ask for it)
 
     def write(self, b) -> int:
         b = bytes(b)
@@ -119,6 +119,9 @@ class _Buffer:
             self.parts.append(b)
             self.size += len(b)
         return len(b)
+
+    def tell(self) -> int:
+        return self.size
 
     def take(self) -> bytes:
         with self.lock:
