@@ -21,6 +21,33 @@ from uvd.model.vehicle import Vehicle
 
 
 @dataclass(frozen=True)
+class PlantFault:
+    """A change of the vehicle itself, for fault detection (thesis §6.2): the plant's true
+    parameters become ``drag_scale``·D (entanglement: drag up), ``mass_scale``·M (flooding,
+    a lost part), g + ``g_delta`` and b + ``b_delta`` (a lost float, a flooded housing);
+    thruster faults are the bank's ``health`` (1 healthy, 0.5 weak, 0 dead)."""
+
+    drag_scale: float = 1.0
+    mass_scale: float = 1.0
+    g_delta: float = 0.0
+    b_delta: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        vals = (self.drag_scale, self.mass_scale, self.g_delta, *self.b_delta)
+        if not all(math.isfinite(float(x)) for x in vals) or self.drag_scale <= 0.0 \
+                or self.mass_scale <= 0.0:
+            raise ValueError(f"PlantFault: scales must be finite and > 0, deltas finite; got "
+                             f"{self!r}")
+
+    def apply(self, p):
+        """The parameters ``p`` (:class:`uvd.model.params.UVParams`) with this fault."""
+        from uvd.model.params import UVParams
+        return UVParams(M=np.asarray(p.M) * self.mass_scale,
+                        D=np.asarray(p.D) * self.drag_scale, g=float(p.g) + self.g_delta,
+                        b=np.asarray(p.b, dtype=float) + np.asarray(self.b_delta, dtype=float))
+
+
+@dataclass(frozen=True)
 class PlantConfig:
     rate_hz: float = 100.0
     thrusters: ThrusterEffects = field(default_factory=ThrusterEffects)
@@ -46,6 +73,12 @@ class Plant:
         self.u = np.zeros(6)  # body wrench applied during the last step (u = B f)
         self._H_next = np.empty((4, 4))
         self._v_next = np.empty(6)
+
+    def set_fault(self, fault: PlantFault | None) -> None:
+        """From now on the vehicle's true parameters are ``fault.apply(vehicle.params)``
+        (None: the vehicle file's own again); the state carries on."""
+        p = self.vehicle.params if fault is None else fault.apply(self.vehicle.params)
+        self.model = UVModel.from_params(p)
 
     @property
     def R(self) -> np.ndarray:

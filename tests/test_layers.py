@@ -37,7 +37,7 @@ PACKAGES = ("uvd", "drivers", "sim_bridge")
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("uvd.cli", "uvd.commands", "uvd.__main__"),
-    ("uvd.experiments", "uvd.bench"),
+    ("uvd.experiments", "uvd.bench", "uvd.fdc"),
     ("uvd.runtime",),
     ("uvd.telemetry",),
     ("uvd.io",),
@@ -248,3 +248,18 @@ def test_impurities_are_found():
                    "line 4: imports logging.handlers", "line 6: calls print()",
                    "line 7: calls .savez() (a file reader or writer)", "line 8: calls open()"]
     assert impurities("uvd.model.x", "import math\nimport numpy as np\nnp.sin(1.0)\n") == []
+
+
+def test_the_fault_detection_client_uses_only_the_wire_contract():
+    """uvd-fdc is a separate process of the fleet: it imports nothing of uvd but itself."""
+    found, seen = {}, 0
+    for module, path in project_modules():
+        if _within(module, ("uvd.fdc",)):
+            seen += 1
+            bad = [name for name, _ in imports_of(module, path.read_text(encoding="utf-8"),
+                                                  is_package=path.name == "__init__.py")
+                   if name and _within(name, ("uvd", "drivers", "sim_bridge"))
+                   and not _within(name, ("uvd.fdc",))]
+            if bad:
+                found[module] = bad
+    assert seen >= 3 and not found, (seen, found)

@@ -155,3 +155,23 @@ def test_effects_can_be_switched_off(coupled):
     np.testing.assert_allclose(a.u, coupled.B @ f, rtol=1e-12)
     b.step(f)
     assert not np.allclose(b.u, coupled.B @ f)
+
+
+def test_an_entanglement_fault_raises_drag_so_the_same_thrust_settles_slower():
+    """PlantFault(drag_scale=1.5) mid-run: the steady surge speed of the test above falls by
+    √1.5 (d₁u|u| + F = 0 with 1.5·d₁); clearing the fault restores it."""
+    from sim_bridge.plant import PlantFault
+
+    vehicle = _with(load_vehicle("jhu-rov"), g=0.0, b=np.zeros(3))
+    plant = Plant(vehicle, PlantConfig())
+    F = 120.0
+    cmd = np.zeros(6)
+    cmd[:2] = F / 2
+    d1 = vehicle.params.D[0, 0, 0]
+    for fault, scale in ((PlantFault(drag_scale=1.5), 1.5), (None, 1.0)):
+        plant.set_fault(fault)
+        for _ in range(120 * 100):
+            plant.step(cmd)
+        assert plant.v[0] == pytest.approx(math.sqrt(F / -(scale * d1)), rel=1e-3)
+    with pytest.raises(ValueError, match="PlantFault"):
+        PlantFault(mass_scale=0.0)

@@ -42,7 +42,7 @@ from uvd.runtime.loop import CpuLatencyRequest
 from uvd.runtime.mailbox import Mailbox
 from uvd.runtime.sensors import make_sensors
 from uvd.runtime.supervisor import Supervisor
-from uvd.telemetry.records import CycleRecord
+from uvd.telemetry.records import CycleRecord, estimate_record
 
 __all__ = ["Daemon", "LastCycle"]
 
@@ -241,15 +241,8 @@ class Daemon:
         keeps the last positive-definite θ̂), ``steps``, ``skipped`` (non-finite inputs),
         ``resyncs`` (v̂ re-synchronised after a navigation gap), ``velocity_error`` (‖v̂ − v‖).
         """
-        out = []
-        for spec, st in zip(self.core_cfg.estimators, self.state.est, strict=True):
-            g = spec.diagnostics(st)
-            out.append({"type": "estimate", "t_ns": t_ns, "estimator": spec.name,
-                        "theta": g.theta, "m_min_eig": g.m_min_eig, "m_max_eig": g.m_max_eig,
-                        "frozen": g.frozen, "freeze_reason": g.freeze_reason,
-                        "steps": g.steps, "skipped": g.skipped, "resyncs": g.resyncs,
-                        "velocity_error": g.velocity_error})
-        return out
+        return [estimate_record(t_ns, spec.name, spec.diagnostics(st))
+                for spec, st in zip(self.core_cfg.estimators, self.state.est, strict=True)]
 
     def _publish_estimates(self, t_ns: int) -> None:
         for rec in self.estimate_records(t_ns):

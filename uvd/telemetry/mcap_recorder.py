@@ -354,6 +354,7 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None
     except OSError as exc:
         raise RecordingError(f"{path}: cannot open: {exc}") from exc
     with fh:
+        size = os.fstat(fh.fileno()).st_size
         if fh.read(8) != b"\x89MCAP0\r\n":
             raise RecordingError(f"{path}: not an MCAP file (no MCAP magic at its start)")
         fh.seek(0)
@@ -363,9 +364,9 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None
                 rec = next(it)
             except StopIteration:
                 return
-            except EndOfFile:
-                return  # a file cut by a crash: everything before the cut was read
-            except (McapError, ValueError, struct.error) as exc:
+            except (EndOfFile, McapError, ValueError, struct.error) as exc:
+                if isinstance(exc, EndOfFile) or fh.tell() >= size:
+                    return  # a file cut by a crash: everything before the cut was read
                 raise RecordingError(f"{path}: damaged MCAP record: {exc}") from exc
             if isinstance(rec, Channel):
                 channels[rec.id] = rec.topic

@@ -32,7 +32,7 @@ import numpy as np
 
 from drivers.samples import R_to_euler
 
-__all__ = ["CycleRecord", "euler_of", "eta_of_record", "CYCLE"]
+__all__ = ["CycleRecord", "estimate_record", "euler_of", "eta_of_record", "CYCLE"]
 
 CYCLE = "cycle"
 
@@ -170,6 +170,17 @@ class CycleRecord:
         if self.p_ref is None or self.R_ref is None:
             return None
         return np.array([*self.p_ref, *euler_of(self.R_ref)])
+
+
+def estimate_record(t_ns: int, estimator: str, g) -> dict[str, Any]:
+    """The ``"estimate"`` record of an online estimator from its spec's diagnostics
+    (:class:`uvd.control.types.Diagnostics`): θ̂ (a copy), M̂'s extreme eigenvalues, frozen
+    and why, the counters and ‖v̂ − v‖."""
+    return {"type": "estimate", "t_ns": int(t_ns), "estimator": estimator,
+            "theta": None if g.theta is None else np.array(g.theta, dtype=float),
+            "m_min_eig": g.m_min_eig, "m_max_eig": g.m_max_eig, "frozen": bool(g.frozen),
+            "freeze_reason": g.freeze_reason, "steps": g.steps, "skipped": g.skipped,
+            "resyncs": g.resyncs, "velocity_error": g.velocity_error}
 
 
 def euler_of(R: Any) -> tuple[float, float, float]:

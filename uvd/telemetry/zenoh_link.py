@@ -42,7 +42,7 @@ from drivers.samples import R_to_euler
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
 
-__all__ = ["ZenohSink", "zenoh_config", "ENCODINGS", "QUERY_WHAT"]
+__all__ = ["ZenohSink", "zenoh_config", "estimate_payload", "ENCODINGS", "QUERY_WHAT"]
 
 #: key (relative to uvd/<vehicle>) → the schema named in its samples' encoding
 ENCODINGS = {"state": "uvd.state.v1", "estimate": "uvd.zestimate.v1",
@@ -212,7 +212,7 @@ class ZenohSink:
                     items.append((key, ENCODINGS["health"], self._stamp(
                         key, t_ns, _health(r, self.dropped() if self.dropped else 0))))
             elif kind == "estimate":
-                body = _estimate(r)
+                body = estimate_payload(r)
                 with self._lock:
                     self._estimates[body["estimator"]] = body
                 key = f"{self.prefix}/estimate/{body['estimator']}"
@@ -262,7 +262,9 @@ def _health(r: Mapping[str, Any], dropped: int) -> dict[str, Any]:
         "overrun_streak": inputs.get("overrun_streak"), "telemetry_dropped": int(dropped)})
 
 
-def _estimate(r: Mapping[str, Any]) -> dict[str, Any]:
+def estimate_payload(r: Mapping[str, Any]) -> dict[str, Any]:
+    """The body of a ``uvd/<vehicle>/estimate/<name>`` sample (``uvd.zestimate.v1``, without
+    ``seq``, ``vehicle`` and the stamps) of an ``"estimate"`` hub record."""
     theta = r.get("theta")
     masses = drags = b = g = None
     if theta is not None:

@@ -1,0 +1,125 @@
+"""uvd-fdc: the CUSUM detector on estimate payloads, and the client as a separate process
+between two Zenoh sessions on loopback (a publisher of estimates, a listener for faults)."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from uvd.fdc.detector import CusumSettings, VehicleDetector, channels_of
+
+MU = {"masses": [640, 800, 1050, 96, 146, 108], "drags": [-1250, -1420, -3080, -726, -781, -467],
+      "g": 3.6, "b": [1.7, 3.1, 302.0]}
+FAST = CusumSettings(warmup_s=10.0, baseline_s=100.0)
+
+
+def _payload(t_s: float, rng, *, scale: dict | None = None, noise: float = 0.005) -> dict:
+    p = {"t_ns": int(t_s * 1e9), "estimator": "aid6", "frozen": False}
+    for key in ("masses", "drags", "b"):
+        base = np.asarray(MU[key], float) * (scale or {}).get(key, 1.0)
+        p[key] = (base * (1 + noise * rng.standard_normal(base.size))).tolist()
+    p["g"] = MU["g"] * (scale or {}).get("g", 1.0) + 0.05 * rng.standard_normal()
+    return p
+
+
+def test_channels_are_masses_drag_magnitudes_g_and_b():
+    ch = channels_of(_payload(0.0, np.random.default_rng(0), noise=0.0))
+    assert set(ch) == {*(f"mass{i}" for i in range(1, 7)), *(f"drag{i}" for i in range(1, 7)),
+                       "g", "b1", "b2", "b3"}
+    assert ch["drag6"] == 467.0 and ch["mass1"] == 640.0
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_stationary_estimates_raise_no_alarm(seed):
+    rng = np.random.default_rng(seed)
+    det = VehicleDetector("v", FAST)
+    alarms = [d for k in range(5000) for d in det.update(_payload(k * 1.0, rng))]
+    assert det.ready and alarms == []
+
+
+@pytest.mark.parametrize("key,factor,kind,channel", [
+    ("drags", 1.5, "entanglement", "drag"), ("masses", 1.1, "flooding", "mass"),
+    ("masses", 0.9, "lost-part", "mass"), ("g", 6.0, "buoyancy", "g")])
+def test_a_step_is_found_quickly_with_its_kind(key, factor, kind, channel):
+    rng = np.random.default_rng(1)
+    det = VehicleDetector("v", FAST)
+    for k in range(200):
+        assert det.update(_payload(k * 1.0, rng)) == []
+    found = []
+    for k in range(200, 260):
+        found += det.update(_payload(k * 1.0, rng, scale={key: factor}))
+        if found:
+            break
+    assert len(found) == 1, found
+    d = found[0]
+    assert d.kind == kind and d.channel.startswith(channel) and d.confidence >= 1.0
+    assert (d.t_ns * 1e-9 - 200) <= 3.0  # within three samples of the step
+    assert det.update(_payload(261.0, rng, scale={key: factor})) == []  # reported once
+
+
+def test_frozen_estimates_are_ignored_and_reset_learns_again():
+    rng = np.random.default_rng(2)
+    det = VehicleDetector("v", FAST)
+    frozen = {**_payload(0.0, rng), "frozen": True}
+    assert det.update(frozen) == [] and det.t0_ns is None
+    for k in range(150):
+        det.update(_payload(k * 1.0, rng))
+    assert det.ready
+    det.reset()
+    assert not det.ready and det.t0_ns is None
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_the_client_reports_and_publishes_a_fault(tmp_path):
+    import zenoh
+
+    port = _free_port()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    faults = []
+    with zenoh.open(conf) as s:
+        token = s.liveliness().declare_token("uvd/sub1/alive")
+        pub = s.declare_publisher("uvd/sub1/estimate/aid6")
+        s.declare_subscriber("uvd/*/fault/*", lambda x: faults.append(
+            (str(x.key_expr), json.loads(x.payload.to_bytes()))))
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvd.fdc.client", "--connect", f"tcp/127.0.0.1:{port}",
+             "--warmup-s", "10", "--baseline-s", "100", "--seconds", "30"],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            time.sleep(3.0)  # the client connects and subscribes
+            rng = np.random.default_rng(3)
+            for k in range(300):  # 300 simulated seconds, a drag step at 200 s
+                scale = {"drags": 1.5} if k >= 200 else None
+                pub.put(json.dumps(_payload(float(k), rng, scale=scale)))
+                time.sleep(0.01)
+            deadline = time.monotonic() + 10.0
+            while not faults and time.monotonic() < deadline:
+                time.sleep(0.1)
+            pub.put(b"not json")  # counted and dropped, never a crash
+            time.sleep(0.3)
+            token.undeclare()
+            time.sleep(0.5)
+        finally:
+            proc.terminate()
+            out, _ = proc.communicate(timeout=10)
+    print(out)
+    assert len(faults) == 1, faults
+    key, d = faults[0]
+    assert key == "uvd/sub1/fault/entanglement" and d["channel"].startswith("drag")
+    assert 200e9 <= d["t_ns"] <= 203e9
+    assert "FAULT sub1: entanglement" in out and "not JSON" in out and "sub1: gone" in out

@@ -1,0 +1,104 @@
+"""``uvd-fdc``: watch one vehicle or a fleet over Zenoh and report faults.
+
+Subscribes to ``uvd/*/estimate/**`` (the key space of docs/zenoh.md; JSON payloads of schema
+``uvd.zestimate.v1``), runs one :class:`~uvd.fdc.detector.VehicleDetector` per vehicle and
+estimator, prints each detection and publishes it on ``uvd/<vehicle>/fault/<kind>`` (JSON:
+kind, t_ns, channel, magnitude in σ, relative change, confidence). Vehicles are followed by
+their liveliness token ``uvd/<vehicle>/alive``: one that goes away is forgotten, and one that
+comes back starts a new baseline (it may have been repaired, or restarted with other
+parameters). Nothing of the daemon is imported: only the wire contract.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import threading
+import time
+
+from uvd.fdc.detector import CusumSettings, VehicleDetector
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="uvd-fdc", description=__doc__.split("\n\n")[0])
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                   help="endpoint of a daemon or router (repeatable; default "
+                        "tcp/127.0.0.1:7447)")
+    p.add_argument("--vehicle", default="*", help="vehicle key or * (default: every vehicle)")
+    p.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: never)")
+    p.add_argument("--warmup-s", type=float, default=CusumSettings.warmup_s)
+    p.add_argument("--baseline-s", type=float, default=CusumSettings.baseline_s)
+    p.add_argument("-k", type=float, default=CusumSettings.k, help="CUSUM allowance (σ)")
+    p.add_argument("--threshold", type=float, default=CusumSettings.h, help="CUSUM h (σ)")
+    args = p.parse_args(argv)
+    import zenoh
+
+    settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s, k=args.k,
+                             h=args.threshold)
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("connect/endpoints",
+                      json.dumps(args.connect or ["tcp/127.0.0.1:7447"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    lock = threading.Lock()
+    detectors: dict[tuple[str, str], VehicleDetector] = {}
+    session = zenoh.open(conf)
+
+    def say(text: str) -> None:
+        with lock:
+            print(text, flush=True)
+
+    def on_estimate(sample) -> None:
+        parts = str(sample.key_expr).split("/")
+        if len(parts) != 4:
+            return
+        vehicle, estimator = parts[1], parts[3]
+        try:
+            payload = json.loads(sample.payload.to_bytes())
+        except ValueError as exc:
+            say(f"{sample.key_expr}: not JSON ({exc}); dropped")
+            return
+        with lock:
+            det = detectors.setdefault((vehicle, estimator), VehicleDetector(vehicle, settings))
+            try:
+                found = det.update(payload)
+            except (KeyError, TypeError, ValueError) as exc:
+                print(f"{sample.key_expr}: malformed estimate ({exc}); dropped", flush=True)
+                return
+        for d in found:
+            say(f"FAULT {vehicle}: {d.kind} ({d.channel} {d.relative_change:+.1%}, "
+                f"{d.magnitude:+.1f} σ, confidence {d.confidence:.1f})")
+            session.put(f"uvd/{vehicle}/fault/{d.kind}", json.dumps(d.as_dict()),
+                        encoding=zenoh.Encoding("application/json;schema=uvd.fault.v1"))
+
+    def on_alive(sample) -> None:
+        vehicle = str(sample.key_expr).split("/")[1]
+        if sample.kind == zenoh.SampleKind.PUT:
+            say(f"{vehicle}: up")
+            return
+        with lock:
+            for key in [k for k in detectors if k[0] == vehicle]:
+                del detectors[key]
+        say(f"{vehicle}: gone (its baseline is forgotten)")
+
+    try:
+        session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*", on_estimate)
+        session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive", on_alive,
+                                                history=True)
+        say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* (baseline after "
+            f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; k {settings.k:g}, "
+            f"h {settings.h:g})")
+        deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
+        while time.monotonic() < deadline:
+            time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
