@@ -58,7 +58,7 @@ from uvd.experiments._control_runner import (
 )
 from uvd.io.figures import write_series
 from uvd.io.vehicle import load_vehicle
-from uvd.model.dynamics import UVModel
+from uvd.model.dynamics import UVModel, uv_inverse_dynamics
 from uvd.model.integrate import simulate
 
 KP = 300.0
@@ -144,10 +144,50 @@ def _write_csv(opts: ExperimentOptions, name: str, header: list[str], cols: np.n
 
 
 def _pdc_run(vehicle, traj, seconds: float, seed: int, progress=None,
-             kd: float = KD, lag_compensation: bool = LAG_COMPENSATION) -> ControlRun:
+             kd: float = KD, lag_compensation: bool = LAG_COMPENSATION,
+             thrusters: ThrusterEffects | None = None, noise: bool = True) -> ControlRun:
     spec = core.ControllerSpec("pdc", pdc_step, PDGains(kp=KP, kd=kd), PDState())
     return run_control(vehicle, spec, traj, seconds, seed=seed, theta_every_s=1e9,
-                       progress=progress, label="PDC: ", lag_compensation=lag_compensation)
+                       progress=progress, label="PDC: ", lag_compensation=lag_compensation,
+                       thrusters=thrusters, noise=noise)
+
+
+#: the plant's unmodelled effects switched off in turn for PDC's heading (label, thrusters,
+#: sensor noise)
+_IDEAL_THRUSTERS = ThrusterEffects(lag=False, stiction=False, saturation=False)
+PDC_HEADING_CASES = (("as run", None, True), ("no sensor noise", None, False),
+                     ("ideal thrusters", _IDEAL_THRUSTERS, True),
+                     ("ideal thrusters, no noise", _IDEAL_THRUSTERS, False))
+
+
+def pdc_heading_diagnostic(vehicle, seconds: float, seed: int, kd: float = KD) -> dict:
+    """What sets PDC's heading error on RefTraj1 (Table 5.6's Hea and AngVelZ), measured.
+
+    The yaw torque the plant's own model needs to follow the reference exactly — the inverse
+    dynamics (2.44), u = M v̇ − ad_vᵀ(Mv) − (Σ|vᵢ|Dᵢ)v − G(R), along RefTraj1 at 10 Hz — beside
+    PDC's heading error with the plant's unmodelled effects (Table A.1 sensor noise; propeller
+    lag, reversal stiction and saturation) switched off in turn. A PD law supplies τ_z only
+    through k_p Δψ_z + k_d Δω_z, so a heading error near mean|τ_z| / k_p that no effect changes
+    is the rigid-body model's (Table 5.5's m₆, d₆ against Table 5.1's 135° at 0.21 rad/s).
+    """
+    traj = reftraj1()
+    tau = np.array([uv_inverse_dynamics(vehicle.params, r.v, r.vdot, r.H[:3, :3])[5]
+                    for r in map(traj.at, np.arange(int(round(seconds * 10.0))) / 10.0)])
+    cases = {}
+    for label, thrusters, noise in PDC_HEADING_CASES:
+        run = _pdc_run(vehicle, traj, seconds, seed, kd=kd, lag_compensation=False,
+                       thrusters=thrusters, noise=noise)
+        s = tracking_stats(run, 0.0)
+        cases[label] = {"heading_mae_rad": s["position_mae"]["heading"],
+                        "r_mae_rad_s": s["velocity_mae"]["r"],
+                        "mean_abs_yaw_torque_nm": float(np.mean(np.abs(run.u_applied[:, 5])))}
+    need = float(np.mean(np.abs(tau)))
+    hea, r = THESIS_TABLE_5_6["PDC"][3], THESIS_TABLE_5_6["PDC"][11]
+    # mean|k_p Δψ_z + k_d Δω_z| <= k_p MAE(Δψ_z) + k_d MAE(Δω_z): the most yaw torque a PD law
+    # with the thesis's errors can have applied on average
+    return {"reference_mean_abs_yaw_torque_nm": need, "over_kp_rad": need / KP,
+            "cases": cases, "thesis_heading_mae_rad": hea, "thesis_r_mae_rad_s": r,
+            "thesis_yaw_torque_bound_nm": KP * hea + kd * r}
 
 
 def _ratio_block(pdc: dict, ambc: dict) -> dict:
@@ -249,6 +289,8 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
 # b3 300 -> 261 in 2 h): 1.25 gives -2.1 / 263, 1.35 -3.9 / 258, 1.5 -6.2 / 251. The rest move
 # g up or leave it, and raise every mass.
 UNSTABLE_THRUSTERS = ThrusterEffects(reverse_ratio=1.35)
+#: the same plant without the propeller lag: is the lag what holds m4, m5 up?
+UNSTABLE_THRUSTERS_NO_LAG = ThrusterEffects(lag=False, reverse_ratio=1.35)
 ROBUST_NOTE = ("ROBUST_DAEMON_DEFAULT: projection, dead zone, freeze on saturation; no lag "
                "compensation, no preview")
 
@@ -270,11 +312,12 @@ def run_ambc_6dof_unstable(opts: ExperimentOptions) -> dict:
     out = _single_step(opts, robust=False, default_h=2.0, name="ambc-6dof-unstable")
     sub = ExperimentOptions(seed=opts.seed, hours=opts.hours, progress=opts.progress)
     asym = {}
-    for robust in (False, True):
-        key = "robust" if robust else "plain"
+    for key, robust, thrusters in (("plain", False, UNSTABLE_THRUSTERS),
+                                   ("robust", True, UNSTABLE_THRUSTERS),
+                                   ("plain_no_lag", False, UNSTABLE_THRUSTERS_NO_LAG)):
         asym[key] = _single_step(sub, robust=robust, default_h=2.0,
                                  name=f"ambc-6dof-unstable {key}, asymmetric thrusters",
-                                 thrusters=UNSTABLE_THRUSTERS)
+                                 thrusters=thrusters)
     total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
     scale = total_h * 3600.0 / (STEP1_DURATION_S + STEP2_DURATION_S)
     step1_s, step2_s = STEP1_DURATION_S * scale, STEP2_DURATION_S * scale
@@ -293,8 +336,10 @@ def run_ambc_6dof_unstable(opts: ExperimentOptions) -> dict:
         "thruster_effects": vars(UNSTABLE_THRUSTERS),
         "plain": {k: v for k, v in asym["plain"].items() if k != "summary"},
         "robust": {k: v for k, v in asym["robust"].items() if k != "summary"},
+        "plain_no_lag": {k: v for k, v in asym["plain_no_lag"].items() if k != "summary"},
+        "thruster_effects_no_lag": vars(UNSTABLE_THRUSTERS_NO_LAG),
         "two_step": two,
-        "m4_or_m5_went_negative": bool(neg["plain"]),
+        "m4_or_m5_went_negative": bool(neg["plain"] or neg["plain_no_lag"]),
         "robust_positive_definite_throughout":
             asym["robust"]["min_mass_eigenvalue"]["positive_definite_throughout"],
     }
@@ -312,6 +357,11 @@ def run_ambc_6dof_unstable(opts: ExperimentOptions) -> dict:
         f"{p['initial'][b3i]:.0f} -> {p['final'][b3i]:.0f} (thesis 300 -> 261); m4 min "
         f"{p['m4_m5']['m4']['min']:.1f}, m5 min {p['m4_m5']['m5']['min']:.1f} (thesis final "
         f"-1.35, 42.5): m4/m5 went negative: {', '.join(neg['plain']) or 'no'}",
+        f"without the propeller lag (same plant otherwise), 2 h: m4 min "
+        f"{asym['plain_no_lag']['m4_m5']['m4']['min']:.1f}, m5 min "
+        f"{asym['plain_no_lag']['m4_m5']['m5']['min']:.1f}, g "
+        f"{asym['plain_no_lag']['final'][gi]:.2f}, b3 {asym['plain_no_lag']['final'][b3i]:.0f}: "
+        f"m4/m5 went negative: {', '.join(neg['plain_no_lag']) or 'no'}",
         f"robust adaptation on the same plant ({ROBUST_NOTE}), "
         f"{asym['robust']['duration_s'] / 3600:.2f} h: min eigenvalue of M-hat "
         f"{asym['robust']['min_mass_eigenvalue']['min']:.1f} (positive definite throughout: "
@@ -570,6 +620,29 @@ def _ratio_text(ours: float, thesis: float) -> str:
     return f"{r:6.2f}" + ("*" if r > 2.0 or r < 0.5 else " ")
 
 
+def _table_5_6_beside(pdc: dict, win: list[dict], scale: float) -> tuple[dict, list[str]]:
+    """Table 5.6 beside ours: per block the thesis's row, ours and ours/thesis (``*`` where off
+    by more than 2×); the thesis's last window (240-255 min) is compared with our last."""
+    ours = {"PDC": table_5_6_row(pdc)}
+    for w in win:
+        for key in THESIS_TABLE_5_6:
+            lo = int(key.split("-")[0]) if key != "PDC" else -1
+            if lo >= 0 and abs(w["start_min"] - lo * scale) < 1e-6:
+                ours[key] = table_5_6_row(w)
+    if len(win):
+        ours["240-255"] = table_5_6_row(win[-1])
+    lines = ["  Table 5.6 beside ours: ours/thesis per column (* = off by more than 2x)",
+             f"{'block':>10} " + " ".join(f"{c:>8}" for c in TABLE_5_6_COLS)]
+    for key, tv in THESIS_TABLE_5_6.items():
+        if key not in ours:
+            continue
+        lines.append(f"{key + ' th':>10} " + " ".join(f"{v:8.4f}" for v in tv))
+        lines.append(f"{key + ' us':>10} " + " ".join(f"{v:8.4f}" for v in ours[key]))
+        lines.append(f"{'ratio':>10} " + " ".join(f"{_ratio_text(o, t):>8}"
+                                                 for o, t in zip(ours[key], tv, strict=True)))
+    return {k: {"ours": v, "thesis": THESIS_TABLE_5_6[k]} for k, v in ours.items()}, lines
+
+
 def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
     """§5.3.5.1, Fig. 5.4 and Table 5.6: PDC vs converged two-step AMBC, like for like first."""
     total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
@@ -638,27 +711,17 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
         if spec["name"] == "thesis":
             lines.append(format_windows(win, "  Table 5.6 layout, this row (AMBC 15-minute "
                                               "windows of step 2, PDC 10 min):", pdc=pdc))
-        # Table 5.6 beside ours: thesis value, ours, ours/thesis (* where off by more than 2x)
-        ours = {"PDC": table_5_6_row(pdc)}
-        for w in win:
-            for key in THESIS_TABLE_5_6:
-                lo = int(key.split("-")[0]) if key != "PDC" else -1
-                if lo >= 0 and abs(w["start_min"] - lo * scale) < 1e-6:
-                    ours[key] = table_5_6_row(w)
-        if len(win):  # the thesis's last window is 240-255: compare our last
-            ours["240-255"] = table_5_6_row(win[-1])
-        lines.append("  Table 5.6 beside ours: ours/thesis per column (* = off by more than 2x)")
-        lines.append(f"{'block':>10} " + " ".join(f"{c:>8}" for c in TABLE_5_6_COLS))
-        for key, tv in THESIS_TABLE_5_6.items():
-            if key not in ours:
-                continue
-            lines.append(f"{key + ' th':>10} " + " ".join(f"{v:8.4f}" for v in tv))
-            lines.append(f"{key + ' us':>10} " + " ".join(f"{v:8.4f}" for v in ours[key]))
-            lines.append(f"{'ratio':>10} " + " ".join(f"{_ratio_text(o, t):>8}"
-                                                     for o, t in zip(ours[key], tv,
-                                                                     strict=True)))
-        row["table_5_6_beside_thesis"] = {k: {"ours": v, "thesis": THESIS_TABLE_5_6[k]}
-                                          for k, v in ours.items()}
+            diag = row["pdc_heading_diagnostic"] = pdc_heading_diagnostic(veh, pdc_s, opts.seed,
+                                                                          kd=spec["kd"])
+            lines.append(
+                f"  PDC heading, measured cause: the plant's model needs mean |yaw torque| "
+                f"{diag['reference_mean_abs_yaw_torque_nm']:.1f} N m to follow RefTraj1 exactly "
+                f"(inverse dynamics, = k_p x {diag['over_kp_rad']:.3f} rad); heading MAE with "
+                "the unmodelled effects off in turn: " + ", ".join(
+                    f"{k} {c['heading_mae_rad']:.4f} rad" for k, c in diag["cases"].items()))
+        beside, table = _table_5_6_beside(pdc, win, scale)
+        lines += table
+        row["table_5_6_beside_thesis"] = beside
     head = rows["thesis"]
     out = {"vehicle": head["vehicle"], "headline": "thesis", "rows": rows,
            **{k: head[k] for k in ("gains", "lag_compensation", "ff_preview_s",
