@@ -45,7 +45,7 @@ from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
 from uvd.telemetry.mcap_recorder import RecordingError, read_messages
 
-__all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport"]
+__all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport", "tracking"]
 
 
 @dataclass
@@ -160,7 +160,7 @@ def _samples(cfg: Config, rec: Recording) -> dict[tuple[str, int], Any]:
     return out
 
 
-def _tracking(cycles: list[Mapping[str, Any]], thrusts) -> dict[str, Any]:
+def tracking(cycles: list[Mapping[str, Any]], thrusts) -> dict[str, Any]:
     """Position and velocity MNE (navigation vs reference) over the armed cycles."""
     from uvd.control.errors import error_coordinates
 
@@ -256,8 +256,8 @@ def replay_lockstep(path: str | Path, *, config: str | Path | None = None,
                     report.first_mismatch = _mismatch(k, t, want, thrust, r, res)
         if progress is not None:
             progress(k + 1, n)
-    report.tracking = {"recorded": _tracking(rec.cycles[:report.cycles], recorded_thrust),
-                       "replayed": _tracking(replayed, [x["thrust"] for x in replayed])}
+    report.tracking = {"recorded": tracking(rec.cycles[:report.cycles], recorded_thrust),
+                       "replayed": tracking(replayed, [x["thrust"] for x in replayed])}
     return report
 
 
