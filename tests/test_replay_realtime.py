@@ -12,6 +12,7 @@ message, not a hang.
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import threading
 from pathlib import Path
@@ -21,6 +22,7 @@ import pytest
 
 from sim_bridge.bridge import free_udp_port
 from tests.hil_daemon import run_scenario, running_bridge
+from uvd.cli import main
 from uvd.commands.replay_realtime import (
     TOLERANCE_PERMILLE,
     compare_commands,
@@ -57,15 +59,18 @@ def _group() -> str:
 
 def test_a_second_daemon_process_commands_what_the_recording_did(recorded, tmp_path):
     path, _ = recorded
-    res = replay_realtime(path, tmp_path / "work", interface="udp_multicast", channel=_group(),
-                          can_port=free_udp_port(), start_daemon=True, wait_s=60.0)
-    pl, c = res.playing, res.commands
-    print(pl, {k: v for k, v in c.items() if k != "first_difference"}, res.tracking)
+    out = tmp_path / "rt.json"
+    code = main(["replay", str(path), "--realtime", "--can-interface", "udp_multicast",
+                 "--channel", _group(), "--can-port", str(free_udp_port()), "--daemon",
+                 "--work", str(tmp_path / "work"), "--json", str(out), "--quiet"])
+    res = json.loads(out.read_text())
+    pl, c = res["playing"], res["commands"]
+    print(pl, {k: v for k, v in c.items() if k != "first_difference"}, res["tracking"])
     assert "error" not in pl
     assert pl["dropped"] == {"can": 0, "serial": 0} and pl["played"]["serial"] > 50
-    assert res.daemon_exit == 0
-    assert c["cycles_compared"] > 30 and c["match"], c
-    rec, live = res.tracking["recorded"], res.tracking["live"]
+    assert res["daemon_exit"] == 0
+    assert c["cycles_compared"] > 30 and c["match"] and code == 0, c
+    rec, live = res["tracking"]["recorded"], res["tracking"]["live"]
     assert live["cycles"] > 20
     assert abs(live["position_mne"] - rec["position_mne"]) < 0.1 * rec["position_mne"]
 
