@@ -17,6 +17,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -224,3 +225,52 @@ def test_report_writes_valid_pngs_the_html_references(recorded, tmp_path):
         assert 400 <= w <= 3000 and 200 <= h <= 3000 and len(data) > 5_000, (p, w, h)
         assert f'src="{p.name}"' in html
     assert main(["report", str(tmp_path / "none.mcap"), "--out", str(out), "--quiet"]) == 2
+
+
+def test_a_stalled_disk_drops_counts_and_never_delays_the_loop(tmp_path):
+    """The worker's writes hang for 2 s (a stalled disk) while a 100 Hz 'loop' publishes:
+    publishing and the taps stay instant, memory stays bounded, every record is either in
+    the file or counted as dropped, and the file reads back whole after the stall."""
+    from uvd.telemetry.mcap_recorder import McapRecorder
+    from uvd.telemetry.sink import TelemetryHub
+
+    stall = threading.Event()
+    rec = McapRecorder(tmp_path, flush_interval_s=0.05, max_pending_mb=0.02, raw_queue_size=64)
+    write_bytes = rec._write_bytes
+
+    def stalled(path, data, close):
+        stall.wait(10.0)
+        write_bytes(path, data, close)
+
+    rec._write_bytes = stalled
+    hub = TelemetryHub([rec], queue_size=64, flush_interval_s=0.01)
+    n = 300
+
+    async def main():
+        task = asyncio.create_task(hub.run())
+        worst, peak = 0.0, 0
+        for k in range(n):
+            t = time.monotonic_ns()
+            t0 = time.perf_counter()
+            hub.publish({"type": "failsafe", "t_ns": t, "kind": "fired", "trigger": "test",
+                         "action": "warn", "reason": f"record {k} " + "x" * 100}, always=True)
+            rec.tap_serial("ins", t, b"\x00" * 64)
+            worst = max(worst, time.perf_counter() - t0)
+            peak = max(peak, rec._buf.pending if rec._buf is not None else 0)
+            if k == 200:
+                stall.set()  # the disk comes back after 2 s
+            await asyncio.sleep(0.01)
+        await hub.aclose(timeout_s=5.0)
+        await task
+        return worst, peak
+
+    worst, peak = asyncio.run(asyncio.wait_for(main(), 30.0))
+    st = hub.stats()["mcap"]
+    written = sum(1 for _ in read_messages(rec.files[0], ["/uvd/failsafe"]))
+    print(f"publish + tap worst {worst * 1e6:.0f} µs; pending peak {peak} B; written "
+          f"{written}, dropped by the recorder {rec.stalled_dropped}, by the hub queue "
+          f"{st['dropped']}, raw frames dropped {rec.raw_dropped}")
+    assert worst < 0.01  # a wait for the disk would be seconds
+    assert rec.stalled_dropped > 0 and rec.raw_dropped > 0
+    assert written + rec.stalled_dropped + st["dropped"] == n
+    assert written > 100 and peak < 0.02e6 + 64 * 400  # the bound plus one batch

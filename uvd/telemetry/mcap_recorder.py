@@ -112,12 +112,14 @@ class _Buffer:
         self.parts: list[bytes] = []
         self.size = 0  # bytes written since the file began: its position (MCAP's summary
         self.lock = threading.Lock()  # offsets ask for it)
+        self.pending = 0  # bytes not yet taken by the worker
 
     def write(self, b) -> int:
         b = bytes(b)
         with self.lock:
             self.parts.append(b)
             self.size += len(b)
+            self.pending += len(b)
         return len(b)
 
     def tell(self) -> int:
@@ -125,7 +127,7 @@ class _Buffer:
 
     def take(self) -> bytes:
         with self.lock:
-            out, self.parts = b"".join(self.parts), []
+            out, self.parts, self.pending = b"".join(self.parts), [], 0
         return out
 
     def flush(self) -> None:
@@ -147,6 +149,10 @@ class McapRecorder:
         Raw frames that may wait; when full the oldest is dropped and counted.
     slice_s : float
         Longest stretch of serialising before the pump yields to the event loop.
+    max_pending_mb : float
+        Serialised bytes that may wait for a stalled disk; past that, records are dropped and
+        counted (``stalled_dropped``) and raw frames pile up in their bounded queue (dropped
+        oldest first, ``raw_dropped``): memory stays bounded, the loop never waits.
     clock_wall : callable
         Wall clock for the file names only.
     """
@@ -155,12 +161,15 @@ class McapRecorder:
 
     def __init__(self, directory: str | Path, *, flush_interval_s: float = 0.25,
                  rotate_mb: float = 512.0, rotate_s: float = 0.0, raw_queue_size: int = 65536,
-                 slice_s: float = 2e-4, clock_wall=time.time) -> None:
+                 slice_s: float = 2e-4, max_pending_mb: float = 64.0,
+                 clock_wall=time.time) -> None:
         self.directory = Path(directory)
         self.flush_interval_s = float(flush_interval_s)
         self.rotate_bytes = int(rotate_mb * 1e6)
         self.rotate_ns = int(rotate_s * 1e9)
         self.slice_s = float(slice_s)
+        self.max_pending = int(max_pending_mb * 1e6)
+        self.stalled_dropped = 0
         self.clock_wall = clock_wall
         self._raw: collections.deque = collections.deque(maxlen=int(raw_queue_size))
         self.raw_taken = 0
@@ -270,6 +279,9 @@ class McapRecorder:
     async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
         if self._writer is None:
             raise RuntimeError(f"sink {self.name} is not open")
+        if self._buf.pending > self.max_pending:  # the disk is stalled: the worker took nothing
+            self.stalled_dropped += len(records)
+            return
         t0 = time.perf_counter()
         for r in records:
             kind = r.get("type")
@@ -327,7 +339,8 @@ class McapRecorder:
 
     def stats(self) -> dict[str, Any]:
         return {"files": [str(p) for p in self.files], "messages": self.messages,
-                "raw_taken": self.raw_taken, "raw_dropped": self.raw_dropped}
+                "raw_taken": self.raw_taken, "raw_dropped": self.raw_dropped,
+                "stalled_dropped": self.stalled_dropped}
 
 
 def read_messages(path: str | Path, topics: Sequence[str] | None = None
