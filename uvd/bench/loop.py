@@ -470,9 +470,11 @@ def _fmt(d: dict) -> str:
     return "  ".join(f"{k} {d[k]:8.1f}" for k in ("p50", "p99", "p999", "max") if k in d)
 
 
-def _recorded(cycle, directory: str):
-    """``cycle`` followed by what the daemon's write phase does for the black box: build one
-    cycle record and publish it to a hub whose sink is the MCAP recorder (6 thrusters)."""
+def _recorded(cycle, directory: str, times: dict[str, list]):
+    """``cycle`` followed, every other cycle, by what the daemon's write phase does for the
+    black box: build one cycle record and publish it to a hub whose sink is the MCAP recorder
+    (6 thrusters). The time of each call goes to ``times["with"]`` or ``times["without"]``:
+    with and without in the same run, interleaved, under the same load and the same pump."""
     from uvd.telemetry.mcap_recorder import McapRecorder
     from uvd.telemetry.records import CycleRecord
     from uvd.telemetry.sink import TelemetryHub
@@ -480,8 +482,15 @@ def _recorded(cycle, directory: str):
     hub = TelemetryHub([McapRecorder(directory)])
     z3, z6, eye = np.zeros(3), np.zeros(6), np.eye(3)
 
+    clock = time.perf_counter
+    with_s, without_s = times.setdefault("with", []), times.setdefault("without", [])
+
     def recorded(t_ns: int, dt: float) -> None:
+        t0 = clock()
         cycle(t_ns, dt)
+        if len(with_s) > len(without_s):
+            without_s.append(clock() - t0)
+            return
         hub.publish(CycleRecord(
             t_ns=t_ns, dt=dt, state="ARMED", action="none", mode="control", status="ok",
             p=z3, R=eye, v=z6, nav_valid=True, u=z6, u_cmd=z6, thrust=z6,
@@ -490,6 +499,7 @@ def _recorded(cycle, directory: str):
                               "feedback_t_ns": t_ns, "bus_off": False},
                 "overrun_streak": 0, "overrun_streak_exceeded": False, "leak": False,
                 "extra": None}, p_ref=z3, R_ref=eye, v_ref=z6).to_dict())
+        with_s.append(clock() - t0)
     return recorded, hub
 
 
@@ -501,9 +511,9 @@ def _run(args) -> dict:
     # would hold the CPU for hundreds of ms from every lower-priority task on it — the HIL
     # demo's daemon, which the acceptance runs beside this benchmark, included.
     cycle = CYCLES[args.cycle]()
-    hub = None
+    hub, rec_times = None, {}
     if args.record:
-        cycle, hub = _recorded(cycle, args.record)
+        cycle, hub = _recorded(cycle, args.record, rec_times)
     for _ in range(20):
         t = time.monotonic_ns()
         cycle(t, 1.0 / args.rate)
@@ -520,13 +530,19 @@ def _run(args) -> dict:
     steal_cpus = sorted(rt.cpu_affinity) if args.cpu else None
     ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup,
                              lambda: host_steal_s(steal_cpus), hub))
+    # the measured cycles' (warm-up and back-to-back runs left out), half with the recorder
+    recording = None
+    if args.record:
+        half = ours["cycles"] // 2
+        w, wo = (percentiles(rec_times[k][-half:]) for k in ("with", "without"))
+        recording = {"with_us": w, "without_us": wo, "p50_cost_us": w["p50"] - wo["p50"]}
     warm = _back_to_back(cycle, args.rate, 2000) if args.cycle != "none" else None
     naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
     figures = {
         "rate_hz": args.rate,
         "duration_s": args.duration,
         "cycle": args.cycle,
-        "recording": bool(args.record),
+        "recording": recording,
         "lateness_us": ours["lateness_us"],
         "compute_us": ours["compute_us"],
         "compute_back_to_back_us": warm,
@@ -563,6 +579,10 @@ def _run(args) -> dict:
         print(f"  lateness µs  naive : {_fmt(naive['lateness_us'])}   achieved "
               f"{naive['achieved_rate_hz']:.1f} Hz")
     print(f"  compute  µs  ours  : {_fmt(ours['compute_us'])}")
+    if recording is not None:
+        print(f"  cycle µs with the black box   : {_fmt(recording['with_us'])}")
+        print(f"  cycle µs without (interleaved): {_fmt(recording['without_us'])}   median "
+              f"cost {recording['p50_cost_us']:.1f} µs")
     if warm is not None:
         print(f"  compute  µs  back to back (warm caches, 2000 in bursts of 10): {_fmt(warm)}")
     hs = figures["host_steal"]
