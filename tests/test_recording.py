@@ -208,23 +208,49 @@ def test_sigkill_leaves_a_file_readable_to_within_a_second(tmp_path):
     assert 0.0 <= lost_s <= 1.0
 
 
-def test_report_writes_valid_pngs_the_html_references(recorded, tmp_path):
+def _check_report(out: Path, names: set[str]) -> None:
+    """``out/index.html`` references every PNG, and each is a valid PNG of sensible size."""
     import struct
-    path, _, _, _ = recorded
-    out = tmp_path / "report"
-    assert main(["report", str(path), "--out", str(out), "--quiet"]) == 0
     html = (out / "index.html").read_text()
     pngs = sorted(out.glob("*.png"))
-    # no estimates.png: the run identified nothing ([estimation] aid is off)
-    assert {p.name for p in pngs} == {"tracking.png", "mne.png", "thrust.png", "failsafe.png",
-                                      "lateness.png"}
+    assert {p.name for p in pngs} == names
     for p in pngs:
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n", p  # a PNG
         w, h = struct.unpack(">II", data[16:24])  # IHDR
         assert 400 <= w <= 3000 and 200 <= h <= 3000 and len(data) > 5_000, (p, w, h)
         assert f'src="{p.name}"' in html
+
+
+def test_report_writes_valid_pngs_the_html_references(recorded, tmp_path):
+    path, _, _, _ = recorded
+    out = tmp_path / "report"
+    assert main(["report", str(path), "--out", str(out), "--quiet"]) == 0
+    # no estimates.png: the run identified nothing ([estimation] aid is off)
+    _check_report(out, {"tracking.png", "mne.png", "thrust.png", "failsafe.png",
+                        "lateness.png"})
     assert main(["report", str(tmp_path / "none.mcap"), "--out", str(out), "--quiet"]) == 2
+
+
+def test_a_two_step_experiment_records_the_daemons_channels_and_reports(tmp_path):
+    """``uvd experiment two-step --record``: the same format (every message fits its schema),
+    and ``uvd report`` draws it, the controller's θ̂ included."""
+    rec = tmp_path / "rec"
+    assert main(["experiment", "two-step", "--hours", "0.01", "--record", str(rec),
+                 "--json", str(tmp_path / "out.json")]) == 0
+    (path,) = json.loads((tmp_path / "out.json").read_text())["recordings"]
+    validators = {t: jsonschema.Draft202012Validator(schema(s)) for t, (s, _) in
+                  CHANNELS.items()}
+    counts = Counter()
+    for topic, _, msg in read_messages(path):
+        counts[topic] += 1
+        errors = list(validators[topic].iter_errors(msg))
+        assert not errors, (topic, errors[0].message)
+    assert counts["/uvd/cycle"] == counts["/uvd/pose"] == 360 and counts["/uvd/estimate"] > 30
+    out = tmp_path / "report"
+    assert main(["report", path, "--out", str(out), "--quiet"]) == 0
+    _check_report(out, {"tracking.png", "mne.png", "thrust.png", "estimates.png",
+                        "failsafe.png", "lateness.png"})
 
 
 def test_a_stalled_disk_drops_counts_and_never_delays_the_loop(tmp_path):

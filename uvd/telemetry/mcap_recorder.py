@@ -185,6 +185,7 @@ class McapRecorder:
         self._file_bytes = 0
         self._file_t0_ns = 0
         self._worker = DaemonWorker("uvd-sink-mcap")
+        self._sync = False  # open_now: the caller's thread writes (lockstep experiments)
         self._flusher: asyncio.Task | None = None
 
     # -- taps (any thread; cheap; never raise) --
@@ -231,8 +232,10 @@ class McapRecorder:
     def _finish_file(self) -> None:
         self._writer.finish()
         data = self._buf.take()
-        # queued behind the earlier writes of that file (one worker thread, in order)
-        self._worker.submit(self._write_bytes, self.files[-1], data, True)
+        if self._sync:
+            self._write_bytes(self.files[-1], data, True)
+        else:  # queued behind the earlier writes of that file (one worker thread, in order)
+            self._worker.submit(self._write_bytes, self.files[-1], data, True)
         self._writer = None
 
     def _write_bytes(self, path: Path, data: bytes, close: bool) -> None:
@@ -284,22 +287,48 @@ class McapRecorder:
             return
         t0 = time.perf_counter()
         for r in records:
-            kind = r.get("type")
-            t_ns = int(r.get("t_ns") or time.monotonic_ns())
-            if self._rotate_due(t_ns):
-                self._new_file(t_ns)
-            obj = to_jsonable(r)
-            if kind == "start":
-                self._start_rec = obj
-            topic = _TOPIC_OF_TYPE.get(kind)
-            if topic is not None:
-                self._add(topic, t_ns, obj)
-                if kind == "cycle":
-                    self._add("/uvd/pose", t_ns, _pose(obj))
+            self._take(r)
             if time.perf_counter() - t0 > self.slice_s:
                 await asyncio.sleep(0)
                 t0 = time.perf_counter()
         self._drain_raw()
+
+    def _take(self, r: Mapping[str, Any]) -> None:
+        """Serialise one hub record onto its channel (a cycle record onto the pose too)."""
+        kind = r.get("type")
+        t_ns = int(r.get("t_ns") or time.monotonic_ns())
+        if self._rotate_due(t_ns):
+            self._new_file(t_ns)
+        obj = to_jsonable(r)
+        if kind == "start":
+            self._start_rec = obj
+        topic = _TOPIC_OF_TYPE.get(kind)
+        if topic is not None:
+            self._add(topic, t_ns, obj)
+            if kind == "cycle":
+                self._add("/uvd/pose", t_ns, _pose(obj))
+
+    # -- without an event loop: a lockstep experiment's thread writes the same files --
+
+    def open_now(self, t_ns: int = 0) -> None:
+        """Start writing from the calling thread (no event loop, no worker: lockstep runs)."""
+        self._sync = True
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self._new_file(t_ns)
+
+    def write_now(self, records: Sequence[Mapping[str, Any]]) -> None:
+        """Serialise ``records``; every few MB go to the file from the calling thread."""
+        for r in records:
+            self._take(r)
+        if self._buf.pending > 4_000_000:
+            self._write_bytes(self.files[-1], self._buf.take(), False)
+
+    def close_now(self) -> None:
+        """Finish the file (MCAP's summary included) from the calling thread."""
+        if self._writer is not None:
+            self._writer.finish()
+            self._write_bytes(self.files[-1], self._buf.take(), True)
+            self._writer = None
 
     def _drain_raw(self) -> None:
         q = self._raw

@@ -62,6 +62,19 @@ def _k_thrust(start: list[dict]) -> np.ndarray | None:
         return None
 
 
+def _mass_drag_gb(thetas: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Masses, drags and (g, b) of θ_UV (241, eq. 2.48) or of the decoupled view (16, §5.3.1:
+    m₁…m₆, d₁…d₆, g, b₁…b₃), one row per θ."""
+    if len(thetas[0]) == 16:
+        a = np.array(thetas)
+        return a[:, :6], a[:, 6:12], a[:, 12:16]
+    from uvd.model.params import UVParams
+    ps = [UVParams.from_theta(t) for t in thetas]
+    return (np.array([np.diag(p.M) for p in ps]),
+            np.array([[p.D[i][i, i] for i in range(6)] for p in ps]),
+            np.array([[p.g, *p.b] for p in ps]))
+
+
 def write_report(recording: str | Path, out_dir: str | Path, *,
                  progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Write ``out_dir/index.html`` and its PNG figures; returns what was written.
@@ -177,22 +190,24 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
 
     # -- estimates --
     est = [e for e in data["estimate"] if e.get("theta") is not None
-           and len(e["theta"]) == 241]
+           and len(e["theta"]) in (16, 241)]
     if est:
-        from uvd.model.params import UVParams
         te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in est])
-        ps = [UVParams.from_theta(np.asarray(e["theta"], float)) for e in est]
+        masses, drags, gb = _mass_drag_gb([np.asarray(e["theta"], float) for e in est])
         fig, ax = plt.subplots(1, 3, figsize=(14, 4))
-        ax[0].plot(te, [np.diag(p.M) for p in ps])
-        ax[0].set_title("masses M̂ᵢᵢ")
-        ax[1].plot(te, [[p.D[i][i, i] for i in range(6)] for p in ps])
-        ax[1].set_title("drags D̂ᵢ(i,i)")
-        ax[2].plot(te, [[p.g, *p.b] for p in ps])
+        for a, y, title, names in ((ax[0], masses, "masses M̂ᵢᵢ", "m"),
+                                   (ax[1], drags, "drags D̂ᵢ(i,i)", "d")):
+            a.plot(te, y)
+            a.set_title(title)
+            a.legend([f"{names}{i + 1}" for i in range(6)], fontsize=7, ncol=2)
+        ax[2].plot(te, gb)
         ax[2].set_title("g, b")
+        ax[2].legend(["g", "b₁", "b₂", "b₃"], fontsize=7)
         for a in ax:
             a.set_xlabel("time (s)")
-        save(fig, "estimates.png", "Online estimates over the run (AID, Theorem 4.3.1; "
-                                   "cf. Figs. 4.x and 5.1).")
+        save(fig, "estimates.png", "Estimates over the run: the online AID's θ̂ (Theorem "
+                                   "4.3.1, cf. Figs. 4.x) or the adaptive controller's (the "
+                                   "16 decoupled parameters of §5.3.1, cf. Fig. 5.1).")
 
     # -- failsafe timeline --
     level = np.array([_ACTIONS.index(r["action"]) if r["action"] in _ACTIONS else 0
