@@ -81,6 +81,16 @@ def test_every_message_fits_its_schema_and_every_channel_is_there(recorded):
     assert set(sources) == {"ins", "dvl", "depth"}
     assert d.recorder.raw_dropped == 0
 
+    # what `mcap info` shows, from MCAP's own indexed reader: the summary a clean stop writes
+    from mcap.reader import make_reader
+    with path.open("rb") as fh:
+        summary = make_reader(fh).get_summary()
+    topics = {c.id: c.topic for c in summary.channels.values()}
+    assert {summary.schemas[c.schema_id].name for c in summary.channels.values()} == \
+        {s for s, _ in CHANNELS.values()}
+    assert {topics[i]: n for i, n in summary.statistics.channel_message_counts.items()} == \
+        dict(counts)
+
 
 def test_lockstep_replay_is_bit_identical(recorded, tmp_path):
     path, _, _, cycles = recorded
@@ -168,43 +178,32 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path):
     assert main(["replay", str(foreign), "--lockstep", "--quiet"]) == 2
 
 
-_WRITER = """
-import asyncio, sys, time
-from uvd.telemetry.mcap_recorder import McapRecorder
-from uvd.telemetry.sink import TelemetryHub
-
-async def main():
-    rec = McapRecorder(sys.argv[1], flush_interval_s=0.25)
-    hub = TelemetryHub([rec], flush_interval_s=0.05)
-    task = asyncio.create_task(hub.run())
-    await asyncio.sleep(0.1)
-    print("ready", flush=True)
-    while True:
-        t = time.monotonic_ns()
-        hub.publish({"type": "failsafe", "t_ns": t, "kind": "fired", "trigger": "test",
-                     "action": "warn", "reason": "a record every 10 ms"}, always=True)
-        await asyncio.sleep(0.01)
-
-asyncio.run(main())
-"""
-
-
-def test_sigkill_leaves_a_file_readable_to_within_a_second(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(tmp_path)],
-                            stdout=subprocess.PIPE, text=True, cwd=Path(__file__).parents[1])
-    try:
-        assert proc.stdout.readline().strip() == "ready"
-        time.sleep(2.0)
-        t_kill = time.monotonic_ns()
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    (f,) = tmp_path.glob("*.mcap")
-    last = max(t for _, t, _ in read_messages(f, ["/uvd/failsafe"]))
+def test_sigkill_of_the_daemon_leaves_a_file_report_reads_to_within_a_second(tmp_path):
+    """``uvd run`` (a real daemon process over sim-bridge, recording) killed with SIGKILL
+    mid-run: ``uvd report`` reads its file up to at most one second before the kill."""
+    changes = {"recording": {"enabled": True, "dir": str(tmp_path / "rec")}}
+    with running_bridge(tmp_path, changes) as (cfg_path, _):
+        proc = subprocess.Popen([sys.executable, "-m", "uvd", "run", "--config", str(cfg_path),
+                                 "--arm", "--duration", "60"], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, cwd=Path(__file__).parents[1])
+        try:
+            deadline = time.monotonic() + 60.0
+            while not list((tmp_path / "rec").glob("*.mcap")) or \
+                    sum(1 for _ in read_messages(next((tmp_path / "rec").glob("*.mcap")),
+                                                 ["/uvd/cycle"])) < 30:
+                assert proc.poll() is None and time.monotonic() < deadline
+                time.sleep(0.5)
+            t_kill = time.monotonic_ns()  # the daemon stamps on this same clock
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    (f,) = (tmp_path / "rec").glob("*.mcap")
+    assert main(["report", str(f), "--out", str(tmp_path / "report"), "--quiet"]) == 0
+    last = max(t for _, t, _ in read_messages(f, ["/uvd/cycle"]))
     lost_s = (t_kill - last) * 1e-9
-    print(f"SIGKILL: the file reads up to {lost_s * 1e3:.0f} ms before the kill")
+    print(f"SIGKILL: uvd report reads the file up to {lost_s * 1e3:.0f} ms before the kill")
     assert 0.0 <= lost_s <= 1.0
 
 
