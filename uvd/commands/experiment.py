@@ -9,6 +9,7 @@ from pathlib import Path
 
 from uvd import experiments
 from uvd.jsonio import write_json
+from uvd.progress import Progress
 
 
 def register(sub) -> None:
@@ -25,6 +26,7 @@ def register(sub) -> None:
                         "(uvd report draws it; docs/recording.md)")
     p.add_argument("--hours", type=float, help="override the simulated duration (hours)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random generator")
+    p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=_run)
 
 
@@ -34,10 +36,12 @@ def _run(args) -> int:
             print(f"{name:24s} {exp.summary}")
         return 0
     exp = experiments.get(args.name)
-    opts = experiments.ExperimentOptions(seed=args.seed, hours=args.hours, plots=args.plots,
-                                         record=args.record)
     t0 = time.perf_counter()
-    result = exp.run(opts)
+    with Progress(exp.name, unit="s simulated", quiet=args.quiet) as p:
+        opts = experiments.ExperimentOptions(
+            seed=args.seed, hours=args.hours, plots=args.plots, record=args.record,
+            progress=p.note, advance=lambda done, total, label: p.update(done, total, label))
+        result = exp.run(opts)
     result.setdefault("experiment", exp.name)
     result.setdefault("seed", args.seed)
     result["wall_seconds"] = round(time.perf_counter() - t0, 3)

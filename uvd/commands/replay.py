@@ -54,20 +54,14 @@ def _run(args) -> int:
     if args.realtime:
         return _run_realtime(args)
     from uvd.jsonio import write_json
+    from uvd.progress import Progress
     from uvd.runtime.replay import replay_lockstep
     from uvd.telemetry.mcap_recorder import RecordingError
 
-    state = {"next": time.monotonic() + 1.0}
-
-    def progress(k: int, n: int) -> None:
-        if args.quiet or time.monotonic() < state["next"]:
-            return
-        state["next"] = time.monotonic() + 1.0
-        print(f"  replayed {k} / {n} cycles", file=sys.stderr)
-
     t0 = time.monotonic()
     try:
-        rep = replay_lockstep(args.recording, config=args.config, progress=progress)
+        with Progress("replay", unit="cycles", quiet=args.quiet) as p:
+            rep = replay_lockstep(args.recording, config=args.config, progress=p.update)
     except RecordingError as exc:
         print(f"uvd replay: {exc}", file=sys.stderr)
         return 2
@@ -104,6 +98,7 @@ def _run(args) -> int:
 def _run_realtime(args) -> int:
     from uvd.commands.replay_realtime import default_work_dir, replay_realtime
     from uvd.jsonio import write_json
+    from uvd.progress import Progress
     from uvd.telemetry.mcap_recorder import RecordingError
 
     if not (args.can_interface and args.channel):
@@ -114,16 +109,13 @@ def _run_realtime(args) -> int:
         print(f"uvd replay: waiting for the daemon under test: uvd run --config {cfg} --arm",
               flush=True)
 
-    def progress(k: int, n: int) -> None:
-        if not args.quiet:
-            print(f"  played {k} / {n} frames", file=sys.stderr)
-
     work = args.work or default_work_dir(args.recording)
     try:
-        res = replay_realtime(args.recording, work, interface=args.can_interface,
-                              channel=args.channel, can_port=args.can_port, config=args.config,
-                              start_daemon=args.daemon, wait_s=args.wait, ready=ready,
-                              progress=progress)
+        with Progress("played", unit="frames", quiet=args.quiet) as p:
+            res = replay_realtime(args.recording, work, interface=args.can_interface,
+                                  channel=args.channel, can_port=args.can_port,
+                                  config=args.config, start_daemon=args.daemon,
+                                  wait_s=args.wait, ready=ready, progress=p.update)
     except RecordingError as exc:
         print(f"uvd replay: {exc}", file=sys.stderr)
         return 2

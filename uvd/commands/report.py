@@ -19,15 +19,13 @@ def register(sub) -> None:
 
 
 def _run(args) -> int:
+    from uvd.progress import Progress
     from uvd.telemetry.mcap_recorder import RecordingError
     from uvd.telemetry.report import write_report
 
-    def progress(msg: str) -> None:
-        if not args.quiet:
-            print(f"  {msg}", file=sys.stderr)
-
     try:
-        summary = write_report(args.recording, args.out, progress=progress)
+        with Progress("report", quiet=args.quiet) as p:
+            summary = write_report(args.recording, args.out, progress=lambda m: p.note(f"  {m}"))
     except RecordingError as exc:
         print(f"uvd report: {exc}", file=sys.stderr)
         return 2

@@ -162,7 +162,8 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
                 progress_every_s: float = 1800.0,
                 on_theta: Callable[[float, np.ndarray], None] | None = None,
                 lag_compensation: bool = False, ff_preview_s: float = 0.0,
-                record: Path | None = None) -> ControlRun:
+                record: Path | None = None,
+                advance: Callable[[float, float, str], None] | None = None) -> ControlRun:
     """Run ``duration_s`` simulated seconds of ``controller`` tracking ``reference``.
 
     The plant starts on the reference (zero initial error) unless H0/v0 are given. Thruster
@@ -171,6 +172,7 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     set-points from the measured propeller speeds (:func:`uvd.control.allocation.lag_compensate`);
     ``ff_preview_s`` > 0 the feed-forward preview (``CoreConfig.ff_preview_s``).
     ``record`` (a folder): every cycle and θ̂ to MCAP as the daemon records them (``_BlackBox``).
+    ``advance(done_s, total_s, label)`` is called every 100 cycles (a progress bar).
     """
     thrusters = ThrusterEffects() if thrusters is None else thrusters
     cfg = make_core(vehicle, controller, reference, lag_compensation=lag_compensation,
@@ -240,6 +242,8 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
                     box.estimate(k, theta)
                 if on_theta is not None:
                     on_theta((k + 1) * dt, theta)
+        if advance is not None and k % 100 == 99:
+            advance((k + 1) * dt, duration_s, label.strip(": ") or "simulated")
         if progress is not None and (k + 1) * dt >= next_report:
             next_report += progress_every_s
             progress(f"  {label}simulated {(k + 1) * dt / 60:.0f} / {duration_s / 60:.0f} min "

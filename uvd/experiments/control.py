@@ -181,8 +181,8 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
                   f"{seconds / 3600:.2f} simulated h" + (", robust adaptation on" if robust
                                                         else ""))
     run = run_control(veh, spec, reftraj1(), seconds, seed=opts.seed, theta_every_s=10.0,
-                      record=opts.record, progress=opts.progress, label=f"{name}: ",
-                      thrusters=thrusters, lag_compensation=lag_compensation,
+                      record=opts.record, advance=opts.advance, progress=opts.progress,
+                      label=f"{name}: ", thrusters=thrusters, lag_compensation=lag_compensation,
                       ff_preview_s=preview_s)
     th = run.theta
     final = th[-1]
@@ -363,8 +363,8 @@ def run_pitch_reversal(opts: ExperimentOptions) -> dict:
         spec = core.ControllerSpec("ambc", ambc_step, p, ambc_init(p, truth))
         opts.progress(f"[pitch-reversal] {case}: pitch {mean_deg:g}° ± {amp_deg:g}°")
         run = run_control(veh, spec, traj, seconds, seed=opts.seed, theta_every_s=10.0,
-                          record=opts.record, rate_indices=(4,), progress=opts.progress,
-                          label=f"{case}: ")
+                          record=opts.record, advance=opts.advance, rate_indices=(4,),
+                          progress=opts.progress, label=f"{case}: ")
         f = run.thrust_cmd[:, pitch_thrusters]
         sgn = np.sign(f)
         flips = (sgn[1:] * sgn[:-1]) < 0
@@ -438,8 +438,9 @@ def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label
                 captured[tt] = theta.copy()
 
     run = run_control(veh, spec, ref, step1_s + step2_s, seed=opts.seed, theta_every_s=1.0,
-                      record=opts.record, progress=opts.progress, label=f"{label}: ", on_theta=grab,
-                      thrusters=thrusters, lag_compensation=lag_compensation,
+                      record=opts.record, advance=opts.advance, progress=opts.progress,
+                      label=f"{label}: ", on_theta=grab, thrusters=thrusters,
+                      lag_compensation=lag_compensation,
                       ff_preview_s=_preview_s(veh, ff_preview, lag_compensation, thrusters))
     return run, captured
 
@@ -785,8 +786,8 @@ def run_ambc_full(opts: ExperimentOptions) -> dict:
     opts.progress(f"[ambc-full] 241-parameter AMBC with robust adaptation from zero, "
                   f"jhu-rov-coupled, RefTraj1, {seconds / 3600:.2f} h")
     run = run_control(veh, spec, reftraj1(), seconds, seed=opts.seed, theta_every_s=60.0,
-                      record=opts.record, progress=opts.progress, label="ambc-full: ",
-                      lag_compensation=LAG_COMPENSATION)
+                      record=opts.record, advance=opts.advance, progress=opts.progress,
+                      label="ambc-full: ", lag_compensation=LAG_COMPENSATION)
     win_s = min(900.0, seconds)
     ambc = tracking_stats(run, seconds - win_s)
     pdc_s = min(PDC_MINUTES * 60.0, seconds)
