@@ -106,19 +106,27 @@ def test_lockstep_replay_is_bit_identical(recorded, tmp_path):
     assert {"pdc-fallback", "zero", "control"} <= modes  # the replay went through them all
 
 
-def _rewrite(src: Path, dst: Path, edit) -> None:
-    """Copy a recording message by message through MCAP's writer, ``edit``-ing each."""
+def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = None,
+             stray_channel: int | None = None) -> None:
+    """Copy a recording message by message through MCAP's writer, ``edit``-ing each (None:
+    left out); ``schema_names`` renames channels' schemas, ``stray_channel`` adds a message
+    on a channel id never declared."""
     from mcap.writer import CompressionType, Writer
     with dst.open("wb") as fh:
         w = Writer(fh, use_chunking=False, compression=CompressionType.NONE)
         w.start()
         ids = {}
         for topic, (sname, _) in CHANNELS.items():
-            sid = w.register_schema(sname, "jsonschema", json.dumps(schema(sname)).encode())
+            sname = (schema_names or {}).get(topic, sname)
+            sid = w.register_schema(sname, "jsonschema", json.dumps(schema(
+                CHANNELS[topic][0])).encode())
             ids[topic] = w.register_channel(topic, "json", sid)
         for k, (topic, t, msg) in enumerate(read_messages(src)):
             msg = edit(k, topic, msg)
-            w.add_message(ids[topic], t, json.dumps(msg).encode(), t, k)
+            if msg is not None:
+                w.add_message(ids[topic], t, json.dumps(msg).encode(), t, k)
+            if k == 100 and stray_channel is not None:
+                w.add_message(stray_channel, t, b"{}", t, k)
         w.finish()
 
 
@@ -176,6 +184,22 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path):
     with pytest.raises(RecordingError, match="no start record"):
         replay_lockstep(head)
     assert main(["replay", str(foreign), "--lockstep", "--quiet"]) == 2
+    same = lambda k, topic, msg: msg  # noqa: E731
+    other = tmp_path / "other-schema.mcap"
+    _rewrite(path, other, same, schema_names={"/uvd/cycle": "uvd.cycle.v9"})
+    with pytest.raises(RecordingError, match="other-schema.mcap: channel /uvd/cycle has schema "
+                                             "'uvd.cycle.v9'"):
+        replay_lockstep(other)
+    stray = tmp_path / "stray.mcap"
+    _rewrite(path, stray, same, stray_channel=99)
+    with pytest.raises(RecordingError, match="stray.mcap: message on unknown channel 99"):
+        replay_lockstep(stray)
+    no_thrust = tmp_path / "no-thrust.mcap"
+    _rewrite(path, no_thrust, lambda k, topic, msg: {key: v for key, v in msg.items()
+                                                     if key != "thrust"}
+             if topic == "/uvd/cycle" else msg)
+    with pytest.raises(RecordingError, match="no-thrust.mcap: a record does not hold"):
+        replay_lockstep(no_thrust)
 
 
 def test_sigkill_of_the_daemon_leaves_a_file_report_reads_to_within_a_second(tmp_path):

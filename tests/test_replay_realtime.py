@@ -139,3 +139,37 @@ def test_compare_commands_cycle_by_cycle():
     assert (c["identical"], c["within_tolerance"], c["cycles_compared"]) == (2, 3, 4)
     assert c["first_difference"]["cycle"] == 2 and c["max_diff_permille"] == float("inf")
     assert not c["match"]
+
+
+def test_a_daemon_that_stops_costs_one_gate_timeout_not_a_hang():
+    """A recording of 1 s with 500 drive frames, each gated on a SYNC of the daemon: the
+    'daemon' (a second python-can virtual bus) sends its NMT start and one SYNC, then
+    nothing. The player must finish in about the recording's length plus one timeout."""
+    import time
+
+    import can
+
+    from uvd.commands.replay_realtime import RealtimePlayer, WireRecording
+
+    fb = [(10_000_000 + k * 2_000_000, can.Message(arbitration_id=0x181, data=b"\0" * 8,
+                                                   is_extended_id=False), (0x080, k // 5))
+          for k in range(500)]
+    rec = WireRecording(Path("synthetic.mcap"), "", [], fb,
+                        {0x000: [0], 0x080: [5_000_000 + 10_000_000 * k for k in range(100)]},
+                        frozenset({0x000, 0x080}), [{}], [], [], (1,))
+    chan = f"gate-{os.getpid()}"
+    with can.Bus(interface="virtual", channel=chan) as ours, \
+            can.Bus(interface="virtual", channel=chan) as daemon:
+        player = RealtimePlayer(rec, ours, {}, wait_s=5.0, tail_s=0.0, gate_timeout_s=0.2)
+        got = {}
+        t = threading.Thread(target=lambda: got.update(player.run()))
+        t0 = time.monotonic()
+        t.start()
+        daemon.send(can.Message(arbitration_id=0x000, data=b"\x01\x00", is_extended_id=False))
+        time.sleep(0.005)
+        daemon.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
+        t.join(10.0)
+        wall = time.monotonic() - t0
+    print(got, f"{wall:.2f} s")
+    assert not t.is_alive() and wall < 2.5
+    assert got["played"]["can"] == 500 and got["frames_ungated"] >= 490

@@ -190,7 +190,9 @@ class RealtimePlayer:
         Listening after the last recorded frame (the last commands).
     gate_timeout_s : float
         A received frame waits for the live counterpart of the daemon's frame it followed
-        (its gate) at most this long past its time; then it is played anyway (counted).
+        (its gate) at most this long past its time; then it is played anyway (counted). A
+        daemon silent this long gates nothing (played on the clock): one that stops costs
+        one timeout, not one per frame, and the replay ends with the recording.
     clock : callable
         Monotonic nanoseconds.
     progress : callable, optional
@@ -206,6 +208,7 @@ class RealtimePlayer:
         self.gate_timeout_s = gate_timeout_s
         self.ungated: list[tuple[int, int, int, int]] = []  # (t, id, gate id, gate k)
         self.offset_ns: int | None = None
+        self._live_ns = 0  # when the daemon last sent an aligning frame
         self.matched = 0
         self.unmatched = 0
         self._counts: dict[int, int] = {}
@@ -238,6 +241,7 @@ class RealtimePlayer:
         self._counts[cid] = k + 1
         if k < len(times):
             self.offset_ns = t_ns - times[k]
+            self._live_ns = t_ns
             self.matched += 1
         else:
             self.unmatched += 1
@@ -245,7 +249,7 @@ class RealtimePlayer:
     # -- playing --
 
     def run(self) -> dict[str, Any]:
-        """Play everything; returns the playing figures (:meth:`summary` adds the rest)."""
+        """Play everything; returns the playing figures (the comparison is separate)."""
         listener = threading.Thread(target=self._listen, name="replay-listen", daemon=True)
         listener.start()
         try:
@@ -270,8 +274,11 @@ class RealtimePlayer:
                 if j < len(fr):
                     t, msg, gate = fr[j]
                     due = t + off
+                    # gated until the live daemon has sent the frame it follows; a daemon
+                    # silent for gate_timeout_s (stopped, hung) gates nothing: never a hang
                     if now >= due and (gate is None or self._counts.get(gate[0], 0) > gate[1]
-                                       or now - due > gate_ns):
+                                       or now - due > gate_ns
+                                       or now - self._live_ns > gate_ns):
                         if gate is not None and self._counts.get(gate[0], 0) <= gate[1]:
                             self.ungated.append((t, msg.arbitration_id, *gate))
                         self._emit_can(msg, now - due)

@@ -194,6 +194,16 @@ def replay_lockstep(path: str | Path, *, config: str | Path | None = None,
         Its configuration (or ``config``) does not validate here.
     """
     rec = load_recording(path)
+    try:
+        return _replay(rec, config, progress)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        if isinstance(exc, (RecordingError, ConfigError)):
+            raise
+        raise RecordingError(f"{rec.path}: a record does not hold what uvd.cycle.v1 / "
+                             f"uvd.start.v1 promise: {type(exc).__name__}: {exc}") from exc
+
+
+def _replay(rec: Recording, config, progress) -> ReplayReport:
     cfg, same = _config_of(rec, config)
     if cfg.sensors.depth.source == "can":
         raise ConfigError(f"{rec.path}: the depth sensor is on CAN — its samples are not in the "

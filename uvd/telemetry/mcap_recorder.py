@@ -382,15 +382,18 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None
     Raises
     ------
     RecordingError
-        Not an MCAP file, or a message that is not JSON (the message names the file).
+        Not an MCAP file, a damaged record, a channel of uvd's topics with another schema or
+        encoding, a message on a channel never declared, or a message that is not JSON (the
+        message names the file and the problem). Channels of other topics are read as they are.
     """
     from mcap.exceptions import EndOfFile, McapError
     from mcap.reader import StreamReader
-    from mcap.records import Channel, Message
+    from mcap.records import Channel, Message, Schema
 
     path = Path(path)
     want = None if topics is None else set(topics)
     channels: dict[int, str] = {}
+    schemas: dict[int, str] = {}
     try:
         fh = path.open("rb")
     except OSError as exc:
@@ -410,7 +413,17 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None
                 if isinstance(exc, EndOfFile) or fh.tell() >= size:
                     return  # a file cut by a crash: everything before the cut was read
                 raise RecordingError(f"{path}: damaged MCAP record: {exc}") from exc
-            if isinstance(rec, Channel):
+            if isinstance(rec, Schema):
+                schemas[rec.id] = rec.name
+            elif isinstance(rec, Channel):
+                want_schema = CHANNELS.get(rec.topic, (None,))[0]
+                got = schemas.get(rec.schema_id)
+                if want_schema is not None and (got != want_schema
+                                                or rec.message_encoding != "json"):
+                    raise RecordingError(
+                        f"{path}: channel {rec.topic} has schema {got!r} and encoding "
+                        f"{rec.message_encoding!r}; uvd writes {want_schema!r} as json "
+                        "(another program's file, or another version's)")
                 channels[rec.id] = rec.topic
             elif isinstance(rec, Message):
                 topic = channels.get(rec.channel_id)
