@@ -257,7 +257,8 @@ def test_report_writes_valid_pngs_the_html_references(recorded, tmp_path):
 
 def test_a_two_step_experiment_records_the_daemons_channels_and_reports(tmp_path):
     """``uvd experiment two-step --record``: the same format (every message fits its schema),
-    and ``uvd report`` draws it, the controller's θ̂ included."""
+    and ``uvd report`` draws it, the controller's θ̂ included, and cross-validates a parameter
+    set on it (``--params``: the vehicle file's, Figs. 4.5–4.7)."""
     rec = tmp_path / "rec"
     assert main(["experiment", "two-step", "--hours", "0.01", "--record", str(rec),
                  "--json", str(tmp_path / "out.json")]) == 0
@@ -271,9 +272,12 @@ def test_a_two_step_experiment_records_the_daemons_channels_and_reports(tmp_path
         assert not errors, (topic, errors[0].message)
     assert counts["/uvd/cycle"] == counts["/uvd/pose"] == 360 and counts["/uvd/estimate"] > 30
     out = tmp_path / "report"
-    assert main(["report", path, "--out", str(out), "--quiet"]) == 0
+    vehicle = Path(__file__).parents[1] / "uvd" / "vehicles" / "jhu-rov.toml"
+    assert main(["report", path, "--out", str(out), "--params", str(vehicle), "--quiet"]) == 0
+    xval = {f"xval-{s}.png" for s in ("roll_deg", "pitch_deg", "u_mps", "v_mps", "w_mps",
+                                      "p_degps", "q_degps", "r_degps")}
     _check_report(out, {"tracking.png", "mne.png", "thrust.png", "estimates.png",
-                        "failsafe.png", "lateness.png"})
+                        "failsafe.png", "lateness.png"} | xval)
 
 
 def test_a_stalled_disk_drops_counts_and_never_delays_the_loop(tmp_path):

@@ -76,8 +76,14 @@ def _mass_drag_gb(thetas: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.
 
 
 def write_report(recording: str | Path, out_dir: str | Path, *,
+                 params: str | Path | None = None,
                  progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Write ``out_dir/index.html`` and its PNG figures; returns what was written.
+
+    With ``params`` (a parameters file) also the cross-validation of that set on the run:
+    simulated open loop with the run's wrench from its first state (App. A.2), measured
+    against simulated roll, pitch and body velocities, Figs. 4.5–4.7
+    (:func:`uvd.io.figures.write_xval_figures`, the figures ``uvd xval --plots`` draws).
 
     Raises
     ------
@@ -236,12 +242,38 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
     ax.set_yscale("log")
     save(fig, "lateness.png", "Distribution of the loop's measured period around its median.")
 
+    xval = None
+    if params is not None:
+        xval = _xval(path, cyc, Path(params), out, figures, say)
+
     summary = {"recording": str(path), "cycles": len(cyc), "armed_cycles": int(armed.sum()),
                "duration_s": float(t[-1]) if len(t) else 0.0,
                "failsafe_fired": sum(1 for e in data["failsafe"] if e.get("kind") == "fired"),
                "estimates": len(est), "figures": [f for f, _ in figures]}
+    if xval is not None:
+        summary["xval"] = xval
     _write_html(out / "index.html", summary, figures)
     return summary
+
+
+def _xval(path: Path, cyc: list, params: Path, out: Path, figures: list,
+          say: Callable[[str], None]) -> dict[str, Any]:
+    """Cross-validate ``params`` on the recorded cycles; its figures join ``figures``."""
+    from uvd.estimation.xval import STATES_6DOF, cross_validate
+    from uvd.io.figures import write_xval_figures
+    from uvd.io.params import params_from_toml
+    from uvd.io.runlog import runlog_from_records
+
+    prm = params_from_toml(params)
+    run = runlog_from_records(cyc, name=path.stem, source=f"recording {path}", where=path)
+    res = cross_validate(prm, run)
+    for f in write_xval_figures(out, run, {params.stem: (res.R_sim, res.v_sim)}, STATES_6DOF,
+                                prefix="xval-"):
+        figures.append((f.name, f"Cross-validation of {params.name} on this run (App. A.2; "
+                                "Figs. 4.5–4.7): measured against simulated open loop with "
+                                "the recorded wrench, first 3 minutes."))
+        say(f"wrote {f.name}")
+    return {"params": str(params), "mae": res.mae, "diverged_at_s": res.diverged_at_s}
 
 
 def _write_html(path: Path, summary: dict[str, Any], figures: list[tuple[str, str]]) -> None:
