@@ -25,6 +25,7 @@ import numpy as np
 
 from drivers.frames import wrap_pi_array
 from drivers.samples import R_to_euler
+from uvd.io.figures import estimates_figure, mne_figure
 from uvd.telemetry.mcap_recorder import RecordingError, read_messages
 
 __all__ = ["write_report"]
@@ -60,19 +61,6 @@ def _k_thrust(start: list[dict]) -> np.ndarray | None:
         return np.asarray(load_vehicle(name).k_thrust, dtype=float)
     except Exception:  # noqa: BLE001 - a vehicle file we cannot find here: no realised thrust
         return None
-
-
-def _mass_drag_gb(thetas: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Masses, drags and (g, b) of θ_UV (241, eq. 2.48) or of the decoupled view (16, §5.3.1:
-    m₁…m₆, d₁…d₆, g, b₁…b₃), one row per θ."""
-    if len(thetas[0]) == 16:
-        a = np.array(thetas)
-        return a[:, :6], a[:, 6:12], a[:, 12:16]
-    from uvd.model.params import UVParams
-    ps = [UVParams.from_theta(t) for t in thetas]
-    return (np.array([np.diag(p.M) for p in ps]),
-            np.array([[p.D[i][i, i] for i in range(6)] for p in ps]),
-            np.array([[p.g, *p.b] for p in ps]))
 
 
 def write_report(recording: str | Path, out_dir: str | Path, *,
@@ -158,14 +146,7 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
               if np.any(idx == k)]
         mv = [float(np.mean(np.asarray(dv)[idx == k])) for k in range(len(edges))
               if np.any(idx == k)]
-        fig, ax = plt.subplots(1, 2, figsize=(12, 4))
-        x = np.arange(len(mp)) * win / 60.0
-        ax[0].bar(x, mp, width=win / 60.0 * 0.8, align="edge")
-        ax[0].set_ylabel("position MNE (‖Δψ‖)")
-        ax[1].bar(x, mv, width=win / 60.0 * 0.8, align="edge", color="C1")
-        ax[1].set_ylabel("velocity MNE (‖Δv‖)")
-        for a in ax:
-            a.set_xlabel(f"window start (min), {win / 60.0:.3g}-minute windows")
+        fig = mne_figure(plt, np.arange(len(mp)) * win / 60.0, win / 60.0, mp, mv)
         save(fig, "mne.png", f"Position and velocity MNE (§5.3.1) in {win / 60.0:.3g}-minute "
                              "windows, the layout of Fig. 5.4.")
 
@@ -199,18 +180,7 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
            and len(e["theta"]) in (16, 241)]
     if est:
         te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in est])
-        masses, drags, gb = _mass_drag_gb([np.asarray(e["theta"], float) for e in est])
-        fig, ax = plt.subplots(1, 3, figsize=(14, 4))
-        for a, y, title, names in ((ax[0], masses, "masses M̂ᵢᵢ", "m"),
-                                   (ax[1], drags, "drags D̂ᵢ(i,i)", "d")):
-            a.plot(te, y)
-            a.set_title(title)
-            a.legend([f"{names}{i + 1}" for i in range(6)], fontsize=7, ncol=2)
-        ax[2].plot(te, gb)
-        ax[2].set_title("g, b")
-        ax[2].legend(["g", "b₁", "b₂", "b₃"], fontsize=7)
-        for a in ax:
-            a.set_xlabel("time (s)")
+        fig = estimates_figure(plt, te, [e["theta"] for e in est])
         save(fig, "estimates.png", "Estimates over the run: the online AID's θ̂ (Theorem "
                                    "4.3.1, cf. Figs. 4.x) or the adaptive controller's (the "
                                    "16 decoupled parameters of §5.3.1, cf. Fig. 5.1).")
