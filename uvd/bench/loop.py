@@ -471,27 +471,36 @@ def _fmt(d: dict) -> str:
 
 
 def _recorded(cycle, directory: str, times: dict[str, list]):
-    """``cycle`` followed, every other cycle, by what the daemon's write phase does for the
-    black box: build one cycle record and publish it to a hub whose sink is the MCAP recorder
-    (6 thrusters). The time of each call goes to ``times["with"]`` or ``times["without"]``:
-    with and without in the same run, interleaved, under the same load and the same pump."""
+    """``cycle`` followed by what the daemon's write phase does for telemetry — build one cycle
+    record (6 thrusters) and publish it — every cycle; every other cycle the hub has the MCAP
+    recorder as its sink and the cycle's seven CAN sends (6 RPDOs + SYNC) pass its tap, the
+    others publish to a hub without sinks. The daemon builds and publishes the record whether
+    or not it records, so the difference is what ``[recording] enabled`` adds to a cycle. The
+    time of each call goes to ``times["with"]`` or ``times["without"]``: interleaved, in the
+    same run, under the same load; the recorder's pump runs between cycles as in the daemon."""
+    import can
+
     from uvd.telemetry.mcap_recorder import McapRecorder
     from uvd.telemetry.records import CycleRecord
     from uvd.telemetry.sink import TelemetryHub
 
-    hub = TelemetryHub([McapRecorder(directory)])
+    rec = McapRecorder(directory)
+    hub, bare = TelemetryHub([rec]), TelemetryHub([])
     z3, z6, eye = np.zeros(3), np.zeros(6), np.eye(3)
-
+    frames = [can.Message(arbitration_id=0x200 + n, data=bytes(4), is_extended_id=False)
+              for n in range(1, 7)] + [can.Message(arbitration_id=0x80, data=b"",
+                                                   is_extended_id=False)]
     clock = time.perf_counter
     with_s, without_s = times.setdefault("with", []), times.setdefault("without", [])
 
     def recorded(t_ns: int, dt: float) -> None:
         t0 = clock()
         cycle(t_ns, dt)
-        if len(with_s) > len(without_s):
-            without_s.append(clock() - t0)
-            return
-        hub.publish(CycleRecord(
+        recording = len(with_s) <= len(without_s)
+        if recording:
+            for m in frames:
+                rec.tap_can(m, t_ns, False)
+        (hub if recording else bare).publish(CycleRecord(
             t_ns=t_ns, dt=dt, state="ARMED", action="none", mode="control", status="ok",
             p=z3, R=eye, v=z6, nav_valid=True, u=z6, u_cmd=z6, thrust=z6,
             ages=(0.01, 0.1, 0.05, 0.01), ins_rx_ns=t_ns, inputs={
@@ -499,7 +508,7 @@ def _recorded(cycle, directory: str, times: dict[str, list]):
                               "feedback_t_ns": t_ns, "bus_off": False},
                 "overrun_streak": 0, "overrun_streak_exceeded": False, "leak": False,
                 "extra": None}, p_ref=z3, R_ref=eye, v_ref=z6).to_dict())
-        with_s.append(clock() - t0)
+        (with_s if recording else without_s).append(clock() - t0)
     return recorded, hub
 
 
