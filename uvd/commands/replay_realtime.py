@@ -53,18 +53,18 @@ __all__ = ["WireRecording", "load_wire", "RealtimePlayer", "live_config",
 SYNC_ID = 0x080
 RPDO1_BASE = 0x200
 
+#: a live command within this many ‰ of rated torque of the recorded one counts as matching
+#: (the two runs see the same bytes, stamped some hundred µs apart, and AMBC integrates the
+#: difference: docs/recording.md has the figures)
+TOLERANCE_PERMILLE = 20
+#: share of the compared cycles that must be within tolerance for the summary to say "match"
+MATCH_SHARE = 0.95
+
 
 def _aligns(cid: int) -> bool:
     """The daemon's frames the devices answer — NMT, SYNC, SDO requests — and so the ones
     the two clocks are aligned on (its heartbeat and RPDOs follow its own timers)."""
     return cid in (0x000, SYNC_ID) or 0x600 < cid < 0x680
-
-#: a live command within this many ‰ of rated torque of the recorded one counts as matching
-#: (the two runs see the same bytes, but not at the same microsecond: a sample that arrives
-#: within a few ms of a cycle's start may fall into the next cycle)
-TOLERANCE_PERMILLE = 20
-#: share of the compared cycles that must be within tolerance for the summary to say "match"
-MATCH_SHARE = 0.95
 
 
 @dataclass
@@ -97,8 +97,7 @@ def load_wire(path: str | Path) -> WireRecording:
 
     path = Path(path)
     start, serial, received, cycles, others = None, [], [], [], []
-    tx: dict[int, list[int]] = {}
-    sent: list[tuple[int, bytes]] = []
+    sent: list[tuple[int, int, bytes]] = []  # (t_ns, id, data) of the daemon's frames
     for topic, _, m in read_messages(path, ("/uvd/start", "/uvd/raw/serial", "/uvd/raw/can",
                                             "/uvd/cycle", "/uvd/command")):
         try:
@@ -433,14 +432,16 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
     ports = {name: PtyPort(work / name) for name in ("ins", "dvl", "depth")}
     result = RealtimeResult(str(rec.path), str(cfg_path),
                             operator_commands=rec.operator_commands)
-    proc = None
+    before = set((work / "live").glob("*.mcap"))  # a reused folder: earlier runs' files
+    proc = log = None
     try:
         for p in ports.values():
             p.open()
         if start_daemon:
+            log = (work / "daemon.log").open("wb")  # noqa: SIM115 - closed below
             proc = subprocess.Popen(  # noqa: S603 - our own interpreter and module
                 [sys.executable, "-m", "uvd", "run", "--config", str(cfg_path), "--arm"],
-                stdout=subprocess.DEVNULL, stderr=(work / "daemon.log").open("wb"))
+                stdout=subprocess.DEVNULL, stderr=log)
         elif ready is not None:
             ready(cfg_path)
         player = RealtimePlayer(rec, bus, ports, wait_s=wait_s, progress=progress)
@@ -450,11 +451,13 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
     finally:
         if proc is not None:
             result.daemon_exit = _stop(proc)
+        if log is not None:
+            log.close()
         for p in ports.values():
             p.close()
         with contextlib.suppress(Exception):
             bus.shutdown()
-    live = sorted((work / "live").glob("*.mcap"))
+    live = sorted(set((work / "live").glob("*.mcap")) - before)
     result.tracking = {"recorded": tracking(rec.cycles, [c["thrust"] for c in rec.cycles])}
     if live:
         cyc = [m for _, _, m in read_messages(live[0], ["/uvd/cycle"])][:len(rec.cycles)]
