@@ -125,8 +125,8 @@ def test_files_that_cannot_be_played_and_a_daemon_that_never_comes(recorded, tmp
     foreign.write_text("not a recording\n")
     with pytest.raises(RecordingError, match="foreign.mcap: not an MCAP file"):
         load_wire(foreign)
-    res = replay_realtime(path, tmp_path / "w", interface="virtual", channel="nobody",
-                          wait_s=0.5)
+    res = replay_realtime(path, tmp_path / "w", interface="virtual",
+                          channel=f"nobody-{os.getpid()}", wait_s=0.5)
     assert res.playing == {"error": "no daemon appeared on the bus within 0.5 s"}
 
 
