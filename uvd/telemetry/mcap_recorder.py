@@ -21,7 +21,12 @@ every ``flush_interval_s``. Messages are written as plain records (no chunks), s
 by SIGKILL or a crash is readable by a streaming reader (:func:`read_messages`) up to the last
 flush — at most ``flush_interval_s`` (0.25 s by default) before the kill; a clean stop writes
 MCAP's summary section too. A new file is started past ``rotate_mb`` or ``rotate_s``; the
-start record is repeated at the top of each.
+start record is repeated at the top of each. A stalled disk bounds the bytes waiting for it
+(``max_pending_mb``): past that, records are dropped and counted, never queued without end.
+
+A lockstep experiment, which has no event loop, writes the same files from its own thread
+(:meth:`McapRecorder.open_now`, :meth:`~McapRecorder.write_now`,
+:meth:`~McapRecorder.close_now`).
 """
 
 from __future__ import annotations
@@ -326,9 +331,7 @@ class McapRecorder:
     def close_now(self) -> None:
         """Finish the file (MCAP's summary included) from the calling thread."""
         if self._writer is not None:
-            self._writer.finish()
-            self._write_bytes(self.files[-1], self._buf.take(), True)
-            self._writer = None
+            self._finish_file()
 
     def _drain_raw(self) -> None:
         q = self._raw
