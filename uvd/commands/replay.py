@@ -132,7 +132,8 @@ def _run_realtime(args) -> int:
           f"{pl['late_ms_p50']:.2f} ms, p99 {pl['late_ms_p99']:.2f} ms")
     print(f"  commands: {c['cycles_compared']} cycles compared, {c['identical']} identical, "
           f"{c['within_tolerance']} within {c['tolerance_permille']} ‰ of rated torque, "
-          f"largest difference {c['max_diff_permille']} ‰")
+          f"largest difference {c['max_diff_permille']} ‰, mean "
+          f"{c['mean_diff_permille'] or 0.0:.1f} ‰")
     for k in ("recorded", "live"):
         t = res.tracking.get(k, {})
         if t.get("cycles"):
@@ -143,7 +144,14 @@ def _run_realtime(args) -> int:
         print(f"  not re-issued (no wire for them yet): operator commands "
               f"{', '.join(res.operator_commands)} — commands after them differ")
     if args.config is not None:
-        print("  another configuration: commands compared for their difference only")
+        rec, live = res.tracking.get("recorded", {}), res.tracking.get("live", {})
+        if rec.get("cycles") and live.get("cycles"):
+            print(f"  another configuration: thrust RMS {live['thrust_rms_n']:.1f} N against "
+                  f"{rec['thrust_rms_n']:.1f} N recorded "
+                  f"({100 * (live['thrust_rms_n'] / rec['thrust_rms_n'] - 1):+.1f} %); "
+                  "position MNE "
+                  f"{live['position_mne']:.4f} against {rec['position_mne']:.4f} — in an open-loop "
+                  "replay the motion is the recording's, so other gains show in the commands")
         return 0
     print("  MATCH: the daemon under test commands what the recording did, within tolerance"
           if c["match"] else "  NO MATCH: the commands differ beyond tolerance")

@@ -7,10 +7,14 @@ Figures, each from the recording's own channels (docs/recording.md):
   15 minutes as Fig. 5.4 (shorter runs: a tenth of the run);
 * ``thrust.png`` — per thruster, the commanded thrust and the thrust the propellers produced
   (f = k ω|ω| of the measured speed, App. A.1), as Fig. 5.2 shows them around reversals;
-* ``estimates.png`` — the online estimates over time (the six masses and drags, g, b₃) when
-  the run identified the vehicle;
+* ``estimates.png`` — the estimates over time (the six masses and drags, g, b): the online
+  AID's θ̂ of a daemon run, or the adaptive controller's 16 decoupled parameters of a
+  lockstep experiment (``uvd experiment … --record``);
 * ``failsafe.png`` — the failsafe action over time with every trigger that fired;
-* ``lateness.png`` — the distribution of the loop's measured period around its nominal one.
+* ``lateness.png`` — the distribution of the loop's measured period around its nominal one;
+* ``xval-*.png`` — with a parameter set, its cross-validation on the run (Figs. 4.5–4.7).
+
+The figures the experiments' ``--plots`` draw too come from :mod:`uvd.io.figures`.
 """
 
 from __future__ import annotations
