@@ -173,3 +173,33 @@ def test_a_daemon_that_stops_costs_one_gate_timeout_not_a_hang():
     print(got, f"{wall:.2f} s")
     assert not t.is_alive() and wall < 2.5
     assert got["played"]["can"] == 500 and got["frames_ungated"] >= 490
+
+
+def test_the_documented_can_log_filter_keeps_the_received_frames_and_plays(tmp_path):
+    """docs/recording.md: keep the frames the daemon received (``R``) of a candump log with
+    python-can's reader and writer, then python-can's player plays the result."""
+    import subprocess
+    import sys
+
+    import can
+
+    log, rx = tmp_path / "can.log", tmp_path / "rx.log"
+    w = can.Logger(str(log))
+    for k in range(20):
+        w(can.Message(timestamp=100.0 + 0.01 * k, arbitration_id=0x181 if k % 2 else 0x201,
+                      data=bytes([k]) * 8, is_extended_id=False, is_rx=bool(k % 2)))
+    w.stop()
+    text = (Path(__file__).parents[1] / "docs" / "recording.md").read_text()
+    cmd = next(line for line in text.splitlines() if line.startswith("python -c \"import can"))
+    code = cmd.split('"')[1]
+    subprocess.run([sys.executable, "-c", code, str(log), str(rx)], check=True, timeout=60)
+    kept = list(can.LogReader(str(rx)))
+    assert [m.arbitration_id for m in kept] == [0x181] * 10
+    assert [m.data[0] for m in kept] == list(range(1, 20, 2))
+    assert kept[1].timestamp - kept[0].timestamp == pytest.approx(0.02)
+    played = subprocess.run([sys.executable, "-m", "can.player", "-i", "virtual", "-c",
+                             f"rx-{os.getpid()}", "-v", "--", str(rx)], capture_output=True,
+                            text=True, timeout=60)
+    assert played.returncode == 0, played.stderr
+    sent = [line for line in played.stdout.splitlines() if line.startswith("Timestamp:")]
+    assert len(sent) == 10 and all("ID:      181" in line for line in sent)
