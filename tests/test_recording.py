@@ -327,3 +327,46 @@ def test_a_stalled_disk_drops_counts_and_never_delays_the_loop(tmp_path):
     assert rec.stalled_dropped > 0 and rec.raw_dropped > 0
     assert written + rec.stalled_dropped + st["dropped"] == n
     assert written > 100 and peak < 0.02e6 + 64 * 400  # the bound plus one batch
+
+
+@pytest.mark.parametrize("how", ["time", "size"])
+def test_files_rotate_by_time_or_size_each_with_the_start_record(tmp_path, how):
+    """Through the hub, as in the daemon: a new file past ``rotate_s`` of record time or
+    ``rotate_mb``; each begins with the start record, none loses a message, and each is a
+    complete MCAP file (summary included)."""
+    from mcap.reader import make_reader
+
+    from uvd.telemetry.mcap_recorder import McapRecorder
+    from uvd.telemetry.sink import TelemetryHub
+
+    rotate = {"rotate_s": 0.5} if how == "time" else {"rotate_mb": 0.004}
+    rec = McapRecorder(tmp_path, flush_interval_s=0.05, **rotate)
+    hub = TelemetryHub([rec], flush_interval_s=0.01)
+    n = 100
+
+    async def main():
+        task = asyncio.create_task(hub.run())
+        await asyncio.sleep(0.05)  # opened: the first file's time starts
+        t0 = time.monotonic_ns()
+        hub.publish({"type": "start", "t_ns": t0, "version": "test", "config_toml": "# x\n"},
+                    always=True)
+        for k in range(n):  # 20 ms of record time apart: 2 s
+            hub.publish({"type": "failsafe", "t_ns": t0 + (k + 1) * 20_000_000, "kind": "fired",
+                         "trigger": "test", "action": "warn", "reason": "x" * 100},
+                        always=True)
+            if k % 10 == 0:
+                await asyncio.sleep(0.02)
+        await hub.aclose(timeout_s=5.0)
+        await task
+
+    asyncio.run(asyncio.wait_for(main(), 30.0))
+    files = sorted(tmp_path.glob("*.mcap"))
+    assert files == rec.files and len(files) >= 3, files
+    got = 0
+    for f in files:
+        msgs = list(read_messages(f))
+        assert msgs[0][0] == "/uvd/start"
+        got += sum(1 for topic, _, _ in msgs if topic == "/uvd/failsafe")
+        with f.open("rb") as fh:
+            assert make_reader(fh).get_summary() is not None
+    assert got == n
