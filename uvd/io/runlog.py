@@ -130,12 +130,12 @@ def runlog_from_records(records, *, name: str, source: str, where: str | Path) -
     bad = 0
     for rec in records:
         try:
-            sample = None if rec is None else _cycle_sample(rec)
+            if rec is None:
+                raise ValueError("not a record")
+            sample = _cycle_sample(rec)
         except ValueError:
-            sample = None
             bad += 1
-        if rec is None:
-            bad += 1
+            continue
         if sample is None:
             continue
         for seq, x in zip((t, p, R, v, u), sample, strict=True):
