@@ -46,7 +46,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("uvd.model",),
     ("drivers",),
 )
-UTILITIES = ("uvd", "uvd.errors", "uvd.jsonio", "uvd.blas", "uvd._jitcache")
+UTILITIES = ("uvd", "uvd.errors", "uvd.jsonio", "uvd.blas", "uvd._jitcache", "uvd.progress")
 #: drivers never import uvd, except the design card's one error hierarchy (UvdError and the
 #: matching built-ins), which imports nothing itself
 DRIVERS_MAY_IMPORT = ("uvd.errors",)

@@ -17,6 +17,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -80,6 +81,16 @@ def test_every_message_fits_its_schema_and_every_channel_is_there(recorded):
     assert set(sources) == {"ins", "dvl", "depth"}
     assert d.recorder.raw_dropped == 0
 
+    # what `mcap info` shows, from MCAP's own indexed reader: the summary a clean stop writes
+    from mcap.reader import make_reader
+    with path.open("rb") as fh:
+        summary = make_reader(fh).get_summary()
+    topics = {c.id: c.topic for c in summary.channels.values()}
+    assert {summary.schemas[c.schema_id].name for c in summary.channels.values()} == \
+        {s for s, _ in CHANNELS.values()}
+    assert {topics[i]: n for i, n in summary.statistics.channel_message_counts.items()} == \
+        dict(counts)
+
 
 def test_lockstep_replay_is_bit_identical(recorded, tmp_path):
     path, _, _, cycles = recorded
@@ -95,19 +106,27 @@ def test_lockstep_replay_is_bit_identical(recorded, tmp_path):
     assert {"pdc-fallback", "zero", "control"} <= modes  # the replay went through them all
 
 
-def _rewrite(src: Path, dst: Path, edit) -> None:
-    """Copy a recording message by message through MCAP's writer, ``edit``-ing each."""
+def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = None,
+             stray_channel: int | None = None) -> None:
+    """Copy a recording message by message through MCAP's writer, ``edit``-ing each (None:
+    left out); ``schema_names`` renames channels' schemas, ``stray_channel`` adds a message
+    on a channel id never declared."""
     from mcap.writer import CompressionType, Writer
     with dst.open("wb") as fh:
         w = Writer(fh, use_chunking=False, compression=CompressionType.NONE)
         w.start()
         ids = {}
         for topic, (sname, _) in CHANNELS.items():
-            sid = w.register_schema(sname, "jsonschema", json.dumps(schema(sname)).encode())
+            sname = (schema_names or {}).get(topic, sname)
+            sid = w.register_schema(sname, "jsonschema", json.dumps(schema(
+                CHANNELS[topic][0])).encode())
             ids[topic] = w.register_channel(topic, "json", sid)
         for k, (topic, t, msg) in enumerate(read_messages(src)):
             msg = edit(k, topic, msg)
-            w.add_message(ids[topic], t, json.dumps(msg).encode(), t, k)
+            if msg is not None:
+                w.add_message(ids[topic], t, json.dumps(msg).encode(), t, k)
+            if k == 100 and stray_channel is not None:
+                w.add_message(stray_channel, t, b"{}", t, k)
         w.finish()
 
 
@@ -165,62 +184,189 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path):
     with pytest.raises(RecordingError, match="no start record"):
         replay_lockstep(head)
     assert main(["replay", str(foreign), "--lockstep", "--quiet"]) == 2
+    same = lambda k, topic, msg: msg  # noqa: E731
+    other = tmp_path / "other-schema.mcap"
+    _rewrite(path, other, same, schema_names={"/uvd/cycle": "uvd.cycle.v9"})
+    with pytest.raises(RecordingError, match="other-schema.mcap: channel /uvd/cycle has schema "
+                                             "'uvd.cycle.v9'"):
+        replay_lockstep(other)
+    stray = tmp_path / "stray.mcap"
+    _rewrite(path, stray, same, stray_channel=99)
+    with pytest.raises(RecordingError, match="stray.mcap: message on unknown channel 99"):
+        replay_lockstep(stray)
+    no_thrust = tmp_path / "no-thrust.mcap"
+    _rewrite(path, no_thrust, lambda k, topic, msg: {key: v for key, v in msg.items()
+                                                     if key != "thrust"}
+             if topic == "/uvd/cycle" else msg)
+    with pytest.raises(RecordingError, match="no-thrust.mcap: a record does not hold"):
+        replay_lockstep(no_thrust)
 
 
-_WRITER = """
-import asyncio, sys, time
-from uvd.telemetry.mcap_recorder import McapRecorder
-from uvd.telemetry.sink import TelemetryHub
-
-async def main():
-    rec = McapRecorder(sys.argv[1], flush_interval_s=0.25)
-    hub = TelemetryHub([rec], flush_interval_s=0.05)
-    task = asyncio.create_task(hub.run())
-    await asyncio.sleep(0.1)
-    print("ready", flush=True)
-    while True:
-        t = time.monotonic_ns()
-        hub.publish({"type": "failsafe", "t_ns": t, "kind": "fired", "trigger": "test",
-                     "action": "warn", "reason": "a record every 10 ms"}, always=True)
-        await asyncio.sleep(0.01)
-
-asyncio.run(main())
-"""
-
-
-def test_sigkill_leaves_a_file_readable_to_within_a_second(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(tmp_path)],
-                            stdout=subprocess.PIPE, text=True, cwd=Path(__file__).parents[1])
-    try:
-        assert proc.stdout.readline().strip() == "ready"
-        time.sleep(2.0)
-        t_kill = time.monotonic_ns()
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    (f,) = tmp_path.glob("*.mcap")
-    last = max(t for _, t, _ in read_messages(f, ["/uvd/failsafe"]))
+def test_sigkill_of_the_daemon_leaves_a_file_report_reads_to_within_a_second(tmp_path):
+    """``uvd run`` (a real daemon process over sim-bridge, recording) killed with SIGKILL
+    mid-run: ``uvd report`` reads its file up to at most one second before the kill."""
+    changes = {"recording": {"enabled": True, "dir": str(tmp_path / "rec")}}
+    with running_bridge(tmp_path, changes) as (cfg_path, _):
+        proc = subprocess.Popen([sys.executable, "-m", "uvd", "run", "--config", str(cfg_path),
+                                 "--arm", "--duration", "60"], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, cwd=Path(__file__).parents[1])
+        try:
+            deadline = time.monotonic() + 60.0
+            while not list((tmp_path / "rec").glob("*.mcap")) or \
+                    sum(1 for _ in read_messages(next((tmp_path / "rec").glob("*.mcap")),
+                                                 ["/uvd/cycle"])) < 30:
+                assert proc.poll() is None and time.monotonic() < deadline
+                time.sleep(0.5)
+            t_kill = time.monotonic_ns()  # the daemon stamps on this same clock
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    (f,) = (tmp_path / "rec").glob("*.mcap")
+    assert main(["report", str(f), "--out", str(tmp_path / "report"), "--quiet"]) == 0
+    last = max(t for _, t, _ in read_messages(f, ["/uvd/cycle"]))
     lost_s = (t_kill - last) * 1e-9
-    print(f"SIGKILL: the file reads up to {lost_s * 1e3:.0f} ms before the kill")
+    print(f"SIGKILL: uvd report reads the file up to {lost_s * 1e3:.0f} ms before the kill")
     assert 0.0 <= lost_s <= 1.0
 
 
-def test_report_writes_valid_pngs_the_html_references(recorded, tmp_path):
+def _check_report(out: Path, names: set[str]) -> None:
+    """``out/index.html`` references every PNG, and each is a valid PNG of sensible size."""
     import struct
-    path, _, _, _ = recorded
-    out = tmp_path / "report"
-    assert main(["report", str(path), "--out", str(out), "--quiet"]) == 0
     html = (out / "index.html").read_text()
     pngs = sorted(out.glob("*.png"))
-    # no estimates.png: the run identified nothing ([estimation] aid is off)
-    assert {p.name for p in pngs} == {"tracking.png", "mne.png", "thrust.png", "failsafe.png",
-                                      "lateness.png"}
+    assert {p.name for p in pngs} == names
     for p in pngs:
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n", p  # a PNG
         w, h = struct.unpack(">II", data[16:24])  # IHDR
         assert 400 <= w <= 3000 and 200 <= h <= 3000 and len(data) > 5_000, (p, w, h)
         assert f'src="{p.name}"' in html
+
+
+def test_report_writes_valid_pngs_the_html_references(recorded, tmp_path):
+    path, _, _, _ = recorded
+    out = tmp_path / "report"
+    assert main(["report", str(path), "--out", str(out), "--quiet"]) == 0
+    # no estimates.png: the run identified nothing ([estimation] aid is off)
+    _check_report(out, {"tracking.png", "mne.png", "thrust.png", "failsafe.png",
+                        "lateness.png"})
     assert main(["report", str(tmp_path / "none.mcap"), "--out", str(out), "--quiet"]) == 2
+
+
+def test_a_two_step_experiment_records_the_daemons_channels_and_reports(tmp_path):
+    """``uvd experiment two-step --record``: the same format (every message fits its schema),
+    and ``uvd report`` draws it, the controller's θ̂ included, and cross-validates a parameter
+    set on it (``--params``: the vehicle file's, Figs. 4.5–4.7)."""
+    rec = tmp_path / "rec"
+    assert main(["experiment", "two-step", "--hours", "0.01", "--record", str(rec),
+                 "--json", str(tmp_path / "out.json")]) == 0
+    (path,) = json.loads((tmp_path / "out.json").read_text())["recordings"]
+    validators = {t: jsonschema.Draft202012Validator(schema(s)) for t, (s, _) in
+                  CHANNELS.items()}
+    counts = Counter()
+    for topic, _, msg in read_messages(path):
+        counts[topic] += 1
+        errors = list(validators[topic].iter_errors(msg))
+        assert not errors, (topic, errors[0].message)
+    assert counts["/uvd/cycle"] == counts["/uvd/pose"] == 360 and counts["/uvd/estimate"] > 30
+    out = tmp_path / "report"
+    vehicle = Path(__file__).parents[1] / "uvd" / "vehicles" / "jhu-rov.toml"
+    assert main(["report", path, "--out", str(out), "--params", str(vehicle), "--quiet"]) == 0
+    xval = {f"xval-{s}.png" for s in ("roll_deg", "pitch_deg", "u_mps", "v_mps", "w_mps",
+                                      "p_degps", "q_degps", "r_degps")}
+    _check_report(out, {"tracking.png", "mne.png", "thrust.png", "estimates.png",
+                        "failsafe.png", "lateness.png"} | xval)
+
+
+def test_a_stalled_disk_drops_counts_and_never_delays_the_loop(tmp_path):
+    """The worker's writes hang for 2 s (a stalled disk) while a 100 Hz 'loop' publishes:
+    publishing and the taps stay instant, memory stays bounded, every record is either in
+    the file or counted as dropped, and the file reads back whole after the stall."""
+    from uvd.telemetry.mcap_recorder import McapRecorder
+    from uvd.telemetry.sink import TelemetryHub
+
+    stall = threading.Event()
+    rec = McapRecorder(tmp_path, flush_interval_s=0.05, max_pending_mb=0.02, raw_queue_size=64)
+    write_bytes = rec._write_bytes
+
+    def stalled(path, data, close):
+        stall.wait(10.0)
+        write_bytes(path, data, close)
+
+    rec._write_bytes = stalled
+    hub = TelemetryHub([rec], queue_size=64, flush_interval_s=0.01)
+    n = 300
+
+    async def main():
+        task = asyncio.create_task(hub.run())
+        worst, peak = 0.0, 0
+        for k in range(n):
+            t = time.monotonic_ns()
+            t0 = time.perf_counter()
+            hub.publish({"type": "failsafe", "t_ns": t, "kind": "fired", "trigger": "test",
+                         "action": "warn", "reason": f"record {k} " + "x" * 100}, always=True)
+            rec.tap_serial("ins", t, b"\x00" * 64)
+            worst = max(worst, time.perf_counter() - t0)
+            peak = max(peak, rec._buf.pending if rec._buf is not None else 0)
+            if k == 200:
+                stall.set()  # the disk comes back after 2 s
+            await asyncio.sleep(0.01)
+        await hub.aclose(timeout_s=5.0)
+        await task
+        return worst, peak
+
+    worst, peak = asyncio.run(asyncio.wait_for(main(), 30.0))
+    st = hub.stats()["mcap"]
+    written = sum(1 for _ in read_messages(rec.files[0], ["/uvd/failsafe"]))
+    print(f"publish + tap worst {worst * 1e6:.0f} µs; pending peak {peak} B; written "
+          f"{written}, dropped by the recorder {rec.stalled_dropped}, by the hub queue "
+          f"{st['dropped']}, raw frames dropped {rec.raw_dropped}")
+    assert worst < 0.01  # a wait for the disk would be seconds
+    assert rec.stalled_dropped > 0 and rec.raw_dropped > 0
+    assert written + rec.stalled_dropped + st["dropped"] == n
+    assert written > 100 and peak < 0.02e6 + 64 * 400  # the bound plus one batch
+
+
+@pytest.mark.parametrize("how", ["time", "size"])
+def test_files_rotate_by_time_or_size_each_with_the_start_record(tmp_path, how):
+    """Through the hub, as in the daemon: a new file past ``rotate_s`` of record time or
+    ``rotate_mb``; each begins with the start record, none loses a message, and each is a
+    complete MCAP file (summary included)."""
+    from mcap.reader import make_reader
+
+    from uvd.telemetry.mcap_recorder import McapRecorder
+    from uvd.telemetry.sink import TelemetryHub
+
+    rotate = {"rotate_s": 0.5} if how == "time" else {"rotate_mb": 0.004}
+    rec = McapRecorder(tmp_path, flush_interval_s=0.05, **rotate)
+    hub = TelemetryHub([rec], flush_interval_s=0.01)
+    n = 100
+
+    async def main():
+        task = asyncio.create_task(hub.run())
+        await asyncio.sleep(0.05)  # opened: the first file's time starts
+        t0 = time.monotonic_ns()
+        hub.publish({"type": "start", "t_ns": t0, "version": "test", "config_toml": "# x\n"},
+                    always=True)
+        for k in range(n):  # 20 ms of record time apart: 2 s
+            hub.publish({"type": "failsafe", "t_ns": t0 + (k + 1) * 20_000_000, "kind": "fired",
+                         "trigger": "test", "action": "warn", "reason": "x" * 100},
+                        always=True)
+            if k % 10 == 0:
+                await asyncio.sleep(0.02)
+        await hub.aclose(timeout_s=5.0)
+        await task
+
+    asyncio.run(asyncio.wait_for(main(), 30.0))
+    files = sorted(tmp_path.glob("*.mcap"))
+    assert files == rec.files and len(files) >= 3, files
+    got = 0
+    for f in files:
+        msgs = list(read_messages(f))
+        assert msgs[0][0] == "/uvd/start"
+        got += sum(1 for topic, _, _ in msgs if topic == "/uvd/failsafe")
+        with f.open("rb") as fh:
+            assert make_reader(fh).get_summary() is not None
+    assert got == n

@@ -41,6 +41,25 @@ def test_bench_loop_keys(tmp_path, capsys):
         assert hs["seconds"] >= 0.0 and 0.0 <= hs["share"] <= 1.0
 
 
+def test_bench_loop_record_compares_with_and_without_in_one_run(tmp_path):
+    """--record: half the measured cycles with the black box, half without, and the file holds
+    the recorded half's cycle records and CAN taps."""
+    from uvd.telemetry.mcap_recorder import read_messages
+
+    out = tmp_path / "loop.json"
+    assert main(["bench", "loop", "--rate", "200", "--duration", "0.5", "--warmup", "0",
+                 "--cycle", "pdc", "--no-naive", "--record", str(tmp_path / "rec"),
+                 "--json", str(out)]) == 0
+    r = json.loads(out.read_text())["recording"]
+    assert r["with_us"]["n"] == r["without_us"]["n"] > 30
+    assert r["p50_cost_us"] == r["with_us"]["p50"] - r["without_us"]["p50"]
+    (f,) = (tmp_path / "rec").glob("*.mcap")
+    counts = {}
+    for topic, _, _ in read_messages(f, ["/uvd/cycle", "/uvd/raw/can"]):
+        counts[topic] = counts.get(topic, 0) + 1
+    assert counts["/uvd/raw/can"] == 7 * counts["/uvd/cycle"] > 7 * 30
+
+
 def test_overruns_are_sorted_by_cause():
     from uvd.bench.loop import attribute_overruns
 

@@ -1,13 +1,15 @@
-"""``uvd experiment NAME --json OUT [--plots DIR] [--hours H] [--seed S]``."""
+"""``uvd experiment NAME --json OUT [--plots DIR] [--record DIR] [--hours H] [--seed S]``."""
 
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
 from uvd import experiments
 from uvd.jsonio import write_json
+from uvd.progress import Progress
 
 
 def register(sub) -> None:
@@ -19,8 +21,12 @@ def register(sub) -> None:
     p.add_argument("name", help="experiment name, or 'list'")
     p.add_argument("--json", type=Path, metavar="OUT", help="write results to this JSON file")
     p.add_argument("--plots", type=Path, metavar="DIR", help="write figures into this folder")
+    p.add_argument("--record", type=Path, metavar="DIR",
+                   help="write each control run to MCAP in DIR/<run>/ as the daemon records "
+                        "(uvd report draws it; docs/recording.md)")
     p.add_argument("--hours", type=float, help="override the simulated duration (hours)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random generator")
+    p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=_run)
 
 
@@ -30,12 +36,22 @@ def _run(args) -> int:
             print(f"{name:24s} {exp.summary}")
         return 0
     exp = experiments.get(args.name)
-    opts = experiments.ExperimentOptions(seed=args.seed, hours=args.hours, plots=args.plots)
     t0 = time.perf_counter()
-    result = exp.run(opts)
+    with Progress(exp.name, unit="s simulated", quiet=args.quiet) as p:
+        opts = experiments.ExperimentOptions(
+            seed=args.seed, hours=args.hours, plots=args.plots, record=args.record,
+            progress=p.note, advance=lambda done, total, label: p.update(done, total, label))
+        result = exp.run(opts)
     result.setdefault("experiment", exp.name)
     result.setdefault("seed", args.seed)
     result["wall_seconds"] = round(time.perf_counter() - t0, 3)
+    if args.record is not None:
+        files = sorted(args.record.glob("*/*.mcap"))
+        result["recordings"] = [str(f) for f in files]
+        if not files:
+            print(f"uvd experiment: {exp.name} wrote no recording: --record covers the control "
+                  "experiments (their lockstep control runs), not identification or fdc",
+                  file=sys.stderr)
     if args.json:
         write_json(args.json, result)
     summary = result.get("summary")

@@ -40,12 +40,14 @@ def register(sub) -> None:
     p.add_argument("--window", type=float, default=2.1, metavar="S",
                    help="ls: Savitzky-Golay window in seconds (default 2.1)")
     p.add_argument("--json", type=Path, metavar="OUT", help="also write a summary as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=_run)
 
 
-def identify_aid(run, theta0, gains):
+def identify_aid(run, theta0, gains, progress=None):
     """Replay a run through 6-DOF AID; returns the final :class:`AID6State` and the
-    velocity-estimate error ∆v = v̂ − v of every sample, (n, 6)."""
+    velocity-estimate error ∆v = v̂ − v of every sample, (n, 6). ``progress(done, total)``
+    every 1000 samples."""
     from uvd.control.types import VehicleState
     from uvd.estimation.aid import AID6Params, aid6_init, aid6_step
 
@@ -57,6 +59,8 @@ def identify_aid(run, theta0, gains):
     for k in range(len(run.t)):
         st = aid6_step(VehicleState(H=H[k], v=run.v[k]), run.u[k], prm, st, dt)
         dv[k] = st.dv
+        if progress is not None and k % 1000 == 999:
+            progress(k + 1, len(run.t))
     return st, dv
 
 
@@ -134,6 +138,7 @@ def _run(args) -> int:
     from uvd.io.params import params_from_toml, save_params
     from uvd.io.runlog import load_runlog
     from uvd.jsonio import write_json
+    from uvd.progress import Progress
 
     if not args.out.parent.is_dir():  # before minutes of identification, not after
         raise ConfigError(f"--out {args.out}: cannot write: no folder {args.out.parent}")
@@ -146,7 +151,8 @@ def _run(args) -> int:
     if args.method == "aid":
         init = params_from_toml(args.init) if args.init else INITP_6DOF
         try:
-            st, dv = identify_aid(run, init.theta, _parse_gains(args.gains))
+            with Progress("aid", unit="samples", quiet=args.quiet) as p:
+                st, dv = identify_aid(run, init.theta, _parse_gains(args.gains), p.update)
         except ValueError as exc:
             raise ConfigError(f"aid: {exc}") from exc
         params = aid6_params(st)

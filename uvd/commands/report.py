@@ -1,6 +1,7 @@
-"""``uvd report RUN.mcap --out DIR [--quiet]``: ``DIR/index.html`` with PNG figures of a
-black-box recording — tracking per DOF, MNE in windows (Fig. 5.4), commanded vs realised
-thrust (Fig. 5.2), online estimates, the failsafe timeline, the loop's period
+"""``uvd report RUN.mcap --out DIR [--params PARAMS.toml] [--quiet]``: ``DIR/index.html`` with
+PNG figures of a black-box recording — tracking per DOF, MNE in windows (Fig. 5.4), commanded
+vs realised thrust (Fig. 5.2), estimates over time, the failsafe timeline, the loop's lateness
+histogram, and with ``--params`` the cross-validation of that set on the run (Figs. 4.5–4.7)
 (:mod:`uvd.telemetry.report`)."""
 
 from __future__ import annotations
@@ -14,21 +15,23 @@ def register(sub) -> None:
                        description="Write DIR/index.html and PNG figures of RUN.mcap.")
     p.add_argument("recording", type=Path, metavar="RUN.mcap")
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
+    p.add_argument("--params", type=Path, metavar="PARAMS.toml",
+                   help="also cross-validate this parameter set on the run (Figs. 4.5-4.7)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_run)
 
 
 def _run(args) -> int:
+    from uvd.errors import ConfigError
+    from uvd.progress import Progress
     from uvd.telemetry.mcap_recorder import RecordingError
     from uvd.telemetry.report import write_report
 
-    def progress(msg: str) -> None:
-        if not args.quiet:
-            print(f"  {msg}", file=sys.stderr)
-
     try:
-        summary = write_report(args.recording, args.out, progress=progress)
-    except RecordingError as exc:
+        with Progress("report", quiet=args.quiet) as p:
+            summary = write_report(args.recording, args.out, params=args.params,
+                                   progress=lambda m: p.note(f"  {m}"))
+    except (RecordingError, ConfigError) as exc:
         print(f"uvd report: {exc}", file=sys.stderr)
         return 2
     print(f"uvd report: {args.out / 'index.html'} — {summary['cycles']} cycles "

@@ -26,12 +26,17 @@ class ExperimentOptions:
     """Options common to every experiment.
 
     ``hours`` overrides the experiment's default simulated duration where it has one;
-    ``progress`` receives short human-readable progress lines (stderr by default).
+    ``progress`` receives short human-readable progress lines (stderr by default);
+    ``record`` a folder for MCAP black-box files of the control runs (docs/recording.md);
+    ``advance(done_s, total_s, label)`` is told the simulated time of a run as it goes
+    (:class:`uvd.progress.Progress.update`).
     """
 
     seed: int = 0
     hours: float | None = None
     plots: Path | None = None
+    record: Path | None = None
+    advance: Callable[[float, float, str], None] | None = None
     progress: Callable[[str], None] = field(default=_stderr_progress)
 
 

@@ -17,6 +17,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numba
@@ -111,6 +112,46 @@ def make_core(vehicle: Vehicle, controller: core.ControllerSpec, reference, *,
                            lag_compensation=lag_compensation, ff_preview_s=ff_preview_s)
 
 
+class _BlackBox:
+    """``--record DIR``: the run's cycles and θ̂ on the daemon's MCAP channels
+    (docs/recording.md) — the files ``uvd report`` draws — in ``DIR/<label>/``, on the
+    simulated clock. No raw channels: a lockstep run reads no bytes."""
+
+    def __init__(self, directory: Path, vehicle: Vehicle, label: str, dt: float) -> None:
+        from uvd import __version__
+        from uvd.telemetry.mcap_recorder import McapRecorder
+
+        name = label.strip(": ").replace(" ", "-") or "run"
+        self.rec = McapRecorder(Path(directory) / name, rotate_mb=0.0)
+        self.rec.open_now(0)
+        self.dt_ns = int(round(dt * 1e9))
+        self.dt = dt
+        # the vehicle as a configuration's text: the report takes k of f = k ω|ω| from it
+        self.rec.write_now([{"type": "start", "t_ns": 0, "version": __version__,
+                             "config_toml": f'[vehicle]\nname = "{vehicle.name}"\n'}])
+
+    def cycle(self, k: int, out: core.CoreOutputs, omega: np.ndarray) -> None:
+        from uvd.telemetry.records import CycleRecord
+
+        nav, ref = out.nav, out.reference
+        self.rec.write_now([CycleRecord(
+            t_ns=k * self.dt_ns, dt=self.dt, state="ARMED", action="none", mode=out.mode,
+            status=out.status, p=nav.H[:3, 3], R=nav.H[:3, :3], v=nav.v, nav_valid=nav.valid,
+            u=out.u_applied, u_cmd=out.u_cmd, thrust=out.thrust_n, ages=(None,) * 4,
+            inputs={"actuators": {"omega_rad_s": omega, "enabled": True, "faults": [],
+                                  "bus_off": False}},
+            p_ref=None if ref is None else ref.H[:3, 3],
+            R_ref=None if ref is None else ref.H[:3, :3],
+            v_ref=None if ref is None else np.asarray(ref.v)).to_dict()])
+
+    def estimate(self, k: int, theta: np.ndarray) -> None:
+        self.rec.write_now([{"type": "estimate", "t_ns": k * self.dt_ns,
+                             "estimator": "controller", "theta": theta}])
+
+    def close(self) -> None:
+        self.rec.close_now()
+
+
 def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, duration_s: float,
                 *, seed: int = 0, noise: bool = True,
                 thrusters: ThrusterEffects | None = None, control_rate_hz: float = 10.0,
@@ -120,7 +161,9 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
                 progress: Callable[[str], None] | None = None, label: str = "",
                 progress_every_s: float = 1800.0,
                 on_theta: Callable[[float, np.ndarray], None] | None = None,
-                lag_compensation: bool = False, ff_preview_s: float = 0.0) -> ControlRun:
+                lag_compensation: bool = False, ff_preview_s: float = 0.0,
+                record: Path | None = None,
+                advance: Callable[[float, float, str], None] | None = None) -> ControlRun:
     """Run ``duration_s`` simulated seconds of ``controller`` tracking ``reference``.
 
     The plant starts on the reference (zero initial error) unless H0/v0 are given. Thruster
@@ -128,6 +171,8 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     ``thrusters``/``noise`` say otherwise. ``lag_compensation`` turns on the core's lead
     set-points from the measured propeller speeds (:func:`uvd.control.allocation.lag_compensate`);
     ``ff_preview_s`` > 0 the feed-forward preview (``CoreConfig.ff_preview_s``).
+    ``record`` (a folder): every cycle and θ̂ to MCAP as the daemon records them (``_BlackBox``).
+    ``advance(done_s, total_s, label)`` is called every 100 cycles (a progress bar).
     """
     thrusters = ThrusterEffects() if thrusters is None else thrusters
     cfg = make_core(vehicle, controller, reference, lag_compensation=lag_compensation,
@@ -163,10 +208,15 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     dpsi_meas, dv_meas, u_cmd, u_app = (rec["dpsi_meas"], rec["dv_meas"], rec["u_cmd"],
                                         rec["u_applied"])
     plant = sim.plant
+    box = None if record is None else _BlackBox(record, vehicle, label, dt)
     for k in range(n):
         H = plant.H.copy()
         v = plant.v.copy()
+        if box is not None:
+            omega = plant.thrusters.omega.copy()
         out = sim.cycle()
+        if box is not None:
+            box.cycle(k, out, omega)
         ref = out.reference
         _record(k, H, v, out.nav.H, ref.H, ref.v, ref.vdot, err, e_true, e_nav, e_ref, v_true,
                 dpsi_true, dv_true)
@@ -188,12 +238,18 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
             if theta is not None:
                 th_t.append((k + 1) * dt)
                 th.append(theta.copy())
+                if box is not None:
+                    box.estimate(k, theta)
                 if on_theta is not None:
                     on_theta((k + 1) * dt, theta)
+        if advance is not None and k % 100 == 99:
+            advance((k + 1) * dt, duration_s, label.strip(": ") or "simulated")
         if progress is not None and (k + 1) * dt >= next_report:
             next_report += progress_every_s
             progress(f"  {label}simulated {(k + 1) * dt / 60:.0f} / {duration_s / 60:.0f} min "
                      f"({time.perf_counter() - t_wall:.0f} s wall)")
+    if box is not None:
+        box.close()
     return ControlRun(t=np.arange(n) * dt, thrust_cmd=thrust, saturated=sat, not_ok=not_ok,
                       theta_t=np.array(th_t), theta=np.array(th) if th else np.zeros((0, 0)),
                       rates=rates, H0=np.array(H0), v0=np.array(v0), final_ctrl=sim.state.ctrl,

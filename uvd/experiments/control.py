@@ -56,7 +56,7 @@ from uvd.experiments._control_runner import (
     tracking_stats,
     windows,
 )
-from uvd.io.figures import write_series
+from uvd.io.figures import write_estimates, write_mne, write_series
 from uvd.io.vehicle import load_vehicle
 from uvd.model.dynamics import UVModel, uv_inverse_dynamics
 from uvd.model.integrate import simulate
@@ -221,8 +221,9 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
                   f"{seconds / 3600:.2f} simulated h" + (", robust adaptation on" if robust
                                                         else ""))
     run = run_control(veh, spec, reftraj1(), seconds, seed=opts.seed, theta_every_s=10.0,
-                      progress=opts.progress, label=f"{name}: ", thrusters=thrusters,
-                      lag_compensation=lag_compensation, ff_preview_s=preview_s)
+                      record=opts.record, advance=opts.advance, progress=opts.progress,
+                      label=f"{name}: ", thrusters=thrusters, lag_compensation=lag_compensation,
+                      ff_preview_s=preview_s)
     th = run.theta
     final = th[-1]
     min_mass = th[:, :6].min(axis=1)
@@ -260,8 +261,8 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
                                   for k, v in vars(ROBUST_DAEMON_DEFAULT).items()}
         out["projections"] = int(run.final_ctrl.projections)
         out["frozen_fraction"] = run.extra["frozen_fraction"]
-    _write_csv(opts, f"{name}-parameters", ["t_s"] + DEC_NAMES,
-               np.column_stack([run.theta_t, th]))
+    if opts.plots is not None:
+        write_estimates(opts.plots, f"{name}-parameters", run.theta_t, th, ["t_s"] + DEC_NAMES)
     rows = {"true": truth, "initial": th[0], "final": final, "min": th.min(axis=0),
             "max": th.max(axis=0)}
     if not robust:
@@ -412,7 +413,8 @@ def run_pitch_reversal(opts: ExperimentOptions) -> dict:
         spec = core.ControllerSpec("ambc", ambc_step, p, ambc_init(p, truth))
         opts.progress(f"[pitch-reversal] {case}: pitch {mean_deg:g}° ± {amp_deg:g}°")
         run = run_control(veh, spec, traj, seconds, seed=opts.seed, theta_every_s=10.0,
-                          rate_indices=(4,), progress=opts.progress, label=f"{case}: ")
+                          record=opts.record, advance=opts.advance, rate_indices=(4,),
+                          progress=opts.progress, label=f"{case}: ")
         f = run.thrust_cmd[:, pitch_thrusters]
         sgn = np.sign(f)
         flips = (sgn[1:] * sgn[:-1]) < 0
@@ -486,8 +488,9 @@ def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label
                 captured[tt] = theta.copy()
 
     run = run_control(veh, spec, ref, step1_s + step2_s, seed=opts.seed, theta_every_s=1.0,
-                      progress=opts.progress, label=f"{label}: ", on_theta=grab,
-                      thrusters=thrusters, lag_compensation=lag_compensation,
+                      record=opts.record, advance=opts.advance, progress=opts.progress,
+                      label=f"{label}: ", on_theta=grab, thrusters=thrusters,
+                      lag_compensation=lag_compensation,
                       ff_preview_s=_preview_s(veh, ff_preview, lag_compensation, thrusters))
     return run, captured
 
@@ -538,8 +541,9 @@ def run_two_step(opts: ExperimentOptions, *, name: str = "two-step",
     }
     if thrusters is not None:
         out["thruster_effects"] = vars(thrusters)
-    _write_csv(opts, f"{name}-parameters", ["t_s"] + DEC_NAMES,
-               np.column_stack([run.theta_t, run.theta]))
+    if opts.plots is not None:
+        write_estimates(opts.plots, f"{name}-parameters", run.theta_t, run.theta,
+                        ["t_s"] + DEC_NAMES)
     out["summary"] = "\n".join([
         f"{name}: step 1 {step1_s / 60:.0f} min (k_d={KD:g}, eps={EPS_STEP1:g}) + step 2 "
         f"{step2_s / 3600:.2f} h (k_d={KD_STEP2:g}, eps={EPS_STEP2:g}), k_p={KP:g}"
@@ -732,12 +736,11 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
                       "table_5_6": THESIS_TABLE_5_6}}
     out["acceptance"] = {"position_ratio_le_0.70": out["position_ratio"] <= 0.70,
                          "velocity_ratio_le_1.08": out["velocity_ratio"] <= 1.08}
-    _write_csv(opts, "pdc-vs-ambc-mne", ["window_start_min", "ambc_position_mne",
-                                         "ambc_velocity_mne", "pdc_position_mne",
-                                         "pdc_velocity_mne"],
-               np.array([[w["start_min"], w["position_mne"], w["velocity_mne"],
-                          head["pdc"]["position_mne"], head["pdc"]["velocity_mne"]]
-                         for w in head["ambc_windows"]]))
+    if opts.plots is not None:
+        ws = head["ambc_windows"]
+        write_mne(opts.plots, "pdc-vs-ambc-mne", [w["start_min"] for w in ws], win_s / 60.0,
+                  [w["position_mne"] for w in ws], [w["velocity_mne"] for w in ws],
+                  (head["pdc"]["position_mne"], head["pdc"]["velocity_mne"]), label="ambc")
     out["summary"] = "\n".join(lines)
     return out
 
@@ -846,8 +849,8 @@ def run_ambc_full(opts: ExperimentOptions) -> dict:
     opts.progress(f"[ambc-full] 241-parameter AMBC with robust adaptation from zero, "
                   f"jhu-rov-coupled, RefTraj1, {seconds / 3600:.2f} h")
     run = run_control(veh, spec, reftraj1(), seconds, seed=opts.seed, theta_every_s=60.0,
-                      progress=opts.progress, label="ambc-full: ",
-                      lag_compensation=LAG_COMPENSATION)
+                      record=opts.record, advance=opts.advance, progress=opts.progress,
+                      label="ambc-full: ", lag_compensation=LAG_COMPENSATION)
     win_s = min(900.0, seconds)
     ambc = tracking_stats(run, seconds - win_s)
     pdc_s = min(PDC_MINUTES * 60.0, seconds)

@@ -18,12 +18,12 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
-import sys
 import time
 from pathlib import Path
 
 from uvd import experiments
 from uvd.jsonio import write_json
+from uvd.progress import Progress
 
 # what each experiment reproduces in the thesis (experiments not listed here show their own
 # one-line summary; an experiment may also say it in its result under "thesis_reference")
@@ -247,10 +247,6 @@ NOTES = {"aid-6dof": _note_aid_6dof, "aid-rot": _note_aid_rot,
          "pdc-vs-ambc": _note_pdc_vs_ambc}
 
 
-def _progress(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
 def _thesis_text(name: str, result: dict, exp) -> str:
     if name in THESIS:
         return THESIS[name]
@@ -266,7 +262,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="do not run: use the JSON already in OUT/results/")
     ap.add_argument("--out", type=Path, default=Path("docs"), help="output folder (docs)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--quiet", action="store_true", help="no progress")
     args = ap.parse_args(argv)
+    progress = Progress("results", quiet=args.quiet)
+    _progress = progress.note
 
     reg = experiments.registry()
     names = all_names = [n for n in ORDER if n in reg] + sorted(n for n in reg if n not in ORDER)
@@ -287,7 +286,10 @@ def main(argv: list[str] | None = None) -> int:
             continue
         _progress(f"[results] ({i}/{len(names)}) uvd experiment {name} --json {path}")
         t0 = time.perf_counter()
-        opts = experiments.ExperimentOptions(seed=args.seed, progress=_progress)
+        opts = experiments.ExperimentOptions(
+            seed=args.seed, progress=_progress,
+            advance=lambda done, total, label, n=name: progress.update(
+                done, total, f"[{n}] {label}"))
         try:
             result = reg[name].run(opts)
         except Exception as exc:  # one broken experiment must not lose the others' results
@@ -305,6 +307,7 @@ def main(argv: list[str] | None = None) -> int:
         path = res_dir / f"{name}.json"
         if name not in results and path.exists():
             results[name] = json.loads(path.read_text())
+    progress.close()
     page = render({n: results[n] for n in all_names if n in results}, reg)
     (args.out / "RESULTS.md").write_text(page)
     _progress(f"[results] wrote {args.out / 'RESULTS.md'} ({time.perf_counter() - t_all:.0f} s)")

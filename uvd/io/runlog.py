@@ -1,5 +1,5 @@
 """Run-log files: :class:`uvd.estimation.runlog.RunLog` as ``.npz`` and from ``uvd run``'s
-JSON-lines telemetry.
+JSON-lines telemetry or any cycle records (a black-box recording's, :func:`runlog_from_records`).
 
 The ``.npz`` layout is in :mod:`uvd.estimation.runlog`'s docstring and
 ``docs/experiments-identification.md``. Every reader raises :class:`~uvd.errors.ConfigError`
@@ -104,26 +104,46 @@ def runlog_from_telemetry(path: str | Path, *, name: str | None = None) -> RunLo
     record, samples].
     """
     path = Path(path)
-    t, p, R, v, u = [], [], [], [], []
-    bad = 0
+
+    def records():
+        for line in fh:
+            try:
+                yield json.loads(line)
+            except json.JSONDecodeError:
+                yield None  # a line cut by a crash: counted
+
     try:
         with path.open("r", encoding="utf-8") as fh:
-            for line in fh:
-                try:
-                    sample = _cycle_sample(json.loads(line))
-                except (json.JSONDecodeError, ValueError):
-                    bad += 1
-                    continue
-                if sample is None:
-                    continue
-                for seq, x in zip((t, p, R, v, u), sample, strict=True):
-                    seq.append(x)
+            return runlog_from_records(records(), name=name or path.stem,
+                                       source=f"uvd run telemetry {path}", where=path)
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read the telemetry: {exc}") from exc
+
+
+def runlog_from_records(records, *, name: str, source: str, where: str | Path) -> RunLog:
+    """A run from cycle records (dicts of :class:`uvd.telemetry.records.CycleRecord`'s JSON
+    form: a telemetry file's lines, a black-box recording's ``/uvd/cycle`` messages) as
+    :func:`runlog_from_telemetry` describes; ``None`` or a malformed record is counted in
+    ``extra["bad_lines"]``. Errors name ``where``."""
+    path = where
+    t, p, R, v, u = [], [], [], [], []
+    bad = 0
+    for rec in records:
+        try:
+            if rec is None:
+                raise ValueError("not a record")
+            sample = _cycle_sample(rec)
+        except ValueError:
+            bad += 1
+            continue
+        if sample is None:
+            continue
+        for seq, x in zip((t, p, R, v, u), sample, strict=True):
+            seq.append(x)
     if len(t) < 2:
         raise ConfigError(f"{path}: {len(t)} cycle record(s) with valid navigation and the "
                           "applied wrench 'u'; needs uvd run's telemetry ([telemetry.jsonl] "
-                          "enabled) over a stretch with valid navigation")
+                          "enabled) or recording over a stretch with valid navigation")
     # in file order (the sink writes in order; a restart appends a new run, whose clock
     # may even start lower after a reboot): a step of other than one period is a cut
     t_ns = np.asarray(t, dtype=np.int64)
@@ -139,7 +159,7 @@ def runlog_from_telemetry(path: str | Path, *, name: str | None = None) -> RunLo
     a, n = max(segments, key=lambda s: s[1])
     sl = slice(a, a + n)
     return RunLog(t=np.arange(n) * (period_ns * 1e-9), R=np.asarray(R[sl]), p=np.asarray(p[sl]),
-                  v=np.asarray(v[sl]), u=np.asarray(u[sl]), name=name or path.stem,
-                  input_interp="linear", source=f"uvd run telemetry {path}",
+                  v=np.asarray(v[sl]), u=np.asarray(u[sl]), name=name,
+                  input_interp="linear", source=source,
                   extra={"segments": segments, "kept_segment": [a, n], "bad_lines": bad,
                          "t0_ns": int(t_ns[a])})

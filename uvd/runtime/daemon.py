@@ -131,7 +131,10 @@ class Daemon:
                                                     self._publish_final_estimates))
         self.app.hub.publish(self.start_record(), always=True)
         self.auto_arm = auto_arm
-        self._last_arm_try_ns = 0
+        # tries counted in cycles, not measured in time: the cycle a try falls on must not
+        # depend on jitter, or a realtime replay arms a cycle apart from the recording
+        self._arm_every = max(1, round(0.2 * config.loop.rate_hz))
+        self._arm_wait = 0
         self._last_refusal_log_ns = 0
         self.arm_refusal: str | None = None
         self.last = LastCycle()
@@ -340,12 +343,15 @@ class Daemon:
         return res
 
     def _auto_arm(self, t_ns: int) -> None:
-        """``uvd run --arm``: an ``Arm`` command every 200 ms until one succeeds."""
+        """``uvd run --arm``: an ``Arm`` command every 200 ms of cycles (every second cycle
+        at 10 Hz, counted from the first in STANDBY) until one succeeds."""
         if not self.auto_arm or self.control.armed_at_ns is not None \
-                or self.supervisor.state is not State.STANDBY \
-                or t_ns - self._last_arm_try_ns < 200_000_000:
+                or self.supervisor.state is not State.STANDBY:
             return
-        self._last_arm_try_ns = t_ns
+        if self._arm_wait > 0:
+            self._arm_wait -= 1
+            return
+        self._arm_wait = self._arm_every - 1
         res = self._apply(Arm(cause="uvd run --arm", source="uvd run --arm"), t_ns)
         self.arm_refusal = None if res.ok else res.reason
         if self.arm_refusal and t_ns - self._last_refusal_log_ns >= 2_000_000_000:

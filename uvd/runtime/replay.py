@@ -45,7 +45,7 @@ from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
 from uvd.telemetry.mcap_recorder import RecordingError, read_messages
 
-__all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport"]
+__all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport", "tracking"]
 
 
 @dataclass
@@ -160,7 +160,7 @@ def _samples(cfg: Config, rec: Recording) -> dict[tuple[str, int], Any]:
     return out
 
 
-def _tracking(cycles: list[Mapping[str, Any]], thrusts) -> dict[str, Any]:
+def tracking(cycles: list[Mapping[str, Any]], thrusts) -> dict[str, Any]:
     """Position and velocity MNE (navigation vs reference) over the armed cycles."""
     from uvd.control.errors import error_coordinates
 
@@ -194,6 +194,16 @@ def replay_lockstep(path: str | Path, *, config: str | Path | None = None,
         Its configuration (or ``config``) does not validate here.
     """
     rec = load_recording(path)
+    try:
+        return _replay(rec, config, progress)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        if isinstance(exc, (RecordingError, ConfigError)):
+            raise
+        raise RecordingError(f"{rec.path}: a record does not hold what uvd.cycle.v1 / "
+                             f"uvd.start.v1 promise: {type(exc).__name__}: {exc}") from exc
+
+
+def _replay(rec: Recording, config, progress) -> ReplayReport:
     cfg, same = _config_of(rec, config)
     if cfg.sensors.depth.source == "can":
         raise ConfigError(f"{rec.path}: the depth sensor is on CAN — its samples are not in the "
@@ -256,8 +266,8 @@ def replay_lockstep(path: str | Path, *, config: str | Path | None = None,
                     report.first_mismatch = _mismatch(k, t, want, thrust, r, res)
         if progress is not None:
             progress(k + 1, n)
-    report.tracking = {"recorded": _tracking(rec.cycles[:report.cycles], recorded_thrust),
-                       "replayed": _tracking(replayed, [x["thrust"] for x in replayed])}
+    report.tracking = {"recorded": tracking(rec.cycles[:report.cycles], recorded_thrust),
+                       "replayed": tracking(replayed, [x["thrust"] for x in replayed])}
     return report
 
 

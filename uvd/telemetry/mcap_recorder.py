@@ -21,7 +21,12 @@ every ``flush_interval_s``. Messages are written as plain records (no chunks), s
 by SIGKILL or a crash is readable by a streaming reader (:func:`read_messages`) up to the last
 flush — at most ``flush_interval_s`` (0.25 s by default) before the kill; a clean stop writes
 MCAP's summary section too. A new file is started past ``rotate_mb`` or ``rotate_s``; the
-start record is repeated at the top of each.
+start record is repeated at the top of each. A stalled disk bounds the bytes waiting for it
+(``max_pending_mb``): past that, records are dropped and counted, never queued without end.
+
+A lockstep experiment, which has no event loop, writes the same files from its own thread
+(:meth:`McapRecorder.open_now`, :meth:`~McapRecorder.write_now`,
+:meth:`~McapRecorder.close_now`).
 """
 
 from __future__ import annotations
@@ -112,12 +117,14 @@ class _Buffer:
         self.parts: list[bytes] = []
         self.size = 0  # bytes written since the file began: its position (MCAP's summary
         self.lock = threading.Lock()  # offsets ask for it)
+        self.pending = 0  # bytes not yet taken by the worker
 
     def write(self, b) -> int:
         b = bytes(b)
         with self.lock:
             self.parts.append(b)
             self.size += len(b)
+            self.pending += len(b)
         return len(b)
 
     def tell(self) -> int:
@@ -125,7 +132,7 @@ class _Buffer:
 
     def take(self) -> bytes:
         with self.lock:
-            out, self.parts = b"".join(self.parts), []
+            out, self.parts, self.pending = b"".join(self.parts), [], 0
         return out
 
     def flush(self) -> None:
@@ -147,6 +154,10 @@ class McapRecorder:
         Raw frames that may wait; when full the oldest is dropped and counted.
     slice_s : float
         Longest stretch of serialising before the pump yields to the event loop.
+    max_pending_mb : float
+        Serialised bytes that may wait for a stalled disk; past that, records are dropped and
+        counted (``stalled_dropped``) and raw frames pile up in their bounded queue (dropped
+        oldest first, ``raw_dropped``): memory stays bounded, the loop never waits.
     clock_wall : callable
         Wall clock for the file names only.
     """
@@ -155,12 +166,15 @@ class McapRecorder:
 
     def __init__(self, directory: str | Path, *, flush_interval_s: float = 0.25,
                  rotate_mb: float = 512.0, rotate_s: float = 0.0, raw_queue_size: int = 65536,
-                 slice_s: float = 2e-4, clock_wall=time.time) -> None:
+                 slice_s: float = 2e-4, max_pending_mb: float = 64.0,
+                 clock_wall=time.time) -> None:
         self.directory = Path(directory)
         self.flush_interval_s = float(flush_interval_s)
         self.rotate_bytes = int(rotate_mb * 1e6)
         self.rotate_ns = int(rotate_s * 1e9)
         self.slice_s = float(slice_s)
+        self.max_pending = int(max_pending_mb * 1e6)
+        self.stalled_dropped = 0
         self.clock_wall = clock_wall
         self._raw: collections.deque = collections.deque(maxlen=int(raw_queue_size))
         self.raw_taken = 0
@@ -176,6 +190,7 @@ class McapRecorder:
         self._file_bytes = 0
         self._file_t0_ns = 0
         self._worker = DaemonWorker("uvd-sink-mcap")
+        self._sync = False  # open_now: the caller's thread writes (lockstep experiments)
         self._flusher: asyncio.Task | None = None
 
     # -- taps (any thread; cheap; never raise) --
@@ -222,8 +237,10 @@ class McapRecorder:
     def _finish_file(self) -> None:
         self._writer.finish()
         data = self._buf.take()
-        # queued behind the earlier writes of that file (one worker thread, in order)
-        self._worker.submit(self._write_bytes, self.files[-1], data, True)
+        if self._sync:
+            self._write_bytes(self.files[-1], data, True)
+        else:  # queued behind the earlier writes of that file (one worker thread, in order)
+            self._worker.submit(self._write_bytes, self.files[-1], data, True)
         self._writer = None
 
     def _write_bytes(self, path: Path, data: bytes, close: bool) -> None:
@@ -270,24 +287,51 @@ class McapRecorder:
     async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
         if self._writer is None:
             raise RuntimeError(f"sink {self.name} is not open")
+        if self._buf.pending > self.max_pending:  # the disk is stalled: the worker took nothing
+            self.stalled_dropped += len(records)
+            return
         t0 = time.perf_counter()
         for r in records:
-            kind = r.get("type")
-            t_ns = int(r.get("t_ns") or time.monotonic_ns())
-            if self._rotate_due(t_ns):
-                self._new_file(t_ns)
-            obj = to_jsonable(r)
-            if kind == "start":
-                self._start_rec = obj
-            topic = _TOPIC_OF_TYPE.get(kind)
-            if topic is not None:
-                self._add(topic, t_ns, obj)
-                if kind == "cycle":
-                    self._add("/uvd/pose", t_ns, _pose(obj))
+            self._take(r)
             if time.perf_counter() - t0 > self.slice_s:
                 await asyncio.sleep(0)
                 t0 = time.perf_counter()
         self._drain_raw()
+
+    def _take(self, r: Mapping[str, Any]) -> None:
+        """Serialise one hub record onto its channel (a cycle record onto the pose too)."""
+        kind = r.get("type")
+        t_ns = int(r.get("t_ns") or time.monotonic_ns())
+        if self._rotate_due(t_ns):
+            self._new_file(t_ns)
+        obj = to_jsonable(r)
+        if kind == "start":
+            self._start_rec = obj
+        topic = _TOPIC_OF_TYPE.get(kind)
+        if topic is not None:
+            self._add(topic, t_ns, obj)
+            if kind == "cycle":
+                self._add("/uvd/pose", t_ns, _pose(obj))
+
+    # -- without an event loop: a lockstep experiment's thread writes the same files --
+
+    def open_now(self, t_ns: int = 0) -> None:
+        """Start writing from the calling thread (no event loop, no worker: lockstep runs)."""
+        self._sync = True
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self._new_file(t_ns)
+
+    def write_now(self, records: Sequence[Mapping[str, Any]]) -> None:
+        """Serialise ``records``; every few MB go to the file from the calling thread."""
+        for r in records:
+            self._take(r)
+        if self._buf.pending > 4_000_000:
+            self._write_bytes(self.files[-1], self._buf.take(), False)
+
+    def close_now(self) -> None:
+        """Finish the file (MCAP's summary included) from the calling thread."""
+        if self._writer is not None:
+            self._finish_file()
 
     def _drain_raw(self) -> None:
         q = self._raw
@@ -327,7 +371,8 @@ class McapRecorder:
 
     def stats(self) -> dict[str, Any]:
         return {"files": [str(p) for p in self.files], "messages": self.messages,
-                "raw_taken": self.raw_taken, "raw_dropped": self.raw_dropped}
+                "raw_taken": self.raw_taken, "raw_dropped": self.raw_dropped,
+                "stalled_dropped": self.stalled_dropped}
 
 
 def read_messages(path: str | Path, topics: Sequence[str] | None = None
@@ -340,15 +385,18 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None
     Raises
     ------
     RecordingError
-        Not an MCAP file, or a message that is not JSON (the message names the file).
+        Not an MCAP file, a damaged record, a channel of uvd's topics with another schema or
+        encoding, a message on a channel never declared, or a message that is not JSON (the
+        message names the file and the problem). Channels of other topics are read as they are.
     """
     from mcap.exceptions import EndOfFile, McapError
     from mcap.reader import StreamReader
-    from mcap.records import Channel, Message
+    from mcap.records import Channel, Message, Schema
 
     path = Path(path)
     want = None if topics is None else set(topics)
     channels: dict[int, str] = {}
+    schemas: dict[int, str] = {}
     try:
         fh = path.open("rb")
     except OSError as exc:
@@ -368,7 +416,17 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None
                 if isinstance(exc, EndOfFile) or fh.tell() >= size:
                     return  # a file cut by a crash: everything before the cut was read
                 raise RecordingError(f"{path}: damaged MCAP record: {exc}") from exc
-            if isinstance(rec, Channel):
+            if isinstance(rec, Schema):
+                schemas[rec.id] = rec.name
+            elif isinstance(rec, Channel):
+                want_schema = CHANNELS.get(rec.topic, (None,))[0]
+                got = schemas.get(rec.schema_id)
+                if want_schema is not None and (got != want_schema
+                                                or rec.message_encoding != "json"):
+                    raise RecordingError(
+                        f"{path}: channel {rec.topic} has schema {got!r} and encoding "
+                        f"{rec.message_encoding!r}; uvd writes {want_schema!r} as json "
+                        "(another program's file, or another version's)")
                 channels[rec.id] = rec.topic
             elif isinstance(rec, Message):
                 topic = channels.get(rec.channel_id)

@@ -7,10 +7,14 @@ Figures, each from the recording's own channels (docs/recording.md):
   15 minutes as Fig. 5.4 (shorter runs: a tenth of the run);
 * ``thrust.png`` — per thruster, the commanded thrust and the thrust the propellers produced
   (f = k ω|ω| of the measured speed, App. A.1), as Fig. 5.2 shows them around reversals;
-* ``estimates.png`` — the online estimates over time (the six masses and drags, g, b₃) when
-  the run identified the vehicle;
+* ``estimates.png`` — the estimates over time (the six masses and drags, g, b): the online
+  AID's θ̂ of a daemon run, or the adaptive controller's 16 decoupled parameters of a
+  lockstep experiment (``uvd experiment … --record``);
 * ``failsafe.png`` — the failsafe action over time with every trigger that fired;
-* ``lateness.png`` — the distribution of the loop's measured period around its nominal one.
+* ``lateness.png`` — the distribution of the loop's measured period around its nominal one;
+* ``xval-*.png`` — with a parameter set, its cross-validation on the run (Figs. 4.5–4.7).
+
+The figures the experiments' ``--plots`` draw too come from :mod:`uvd.io.figures`.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ import numpy as np
 
 from drivers.frames import wrap_pi_array
 from drivers.samples import R_to_euler
+from uvd.io.figures import estimates_figure, mne_figure
 from uvd.telemetry.mcap_recorder import RecordingError, read_messages
 
 __all__ = ["write_report"]
@@ -63,8 +68,14 @@ def _k_thrust(start: list[dict]) -> np.ndarray | None:
 
 
 def write_report(recording: str | Path, out_dir: str | Path, *,
+                 params: str | Path | None = None,
                  progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Write ``out_dir/index.html`` and its PNG figures; returns what was written.
+
+    With ``params`` (a parameters file) also the cross-validation of that set on the run:
+    simulated open loop with the run's wrench from its first state (App. A.2), measured
+    against simulated roll, pitch and body velocities, Figs. 4.5–4.7
+    (:func:`uvd.io.figures.write_xval_figures`, the figures ``uvd xval --plots`` draws).
 
     Raises
     ------
@@ -139,14 +150,7 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
               if np.any(idx == k)]
         mv = [float(np.mean(np.asarray(dv)[idx == k])) for k in range(len(edges))
               if np.any(idx == k)]
-        fig, ax = plt.subplots(1, 2, figsize=(12, 4))
-        x = np.arange(len(mp)) * win / 60.0
-        ax[0].bar(x, mp, width=win / 60.0 * 0.8, align="edge")
-        ax[0].set_ylabel("position MNE (‖Δψ‖)")
-        ax[1].bar(x, mv, width=win / 60.0 * 0.8, align="edge", color="C1")
-        ax[1].set_ylabel("velocity MNE (‖Δv‖)")
-        for a in ax:
-            a.set_xlabel(f"window start (min), {win / 60.0:.3g}-minute windows")
+        fig = mne_figure(plt, np.arange(len(mp)) * win / 60.0, win / 60.0, mp, mv)
         save(fig, "mne.png", f"Position and velocity MNE (§5.3.1) in {win / 60.0:.3g}-minute "
                              "windows, the layout of Fig. 5.4.")
 
@@ -177,22 +181,13 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
 
     # -- estimates --
     est = [e for e in data["estimate"] if e.get("theta") is not None
-           and len(e["theta"]) == 241]
+           and len(e["theta"]) in (16, 241)]
     if est:
-        from uvd.model.params import UVParams
         te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in est])
-        ps = [UVParams.from_theta(np.asarray(e["theta"], float)) for e in est]
-        fig, ax = plt.subplots(1, 3, figsize=(14, 4))
-        ax[0].plot(te, [np.diag(p.M) for p in ps])
-        ax[0].set_title("masses M̂ᵢᵢ")
-        ax[1].plot(te, [[p.D[i][i, i] for i in range(6)] for p in ps])
-        ax[1].set_title("drags D̂ᵢ(i,i)")
-        ax[2].plot(te, [[p.g, *p.b] for p in ps])
-        ax[2].set_title("g, b")
-        for a in ax:
-            a.set_xlabel("time (s)")
-        save(fig, "estimates.png", "Online estimates over the run (AID, Theorem 4.3.1; "
-                                   "cf. Figs. 4.x and 5.1).")
+        fig = estimates_figure(plt, te, [e["theta"] for e in est])
+        save(fig, "estimates.png", "Estimates over the run: the online AID's θ̂ (Theorem "
+                                   "4.3.1, cf. Figs. 4.x) or the adaptive controller's (the "
+                                   "16 decoupled parameters of §5.3.1, cf. Fig. 5.1).")
 
     # -- failsafe timeline --
     level = np.array([_ACTIONS.index(r["action"]) if r["action"] in _ACTIONS else 0
@@ -221,12 +216,38 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
     ax.set_yscale("log")
     save(fig, "lateness.png", "Distribution of the loop's measured period around its median.")
 
+    xval = None
+    if params is not None:
+        xval = _xval(path, cyc, Path(params), out, figures, say)
+
     summary = {"recording": str(path), "cycles": len(cyc), "armed_cycles": int(armed.sum()),
                "duration_s": float(t[-1]) if len(t) else 0.0,
                "failsafe_fired": sum(1 for e in data["failsafe"] if e.get("kind") == "fired"),
                "estimates": len(est), "figures": [f for f, _ in figures]}
+    if xval is not None:
+        summary["xval"] = xval
     _write_html(out / "index.html", summary, figures)
     return summary
+
+
+def _xval(path: Path, cyc: list, params: Path, out: Path, figures: list,
+          say: Callable[[str], None]) -> dict[str, Any]:
+    """Cross-validate ``params`` on the recorded cycles; its figures join ``figures``."""
+    from uvd.estimation.xval import STATES_6DOF, cross_validate
+    from uvd.io.figures import write_xval_figures
+    from uvd.io.params import params_from_toml
+    from uvd.io.runlog import runlog_from_records
+
+    prm = params_from_toml(params)
+    run = runlog_from_records(cyc, name=path.stem, source=f"recording {path}", where=path)
+    res = cross_validate(prm, run)
+    for f in write_xval_figures(out, run, {params.stem: (res.R_sim, res.v_sim)}, STATES_6DOF,
+                                prefix="xval-"):
+        figures.append((f.name, f"Cross-validation of {params.name} on this run (App. A.2; "
+                                "Figs. 4.5–4.7): measured against simulated open loop with "
+                                "the recorded wrench, first 3 minutes."))
+        say(f"wrote {f.name}")
+    return {"params": str(params), "mae": res.mae, "diverged_at_s": res.diverged_at_s}
 
 
 def _write_html(path: Path, summary: dict[str, Any], figures: list[tuple[str, str]]) -> None:
