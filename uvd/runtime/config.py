@@ -67,7 +67,7 @@ from uvd.runtime import schema
 from uvd.runtime.failsafe import Thresholds
 from uvd.runtime.leak import LeakSection
 from uvd.runtime.loop import LoopSettings
-from uvd.runtime.schema import section, setting
+from uvd.runtime.schema import PerAxis, section, setting
 
 __all__ = ["Config", "ConfigValidationError", "load_config", "parse_config",
            "render_config_doc", "DEFAULT_CONFIG", "VehicleSection", "ControlSection",
@@ -131,10 +131,24 @@ class ControlSection:
     controller: Literal["pdc", "ambc", "two-step-ambc"] = setting(
         "pdc", doc="PD control (5.11), adaptive model-based control, or its two-step form "
                    "(§5.3.5)")
-    kp: float = setting(300.0, unit="N/rad, N m/rad", min=0.0, max=100000.0, reload=True,
-                        doc="proportional gain k_p on Δψ (thesis §5.3.5.1: 300)")
-    kd: float = setting(100.0, unit="N s/m, N m s/rad", min=0.0, max=100000.0, reload=True,
-                        doc="derivative gain k_d on Δv (thesis §5.3.5.1: 100)")
+    kp: PerAxis = setting(300.0, unit="N/rad, N m/rad", min=0.0, max=100000.0, reload=True,
+                          doc="proportional gain k_p on Δψ: one for every DOF or six (surge, "
+                              "sway, heave, roll, pitch, yaw) (thesis §5.3.5.1: 300)")
+    kd: PerAxis = setting(100.0, unit="N s/m, N m s/rad", min=0.0, max=100000.0, reload=True,
+                          doc="derivative gain k_d on Δv: one or six, as kp (thesis "
+                              "§5.3.5.1: 100)")
+    gamma_m: PerAxis = setting(1000.0, min=0.0, max=1e9, reload=True,
+                               doc="AMBC adaptation gain γ_m of the masses m₁…m₆ (K_θ of "
+                                   "(5.28)): one or six, as kp; model = \"full\" takes one "
+                                   "(thesis §5.3.2: 1000)")
+    gamma_d: PerAxis = setting(5000.0, min=0.0, max=1e9, reload=True,
+                               doc="AMBC adaptation gain γ_d of the drags d₁…d₆: one or six, "
+                                   "as gamma_m (thesis §5.3.2: 5000)")
+    gamma_g: float = setting(0.5, min=0.0, max=1e9, reload=True,
+                             doc="AMBC adaptation gain γ_g of g (thesis §5.3.2: 0.5)")
+    gamma_b: tuple[float, float, float] = setting(
+        (0.5, 0.5, 10.0), min=0.0, max=1e9, reload=True,
+        doc="AMBC adaptation gains γ_b1, γ_b2, γ_b3 of b (thesis §5.3.2: 0.5, 0.5, 10)")
     robust_adaptation: bool = setting(
         True, doc="robust (projection/σ) modification of the AMBC parameter update law")
     reference: Literal["hold", "reftraj1", "reftraj2"] = setting(
@@ -160,6 +174,15 @@ class ControlSection:
                    "amplifiers' measured speed and the vehicle file's time_constant_s "
                    "(uvd.control.allocation.lag_compensate); cycles without finite speeds use "
                    "plain allocation")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        if self.model == "full":
+            return [(k, f"six values need model = \"decoupled\" (the full model's {what} "
+                        f"are not per DOF); give one number")
+                    for k, what in (("gamma_m", "21 mass entries"), ("gamma_d", "216 drag entries"))
+                    if isinstance(getattr(self, k), tuple)]
+        return []
+
 
 
 @dataclass(frozen=True)
