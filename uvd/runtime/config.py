@@ -107,8 +107,9 @@ class ConfigValidationError(ConfigError):
 class VehicleSection:
     """The vehicle model (``[vehicle]``)."""
 
-    name: str = setting("jhu-rov", doc="built-in vehicle (jhu-rov, jhu-rov-coupled) or a "
-                                       "vehicle TOML file, relative to this config file")
+    name: str = setting("jhu-rov", doc="built-in vehicle (jhu-rov, jhu-rov-coupled, "
+                                       "bluerov2-heavy) or a vehicle TOML file, relative to "
+                                       "this config file")
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
         from uvd.io.vehicle import builtin_vehicles
