@@ -134,13 +134,12 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
 
 def lockstep_run(cfg, duration_s: float, seed: int):
     """The same configuration (same core, same controller) in lockstep simulation; the log."""
-    from uvd.experiments.lockstep import Lockstep, LockstepConfig, run
+    from uvd.experiments.lockstep import Lockstep, lockstep_config, run
     from uvd.runtime.build import build_core, start_pose
 
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, build_core(cfg, vehicle),
-                   LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=seed), H0=H0, v0=v0)
+    sim = Lockstep(vehicle, build_core(cfg, vehicle), lockstep_config(cfg, seed), H0=H0, v0=v0)
     return run(sim, duration_s)
 
 

@@ -462,6 +462,44 @@ class DaemonSection:
 
 
 @dataclass(frozen=True)
+class SimInstrumentsSection:
+    """The simulated instruments (``[simulation.instruments]``): rates and noise of the INS,
+    DVL and depth sensor that ``sim-bridge`` emulates and a lockstep run of this configuration
+    samples (``sim_bridge.instruments.models.InstrumentConfig``). Defaults: the JHU ROV's
+    Table A.1. The daemon itself does not read them."""
+
+    noise: bool = setting(True, doc="add the noise below (false: exact samples)")
+    ins_rate_hz: float = setting(10.0, unit="Hz", gt=0.0, max=1000.0,
+                                 doc="INS (PHINS III) output rate (Table A.1: 10)")
+    heading_std_rad: float = setting(0.13 * math.pi / 180, unit="rad", min=0.0, max=1.0,
+                                     doc="INS heading noise, standard deviation (0.13°)")
+    roll_pitch_std_rad: float = setting(0.01 * math.pi / 180, unit="rad", min=0.0, max=1.0,
+                                        doc="INS roll and pitch noise (0.01°)")
+    rate_std_rad_s: float = setting(0.01 * math.pi / 180, unit="rad/s", min=0.0, max=1.0,
+                                    doc="INS angular-rate noise (0.01°/s)")
+    dvl_rate_hz: float = setting(6.0, unit="Hz", gt=0.0, max=1000.0,
+                                 doc="DVL ping rate (Table A.1: 6)")
+    dvl_std_m_s: float = setting(0.003, unit="m/s", min=0.0, max=1.0,
+                                 doc="DVL velocity noise (0.003)")
+    dvl_altitude_m: float = setting(2.0, unit="m", gt=0.0, max=1000.0,
+                                    doc="the vehicle's height above the floor at depth 0")
+    depth_rate_hz: float = setting(7.0, unit="Hz", gt=0.0, max=1000.0,
+                                   doc="depth sensor rate (Table A.1: 7)")
+    depth_std_m: float = setting(0.00075, unit="m", min=0.0, max=1.0,
+                                 doc="depth noise (0.75 mm, sim_bridge.instruments.models)")
+    xy_scale_error: float = setting(0.005, min=0.0, max=0.5,
+                                    doc="DVLNAV dead-reckoning scale error bound (0.5 %)")
+
+
+@dataclass(frozen=True)
+class SimulationSection:
+    """The simulated vehicle's side (``[simulation]``): read by ``sim-bridge`` and by the
+    lockstep run of a configuration, never by the daemon."""
+
+    instruments: SimInstrumentsSection = section(SimInstrumentsSection)
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole configuration file."""
 
@@ -476,6 +514,7 @@ class Config:
     telemetry: TelemetrySection = section(TelemetrySection)
     recording: RecordingSection = section(RecordingSection)
     daemon: DaemonSection = section(DaemonSection)
+    simulation: SimulationSection = section(SimulationSection)
     source: str | None = field(default=None, init=False, compare=False)
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
