@@ -75,6 +75,17 @@ def test_bad_gains_are_refused_naming_the_key(tmp_path, new, key, words):
     assert words in errs[key]
 
 
+def test_mass_floor_reaches_the_robust_projection(tmp_path):
+    floor = "mass_floor = [2, 2, 3, 0.04, 0.03, 0.05]"
+    cfg = config_with(tmp_path, "kp = 300.0", "kp = 300.0\n" + floor)
+    step2 = build_core(cfg, estimators=()).controller.params.step2
+    np.testing.assert_array_equal(step2._c[3], [2, 2, 3, 0.04, 0.03, 0.05])
+    default = build_core(load_config(ROOT / "config" / "sim.toml"), estimators=())
+    np.testing.assert_array_equal(default.controller.params.step2._c[3], np.full(6, 10.0))
+    assert "control.mass_floor[1]" in errors(tmp_path, "kp = 300.0",
+                                             "mass_floor = [1, 0, 1, 1, 1, 1]")
+
+
 def test_full_model_takes_one_mass_and_drag_gain(tmp_path):
     errs = errors(tmp_path, 'model = "decoupled"',
                   'model = "full"\ngamma_d = [1, 1, 1, 1, 1, 2]')

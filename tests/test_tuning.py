@@ -12,7 +12,12 @@ import pytest
 
 from uvd.cli import main
 from uvd.commands.tune import tune_figures
-from uvd.control.tuning import closed_loop, delay_limited_bandwidth, pd_gains_for
+from uvd.control.tuning import (
+    closed_loop,
+    delay_limited_bandwidth,
+    pd_gains_for,
+    scaled_adaptation_gains,
+)
 from uvd.io.vehicle import load_vehicle
 from uvd.runtime.config import load_config
 
@@ -164,3 +169,17 @@ def test_bluerov2_config_gains_are_the_rule_and_uvd_tune_prints_them(capsys, tmp
     assert out_json.is_file()
     assert main(["tune", "--damping", "0.7", "0.7"]) == 2
     assert "one positive value or six" in capsys.readouterr().err
+
+
+def test_adaptation_gains_keep_the_thesis_relative_rates_on_any_vehicle():
+    jhu = load_vehicle("jhu-rov").params
+    m_ref, d_ref = np.diag(jhu.M), [jhu.D[i][i, i] for i in range(6)]
+    same = scaled_adaptation_gains(m_ref, d_ref, m_ref, d_ref)
+    np.testing.assert_allclose(same["gamma_m"], 1000.0)     # the thesis's own, §5.3.2
+    np.testing.assert_allclose(same["gamma_d"], 5000.0)
+    brov = load_vehicle("bluerov2-heavy").params
+    m = np.diag(brov.M)
+    g = scaled_adaptation_gains(m, [brov.D[i][i, i] for i in range(6)], m_ref, d_ref)
+    np.testing.assert_allclose(g["gamma_m"] / m, 1000.0 / m_ref)   # γ/m as on the JHU ROV
+    np.testing.assert_allclose(g["mass_floor"], m / 10.0)
+    assert np.all(g["mass_floor"] < m)

@@ -8,7 +8,8 @@ period on the fixed-rate schedule, none when the cycle runs on the INS frame), t
 stiffness b₃ in roll and pitch and the quadratic drag linearised at the reference's peak speed.
 The suggestion is k_p = m ω², k_d = 2ζωm with one bandwidth ω and damping ratio ζ for every
 axis (default ω: the delay-limited bandwidth, ζ = 0.8), printed as the ``[control]`` lines to
-paste.
+paste — with the AMBC adaptation gains and mass floor scaled from the thesis's on the JHU ROV
+(:func:`uvd.control.tuning.scaled_adaptation_gains`).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ def tune_figures(cfg, omega=None, zeta=DEFAULT_ZETA) -> dict:
         delay_limited_bandwidth,
         equivalent_damping,
         pd_gains_for,
+        scaled_adaptation_gains,
     )
     from uvd.runtime.build import make_reference, pd_gains
 
@@ -70,11 +72,15 @@ def tune_figures(cfg, omega=None, zeta=DEFAULT_ZETA) -> dict:
 
     configured = table(g._kp, g._kd)
     suggested = table(kp_s, kd_s)
+    from uvd.io.vehicle import load_vehicle
+    ref = load_vehicle("jhu-rov").params
+    adapt = scaled_adaptation_gains(m, d, np.diag(ref.M), [ref.D[i][i, i] for i in range(6)])
     return {"vehicle": vehicle.name, "rate_hz": cfg.loop.rate_hz, "lag_s": lag,
             "delay_cycles": delay, "peak_speed": speed.tolist(),
             "bandwidth": np.broadcast_to(w, (6,)).tolist(),
             "damping_ratio": np.broadcast_to(zeta, (6,)).tolist(),
             "configured": configured, "suggested": suggested,
+            "adaptation": {k: v.tolist() for k, v in adapt.items()},
             "stable": all(r["pole_radius"] < 1.0 for r in configured)}
 
 
@@ -127,6 +133,10 @@ def _run(args) -> int:
     print("[control]")
     print(f"kp = {_toml_list(r['kp'] for r in f['suggested'])}")
     print(f"kd = {_toml_list(r['kd'] for r in f['suggested'])}")
+    print("# AMBC: the thesis's γ_m = 1000, γ_d = 5000 on the JHU ROV, scaled per axis by "
+          "m_i and |d_i|")
+    for k, v in f["adaptation"].items():
+        print(f"{k} = {_toml_list(v)}")
     if args.json is not None:
         write_json(args.json, f)
     return 0

@@ -24,6 +24,13 @@ crossover near 17°.
 (m ẍ = f − s x, τ ḟ = u − f) sampled with a zero-order hold at dt, the PD on a measurement
 ``delay_cycles`` periods old; the poles of that discrete loop, their largest modulus (< 1:
 stable) and the smallest equivalent damping −Re(ln z)/|ln z|.
+
+**Adaptation gains** (:func:`scaled_adaptation_gains`). The update law (5.28) changes m̂ᵢ at a
+rate proportional to γ_m,i; the *relative* rate (dm̂ᵢ/dt)/mᵢ is what decides how fast a model
+is learnt against how much noise it picks up. Scaling the thesis's gains for the JHU ROV
+(γ_m = 1000, γ_d = 5000, §5.3.2) by mᵢ/mᵢ^JHU and |dᵢ|/|dᵢ^JHU| per axis keeps those relative
+rates on any vehicle; the robust projection's floor m̂ᵢ ≥ mᵢ/10 keeps M̂ positive without
+holding it far above a small vehicle's own masses.
 """
 
 from __future__ import annotations
@@ -34,7 +41,7 @@ import numpy as np
 from scipy.linalg import expm
 
 __all__ = ["AxisLoop", "pd_gains_for", "delay_limited_bandwidth", "closed_loop",
-           "equivalent_damping", "DELAY_MARGIN"]
+           "equivalent_damping", "scaled_adaptation_gains", "DELAY_MARGIN"]
 
 #: ω (dt (n + ½) + τ) of the default bandwidth: the phase (rad) the loop's delays cost at ω
 DELAY_MARGIN = 0.3
@@ -68,6 +75,20 @@ def pd_gains_for(m: np.ndarray, omega, zeta) -> tuple[np.ndarray, np.ndarray]:
     if np.any(m <= 0) or np.any(w <= 0) or np.any(z <= 0):
         raise ValueError("masses, bandwidths and damping ratios must be > 0")
     return m * w ** 2, 2.0 * z * w * m
+
+
+def scaled_adaptation_gains(m: np.ndarray, d: np.ndarray, m_ref: np.ndarray,
+                            d_ref: np.ndarray, gamma_m_ref: float = 1000.0,
+                            gamma_d_ref: float = 5000.0) -> dict[str, np.ndarray]:
+    """γ_m,i = γ_m^ref mᵢ/mᵢ^ref, γ_d,i = γ_d^ref |dᵢ|/|dᵢ^ref| and the mass floor mᵢ/10
+    (module docstring); ``m``, ``d``: the decoupled masses and drags (6,) of the vehicle,
+    ``m_ref``, ``d_ref`` those of the vehicle the reference gains were tuned on."""
+    m, d = np.asarray(m, dtype=float), np.abs(np.asarray(d, dtype=float))
+    m_ref, d_ref = np.asarray(m_ref, dtype=float), np.abs(np.asarray(d_ref, dtype=float))
+    if np.any(m <= 0) or np.any(m_ref <= 0) or np.any(d_ref <= 0):
+        raise ValueError("masses and reference drags must be non-zero")
+    return {"gamma_m": gamma_m_ref * m / m_ref, "gamma_d": gamma_d_ref * d / d_ref,
+            "mass_floor": m / 10.0}
 
 
 @dataclass(frozen=True)

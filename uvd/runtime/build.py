@@ -83,8 +83,12 @@ def _theta0(cfg: Config, vehicle, model: str) -> np.ndarray:
 
 
 def _robust(cfg: Config):
+    from dataclasses import replace
+
     from uvd.control.ambc import ROBUST_DAEMON_DEFAULT, RobustAdaptation
-    return ROBUST_DAEMON_DEFAULT if cfg.control.robust_adaptation else RobustAdaptation()
+    if not cfg.control.robust_adaptation:
+        return RobustAdaptation()
+    return replace(ROBUST_DAEMON_DEFAULT, mass_floor=_axes(cfg.control.mass_floor))
 
 
 def make_controller(cfg: Config, vehicle, allocator: Allocator) -> ControllerSpec:

@@ -145,6 +145,11 @@ class ControlSection:
     gamma_d: PerAxis = setting(5000.0, min=0.0, max=1e9, reload=True,
                                doc="AMBC adaptation gain γ_d of the drags d₁…d₆: one or six, "
                                    "as gamma_m (thesis §5.3.2: 5000)")
+    mass_floor: PerAxis = setting(
+        10.0, unit="kg, kg m²", gt=0.0, max=1e6, reload=True,
+        doc="robust adaptation: the smallest m̂ᵢ (decoupled) or eigenvalue of M̂ (full: the "
+            "smallest of six) the projection allows; one or six, as kp — below the vehicle's "
+            "own masses (a BlueROV2's rotational ones are ~0.4 kg m²)")
     gamma_g: float = setting(0.5, min=0.0, max=1e9, reload=True,
                              doc="AMBC adaptation gain γ_g of g (thesis §5.3.2: 0.5)")
     gamma_b: tuple[float, float, float] = setting(
