@@ -84,16 +84,11 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
     try:
         bridge_args, changes = cpu_split()
         changes["loop"]["sched_fifo_priority"] = sched_fifo
-        if rate_hz is not None:
-            changes["loop"]["rate_hz"] = rate_hz
-        changes["loop"]["trigger"] = trigger
-        if rate_hz is not None:
-            changes["simulation"] = {"instruments": {"ins_rate_hz": rate_hz}}
+        if rate_hz is None:
+            rate_hz = load_config(base).loop.rate_hz
+        changes["loop"].update(rate_hz=rate_hz, trigger=trigger)
+        changes["simulation"] = {"instruments": {"ins_rate_hz": rate_hz}}
         cfg_path = write_local_config(run_dir, base=base, changes=changes)
-        if rate_hz is None:   # the configuration's rate: the INS at it too
-            cfg = load_config(cfg_path)
-            changes["simulation"] = {"instruments": {"ins_rate_hz": cfg.loop.rate_hz}}
-            cfg_path = write_local_config(run_dir, base=base, changes=changes)
         cfg = load_config(cfg_path)
         node = cfg.can.amplifiers.node_ids[0]
         bridge = BridgeProcess(cfg_path, duration_s=duration_s + 120.0, hold=True,

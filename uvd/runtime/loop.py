@@ -368,6 +368,8 @@ class FixedRateLoop:
     def wake(self) -> None:
         """An INS frame has arrived: with ``trigger = "ins"`` the next cycle runs now (from the
         event loop's thread; a no-op otherwise)."""
+        if self.settings.trigger != "ins":
+            return
         if self._wake_ns is None:
             self._wake_ns = self.clock.monotonic_ns()
         fut = self._wake_fut
@@ -495,7 +497,9 @@ class FixedRateLoop:
                     except Exception:
                         self.hook_errors += 1
                 if own_gc and gc_get_count()[0] >= gc_trigger:
-                    self._collect_in_slack(deadline - margin, gc_threshold, gc_min_slack)
+                    # synchronous: the next frame is due a period after this cycle
+                    due = min(deadline, t + period) if woke is not None else deadline
+                    self._collect_in_slack(due - margin, gc_threshold, gc_min_slack)
         finally:
             self.running = False
             if own_gc and gc_was_enabled:
