@@ -4,7 +4,7 @@ suggestion (docs/tuning.md).
 
 Each axis's loop is sampled as the daemon runs it (:func:`uvd.control.tuning.closed_loop`): the
 configuration's period, the vehicle's propeller lag, the age of the frame the cycle uses (one
-period on the fixed-rate schedule, none when the cycle runs on the INS frame), the hydrostatic
+period on the fixed-rate schedule, none with ``[loop] trigger = "ins"``), the hydrostatic
 stiffness b₃ in roll and pitch and the quadratic drag linearised at the reference's peak speed.
 The suggestion is k_p = m ω², k_d = 2ζωm with one bandwidth ω and damping ratio ζ for every
 axis (default ω: the delay-limited bandwidth, ζ = 0.8), printed as the ``[control]`` lines to
@@ -57,7 +57,8 @@ def tune_figures(cfg, omega=None, zeta=DEFAULT_ZETA) -> dict:
     stiff = np.array([0.0, 0.0, 0.0, p.b[2], p.b[2], 0.0])
     dt = 1.0 / cfg.loop.rate_hz
     lag = float(max(t.time_constant_s for t in vehicle.thrusters))
-    delay = delay_cycles(cfg)
+    # the frame the cycle uses: up to a period old on the fixed schedule, fresh on the INS's
+    delay = 0 if cfg.loop.trigger == "ins" else 1
     traj = make_reference(cfg)
     speed = np.zeros(6) if traj is None else np.max(
         [np.abs(traj.at(t).v) for t in np.arange(0.0, 120.0, 0.1)], axis=0)
@@ -82,11 +83,6 @@ def tune_figures(cfg, omega=None, zeta=DEFAULT_ZETA) -> dict:
             "configured": configured, "suggested": suggested,
             "adaptation": {k: v.tolist() for k, v in adapt.items()},
             "stable": all(r["pole_radius"] < 1.0 for r in configured)}
-
-
-def delay_cycles(cfg) -> int:
-    """Age of the frame the cycle uses, in whole periods: one on the fixed-rate schedule."""
-    return 1
 
 
 def _fmt(rows) -> str:
