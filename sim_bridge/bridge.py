@@ -53,7 +53,7 @@ import numpy as np
 
 from drivers.samples import R_to_euler
 from sim_bridge.instruments.faults import SENSOR_MODES, FaultyInstruments, SensorFaults
-from sim_bridge.instruments.models import InstrumentConfig
+from sim_bridge.instruments.models import instrument_config
 from sim_bridge.instruments.pty_emulators import EmulatorConfig, InstrumentEmulators, PtyPort
 from sim_bridge.plant import Plant, PlantConfig
 from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
@@ -168,7 +168,8 @@ class SimBridge:
         self._pending: list[tuple[str, Any]] = []
         self._links = self._links_from(config)
         ins_protocol = "ascii" if config.sensors.ins.format == "phins-ascii" else "stdbin"
-        self.instruments = FaultyInstruments(InstrumentConfig(), self.rng, self.faults)
+        self.instruments = FaultyInstruments(instrument_config(config.simulation.instruments),
+                                             self.rng, self.faults)
         self.instruments.dr_north, self.instruments.dr_east = self.H0[0, 3], self.H0[1, 3]
         self.emulators = InstrumentEmulators(
             self._truth_now, self._links, self.instruments,

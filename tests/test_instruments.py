@@ -1,6 +1,7 @@
 """Simulated instruments: Table A.1 rates and noise, seeded determinism, DVLNAV drift."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -68,3 +69,31 @@ def test_euler_round_trip():
     for _ in range(200):
         e = rng.uniform([-3, -1.5, -3], [3, 1.5, 3])
         np.testing.assert_allclose(R_to_euler(euler_to_R(*e)), e, atol=1e-9)
+
+
+def test_simulation_instruments_section_is_instrument_config(tmp_path):
+    """``[simulation.instruments]`` declares exactly InstrumentConfig's fields with the same
+    defaults (Table A.1: the JHU ROV's instruments unless a configuration says otherwise);
+    sim-bridge and lockstep build their instruments from it."""
+    import dataclasses
+
+    from sim_bridge.instruments.models import InstrumentConfig, instrument_config
+    from uvd.experiments.lockstep import lockstep_config
+    from uvd.runtime.config import ConfigValidationError, SimInstrumentsSection, load_config
+
+    root = Path(__file__).resolve().parents[1]
+    assert instrument_config(SimInstrumentsSection()) == InstrumentConfig()
+    declared = {f.name for f in dataclasses.fields(SimInstrumentsSection)}
+    assert declared == {f.name for f in dataclasses.fields(InstrumentConfig)} - {"ins_offset_s"}
+    assert lockstep_config(load_config(root / "config" / "sim.toml")).instruments == \
+        InstrumentConfig()
+    fast = lockstep_config(load_config(root / "config" / "sim-bluerov2.toml"), seed=3)
+    assert (fast.instruments.ins_rate_hz, fast.instruments.dvl_rate_hz,
+            fast.instruments.depth_rate_hz, fast.seed, fast.control_rate_hz) == \
+        (50.0, 8.0, 10.0, 3, 50.0)
+    bad = tmp_path / "bad.toml"
+    bad.write_text((root / "config" / "sim.toml").read_text()
+                   + "\n[simulation.instruments]\nins_rate_hz = 0\n")
+    with pytest.raises(ConfigValidationError, match=r"simulation\.instruments\.ins_rate_hz: "
+                                                    r"0\.0 is out of range"):
+        load_config(bad)

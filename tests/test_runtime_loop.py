@@ -350,3 +350,104 @@ def test_gc_python_policy_leaves_the_automatic_collector_on():
         pytest.skip("the collector is disabled in this process")
     snap, enabled_inside, _live, _made = _gc_run(300_000, 20, "python")
     assert all(enabled_inside) and snap["gc"]["collections"] == [0, 0, 0]
+
+
+# --------------------------------------------------------------- sensor-synchronous cycle
+
+def _frames_at(loop, clock, times):
+    """A simulated INS: whenever it gets the event loop it moves the fake time to its next
+    frame and wakes the loop, as the INS reader does after decoding a frame."""
+    async def ins():
+        for t in times:
+            while clock.monotonic_ns() >= t:    # the loop has not waited yet
+                await asyncio.sleep(0)
+            clock.now_ns = t
+            loop.wake()
+            await asyncio.sleep(0)
+    return ins()
+
+
+def test_ins_trigger_runs_each_cycle_on_its_frame_then_falls_back_to_fixed_rate():
+    clock = FakeClock(start_ns=0)
+    seen: list[int] = []
+
+    def cycle(t, dt):
+        seen.append(t)
+        clock.advance(MS)
+
+    loop = FixedRateLoop(cycle, LoopSettings(rate_hz=50.0, trigger="ins"), clock=clock)
+    frames = [7 * MS + 20 * MS * k for k in range(10)]
+
+    async def both():
+        ins = asyncio.ensure_future(_frames_at(loop, clock, frames))
+        snap = await loop.run(max_cycles=14)
+        await ins
+        return snap
+
+    snap = run(both())
+    # every frame: a cycle at its very arrival (zero lateness), not at the fixed-rate tick
+    assert seen[:10] == frames
+    # the INS falls silent: 1.5 periods after the last frame, then every period
+    assert seen[10:] == [frames[-1] + 30 * MS + 20 * MS * k for k in range(4)]
+    assert snap["woken"] == 10 and snap["trigger"] == "ins" and snap["overruns"] == 0
+    assert snap["lateness_us"]["max"] == 0.0
+
+
+def test_ins_trigger_never_runs_sooner_than_half_a_period_after_the_last_cycle():
+    clock = FakeClock(start_ns=0)
+    seen: list[int] = []
+    loop = FixedRateLoop(lambda t, dt: seen.append(t), LoopSettings(rate_hz=50.0,
+                                                                    trigger="ins"), clock=clock)
+    frames = [5 * MS, 7 * MS, 30 * MS]        # a burst of two, then one in time
+
+    async def both():
+        ins = asyncio.ensure_future(_frames_at(loop, clock, frames))
+        await loop.run(max_cycles=3)
+        await ins
+
+    run(both())
+    assert seen == [5 * MS, 15 * MS, 30 * MS]
+
+
+def test_fixed_trigger_ignores_wakes():
+    clock = FakeClock(start_ns=0)
+    seen: list[int] = []
+    loop = FixedRateLoop(lambda t, dt: seen.append(t), LoopSettings(rate_hz=50.0), clock=clock)
+
+    async def both():
+        ins = asyncio.ensure_future(_frames_at(loop, clock, [7 * MS, 27 * MS]))
+        snap = await loop.run(max_cycles=3)
+        await ins
+        return snap
+
+    snap = run(both())
+    assert seen == [20 * MS, 40 * MS, 60 * MS] and snap["woken"] == 0
+
+
+@pytest.mark.skipif(not timerfd_available(), reason="needs timerfd")
+def test_ins_trigger_on_the_real_clock_runs_one_cycle_per_frame_after_it():
+    """The timerfd wait and the wake share one future: each frame ends the wait."""
+    wakes: list[int] = []
+    seen: list[int] = []
+    loop = FixedRateLoop(lambda t, dt: seen.append(t),
+                         LoopSettings(rate_hz=50.0, trigger="ins", gc="python"))
+
+    async def both():
+        async def ins():
+            await asyncio.sleep(0.005)
+            for _ in range(20):
+                wakes.append(loop.clock.monotonic_ns())
+                loop.wake()
+                await asyncio.sleep(0.02)
+        task = asyncio.ensure_future(ins())
+        snap = await loop.run(max_cycles=20)
+        await task
+        return snap
+
+    try:
+        snap = run(both())
+    finally:
+        loop.close()
+    assert snap["woken"] >= 18           # a frame may land in a cycle under heavy load
+    starts = np.searchsorted(seen, wakes)
+    assert np.all(starts[:-1] < len(seen))    # every frame but the last got its own cycle

@@ -66,6 +66,12 @@ class InstrumentConfig:
                              f"{self.ins_offset_s}")
 
 
+def instrument_config(section) -> InstrumentConfig:
+    """The :class:`InstrumentConfig` of a configuration's ``[simulation.instruments]``
+    (``uvd.runtime.config.SimInstrumentsSection``: the same fields)."""
+    return InstrumentConfig(**vars(section))
+
+
 class _Periodic:
     """Fires at t = k/rate on a simulated clock: the k-th due time is computed from k, so no
     rounding error accumulates (6 Hz gives exactly 360 samples a minute)."""

@@ -9,7 +9,10 @@ amplifier RPDO it sees. For each INS frame the daemon used:
     latency = (first RPDO of node 1 after the cycle that took the frame) − (frame written)
 
 split into the pty delivery (written → decoded and stamped by the daemon), the wait for the
-next cycle (the loop is fixed-rate: up to one period), and cycle → RPDO on the bus. All stamps
+next cycle, and cycle → RPDO on the bus. Each rate runs twice, the two ``[loop] trigger``
+modes one after the other: ``fixed`` (the fixed-rate schedule: the frame waits up to one
+period) and ``ins`` (the sensor-synchronous cycle: it runs when the frame is decoded); the
+INS sends at the loop's rate in both (``[simulation.instruments] ins_rate_hz``). All stamps
 are ``CLOCK_MONOTONIC`` of this one machine. The CAN bus is ``udp_multicast`` on an
 interface-local group (never leaves the machine): its per-frame send cost is part of the
 figure and is far above a SocketCAN adapter's.
@@ -35,8 +38,9 @@ from uvd.bench import Bench, percentiles
 
 
 def _add(p) -> None:
-    p.add_argument("--rate", type=float, default=None,
-                   help="control loop rate, Hz (default: the configuration's, 10)")
+    p.add_argument("--rate", type=float, nargs="+", default=None,
+                   help="control loop rate(s), Hz; the INS sends at the same rate (default: "
+                        "the configuration's, 10)")
     p.add_argument("--duration", type=float, default=30.0,
                    help="seconds measured while armed (default 30)")
     p.add_argument("--sched-fifo", type=int, default=50, metavar="PRIO",
@@ -65,9 +69,13 @@ def _observer(bus_cfg, cob: int, stop_at: float):
     return seen, done, t
 
 
+TRIGGERS = ("fixed", "ins")
+
+
 def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fifo: int = 50,
-            base: Path | None = None) -> dict[str, Any]:
-    """Run the three processes and return the figures (see the module docstring)."""
+            base: Path | None = None, trigger: str = "fixed") -> dict[str, Any]:
+    """Run the three processes and return the figures (see the module docstring); the INS
+    sends at the loop's rate."""
     from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
     from uvd.runtime.config import load_config
 
@@ -76,8 +84,10 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
     try:
         bridge_args, changes = cpu_split()
         changes["loop"]["sched_fifo_priority"] = sched_fifo
-        if rate_hz is not None:
-            changes["loop"]["rate_hz"] = rate_hz
+        if rate_hz is None:
+            rate_hz = load_config(base).loop.rate_hz
+        changes["loop"].update(rate_hz=rate_hz, trigger=trigger)
+        changes["simulation"] = {"instruments": {"ins_rate_hz": rate_hz}}
         cfg_path = write_local_config(run_dir, base=base, changes=changes)
         cfg = load_config(cfg_path)
         node = cfg.can.amplifiers.node_ids[0]
@@ -138,6 +148,8 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
     s = 1e-9
     return {
         "rate_hz": cfg.loop.rate_hz,
+        "trigger": cfg.loop.trigger,
+        "ins_rate_hz": cfg.simulation.instruments.ins_rate_hz,
         "sched_fifo_priority": sched_fifo,
         "duration_s": duration_s,
         "frames": len(total),
@@ -153,18 +165,27 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
 
 def _run(args) -> dict:
     load = os.getloadavg()[0]
-    f = measure(args.duration, rate_hz=args.rate, sched_fifo=args.sched_fifo, base=args.config)
-    f["loadavg_1min_at_start"] = load
+    runs: dict[str, Any] = {"loadavg_1min_at_start": load}
+    for rate in args.rate or [None]:
+        for trigger in TRIGGERS:
+            f = measure(args.duration, rate_hz=rate, sched_fifo=args.sched_fifo,
+                        base=args.config, trigger=trigger)
+            runs[f"{f['rate_hz']:g}hz_{trigger}"] = f
+            _print(f)
+    return runs
+
+
+def _print(f: dict) -> None:
     lat = f["latency_ms"]
-    print(f"uvd bench latency: loop {f['rate_hz']:g} Hz (SCHED_FIFO {f['sched_fifo_priority']}), "
-          f"{f['frames']} INS frames, load {load:.2f}")
+    print(f"uvd bench latency: loop {f['rate_hz']:g} Hz, trigger {f['trigger']} (INS "
+          f"{f['ins_rate_hz']:g} Hz, SCHED_FIFO {f['sched_fifo_priority']}), {f['frames']} INS "
+          f"frames, load {os.getloadavg()[0]:.2f}")
     if f["frames"]:
         print(f"  INS frame written → RPDO on the bus: median {lat['p50']:.2f} ms, "
               f"p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms")
         for k, label in (("pty_ms", "pty → decoded"), ("wait_for_cycle_ms", "wait for cycle"),
                          ("cycle_to_bus_ms", "cycle → bus")):
             print(f"    {label:<16} median {f[k]['p50']:.3f} ms  p99 {f[k]['p99']:.3f} ms")
-    return f
 
 
 BENCH = Bench(name="latency", summary="End-to-end latency: INS frame written by the emulator → "

@@ -120,10 +120,11 @@ def two_step_step(state: VehicleState, reference: Reference, params: TwoStepPara
                            switched_at_s=ctrl.switched_at_s)
 
 
-def two_step_params(model: str = "decoupled", *, kp: float = 300.0, kd: float = 100.0,
+def two_step_params(model: str = "decoupled", *, kp: float | np.ndarray = 300.0,
+                    kd: float | np.ndarray = 100.0,
                     eps: float = 0.1, kd1: float | None = None, kd2: float | None = None,
                     eps1: float | None = None, eps2: float | None = None,
-                    gamma_m: float = 1000.0, gamma_d: float = 5000.0,
+                    gamma_m: float | np.ndarray = 1000.0, gamma_d: float | np.ndarray = 5000.0,
                     gamma_g: float = 0.5, gamma_b=(0.5, 0.5, 10.0),
                     theta0: np.ndarray | None = None, step2_theta0: np.ndarray | None = None,
                     step1_duration_s: float = STEP1_DURATION_S,

@@ -52,6 +52,14 @@ class LockstepConfig:
                              f"(got {self.plant_rate_hz} and {self.control_rate_hz})")
 
 
+def lockstep_config(cfg, seed: int = 0) -> LockstepConfig:
+    """The lockstep run of a daemon configuration (:class:`uvd.runtime.config.Config`): its
+    control rate and its ``[simulation.instruments]``."""
+    from sim_bridge.instruments.models import instrument_config
+    return LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=seed,
+                          instruments=instrument_config(cfg.simulation.instruments))
+
+
 @dataclass
 class LockstepLog:
     """Per-cycle records (arrays of length n_cycles)."""

@@ -23,7 +23,7 @@ from uvd.estimation.navigation import NavConfig
 from uvd.runtime.config import Config
 
 __all__ = ["build_core", "make_controller", "nav_config", "make_reference", "start_pose",
-           "aid_theta0", "pd_gains"]
+           "aid_theta0", "pd_gains", "adaptation_gains"]
 
 log = logging.getLogger("uvd.daemon")
 
@@ -50,9 +50,23 @@ def start_pose(cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     return trajectory_start_pose(cfg.control.reference, n.initial_north_m, n.initial_east_m)
 
 
+def _axes(value):
+    """A per-axis key (:data:`uvd.runtime.schema.PerAxis`) as the pure layers take it: the
+    float, or six as a (6,) array."""
+    return np.array(value, dtype=float) if isinstance(value, tuple) else value
+
+
 def pd_gains(cfg: Config) -> PDGains:
     """k_p, k_d of ``[control]``: PDC's, and those of the PDC and hold-depth modes."""
-    return PDGains(kp=cfg.control.kp, kd=cfg.control.kd)
+    return PDGains(kp=_axes(cfg.control.kp), kd=_axes(cfg.control.kd))
+
+
+def adaptation_gains(cfg: Config) -> dict:
+    """γ_m, γ_d, γ_g, γ_b of ``[control]`` as :func:`uvd.control.ambc.adaptation_gains` takes
+    them."""
+    c = cfg.control
+    return {"gamma_m": _axes(c.gamma_m), "gamma_d": _axes(c.gamma_d), "gamma_g": c.gamma_g,
+            "gamma_b": c.gamma_b}
 
 
 def _theta0(cfg: Config, vehicle, model: str) -> np.ndarray:
@@ -69,8 +83,12 @@ def _theta0(cfg: Config, vehicle, model: str) -> np.ndarray:
 
 
 def _robust(cfg: Config):
+    from dataclasses import replace
+
     from uvd.control.ambc import ROBUST_DAEMON_DEFAULT, RobustAdaptation
-    return ROBUST_DAEMON_DEFAULT if cfg.control.robust_adaptation else RobustAdaptation()
+    if not cfg.control.robust_adaptation:
+        return RobustAdaptation()
+    return replace(ROBUST_DAEMON_DEFAULT, mass_floor=_axes(cfg.control.mass_floor))
 
 
 def make_controller(cfg: Config, vehicle, allocator: Allocator) -> ControllerSpec:
@@ -80,13 +98,13 @@ def make_controller(cfg: Config, vehicle, allocator: Allocator) -> ControllerSpe
         return ControllerSpec("pdc", pdc_step, pd_gains(cfg), PDState())
     if c.controller == "ambc":
         from uvd.control.ambc import ambc_params, ambc_spec
-        p = ambc_params(c.model, kp=c.kp, kd=c.kd, eps=c.eps, robust=_robust(cfg),
-                        allocator=allocator)
+        p = ambc_params(c.model, kp=_axes(c.kp), kd=_axes(c.kd), eps=c.eps,
+                        robust=_robust(cfg), allocator=allocator, **adaptation_gains(cfg))
         return ambc_spec(p, _theta0(cfg, vehicle, c.model))
     from uvd.control.twostep import two_step_params, two_step_spec
-    p = two_step_params(c.model, kp=c.kp, kd=c.kd, eps=c.eps, robust=_robust(cfg),
+    p = two_step_params(c.model, kp=_axes(c.kp), kd=_axes(c.kd), eps=c.eps, robust=_robust(cfg),
                         allocator=allocator, theta0=_theta0(cfg, vehicle, c.model),
-                        step1_duration_s=c.step1_duration_s)
+                        step1_duration_s=c.step1_duration_s, **adaptation_gains(cfg))
     return two_step_spec(p)
 
 

@@ -20,6 +20,7 @@ run thousands of cycles without sleeping.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import ctypes
 import ctypes.util
 import os
@@ -40,8 +41,10 @@ class Clock(Protocol):
     def sleep(self, seconds: float) -> None:
         """Block the calling thread for ``seconds`` (never awaits)."""
 
-    async def wait_until_ns(self, deadline_ns: int) -> None:
-        """Await (yielding to the event loop at least once) until about ``deadline_ns``.
+    async def wait_until_ns(self, deadline_ns: int, wake: asyncio.Future | None = None
+                            ) -> None:
+        """Await (yielding to the event loop at least once) until about ``deadline_ns``, or
+        until ``wake`` (a future of the running loop) is done, whichever is first.
 
         May return somewhat late (the coarse phase); never raises for a deadline in the past.
         """
@@ -162,16 +165,21 @@ class MonotonicClock:
         if seconds > 0:
             time.sleep(seconds)
 
-    async def wait_until_ns(self, deadline_ns: int) -> None:
+    async def wait_until_ns(self, deadline_ns: int, wake: asyncio.Future | None = None
+                            ) -> None:
         remaining = deadline_ns - time.monotonic_ns()
-        if remaining <= 0:
+        if remaining <= 0 or (wake is not None and wake.done()):
             await asyncio.sleep(0)
             return
         if self._tfd is None:
-            await asyncio.sleep(remaining * 1e-9)
+            if wake is None:
+                await asyncio.sleep(remaining * 1e-9)
+            else:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(asyncio.shield(wake), remaining * 1e-9)
             return
         loop = asyncio.get_running_loop()
-        fut = loop.create_future()
+        fut = wake if wake is not None else loop.create_future()
         tfd = self._tfd
 
         def readable() -> None:
@@ -239,9 +247,12 @@ class FakeClock:
         if seconds > 0:
             self.now_ns += int(round(seconds * 1e9))
 
-    async def wait_until_ns(self, deadline_ns: int) -> None:
+    async def wait_until_ns(self, deadline_ns: int, wake: asyncio.Future | None = None
+                            ) -> None:
         self.coarse_waits += 1
         await asyncio.sleep(0)
+        if wake is not None and wake.done():  # woken: time stays where the waker left it
+            return
         late = self.coarse_late_ns(deadline_ns) if self.coarse_late_ns else 0
         self.now_ns = max(self.now_ns, deadline_ns + int(late))
 

@@ -67,7 +67,7 @@ from uvd.runtime import schema
 from uvd.runtime.failsafe import Thresholds
 from uvd.runtime.leak import LeakSection
 from uvd.runtime.loop import LoopSettings
-from uvd.runtime.schema import section, setting
+from uvd.runtime.schema import PerAxis, section, setting
 
 __all__ = ["Config", "ConfigValidationError", "load_config", "parse_config",
            "render_config_doc", "DEFAULT_CONFIG", "VehicleSection", "ControlSection",
@@ -107,8 +107,9 @@ class ConfigValidationError(ConfigError):
 class VehicleSection:
     """The vehicle model (``[vehicle]``)."""
 
-    name: str = setting("jhu-rov", doc="built-in vehicle (jhu-rov, jhu-rov-coupled) or a "
-                                       "vehicle TOML file, relative to this config file")
+    name: str = setting("jhu-rov", doc="built-in vehicle (jhu-rov, jhu-rov-coupled, "
+                                       "bluerov2-heavy) or a vehicle TOML file, relative to "
+                                       "this config file")
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
         from uvd.io.vehicle import builtin_vehicles
@@ -131,10 +132,29 @@ class ControlSection:
     controller: Literal["pdc", "ambc", "two-step-ambc"] = setting(
         "pdc", doc="PD control (5.11), adaptive model-based control, or its two-step form "
                    "(§5.3.5)")
-    kp: float = setting(300.0, unit="N/rad, N m/rad", min=0.0, max=100000.0, reload=True,
-                        doc="proportional gain k_p on Δψ (thesis §5.3.5.1: 300)")
-    kd: float = setting(100.0, unit="N s/m, N m s/rad", min=0.0, max=100000.0, reload=True,
-                        doc="derivative gain k_d on Δv (thesis §5.3.5.1: 100)")
+    kp: PerAxis = setting(300.0, unit="N/rad, N m/rad", min=0.0, max=100000.0, reload=True,
+                          doc="proportional gain k_p on Δψ: one for every DOF or six (surge, "
+                              "sway, heave, roll, pitch, yaw) (thesis §5.3.5.1: 300)")
+    kd: PerAxis = setting(100.0, unit="N s/m, N m s/rad", min=0.0, max=100000.0, reload=True,
+                          doc="derivative gain k_d on Δv: one or six, as kp (thesis "
+                              "§5.3.5.1: 100)")
+    gamma_m: PerAxis = setting(1000.0, min=0.0, max=1e9, reload=True,
+                               doc="AMBC adaptation gain γ_m of the masses m₁…m₆ (K_θ of "
+                                   "(5.28)): one or six, as kp; model = \"full\" takes one "
+                                   "(thesis §5.3.2: 1000)")
+    gamma_d: PerAxis = setting(5000.0, min=0.0, max=1e9, reload=True,
+                               doc="AMBC adaptation gain γ_d of the drags d₁…d₆: one or six, "
+                                   "as gamma_m (thesis §5.3.2: 5000)")
+    mass_floor: PerAxis = setting(
+        10.0, unit="kg, kg m²", gt=0.0, max=1e6, reload=True,
+        doc="robust adaptation: the smallest m̂ᵢ (decoupled) or eigenvalue of M̂ (full: the "
+            "smallest of six) the projection allows; one or six, as kp — below the vehicle's "
+            "own masses (a BlueROV2's rotational ones are ~0.4 kg m²)")
+    gamma_g: float = setting(0.5, min=0.0, max=1e9, reload=True,
+                             doc="AMBC adaptation gain γ_g of g (thesis §5.3.2: 0.5)")
+    gamma_b: tuple[float, float, float] = setting(
+        (0.5, 0.5, 10.0), min=0.0, max=1e9, reload=True,
+        doc="AMBC adaptation gains γ_b1, γ_b2, γ_b3 of b (thesis §5.3.2: 0.5, 0.5, 10)")
     robust_adaptation: bool = setting(
         True, doc="robust (projection/σ) modification of the AMBC parameter update law")
     reference: Literal["hold", "reftraj1", "reftraj2"] = setting(
@@ -160,6 +180,15 @@ class ControlSection:
                    "amplifiers' measured speed and the vehicle file's time_constant_s "
                    "(uvd.control.allocation.lag_compensate); cycles without finite speeds use "
                    "plain allocation")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        if self.model == "full":
+            return [(k, f"six values need model = \"decoupled\" (the full model's {what} "
+                        f"are not per DOF); give one number")
+                    for k, what in (("gamma_m", "21 mass entries"), ("gamma_d", "216 drag entries"))
+                    if isinstance(getattr(self, k), tuple)]
+        return []
+
 
 
 @dataclass(frozen=True)
@@ -438,6 +467,44 @@ class DaemonSection:
 
 
 @dataclass(frozen=True)
+class SimInstrumentsSection:
+    """The simulated instruments (``[simulation.instruments]``): rates and noise of the INS,
+    DVL and depth sensor that ``sim-bridge`` emulates and a lockstep run of this configuration
+    samples (``sim_bridge.instruments.models.InstrumentConfig``). Defaults: the JHU ROV's
+    Table A.1. The daemon itself does not read them."""
+
+    noise: bool = setting(True, doc="add the noise below (false: exact samples)")
+    ins_rate_hz: float = setting(10.0, unit="Hz", gt=0.0, max=1000.0,
+                                 doc="INS (PHINS III) output rate (Table A.1: 10)")
+    heading_std_rad: float = setting(0.13 * math.pi / 180, unit="rad", min=0.0, max=1.0,
+                                     doc="INS heading noise, standard deviation (0.13°)")
+    roll_pitch_std_rad: float = setting(0.01 * math.pi / 180, unit="rad", min=0.0, max=1.0,
+                                        doc="INS roll and pitch noise (0.01°)")
+    rate_std_rad_s: float = setting(0.01 * math.pi / 180, unit="rad/s", min=0.0, max=1.0,
+                                    doc="INS angular-rate noise (0.01°/s)")
+    dvl_rate_hz: float = setting(6.0, unit="Hz", gt=0.0, max=1000.0,
+                                 doc="DVL ping rate (Table A.1: 6)")
+    dvl_std_m_s: float = setting(0.003, unit="m/s", min=0.0, max=1.0,
+                                 doc="DVL velocity noise (0.003)")
+    dvl_altitude_m: float = setting(2.0, unit="m", gt=0.0, max=1000.0,
+                                    doc="the vehicle's height above the floor at depth 0")
+    depth_rate_hz: float = setting(7.0, unit="Hz", gt=0.0, max=1000.0,
+                                   doc="depth sensor rate (Table A.1: 7)")
+    depth_std_m: float = setting(0.00075, unit="m", min=0.0, max=1.0,
+                                 doc="depth noise (0.75 mm, sim_bridge.instruments.models)")
+    xy_scale_error: float = setting(0.005, min=0.0, max=0.5,
+                                    doc="DVLNAV dead-reckoning scale error bound (0.5 %)")
+
+
+@dataclass(frozen=True)
+class SimulationSection:
+    """The simulated vehicle's side (``[simulation]``): read by ``sim-bridge`` and by the
+    lockstep run of a configuration, never by the daemon."""
+
+    instruments: SimInstrumentsSection = section(SimInstrumentsSection)
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole configuration file."""
 
@@ -452,6 +519,7 @@ class Config:
     telemetry: TelemetrySection = section(TelemetrySection)
     recording: RecordingSection = section(RecordingSection)
     daemon: DaemonSection = section(DaemonSection)
+    simulation: SimulationSection = section(SimulationSection)
     source: str | None = field(default=None, init=False, compare=False)
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:

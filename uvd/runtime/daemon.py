@@ -114,6 +114,10 @@ class Daemon:
                        sinks=[*sinks, *([self.recorder] if self.recorder else [])],
                        supervisor=self.supervisor, notifier=notifier, clock=clock,
                        realtime=realtime)
+        if config.loop.trigger == "ins":   # the sensor-synchronous cycle (docs/runtime.md)
+            for s in self.sensors:
+                if s.name == "ins":
+                    s.on_sample = self.app.loop.wake
         self.app.set_amplifier_hooks(zero=self.can.zero, disable=self.can.disable)
         self.app.reload_hooks.append(self._on_reload)
         est = config.estimation

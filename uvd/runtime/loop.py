@@ -45,6 +45,14 @@ Counted in :meth:`snapshot` under ``gc``: collections per generation, forced one
 longest and the total time spent. ``gc = "python"`` leaves CPython's automatic collector alone
 (the behaviour before this policy).
 
+**Sensor-synchronous cycle** (``LoopSettings.trigger = "ins"``). The INS reader calls
+:meth:`FixedRateLoop.wake` when a frame has been decoded; the coarse wait ends then (the
+timerfd and the wake share one future), and the cycle runs at once — or at the previous cycle
+plus half a period, if the frame came sooner. Without a frame the wait ends on a fallback
+deadline 1.5 periods after a synchronous cycle, then every period (the fixed-rate schedule),
+until a frame wakes the loop again. A synchronous cycle's lateness is measured from the wake;
+it overruns when it ends more than a period after it started.
+
 **Statistics.** Lateness (wake-up minus deadline) and compute time (cycle return minus
 wake-up) go into constant-memory histograms (:class:`~uvd.runtime.stats.Histogram`);
 :meth:`FixedRateLoop.snapshot` returns a plain dict with p50/p99/p999/max in µs, and counts of
@@ -104,6 +112,13 @@ class LoopSettings:
                      "no automatic collection, young generations collected in a cycle's slack "
                      "time (forced only if memory would grow); python = CPython's automatic "
                      "collector, at any moment")
+    trigger: Literal["fixed", "ins"] = setting(
+        "fixed", doc="fixed: cycles on the fixed-rate schedule; ins: each cycle right after an "
+                     "INS frame arrives, so the command goes out on the freshest attitude (set "
+                     "rate_hz to the INS's rate) — never sooner than half a period after the "
+                     "previous cycle, and without a frame for 1.5 periods the fixed-rate "
+                     "schedule takes over until frames return (the INS failsafes fire on "
+                     "their thresholds as ever)")
     fine_margin_us: float | None = setting(
         None, unit="µs", min=0.0, max=5000.0,
         doc="how long before the deadline the coarse wait ends (default: 20 % of the period "
@@ -331,6 +346,9 @@ class FixedRateLoop:
         self.gc_forced = 0
         self.gc_max_ns = [0, 0, 0]
         self.gc_total_ns = 0
+        self.woken = 0            # cycles started by a wake (trigger = "ins")
+        self._wake_ns: int | None = None
+        self._wake_fut: asyncio.Future | None = None
         self.trace: _Trace | None = None
         if self.trace_capacity > 0:
             self.trace = _Trace(np.zeros(self.trace_capacity, dtype=np.int64),
@@ -346,6 +364,29 @@ class FixedRateLoop:
     def streak_exceeded(self) -> bool:
         """The overrun streak reached ``settings.overrun_streak``."""
         return self.overrun_streak >= self.settings.overrun_streak
+
+    def wake(self) -> None:
+        """An INS frame has arrived: with ``trigger = "ins"`` the next cycle runs now (from the
+        event loop's thread; a no-op otherwise)."""
+        if self.settings.trigger != "ins":
+            return
+        if self._wake_ns is None:
+            self._wake_ns = self.clock.monotonic_ns()
+        fut = self._wake_fut
+        if fut is not None and not fut.done():
+            fut.set_result(None)
+
+    async def _wait_for_frame(self, until_ns: int) -> int | None:
+        """The coarse wait of the sensor-synchronous loop: until a wake or ``until_ns``;
+        returns the wake's time (None: the deadline came first)."""
+        if self._wake_ns is None:
+            self._wake_fut = asyncio.get_running_loop().create_future()
+            try:
+                await self.clock.wait_until_ns(until_ns, self._wake_fut)
+            finally:
+                self._wake_fut = None
+        t, self._wake_ns = self._wake_ns, None
+        return t
 
     def stop(self) -> None:
         """Ask the loop to return after the cycle in progress (or before the next one)."""
@@ -383,6 +424,8 @@ class FixedRateLoop:
             gc_get_count = gc.get_count
             gc_trigger = max(1, gc_threshold[0])
             gc_min_slack = period // 4
+        sync = self.settings.trigger == "ins"
+        self._wake_ns = None
         start = clock.monotonic_ns()
         deadline = start + period
         end_ns = start + int(duration_s * 1e9) if duration_s is not None else None
@@ -395,10 +438,19 @@ class FixedRateLoop:
                     break
                 if end_ns is not None and deadline > end_ns:
                     break
-                await clock.wait_until_ns(deadline - margin)
+                woke = None
+                if sync:
+                    woke = await self._wait_for_frame(deadline - margin)
+                else:
+                    await clock.wait_until_ns(deadline - margin)
                 if self._stop:
                     break
-                clock.sleep_until_ns(deadline)
+                if woke is not None:     # a frame: now, or half a period after the last
+                    self.woken += 1
+                    deadline = woke
+                    clock.sleep_until_ns(woke if prev_t is None else prev_t + period // 2)
+                else:
+                    clock.sleep_until_ns(deadline)
                 t = clock.monotonic_ns()
                 dt = (t - prev_t) * 1e-9 if prev_t is not None else period * 1e-9
                 prev_t = t
@@ -422,7 +474,12 @@ class FixedRateLoop:
                 self.last_cycle_ok = ok
                 if ok:
                     self.consecutive_errors = 0
-                deadline += period
+                if woke is not None:    # next: the fixed-rate fallback, 1.5 periods on
+                    deadline = t + period
+                    fallback = deadline + period // 2
+                else:
+                    deadline += period
+                    fallback = deadline
                 if t_end > deadline:
                     missed = (t_end - deadline) // period + 1
                     self.overruns += 1
@@ -433,13 +490,16 @@ class FixedRateLoop:
                                                   self.overrun_streak)
                 else:
                     self.overrun_streak = 0
+                    deadline = fallback
                 for hook in self.after_cycle:
                     try:
                         hook(t_end, ok)
                     except Exception:
                         self.hook_errors += 1
                 if own_gc and gc_get_count()[0] >= gc_trigger:
-                    self._collect_in_slack(deadline - margin, gc_threshold, gc_min_slack)
+                    # synchronous: the next frame is due a period after this cycle
+                    due = min(deadline, t + period) if woke is not None else deadline
+                    self._collect_in_slack(due - margin, gc_threshold, gc_min_slack)
         finally:
             self.running = False
             if own_gc and gc_was_enabled:
@@ -493,6 +553,8 @@ class FixedRateLoop:
             "rate_hz": 1e9 / self.period_ns,
             "period_us": self.period_ns / 1e3,
             "cycles": self.cycles,
+            "trigger": self.settings.trigger,
+            "woken": self.woken,
             "overruns": self.overruns,
             "skipped": self.skipped,
             "overrun_streak": self.overrun_streak,

@@ -25,8 +25,8 @@ plain dataclass.
 
 Supported field types: ``bool``, ``int``, ``float`` (an integer is accepted), ``str``,
 ``pathlib.Path``, ``typing.Literal[...]`` (choices), ``X | None`` (absent means ``None``; TOML
-has no null), ``tuple[T, ...]`` and fixed ``tuple[T, T]`` of the scalar types, mappings (a
-free-form table), and nested dataclasses.
+has no null), ``tuple[T, ...]`` and fixed ``tuple[T, T]`` of the scalar types, :data:`PerAxis`
+(one number or six, one per DOF), mappings (a free-form table), and nested dataclasses.
 """
 
 from __future__ import annotations
@@ -42,9 +42,15 @@ from pathlib import Path
 from typing import Any, Literal, get_args, get_origin
 
 __all__ = ["Meta", "setting", "section", "build", "describe", "KeyDoc", "BuildContext",
-           "reloadable_changes", "as_dict", "DECLARED_BY"]
+           "reloadable_changes", "as_dict", "DECLARED_BY", "PerAxis", "AXES"]
 
 _META = "uvd.schema"
+
+#: the six degrees of freedom in the order of v = [ν; ω] (thesis Appendix A)
+AXES = ("surge", "sway", "heave", "roll", "pitch", "yaw")
+
+#: a per-axis value: one number for all six DOF, or six in the order of :data:`AXES`
+PerAxis = float | tuple[float, float, float, float, float, float]
 
 #: ``plain dataclass -> the schema section declaring it``: where a configuration field has the
 #: plain type, the section is built, validated and documented instead, and its ``convert()``
@@ -131,6 +137,8 @@ def _is_optional(tp: Any) -> tuple[bool, Any]:
 
 def type_name(tp: Any) -> str:
     """Human-readable name of a supported annotation (for messages and docs)."""
+    if tp == PerAxis:
+        return "number or list of 6 numbers"
     opt, inner = _is_optional(tp)
     if opt:
         return f"{type_name(inner)} (optional)"
@@ -236,6 +244,12 @@ def range_text(meta: Meta) -> str:
 
 
 def _value(value: Any, tp: Any, meta: Meta, key: str, errors: list, ctx: BuildContext) -> Any:
+    if tp == PerAxis:
+        if isinstance(value, list | tuple) and len(value) != len(AXES):
+            errors.append((key, f"expected one number or {len(AXES)} ({', '.join(AXES)}), "
+                                f"got {len(value)} values"))
+            return MISSING
+        tp = get_args(PerAxis)[1] if isinstance(value, list | tuple) else float
     opt, tp = _is_optional(tp)
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, Mapping):

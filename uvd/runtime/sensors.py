@@ -36,6 +36,12 @@ class SerialSensor:
         ``on_connect(reader)`` after the port opened (the Digiquartz gets ``P4``).
     connect_timeout_s : float
         :meth:`start` waits this long for the port to open.
+
+    Attributes
+    ----------
+    on_sample : callable or None
+        Called with no argument after each sample is put (the INS's wakes the
+        sensor-synchronous loop, :meth:`uvd.runtime.loop.FixedRateLoop.wake`).
     """
 
     def __init__(self, name: str, reader, convert: Callable[[Any], Any], box: Mailbox, *,
@@ -49,6 +55,7 @@ class SerialSensor:
         self.connect_timeout_s = connect_timeout_s
         self.samples = 0
         self.rejected = 0
+        self.on_sample: Callable[[], None] | None = None
 
     async def start(self) -> None:
         self.reader.start()
@@ -78,6 +85,8 @@ class SerialSensor:
             if sample is not None:
                 self.samples += 1
                 self.box.put(sample)
+                if self.on_sample is not None:
+                    self.on_sample()
 
     async def stop(self, timeout_s: float = 0.3) -> None:
         await self.reader.close()
