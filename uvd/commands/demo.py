@@ -364,6 +364,8 @@ def _stop(daemon, bridge, pump) -> tuple[int, float, dict]:
     return code, stop_s, bridge_stats
 
 
+# run_demo is long (~110 lines) because it owns two processes (sim-bridge and the daemon)
+# for its whole duration: start, arm, watch and stop share one try/finally that kills both.
 def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path | None = None,
              seed: int = 0, progress=print) -> tuple[dict[str, Any], int]:
     """Run the demo; returns (figures, exit code). See the module docstring."""

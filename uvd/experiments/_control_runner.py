@@ -152,6 +152,8 @@ class _BlackBox:
         self.rec.close_now()
 
 
+# run_control is long (~105 lines): it sets up one lockstep run and records a dozen per-cycle
+# arrays in its loop; the set-up and the loop share them all.
 def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, duration_s: float,
                 *, seed: int = 0, noise: bool = True,
                 thrusters: ThrusterEffects | None = None, control_rate_hz: float = 10.0,

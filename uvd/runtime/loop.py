@@ -401,6 +401,9 @@ class FixedRateLoop:
         if self._own_clock and hasattr(self.clock, "close"):
             self.clock.close()
 
+    # run is long (~105 lines) on purpose: it is the real-time loop, whose per-cycle state
+    # lives in locals (an attribute look-up costs every cycle) and whose schedule, accounting
+    # and slack collection share them; split, they would be passed around each cycle.
     async def run(self, *, max_cycles: int | None = None,
                   duration_s: float | None = None) -> dict[str, Any]:
         """Run until :meth:`stop`, ``max_cycles`` cycles, or ``duration_s`` of schedule.

@@ -106,57 +106,85 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
         figures.append((name, caption))
         say(f"wrote {name}")
 
-    # -- tracking --
     if armed.any():
-        ta = t[armed]
-        eta = np.array([_eta(r["p"], r["R"]) for r, a in zip(cyc, armed, strict=True) if a])
-        ref = np.array([_eta(r["p_ref"], r["R_ref"]) for r, a in zip(cyc, armed, strict=True)
-                        if a])
-        err = eta - ref
-        err[:, 3:] = wrap_pi_array(err[:, 3:])
-        scale = np.array([1, 1, 1, 180 / math.pi, 180 / math.pi, 180 / math.pi])
-        fig, axes = plt.subplots(6, 2, figsize=(12, 13), sharex=True)
-        for i in range(6):
-            a = np.unwrap(eta[:, i]) if i >= 3 else eta[:, i]
-            b = np.unwrap(ref[:, i]) if i >= 3 else ref[:, i]
-            axes[i, 0].plot(ta, b * scale[i], "k--", lw=1, label="reference")
-            axes[i, 0].plot(ta, a * scale[i], lw=1, label="navigation")
-            axes[i, 0].set_ylabel(_DOF[i])
-            axes[i, 1].plot(ta, err[:, i] * scale[i], lw=1, color="C3")
-            axes[i, 1].set_ylabel("error")
-        axes[0, 0].legend(loc="upper right", fontsize=8)
-        axes[-1, 0].set_xlabel("time (s)")
-        axes[-1, 1].set_xlabel("time (s)")
-        save(fig, "tracking.png", "Reference and navigation state per DOF (armed cycles) and "
-                                  "their difference.")
-        # -- MNE in windows --
-        from uvd.control.errors import error_coordinates
-        dpsi, dv = [], []
-        for r, a in zip(cyc, armed, strict=True):
-            if not a:
-                continue
-            H, Hr = np.eye(4), np.eye(4)
-            H[:3, :3], H[:3, 3] = np.asarray(r["R"], float), np.asarray(r["p"], float)
-            Hr[:3, :3], Hr[:3, 3] = np.asarray(r["R_ref"], float), np.asarray(r["p_ref"], float)
-            _, e_psi, e_v, _ = error_coordinates(H, np.asarray(r["v"], float), Hr,
-                                                 np.asarray(r["v_ref"], float))
-            dpsi.append(np.linalg.norm(e_psi))
-            dv.append(np.linalg.norm(e_v))
-        span = ta[-1] - ta[0]
-        win = 900.0 if span >= 1800.0 else max(span / 10.0, 1.0)
-        edges = np.arange(ta[0], ta[-1] + 1e-9, win)
-        idx = np.clip(np.searchsorted(edges, ta, side="right") - 1, 0, None)
-        mp = [float(np.mean(np.asarray(dpsi)[idx == k])) for k in range(len(edges))
-              if np.any(idx == k)]
-        mv = [float(np.mean(np.asarray(dv)[idx == k])) for k in range(len(edges))
-              if np.any(idx == k)]
-        fig = mne_figure(plt, np.arange(len(mp)) * win / 60.0, win / 60.0, mp, mv)
-        save(fig, "mne.png", f"Position and velocity MNE (§5.3.1) in {win / 60.0:.3g}-minute "
-                             "windows, the layout of Fig. 5.4.")
+        _tracking_figures(plt, save, cyc, t, armed)
+    _thrust_figure(plt, save, cyc, t, data["start"])
+    est = [e for e in data["estimate"] if e.get("theta") is not None
+           and len(e["theta"]) in (16, 241)]
+    if est:
+        te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in est])
+        save(estimates_figure(plt, te, [e["theta"] for e in est]), "estimates.png",
+             "Estimates over the run: the online AID's θ̂ (Theorem 4.3.1, cf. Figs. 4.x) or "
+             "the adaptive controller's (the 16 decoupled parameters of §5.3.1, cf. Fig. 5.1).")
+    _failsafe_figure(plt, save, cyc, t, t0, data["failsafe"])
+    _period_figure(plt, save, cyc)
 
-    # -- thrust --
+    xval = None
+    if params is not None:
+        xval = _xval(path, cyc, Path(params), out, figures, say)
+
+    summary = {"recording": str(path), "cycles": len(cyc), "armed_cycles": int(armed.sum()),
+               "duration_s": float(t[-1]) if len(t) else 0.0,
+               "failsafe_fired": sum(1 for e in data["failsafe"] if e.get("kind") == "fired"),
+               "estimates": len(est), "figures": [f for f, _ in figures]}
+    if xval is not None:
+        summary["xval"] = xval
+    _write_html(out / "index.html", summary, figures)
+    return summary
+
+
+def _tracking_figures(plt, save, cyc: list, t: np.ndarray, armed: np.ndarray) -> None:
+    """Reference vs navigation per DOF with their difference, and the MNE windows (Fig. 5.4)."""
+    ta = t[armed]
+    eta = np.array([_eta(r["p"], r["R"]) for r, a in zip(cyc, armed, strict=True) if a])
+    ref = np.array([_eta(r["p_ref"], r["R_ref"]) for r, a in zip(cyc, armed, strict=True)
+                    if a])
+    err = eta - ref
+    err[:, 3:] = wrap_pi_array(err[:, 3:])
+    scale = np.array([1, 1, 1, 180 / math.pi, 180 / math.pi, 180 / math.pi])
+    fig, axes = plt.subplots(6, 2, figsize=(12, 13), sharex=True)
+    for i in range(6):
+        a = np.unwrap(eta[:, i]) if i >= 3 else eta[:, i]
+        b = np.unwrap(ref[:, i]) if i >= 3 else ref[:, i]
+        axes[i, 0].plot(ta, b * scale[i], "k--", lw=1, label="reference")
+        axes[i, 0].plot(ta, a * scale[i], lw=1, label="navigation")
+        axes[i, 0].set_ylabel(_DOF[i])
+        axes[i, 1].plot(ta, err[:, i] * scale[i], lw=1, color="C3")
+        axes[i, 1].set_ylabel("error")
+    axes[0, 0].legend(loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("time (s)")
+    axes[-1, 1].set_xlabel("time (s)")
+    save(fig, "tracking.png", "Reference and navigation state per DOF (armed cycles) and "
+                              "their difference.")
+    from uvd.control.errors import error_coordinates
+    dpsi, dv = [], []
+    for r, a in zip(cyc, armed, strict=True):
+        if not a:
+            continue
+        H, Hr = np.eye(4), np.eye(4)
+        H[:3, :3], H[:3, 3] = np.asarray(r["R"], float), np.asarray(r["p"], float)
+        Hr[:3, :3], Hr[:3, 3] = np.asarray(r["R_ref"], float), np.asarray(r["p_ref"], float)
+        _, e_psi, e_v, _ = error_coordinates(H, np.asarray(r["v"], float), Hr,
+                                             np.asarray(r["v_ref"], float))
+        dpsi.append(np.linalg.norm(e_psi))
+        dv.append(np.linalg.norm(e_v))
+    span = ta[-1] - ta[0]
+    win = 900.0 if span >= 1800.0 else max(span / 10.0, 1.0)
+    edges = np.arange(ta[0], ta[-1] + 1e-9, win)
+    idx = np.clip(np.searchsorted(edges, ta, side="right") - 1, 0, None)
+    mp = [float(np.mean(np.asarray(dpsi)[idx == k])) for k in range(len(edges))
+          if np.any(idx == k)]
+    mv = [float(np.mean(np.asarray(dv)[idx == k])) for k in range(len(edges))
+          if np.any(idx == k)]
+    fig = mne_figure(plt, np.arange(len(mp)) * win / 60.0, win / 60.0, mp, mv)
+    save(fig, "mne.png", f"Position and velocity MNE (§5.3.1) in {win / 60.0:.3g}-minute "
+                         "windows, the layout of Fig. 5.4.")
+
+
+def _thrust_figure(plt, save, cyc: list, t: np.ndarray, start: Any) -> None:
+    """Commanded vs realised thrust per thruster (Fig. 5.2's lag and reversals)."""
     thrust = np.array([r["thrust"] for r in cyc], dtype=float)
-    k = _k_thrust(data["start"])
+    k = _k_thrust(start)
     realised = None
     if k is not None:
         rows = []
@@ -179,23 +207,15 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
                             "measured propeller speed, App. A.1): the lag and the reversals "
                             "of Fig. 5.2.")
 
-    # -- estimates --
-    est = [e for e in data["estimate"] if e.get("theta") is not None
-           and len(e["theta"]) in (16, 241)]
-    if est:
-        te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in est])
-        fig = estimates_figure(plt, te, [e["theta"] for e in est])
-        save(fig, "estimates.png", "Estimates over the run: the online AID's θ̂ (Theorem "
-                                   "4.3.1, cf. Figs. 4.x) or the adaptive controller's (the "
-                                   "16 decoupled parameters of §5.3.1, cf. Fig. 5.1).")
 
-    # -- failsafe timeline --
+def _failsafe_figure(plt, save, cyc: list, t: np.ndarray, t0: int, failsafe: list) -> None:
+    """The failsafe action in force every cycle, each trigger marked when it fired."""
     level = np.array([_ACTIONS.index(r["action"]) if r["action"] in _ACTIONS else 0
                       for r in cyc])
     fig, ax = plt.subplots(figsize=(12, 3))
     ax.step(t, level, where="post")
     ax.set_yticks(range(len(_ACTIONS)), _ACTIONS)
-    for ev in data["failsafe"]:
+    for ev in failsafe:
         if ev.get("kind") == "fired":
             te = (int(ev["t_ns"]) - t0) * 1e-9
             ax.axvline(te, color="C3", lw=0.8, ls=":")
@@ -205,7 +225,9 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
     save(fig, "failsafe.png", "The failsafe action in force every cycle, with each trigger "
                               "when it fired.")
 
-    # -- loop period --
+
+def _period_figure(plt, save, cyc: list) -> None:
+    """Histogram of the loop's measured period around its median."""
     dt = np.array([r["dt"] for r in cyc[1:]], dtype=float)
     nominal = float(np.median(dt)) if dt.size else 0.0
     fig, ax = plt.subplots(figsize=(8, 4))
@@ -215,19 +237,6 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
     ax.set_ylabel("cycles")
     ax.set_yscale("log")
     save(fig, "lateness.png", "Distribution of the loop's measured period around its median.")
-
-    xval = None
-    if params is not None:
-        xval = _xval(path, cyc, Path(params), out, figures, say)
-
-    summary = {"recording": str(path), "cycles": len(cyc), "armed_cycles": int(armed.sum()),
-               "duration_s": float(t[-1]) if len(t) else 0.0,
-               "failsafe_fired": sum(1 for e in data["failsafe"] if e.get("kind") == "fired"),
-               "estimates": len(est), "figures": [f for f, _ in figures]}
-    if xval is not None:
-        summary["xval"] = xval
-    _write_html(out / "index.html", summary, figures)
-    return summary
 
 
 def _xval(path: Path, cyc: list, params: Path, out: Path, figures: list,
