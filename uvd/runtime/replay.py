@@ -40,9 +40,9 @@ from uvd.runtime.build import build_core
 from uvd.runtime.commands import SetParams, command_from_record
 from uvd.runtime.config import Config, load_config
 from uvd.runtime.cycle import Cycle, inputs_from_record
-from uvd.runtime.leak import leak_sensor_fault_trigger
 from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
+from uvd.runtime.triggers import plugin_triggers
 from uvd.telemetry.mcap_recorder import RecordingError, read_messages
 
 __all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport"]
@@ -201,8 +201,7 @@ def replay_lockstep(path: str | Path, *, config: str | Path | None = None,
     report = ReplayReport(recording=str(rec.path), same_config=same)
     vehicle = cfg.load_vehicle()
     core_cfg = build_core(cfg, vehicle, estimators=_estimators(cfg, rec))
-    extra = [leak_sensor_fault_trigger()] if cfg.sensors.leak.enabled else []
-    sup = Supervisor(cfg.failsafe, extra_triggers=extra)
+    sup = Supervisor(cfg.failsafe, extra_triggers=plugin_triggers(cfg))
     nav = cfg.navigation
     cyc = Cycle(core_cfg, sup, hold_on_arm=cfg.control.reference == "hold",
                 north_m=nav.initial_north_m, east_m=nav.initial_east_m)
