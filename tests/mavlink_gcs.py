@@ -9,10 +9,12 @@ answer.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 
-from pymavlink import mavutil
+os.environ.setdefault("MAVLINK20", "1")  # mavutil's MAVLink 2 dialects (signed packets)
+from pymavlink import mavutil  # noqa: E402
 
 mav = mavutil.mavlink
 
@@ -92,9 +94,17 @@ class Station:
                 got[m.param_index] = (m.param_id, m.param_value)
         return dict(got.values())
 
-    def param_read(self, name: str, timeout: float = 5.0) -> float:
-        self.send("param_request_read", *self.target, name.encode(), -1)
-        return self.wait("PARAM_VALUE", lambda m: m.param_id == name, timeout).param_value
+    def param_read(self, name: str, timeout: float = 2.0, retries: int = 3) -> float:
+        """PARAM_REQUEST_READ, sent again after ``timeout`` (UDP may lose it), as a station
+        does."""
+        for i in range(retries):
+            self.send("param_request_read", *self.target, name.encode(), -1)
+            try:
+                return self.wait("PARAM_VALUE", lambda m: m.param_id == name,
+                                 timeout).param_value
+            except AssertionError:
+                if i + 1 == retries:
+                    raise
 
     def param_set(self, name: str, value: float, timeout: float = 5.0) -> float:
         """PARAM_SET; the vehicle's PARAM_VALUE answer (the value in force)."""

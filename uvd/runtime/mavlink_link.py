@@ -104,6 +104,22 @@ def _addr(text: str) -> tuple[str, int]:
     return host.strip("[]"), int(port)
 
 
+def _framed(data: bytes) -> bool:
+    """True when ``data`` is whole MAVLink packets back to back, judged by their headers'
+    lengths alone (a station sends whole packets per datagram)."""
+    i, n = 0, len(data)
+    while i < n:
+        if i + 3 > n:
+            return False
+        if data[i] == 0xFD:
+            i += data[i + 1] + 12 + (13 if data[i + 2] & 0x01 else 0)
+        elif data[i] == 0xFE:
+            i += data[i + 1] + 8
+        else:
+            return False
+    return i == n and n > 0
+
+
 class _Out:
     """pymavlink's encoder writes here; the link sends the bytes to every station."""
 
@@ -286,7 +302,9 @@ class MavlinkLink:
             log.warning("cannot keep the signing timestamp: %s", exc)
 
     def _receive(self) -> None:
-        for _ in range(256):  # bounded per wake: telemetry goes on under a flood
+        # bounded per wake (every 20 ms at most): under a flood the kernel drops the rest, and
+        # this thread never holds the interpreter long enough to delay the loop
+        for _ in range(64):
             try:
                 data, addr = self._sock.recvfrom(4096)
             except (BlockingIOError, InterruptedError):
@@ -298,6 +316,9 @@ class MavlinkLink:
             self._datagram(data, addr)
 
     def _datagram(self, data: bytes, addr: tuple) -> None:
+        if not _framed(data):  # cheap: most garbage never reaches pymavlink's parser
+            self.counters["bad_datagrams"] += 1
+            return
         rx = self.rx
         rx.buf, rx.buf_index, rx.expected_length = bytearray(), 0, self.mavlink.HEADER_LEN_V1 + 2
         rx.have_prefix_error = False
@@ -321,7 +342,10 @@ class MavlinkLink:
         if src not in self.gcs_ids:
             self.counters["not_a_gcs"] += 1
             return
-        if self.signing is not None and kind in _SIGNED_ONLY:
+        if addr not in self.peers and len(self.peers) >= 16:
+            self.peers.pop(min(self.peers, key=self.peers.get))
+        self.peers[addr] = time.monotonic()
+        if self.signing is not None and kind in _SIGNED_ONLY:  # telemetry still goes out
             why = self.signing.verify(m.get_msgbuf())
             if why is not None:
                 self.counters[f"refused_{why.split()[0]}"] += 1
@@ -331,9 +355,6 @@ class MavlinkLink:
                         self._ack(m, self.mavlink.MAV_RESULT_DENIED)
                 return
             self.tx.signing.timestamp = max(self.tx.signing.timestamp, self.signing.timestamp)
-        if addr not in self.peers and len(self.peers) >= 16:
-            self.peers.pop(min(self.peers, key=self.peers.get))
-        self.peers[addr] = time.monotonic()
         handler = getattr(self, f"_on_{kind.lower()}", None)
         if handler is None:
             self.counters["ignored"] += 1
