@@ -211,6 +211,8 @@ def replay_lockstep(path: str | Path, *, config: str | Path | None = None,
     cmds = sorted(rec.commands, key=lambda c: int(c["t_ns"]))
     ci = 0
     stop_at = min((int(r["t_ns"]) for r in rec.reloads if r.get("applied")), default=None)
+    set_at = min((int(c["t_ns"]) for c in cmds if c.get("command") == "SetParams"
+                  and c.get("ok")), default=None)
     replayed, recorded_thrust = [], []
     n = len(rec.cycles)
     for k, r in enumerate(rec.cycles):
@@ -218,6 +220,10 @@ def replay_lockstep(path: str | Path, *, config: str | Path | None = None,
         if stop_at is not None and t > stop_at:
             report.stopped = (f"a reload applied {', '.join(_applied(rec, stop_at))} at "
                               f"t = {stop_at} ns: the replay covers the cycles before it")
+            break
+        if set_at is not None and t >= set_at:
+            report.stopped = (f"parameters were set (SetParams) at t = {set_at} ns: the replay "
+                              "covers the cycles before it")
             break
         if r.get("inputs") is None:
             report.stopped = f"cycle {k} (t = {t} ns) carries no inputs: recorded by an older uvd"
