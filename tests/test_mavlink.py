@@ -13,7 +13,6 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import os
-import random
 import socket
 import subprocess
 import sys
@@ -26,6 +25,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from sim_bridge.bridge import free_udp_port
 from tests.hil_daemon import ListSink, running_bridge, until
 from tests.mavlink_gcs import Station
+from uvd.bench.mavlink_fuzz import fuzz_datagrams
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.loop import drop_realtime
@@ -65,40 +65,6 @@ def run_daemon(cfg_path: Path, scenario, timeout_s: float = 120.0):
 
 def mode_of(hb) -> tuple[int, int]:
     return hb.custom_mode & 0xFF, hb.custom_mode >> 8
-
-
-def fuzz_datagrams(n: int, seed: int = 21) -> list[bytes]:
-    """Random bytes, valid packets truncated, with a flipped bit, a wrong CRC, a garbage
-    payload behind a valid header, oversized — every kind in turn."""
-    rng = random.Random(seed)
-    enc = mavlink.MAVLink(None, 255, 190)
-    enc.WIRE_PROTOCOL_VERSION = "2.0"
-    good = [m.pack(enc) for m in (
-        enc.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0),
-        enc.param_set_encode(1, 1, b"CTL_KP", 1e9, 9),
-        enc.manual_control_encode(1, 1000, 1000, 1000, 1000, 0),
-        enc.set_mode_encode(1, 1, 99), enc.heartbeat_encode(6, 8, 0, 0, 0))]
-    out = []
-    for i in range(n):
-        g = bytearray(rng.choice(good))
-        k = i % 6
-        if k == 0:
-            d = bytes(rng.getrandbits(8) for _ in range(rng.randint(0, 300)))
-        elif k == 1:
-            d = bytes(g[:rng.randint(0, len(g) - 1)])
-        elif k == 2:
-            j = rng.randrange(len(g))
-            g[j] ^= 1 << rng.randrange(8)
-            d = bytes(g)
-        elif k == 3:
-            g[-1] ^= 0xFF
-            d = bytes(g)
-        elif k == 4:
-            d = bytes(g[:10]) + bytes(rng.getrandbits(8) for _ in range(rng.randint(0, 255)))
-        else:
-            d = b"\xfd" + bytes(rng.getrandbits(8) for _ in range(2000))
-        out.append(d)
-    return out
 
 
 @pytest.fixture(scope="module")
