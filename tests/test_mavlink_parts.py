@@ -125,3 +125,13 @@ def test_kept_parameters_apply_at_start_and_a_bad_one_is_skipped(tmp_path, caplo
     cfg = kept_params(sim_config(), str(f))
     assert cfg.control.kp == 420.0 and cfg.control.kd == 100.0
     assert "control.kd" in caplog.text and "out of range" in caplog.text
+
+
+def test_docs_mavlink_md_lists_the_parameters_generated_from_the_schema():
+    from pathlib import Path
+
+    from uvd.runtime.mavlink_params import refresh_doc
+    doc = Path(__file__).resolve().parents[1] / "docs" / "mavlink.md"
+    text = doc.read_text(encoding="utf-8")
+    assert refresh_doc(text) == text, "run: uvd check-config --doc-out docs/config.md"
+    assert "`CTL_KP`" in text and "| 4 | `manual` |" in text
