@@ -213,6 +213,8 @@ class MavlinkLink:
             sock.setblocking(False)
         except OSError as exc:
             sock.close()
+            log.error("MAVLink link off: [mavlink] listen %s: %s", self.cfg.listen,
+                      exc.strerror or exc)
             raise OSError(f"[mavlink] listen {self.cfg.listen}: {exc.strerror or exc}") from exc
         self._sock = sock
         self._thread = threading.Thread(target=self._run, name="uvd-mavlink", daemon=True)
@@ -387,12 +389,10 @@ class MavlinkLink:
     def _ack_when_done(self, m: Any) -> Callable[[CommandResult], None]:
         mav = self.mavlink
 
-        def done(res: CommandResult) -> Any:
-            if res.ok:
-                return self._ack(m, mav.MAV_RESULT_ACCEPTED)
+        def done(res: CommandResult) -> None:  # the reason goes out with the command record
             full = res.reason == "command queue full"
-            self._ack(m, mav.MAV_RESULT_TEMPORARILY_REJECTED if full else mav.MAV_RESULT_DENIED)
-            self._statustext("warning", f"refused: {res.reason}")
+            self._ack(m, mav.MAV_RESULT_ACCEPTED if res.ok else
+                      mav.MAV_RESULT_TEMPORARILY_REJECTED if full else mav.MAV_RESULT_DENIED)
         return done
 
     def _on_command_long(self, m: Any, addr: tuple) -> None:
@@ -522,10 +522,10 @@ class MavlinkLink:
             return
 
         def done(res: CommandResult) -> None:
-            if res.ok:
-                self._persist({p.key: value})
-            else:
-                self._statustext("warning", f"{p.name} refused: {res.reason}")
+            if res.ok:  # a refusal's reason goes out with the command record
+                why = self._persist({p.key: value})
+                if why is not None:
+                    self._statustext("warning", why)
             self._param_value(p)
         self._queue(SetParams({p.key: value}, source=f"mavlink {m.get_srcSystem()}"), done)
 
