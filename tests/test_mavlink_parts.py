@@ -122,8 +122,9 @@ def test_custom_mode_reports_the_operator_mode_and_what_the_cycle_applies():
 def test_kept_parameters_apply_at_start_and_a_bad_one_is_skipped(tmp_path, caplog):
     f = tmp_path / "params.toml"
     write_params_file(f, {"control.kp": 420.0, "control.kd": -3.0})
-    cfg = kept_params(sim_config(), str(f))
+    cfg, applied = kept_params(sim_config(), str(f))
     assert cfg.control.kp == 420.0 and cfg.control.kd == 100.0
+    assert applied == {"control.kp": 420.0}
     assert "control.kd" in caplog.text and "out of range" in caplog.text
 
 
@@ -135,3 +136,16 @@ def test_docs_mavlink_md_lists_the_parameters_generated_from_the_schema():
     text = doc.read_text(encoding="utf-8")
     assert refresh_doc(text) == text, "run: uvd check-config --doc-out docs/config.md"
     assert "`CTL_KP`" in text and "| 4 | `manual` |" in text
+
+
+def test_a_replay_applies_the_parameters_kept_at_start_on_top_of_the_recorded_file(tmp_path):
+    from uvd.runtime.replay import Recording, _config_of
+    text = DEFAULT_CONFIG.read_text(encoding="utf-8")
+    rec = Recording(tmp_path / "run.mcap", {"config_toml": text,
+                                            "config_path": str(DEFAULT_CONFIG),
+                                            "params_kept": {"control.kp": 420.0,
+                                                            "estimation.gains": [1, 2, 3, 4,
+                                                                                 5]}},
+                    [], [], [], [], [])
+    cfg, same = _config_of(rec, None)
+    assert same and cfg.control.kp == 420.0 and cfg.estimation.gains == (1, 2, 3, 4, 5)

@@ -63,24 +63,26 @@ class LastCycle:
     mode: str = "idle"
 
 
-def kept_params(config: Config, path: str) -> Config:
+def kept_params(config: Config, path: str) -> tuple[Config, dict[str, Any]]:
     """``config`` with the parameters a ground station set (``[mavlink] params_file``,
-    docs/mavlink.md); a value that is no longer valid is named in the log and skipped."""
+    docs/mavlink.md), and those applied; a value that is no longer valid is named in the log
+    and skipped."""
     from uvd.runtime.mavlink_params import read_params_file
     try:
         values = read_params_file(path)
     except ValueError as exc:
         log.error("%s (parameters kept over MAVLink not applied)", exc)
-        return config
+        return config, {}
+    applied = {}
     for key, value in values.items():
         new, errors = with_values(config, {key: value})
         if errors:
             log.error("%s: %s (not applied)", path, "; ".join(f"{k}: {r}" for k, r in errors))
             continue
-        config = new
-    if values:
-        log.info("parameters set over MAVLink applied from %s: %s", path, ", ".join(values))
-    return config
+        config, applied[key] = new, value
+    if applied:
+        log.info("parameters set over MAVLink applied from %s: %s", path, ", ".join(applied))
+    return config, applied
 
 
 class Daemon:
@@ -103,8 +105,11 @@ class Daemon:
                  notifier=None, clock=None, realtime: bool = True) -> None:
         cold = _jitcache.cache_is_empty()  # before anything below calls a kernel
         t_init = time.perf_counter()
+        #: parameters a ground station set before this start (in the start record: a replay
+        #: applies them too)
+        self.params_kept: dict[str, Any] = {}
         if config.mavlink.enabled and config.mavlink.params_file:
-            config = kept_params(config, config.mavlink.params_file)
+            config, self.params_kept = kept_params(config, config.mavlink.params_file)
         self.config = config
         self.vehicle = config.load_vehicle()
         self.ins_box: Mailbox = Mailbox("ins")
@@ -185,7 +190,8 @@ class Daemon:
 
     def start_record(self) -> dict[str, Any]:
         """The ``"start"`` record: what a replay needs besides the cycles — the configuration
-        file's text and the online estimators' θ̂(0) (a resumed estimate starts elsewhere
+        file's text, the parameters kept over MAVLink applied on top of it, and the online
+        estimators' θ̂(0) (a resumed estimate starts elsewhere
         than the file says)."""
         text = None
         if self.config.source:
@@ -195,6 +201,7 @@ class Daemon:
                 log.warning("the start record carries no configuration: %s", exc)
         return {"type": "start", "t_ns": time.monotonic_ns(), "version": __version__,
                 "config_path": str(self.config.source or ""), "config_toml": text,
+                "params_kept": dict(self.params_kept),
                 "estimators": {spec.name: spec.diagnostics(st).theta for spec, st in
                                zip(self.core_cfg.estimators, self.state.est, strict=True)}}
 

@@ -40,6 +40,7 @@ from uvd.runtime.build import build_core
 from uvd.runtime.commands import SetParams, command_from_record
 from uvd.runtime.config import Config, load_config
 from uvd.runtime.cycle import Cycle, inputs_from_record
+from uvd.runtime.schema import with_values
 from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
 from uvd.runtime.triggers import plugin_triggers
@@ -132,9 +133,16 @@ def _config_of(rec: Recording, override: str | Path | None) -> tuple[Config, boo
         fh.write(rec.start["config_toml"])
         tmp = Path(fh.name)
     try:
-        return load_config(tmp), True
+        cfg = load_config(tmp)
     finally:
         tmp.unlink(missing_ok=True)
+    kept = rec.start.get("params_kept") or {}
+    if kept:  # parameters a ground station had set, applied at start on top of the file
+        cfg, errors = with_values(cfg, kept)
+        if errors:
+            raise ConfigError(f"{rec.path}: the recorded params_kept do not apply: "
+                              + "; ".join(f"{k}: {r}" for k, r in errors))
+    return cfg, True
 
 
 def _samples(cfg: Config, rec: Recording) -> dict[tuple[str, int], Any]:
