@@ -181,13 +181,8 @@ class MavlinkLink:
         #: monotonic ns of the newest HEARTBEAT of a configured ground station (None: none)
         self.operator_heartbeat_ns: int | None = None
         self.counters: collections.Counter = collections.Counter()
-        self.pending: dict[str, Any] = {}  # parameters kept for the next start
-        if cfg.params_file:
-            try:
-                self.pending = {k: v for k, v in mp.read_params_file(cfg.params_file).items()
-                                if not self._reloadable(k)}
-            except ValueError:
-                pass  # the daemon reported it at start
+        #: parameters set during this run that apply at the next start
+        self.pending: dict[str, Any] = {}
         self._cycle: Mapping[str, Any] | None = None
         self._estimate: Mapping[str, Any] | None = None
         self._texts: collections.deque = collections.deque(maxlen=64)
@@ -198,9 +193,14 @@ class MavlinkLink:
         self._stop = threading.Event()
         self._t0 = time.monotonic()
 
-    @staticmethod
-    def _reloadable(key: str) -> bool:
-        return any(p.key == key and p.reload for p in mp.PARAMS)
+    def _text(self, item: tuple[str, str]) -> None:
+        self._push(self._texts, item, "statustext")
+
+    def _push(self, queue: collections.deque, item: Any, what: str) -> None:
+        """Append to a bounded deque; when full its oldest item is dropped and counted."""
+        if len(queue) == queue.maxlen:
+            self.counters[f"{what}_dropped"] += 1
+        queue.append(item)
 
     # ------------------------------------------------------------------ sink (event loop)
 
@@ -236,12 +236,12 @@ class MavlinkLink:
                 self._estimate = r
             elif kind == "failsafe":
                 sev = "warning" if r["kind"] in ("fired", "action") else "info"
-                self._texts.append((sev, f"failsafe {r['kind']}: {r['trigger']} -> "
+                self._text((sev, f"failsafe {r['kind']}: {r['trigger']} -> "
                                          f"{r['action']} ({r['reason']})"))
             elif kind == "lifecycle":
-                self._texts.append(("notice", f"{r['from']} -> {r['to']}: {r['cause']}"))
+                self._text(("notice", f"{r['from']} -> {r['to']}: {r['cause']}"))
             elif kind == "command" and not r.get("ok"):
-                self._texts.append(("warning", f"{r['command']} refused: {r['reason']}"))
+                self._text(("warning", f"{r['command']} refused: {r['reason']}"))
 
     async def flush(self) -> None:
         pass
@@ -352,7 +352,7 @@ class MavlinkLink:
             if why is not None:
                 self.counters[f"refused_{why.split()[0]}"] += 1
                 if kind != "HEARTBEAT":
-                    self._texts.append(("warning", f"{kind} refused: {why}"))
+                    self._text(("warning", f"{kind} refused: {why}"))
                     if kind == "COMMAND_LONG":
                         self._ack(m, self.mavlink.MAV_RESULT_DENIED)
                 return
@@ -379,7 +379,8 @@ class MavlinkLink:
     def _queue(self, command: Any, done: Callable[[CommandResult], None] | None = None) -> None:
         fut = self.commands.put(command)
         if done is not None:  # runs where the cycle resolves it: only a deque append
-            fut.add_done_callback(lambda f: self._replies.append((done, f.result())))
+            fut.add_done_callback(lambda f: self._push(self._replies, (done, f.result()),
+                                                       "replies"))
 
     def _ack(self, m: Any, result: int) -> None:
         cmd = m.command if m.get_type() == "COMMAND_LONG" else m.get_msgId()
@@ -422,7 +423,7 @@ class MavlinkLink:
     def _set_mode(self, base_mode: int, custom: int, source: str) -> SetMode | None:
         mode = _MODE_OF.get(custom & 0xFF)
         if not base_mode & self.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED or mode is None:
-            self._texts.append(("warning", f"mode {custom} refused: custom modes are "
+            self._text(("warning", f"mode {custom} refused: custom modes are "
                                 f"{', '.join(f'{v} {k}' for k, v in CUSTOM_MODES.items())}"))
             return None
         return SetMode(mode, source=source)
@@ -454,7 +455,7 @@ class MavlinkLink:
         if not self._for_us(m):
             return
         if m.coordinate_frame != self.mavlink.MAV_FRAME_LOCAL_NED or m.type_mask & 0x7:
-            self._texts.append(("warning", "SET_POSITION_TARGET_LOCAL_NED refused: needs "
+            self._text(("warning", "SET_POSITION_TARGET_LOCAL_NED refused: needs "
                                            "MAV_FRAME_LOCAL_NED and a position"))
             return
         yaw = m.yaw
@@ -492,7 +493,7 @@ class MavlinkLink:
             mp.PARAMS[m.param_index] if m.param_index < len(mp.PARAMS) else None)
         if p is None:
             self.counters["unknown_params"] += 1
-            self._texts.append(("warning", f"no parameter {name or m.param_index!r}"))
+            self._text(("warning", f"no parameter {name or m.param_index!r}"))
             return
         self._param_value(p, addr)
 
@@ -503,7 +504,7 @@ class MavlinkLink:
         p = mp.BY_NAME.get(name)
         if p is None:
             self.counters["unknown_params"] += 1
-            self._texts.append(("warning", f"no parameter {name!r}"))
+            self._text(("warning", f"no parameter {name!r}"))
             return
         why = mp.check_value(p, float(m.param_value))
         cfg = self.config()
@@ -512,12 +513,12 @@ class MavlinkLink:
             why = self._keep_for_restart(p, value, cfg)
             if why is None:
                 self._param_value(p)
-                self._texts.append(("notice", f"{p.name} = {m.param_value:g} kept; applies at "
+                self._text(("notice", f"{p.name} = {m.param_value:g} kept; applies at "
                                               "the next start"))
                 return
         if why is not None:
             self.counters["params_refused"] += 1
-            self._texts.append(("warning", why))
+            self._text(("warning", why))
             self._param_value(p, addr)
             return
 
