@@ -149,3 +149,34 @@ def test_a_replay_applies_the_parameters_kept_at_start_on_top_of_the_recorded_fi
                     [], [], [], [], [])
     cfg, same = _config_of(rec, None)
     assert same and cfg.control.kp == 420.0 and cfg.estimation.gains == (1, 2, 3, 4, 5)
+
+
+def test_operator_loss_in_lockstep_holds_depth_through_the_one_cycle():
+    """The same plug-in trigger and cycle in lockstep: the station heard until 1 s after
+    arming, then silent; with the sim's 5 s timeout the cycle holds depth from the first cycle
+    past 6 s (no surge, sway or yaw thrust), and the event says why."""
+    from uvd.experiments.lockstep import Lockstep, LockstepConfig
+    from uvd.runtime import commands as cmd
+    from uvd.runtime.build import build_core, start_pose
+    cfg = sim_config()
+    vehicle = cfg.load_vehicle()
+    H0, v0 = start_pose(cfg)
+    sim = Lockstep(vehicle, build_core(cfg, vehicle),
+                   LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
+                   supervisor=Supervisor(cfg.failsafe, extra_triggers=plugin_triggers(cfg)))
+    sim.cycle()
+    assert sim.command(cmd.Arm()).ok
+    t_arm = sim.t_ns
+    fired = None
+    for _ in range(80):  # 8 s at 10 Hz
+        t = (sim.t_ns - t_arm) * 1e-9
+        sim.extra = {OPERATOR_AGE: max(0.0, t - 1.0), "leak_sensor_fault": False}
+        out = sim.cycle()
+        ev = [e for e in sim.last_result.decision.events if e.trigger == "operator_heartbeat_lost"]
+        if ev and fired is None:
+            fired = (t, ev[0].kind, out.mode)
+    assert fired is not None and 6.0 < fired[0] <= 6.0 + 0.1 + 1e-9
+    assert fired[1] == "fired" and fired[2] == "hold-depth"
+    assert sim.last_result.decision.action is Action.HOLD_DEPTH
+    u = sim.last_result.out.u_cmd
+    assert u[0] == u[1] == u[5] == 0.0
