@@ -33,6 +33,7 @@ import asyncio
 import math
 import os
 import resource
+import sys
 import time
 from collections.abc import Callable
 
@@ -528,8 +529,6 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
         cycle(t_ns, dt)
         publish(t_ns, dt)
 
-    import sys
-
     from uvd.runtime.config import DaemonSection
     # as the daemon runs: another thread holding the interpreter yields it within this
     old_switch = sys.getswitchinterval()
@@ -551,7 +550,7 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
         await pump
         sys.setswitchinterval(old_switch)
     out["mavlink"] = link.stats()
-    out["fuzz_sent"] = link.stats().get("datagrams", 0) if sender is not None else 0
+    out["fuzz_read"] = link.stats().get("datagrams", 0) if sender is not None else 0
     return out
 
 
@@ -590,7 +589,7 @@ def _run(args) -> dict:
         loud = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup,
                                       args.mavlink_fuzz, steal))
         p99q, p99l = quiet["lateness_us"]["p99"], loud["lateness_us"]["p99"]
-        fuzz = {"datagrams": args.mavlink_fuzz, "read": loud["fuzz_sent"],
+        fuzz = {"datagrams": args.mavlink_fuzz, "read": loud["fuzz_read"],
                 "link_counters": loud["mavlink"],
                 "quiet": {k: quiet[k] for k in ("lateness_us", "compute_us", "overruns")},
                 "fuzzed": {k: loud[k] for k in ("lateness_us", "compute_us", "overruns")},

@@ -566,6 +566,8 @@ def with_values(obj: Any, values: Mapping[str, Any], *, reload_only: bool = Fals
         ``{"control.kp": 350.0, …}``.
     reload_only : bool
         Refuse keys that may not change while running (not marked *reload*).
+    ctx : BuildContext, optional
+        For the sections' checks; by default the folder of ``obj.source`` (a Config's file).
 
     Returns
     -------
@@ -574,7 +576,9 @@ def with_values(obj: Any, values: Mapping[str, Any], *, reload_only: bool = Fals
     errors : list of (key, reason)
         Unknown keys, keys that need a restart, bad values — every one named.
     """
-    ctx = ctx or BuildContext()
+    if ctx is None:  # relative paths as the file they came from says (a Config's source)
+        src = getattr(obj, "source", None)
+        ctx = BuildContext(Path(src) if src else None)
     errors: list[tuple[str, str]] = []
     new = _with(obj, dict(values), "", errors, reload_only, ctx)
     return (obj, errors) if errors else (new, errors)
