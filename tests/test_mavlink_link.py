@@ -139,3 +139,55 @@ def test_a_long_reason_goes_out_in_statustext_chunks():
         assert "".join(p.text for p in parts) == text
 
     run_link(scenario)
+
+
+def test_serial_line_carries_telemetry_and_commands(tmp_path):
+    """A pseudo-terminal as the radio: the station writes a HEARTBEAT and an ARM on the master
+    side; the link queues the Arm and sends its telemetry down the line."""
+    import os
+
+    from uvd.runtime.commands import Arm
+    master, slave = os.openpty()
+    os.set_blocking(master, False)
+    enc = mavlink.MAVLink(None, 255, 190)
+    enc.WIRE_PROTOCOL_VERSION = "2.0"
+    dec = mavlink.MAVLink(None, 255, 190)
+    dec.robust_parsing = True
+    link = MavlinkLink(
+        MavlinkSection(enabled=True, listen="127.0.0.1:0", params_file="",
+                       serial=os.ttyname(slave), serial_baud=115200),
+        CommandQueue(), lambda: load_config(DEFAULT_CONFIG),
+        thresholds={"ins": 0.25, "dvl": 1.0, "depth": 0.5, "feedback": 0.5},
+        max_thrust_n=[20.0] * 6)
+
+    def scenario():
+        # split mid-packet: the line is a byte stream
+        data = enc.heartbeat_encode(6, 8, 0, 0, 0).pack(enc) + \
+            enc.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0).pack(enc)
+        os.write(master, data[:15])
+        time.sleep(0.05)
+        os.write(master, data[15:])
+        (c,) = queued(link)
+        assert isinstance(c, Arm) and link.operator_heartbeat_ns is not None
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline:
+            try:
+                msgs = dec.parse_buffer(os.read(master, 4096)) or []
+            except BlockingIOError:
+                time.sleep(0.02)
+                continue
+            if any(m.get_type() == "HEARTBEAT" and m.type == mav.MAV_TYPE_SUBMARINE
+                   for m in msgs):
+                return
+        raise AssertionError("no HEARTBEAT down the serial line")
+
+    async def main():
+        await link.open()
+        try:
+            await link.write([cycle_record()])
+            await asyncio.to_thread(scenario)
+        finally:
+            await link.aclose()
+            os.close(master)
+            os.close(slave)
+    asyncio.run(asyncio.wait_for(main(), 30.0))

@@ -397,7 +397,8 @@ def _check_udp(addr: str, key: str) -> list[tuple[str, str]]:
 
 @dataclass(frozen=True)
 class MavlinkSection:
-    """The ground-station link (``[mavlink]``, docs/mavlink.md): MAVLink 2 over UDP."""
+    """The ground-station link (``[mavlink]``, docs/mavlink.md): MAVLink 2 over UDP and
+    serial."""
 
     enabled: bool = setting(False, doc="run the MAVLink link (QGroundControl, MAVProxy)")
     listen: str = setting("127.0.0.1:14551",
@@ -406,6 +407,9 @@ class MavlinkSection:
     connect: tuple[str, ...] = setting(
         (), doc="UDP ADDRESS:PORT the link also sends to (a station that listens, e.g. "
                 "QGroundControl on 127.0.0.1:14550)")
+    serial: str = setting("", doc="a serial device to also speak MAVLink on (a telemetry "
+                                  "radio, e.g. /dev/ttyUSB0); empty: none")
+    serial_baud: int = setting(57600, min=1200, max=4_000_000, doc="its baud rate")
     system_id: int = setting(1, min=1, max=255, doc="the vehicle's MAVLink system id")
     component_id: int = setting(1, min=1, max=255,
                                 doc="its component id (1 = MAV_COMP_ID_AUTOPILOT1)")

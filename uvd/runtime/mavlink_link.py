@@ -6,10 +6,12 @@ command receiver, never on the loop's critical path.
 queues a STATUSTEXT for each failsafe event, lifecycle transition and refused command. One
 daemon thread owns the UDP socket and the two pymavlink codecs; it
 
+* reads UDP datagrams at ``listen`` and, when ``serial`` is set, a serial line (a telemetry
+  radio);
 * sends HEARTBEAT and SYS_STATUS at ``heartbeat_hz``; ATTITUDE, LOCAL_POSITION_NED,
   SCALED_PRESSURE, VFR_HUD, SERVO_OUTPUT_RAW and ACTUATOR_OUTPUT_STATUS at ``state_hz``;
   NAMED_VALUE_FLOAT of the online estimates at ``estimate_hz`` — to every station heard within
-  ``station_timeout_s`` and to the ``connect`` addresses;
+  ``station_timeout_s``, to the ``connect`` addresses and down the serial line;
 * turns what stations send into commands of :mod:`uvd.runtime.commands` on the daemon's one
   command queue (``App.commands``) — the cycle applies them at its next start — and answers
   each with COMMAND_ACK (and a STATUSTEXT with the reason of a refusal) once the cycle has
@@ -97,6 +99,10 @@ def custom_mode_of(rec: Mapping[str, Any], controller: str, step1_s: float) -> i
                    "zero": "observe" if rec.get("operator_mode") == "observe"
                    else "zero-thrust"}.get(mode, "zero-thrust")
     return op | APPLIED_MODES[applied] << 8
+
+
+#: the station at the end of the serial line (a radio): always a destination when configured
+SERIAL = ("serial",)
 
 
 def _addr(text: str) -> tuple[str, int]:
@@ -189,6 +195,10 @@ class MavlinkLink:
         self._replies: collections.deque = collections.deque(maxlen=256)
         self._text_id = 0
         self._sock: socket.socket | None = None
+        self._serial = None
+        self.rx_serial = mavlink.MAVLink(None, cfg.system_id, cfg.component_id,
+                                         use_native=False)
+        self.rx_serial.robust_parsing = True
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._t0 = time.monotonic()
@@ -217,6 +227,15 @@ class MavlinkLink:
                       exc.strerror or exc)
             raise OSError(f"[mavlink] listen {self.cfg.listen}: {exc.strerror or exc}") from exc
         self._sock = sock
+        if self.cfg.serial:
+            import serial
+            try:
+                self._serial = serial.Serial(self.cfg.serial, self.cfg.serial_baud, timeout=0,
+                                             write_timeout=0)
+            except (serial.SerialException, OSError) as exc:
+                sock.close()
+                log.error("MAVLink link off: [mavlink] serial %s: %s", self.cfg.serial, exc)
+                raise OSError(f"[mavlink] serial {self.cfg.serial}: {exc}") from exc
         self._thread = threading.Thread(target=self._run, name="uvd-mavlink", daemon=True)
         self._thread.start()
         log.info("MAVLink link on udp %s (system %d, signing %s)", self.cfg.listen,
@@ -252,6 +271,8 @@ class MavlinkLink:
             self._thread.join(timeout=0.5)
         if self._sock is not None:
             self._sock.close()
+        if self._serial is not None:
+            self._serial.close()
         self._save_timestamp()
 
     def stats(self) -> dict[str, Any]:
@@ -268,9 +289,12 @@ class MavlinkLink:
         c = self.cfg
         while not self._stop.is_set():
             try:
-                readable, _, _ = select.select([self._sock], [], [], 0.02)
-                if readable:
+                ins = [self._sock] if self._serial is None else [self._sock, self._serial]
+                readable, _, _ = select.select(ins, [], [], 0.02)
+                if self._sock in readable:
                     self._receive()
+                if self._serial is not None and self._serial in readable:
+                    self._receive_serial()
                 while self._replies:
                     done, result = self._replies.popleft()
                     done(result)
@@ -316,6 +340,24 @@ class MavlinkLink:
                 return
             self.counters["datagrams"] += 1
             self._datagram(data, addr)
+
+    def _receive_serial(self) -> None:
+        """A byte stream: one parser keeps its state across reads (at most 4 KiB a wake)."""
+        data = self._serial.read(4096)
+        self.counters["serial_bytes"] += len(data)
+        try:
+            msgs = self.rx_serial.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - whatever pymavlink raises on garbage
+            msgs = []
+        for m in msgs:
+            if m.get_type() == "BAD_DATA":
+                self.counters["bad_serial"] += 1
+                continue
+            try:
+                self._message(m, SERIAL)
+            except Exception as exc:  # noqa: BLE001 - a message we cannot use is dropped
+                self.counters["bad_messages"] += 1
+                log.debug("MAVLink %s on serial dropped: %s", m.get_type(), exc)
 
     def _datagram(self, data: bytes, addr: tuple) -> None:
         if not _framed(data):  # cheap: most garbage never reaches pymavlink's parser
@@ -556,16 +598,20 @@ class MavlinkLink:
     def _stations(self) -> list[tuple]:
         now = time.monotonic()
         live = [a for a, t in self.peers.items() if now - t <= self.cfg.station_timeout_s]
-        return live + [a for a in self.connect if a not in live]
+        out = live + [a for a in self.connect if a not in live]
+        return out + [SERIAL] if self._serial is not None and SERIAL not in out else out
 
     def _send(self, msg: Any, to: Sequence[tuple] | None = None) -> None:
         self.tx.send(msg)
         buf = self._out.buf
         for a in (self._stations() if to is None else to):
             try:
-                self._sock.sendto(buf, a)
+                if a == SERIAL:  # never blocks: what the line cannot take is dropped
+                    self._serial.write(buf)
+                else:
+                    self._sock.sendto(buf, a)
                 self.counters["sent"] += 1
-            except OSError:
+            except Exception:  # noqa: BLE001 - OSError, or pyserial's timeout on a full line
                 self.counters["send_errors"] += 1
 
     def _statustext(self, severity: str, text: str) -> None:
