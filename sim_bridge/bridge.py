@@ -503,7 +503,8 @@ def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
 
     Takes ``base`` (the embedded ``config/sim.toml`` by default), points the instruments at
     pseudo-terminal links in ``run_dir``, picks a fresh interface-local multicast group and
-    a free UDP port for the CAN bus, records telemetry to ``run_dir/telemetry.jsonl``, and
+    a free UDP port for the CAN bus, records telemetry to ``run_dir/telemetry.jsonl``, keeps
+    the MAVLink link's parameters and signing timestamp in ``run_dir``, and
     applies ``changes`` (``{"loop": {"rate_hz": 100.0}, …}``, merged table by table).
     Returns the path of the written ``run_dir/uvd.toml``.
     """
@@ -528,6 +529,9 @@ def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
                port=free_udp_port(), loopback_only=True)
     tel = data.setdefault("telemetry", {})
     tel.setdefault("jsonl", {}).update(enabled=True, path=str(run_dir / "telemetry.jsonl"))
+    if "mavlink" in data:  # what the link keeps stays with the run
+        data["mavlink"].update(params_file=str(run_dir / "mavlink-params.toml"),
+                               signing_timestamp_file=str(run_dir / "mavlink-signing.ts"))
 
     def merge(dst: dict, src: dict) -> None:
         for k, v in src.items():

@@ -53,6 +53,8 @@ def running_bridge(run_dir: Path, changes: dict | None = None, duration_s: float
     bridge_args, base = cpu_split(pin=False)
     # no files, and no Zenoh on the demo's 7447 (a test that wants it names its own port)
     base["telemetry"] = {"jsonl": {"enabled": False}, "zenoh": {"enabled": False}}
+    # nor MAVLink on the demo's 14551 (a test that wants it listens on port 0)
+    base["mavlink"] = {"enabled": False}
     cfg_path = write_local_config(run_dir, changes={**base, **(changes or {})})
     proc = BridgeProcess(cfg_path, duration_s=duration_s, hold=True,
                          extra=bridge_args).start(timeout_s=90.0)

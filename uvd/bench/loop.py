@@ -33,6 +33,7 @@ import asyncio
 import math
 import os
 import resource
+import sys
 import time
 from collections.abc import Callable
 
@@ -358,6 +359,11 @@ def _add(p) -> None:
                    help="also publish a cycle record every cycle to the black-box recorder "
                         "writing MCAP into DIR (its cost on the loop: compare with a run "
                         "without)")
+    p.add_argument("--mavlink-fuzz", type=int, default=0, metavar="N",
+                   help="also run a MAVLink link (its sink fed a cycle record every cycle) on "
+                        "a loopback port: once quiet, then again while N random and "
+                        "malformed datagrams arrive spread over the run (same process); "
+                        "prints both lateness figures")
 
 
 async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float,
@@ -470,6 +476,33 @@ def _fmt(d: dict) -> str:
     return "  ".join(f"{k} {d[k]:8.1f}" for k in ("p50", "p99", "p999", "max") if k in d)
 
 
+_Z3, _Z6, _EYE = np.zeros(3), np.zeros(6), np.eye(3)
+
+
+def bench_cycle_record(t_ns: int, dt: float) -> dict:
+    """A cycle record as the daemon's write phase builds it (6 thrusters, tracking), as the
+    hub's sinks get it."""
+    from uvd.telemetry.records import CycleRecord
+    z3, z6, eye = _Z3, _Z6, _EYE
+    return CycleRecord(
+        t_ns=t_ns, dt=dt, state="ARMED", action="none", mode="control", status="ok",
+        p=z3, R=eye, v=z6, nav_valid=True, u=z6, u_cmd=z6, thrust=z6,
+        ages=(0.01, 0.1, 0.05, 0.01), ins_rx_ns=t_ns, inputs={
+            "actuators": {"omega_rad_s": z6, "enabled": True, "faults": [],
+                          "feedback_t_ns": t_ns, "bus_off": False},
+            "overrun_streak": 0, "overrun_streak_exceeded": False, "leak": False,
+            "extra": None}, p_ref=z3, R_ref=eye, v_ref=z6).to_dict()
+
+
+def _published(cycle, hub):
+    """``cycle`` followed by what the daemon's write phase does for its sinks: build one cycle
+    record and publish it to ``hub``."""
+    def published(t_ns: int, dt: float) -> None:
+        cycle(t_ns, dt)
+        hub.publish(bench_cycle_record(t_ns, dt))
+    return published
+
+
 def _recorded(cycle, directory: str, times: dict[str, list]):
     """``cycle`` followed by what the daemon's write phase does for telemetry — build one cycle
     record (6 thrusters) and publish it — every cycle; every other cycle the hub has the MCAP
@@ -481,12 +514,10 @@ def _recorded(cycle, directory: str, times: dict[str, list]):
     import can
 
     from uvd.telemetry.mcap_recorder import McapRecorder
-    from uvd.telemetry.records import CycleRecord
     from uvd.telemetry.sink import TelemetryHub
 
     rec = McapRecorder(directory)
     hub, bare = TelemetryHub([rec]), TelemetryHub([])
-    z3, z6, eye = np.zeros(3), np.zeros(6), np.eye(3)
     frames = [can.Message(arbitration_id=0x200 + n, data=bytes(4), is_extended_id=False)
               for n in range(1, 7)] + [can.Message(arbitration_id=0x80, data=b"",
                                                    is_extended_id=False)]
@@ -500,16 +531,62 @@ def _recorded(cycle, directory: str, times: dict[str, list]):
         if recording:
             for m in frames:
                 rec.tap_can(m, t_ns, False)
-        (hub if recording else bare).publish(CycleRecord(
-            t_ns=t_ns, dt=dt, state="ARMED", action="none", mode="control", status="ok",
-            p=z3, R=eye, v=z6, nav_valid=True, u=z6, u_cmd=z6, thrust=z6,
-            ages=(0.01, 0.1, 0.05, 0.01), ins_rx_ns=t_ns, inputs={
-                "actuators": {"omega_rad_s": z6, "enabled": True, "faults": [],
-                              "feedback_t_ns": t_ns, "bus_off": False},
-                "overrun_streak": 0, "overrun_streak_exceeded": False, "leak": False,
-                "extra": None}, p_ref=z3, R_ref=eye, v_ref=z6).to_dict())
+        (hub if recording else bare).publish(bench_cycle_record(t_ns, dt))
         (with_s if recording else without_s).append(clock() - t0)
     return recorded, hub
+
+
+def _mavlink_link():
+    """A MAVLink link on a free loopback port, the sink of a hub, and the cycle that publishes
+    one cycle record to that hub (as the daemon's write phase does)."""
+    from uvd.runtime.commands import CommandQueue
+    from uvd.runtime.config import DEFAULT_CONFIG, MavlinkSection, load_config
+    from uvd.runtime.mavlink_link import MavlinkLink
+
+    config = load_config(DEFAULT_CONFIG)
+    link = MavlinkLink(MavlinkSection(enabled=True, listen="127.0.0.1:0", params_file=""),
+                       CommandQueue(), lambda: config,
+                       thresholds={"ins": 0.25, "dvl": 1.0, "depth": 0.5, "feedback": 0.5},
+                       max_thrust_n=[20.0] * 6)
+    from uvd.telemetry.sink import TelemetryHub
+    hub = TelemetryHub([link])
+    return link, _published(CYCLES["none"](), hub), hub
+
+
+async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: float,
+                     n_fuzz: int, steal) -> dict:
+    """Our loop running ``cycle`` plus a MAVLink link's cycle record, with ``n_fuzz`` bad
+    datagrams sent to the link over the measured run (0: none)."""
+    from uvd.bench.mavlink_fuzz import fuzz_process
+    link, publish, hub = _mavlink_link()
+
+    def both(t_ns: int, dt: float) -> None:
+        cycle(t_ns, dt)
+        publish(t_ns, dt)
+
+    from uvd.runtime.config import DaemonSection
+    # as the daemon runs: another thread holding the interpreter yields it within this
+    old_switch = sys.getswitchinterval()
+    sys.setswitchinterval(DaemonSection().gil_switch_interval_us * 1e-6)
+    pump = asyncio.get_running_loop().create_task(hub.run())
+    await asyncio.sleep(0.2)  # the hub opens the link
+    sender = None
+    if n_fuzz:  # from a second process, as a station's would come; it builds its datagrams
+        sender = fuzz_process(link.port, n_fuzz, duration)  # during the warm-up
+    try:
+        out = await _measure(settings, both, duration, warmup, steal)
+    finally:
+        if sender is not None:
+            try:
+                await asyncio.to_thread(sender.wait, 30.0)
+            except Exception:  # noqa: BLE001 - a sender that hangs is ended, never waited for
+                sender.kill()
+        await hub.aclose()
+        await pump
+        sys.setswitchinterval(old_switch)
+    out["mavlink"] = link.stats()
+    out["fuzz_read"] = link.stats().get("datagrams", 0) if sender is not None else 0
+    return out
 
 
 def _run(args) -> dict:
@@ -545,6 +622,19 @@ def _run(args) -> dict:
         half = ours["cycles"] // 2
         w, wo = (percentiles(rec_times[k][-half:]) for k in ("with", "without"))
         recording = {"with_us": w, "without_us": wo, "p50_cost_us": w["p50"] - wo["p50"]}
+    fuzz = None
+    if args.mavlink_fuzz:
+        def steal():
+            return host_steal_s(steal_cpus)
+        quiet = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup, 0, steal))
+        loud = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup,
+                                      args.mavlink_fuzz, steal))
+        p99q, p99l = quiet["lateness_us"]["p99"], loud["lateness_us"]["p99"]
+        fuzz = {"datagrams": args.mavlink_fuzz, "read": loud["fuzz_read"],
+                "link_counters": loud["mavlink"],
+                "quiet": {k: quiet[k] for k in ("lateness_us", "compute_us", "overruns")},
+                "fuzzed": {k: loud[k] for k in ("lateness_us", "compute_us", "overruns")},
+                "lateness_p99_change": (p99l - p99q) / p99q if p99q > 0 else None}
     warm = _back_to_back(cycle, args.rate, 2000) if args.cycle != "none" else None
     naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
     figures = {
@@ -580,6 +670,8 @@ def _run(args) -> dict:
         figures["last_error"] = ours["last_error"]
     if naive is not None:
         figures["naive_asyncio"] = naive
+    if fuzz is not None:
+        figures["mavlink_fuzz"] = fuzz
     print(f"uvd bench loop: {args.rate:g} Hz, {args.duration:g} s, cycle '{args.cycle}', "
           f"load {load0[0]:.2f}")
     print(f"  lateness µs  ours  : {_fmt(ours['lateness_us'])}   overruns {ours['overruns']}"
@@ -603,6 +695,16 @@ def _run(args) -> dict:
           f"host steal)  preempted {oa['preempted']}  woke late {oa['woke_late']}  paused in "
           f"spin {oa['paused_in_spin']}  compute {oa['compute']};  stall over the run "
           f"{oa['stall_ms_total']:.1f} ms, longest {oa['max_stall_us']:.0f} µs")
+    if fuzz is not None:
+        c = fuzz["link_counters"]
+        print(f"  MAVLink link, quiet : lateness µs {_fmt(fuzz['quiet']['lateness_us'])}   "
+              f"overruns {fuzz['quiet']['overruns']}")
+        print(f"  MAVLink link, fuzzed: lateness µs {_fmt(fuzz['fuzzed']['lateness_us'])}   "
+              f"overruns {fuzz['fuzzed']['overruns']}   ({fuzz['datagrams']} datagrams sent, "
+              f"{c.get('datagrams', 0)} read, {c.get('bad_datagrams', 0)} bad)")
+        ch = fuzz["lateness_p99_change"]
+        print(f"  lateness p99 change with fuzz: "
+              f"{'n/a' if ch is None else f'{100 * ch:+.1f} %'}")
     g = ours["gc"]
     print(f"  gc ({g['policy']}): collections {g['collections']}  forced {g['forced']}  "
           f"max µs {[round(x, 1) for x in g['max_us']]}")

@@ -4,7 +4,8 @@ reference.
 Validation is exactly what ``uvd run`` does at start (:func:`uvd.runtime.config.load_config`),
 without opening a port or a bus: on success it prints a one-line summary and exits 0; on
 failure every problem is printed as ``FILE: dotted.key: reason`` and it exits 2.
-``--doc-out`` writes ``docs/config.md`` generated from the schema.
+``--doc-out`` writes ``docs/config.md`` generated from the schema (and refreshes the MAVLink
+parameter list in the ``mavlink.md`` beside it).
 """
 
 from __future__ import annotations
@@ -40,6 +41,11 @@ def _run(args) -> int:
         args.doc_out.parent.mkdir(parents=True, exist_ok=True)
         args.doc_out.write_text(render_config_doc() + "\n", encoding="utf-8")
         print(f"uvd check-config: wrote {args.doc_out}")
+        mav = args.doc_out.with_name("mavlink.md")  # its parameter list, from the same schema
+        if mav.is_file():
+            from uvd.runtime.mavlink_params import refresh_doc
+            mav.write_text(refresh_doc(mav.read_text(encoding="utf-8")), encoding="utf-8")
+            print(f"uvd check-config: refreshed the parameter list in {mav}")
     if args.file is None:
         return 0
     try:

@@ -95,6 +95,9 @@ class Lockstep:
         self.instruments = FaultyInstruments(cfg.instruments, self.rng, self.faults)
         #: amplifier faults the cycle sees (names, e.g. ``("node 3: overcurrent",)``)
         self.amplifier_faults: tuple[str, ...] = ()
+        #: signals of plug-in failsafe triggers the cycle sees, as the daemon's read phase
+        #: gathers them (``{"operator_heartbeat_age_s": 6.0}``, uvd/runtime/triggers.py)
+        self.extra: dict | None = None
         self.substeps = int(round(cfg.plant_rate_hz / cfg.control_rate_hz))
         self.dt_control = 1.0 / cfg.control_rate_hz
         self.plant_dt_ns = int(round(1e9 / cfg.plant_rate_hz))
@@ -129,7 +132,8 @@ class Lockstep:
             act = ActuatorStatus(omega_rad_s=omega, enabled=True, faults=self.amplifier_faults,
                                  feedback_t_ns=self.t_ns)
             self.last_result = r = self.runner.update(
-                CycleInputs(self.t_ns, ins, dvl, depth, act), self.dt_control)
+                CycleInputs(self.t_ns, ins, dvl, depth, act, extra=self.extra),
+                self.dt_control)
             out = r.out
             self.state = self.runner.state
         else:

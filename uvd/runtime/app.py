@@ -317,15 +317,7 @@ class App:
             self.notifier.ready(self.supervisor.status_text())
             return self.last_reload
         merged, applied, refused = reloadable_changes(self.config, new)
-        self.config = merged
-        self.loop.set_overrun_streak(merged.loop.overrun_streak)
-        self.supervisor.set_thresholds(merged.failsafe)
-        self.hub.set_every_n("jsonl", merged.telemetry.jsonl.every_n_cycles)
-        for hook in self.reload_hooks:
-            try:
-                hook(merged, applied)
-            except Exception:
-                log.exception("reload hook failed")
+        self.apply_config(merged, applied)
         if applied:
             log.info("reload: applied %s", ", ".join(applied))
         if refused:
@@ -339,6 +331,20 @@ class App:
                           "error": None}, always=True)
         self.notifier.ready(self.supervisor.status_text())
         return self.last_reload
+
+    def apply_config(self, merged: Config, applied: list[str]) -> None:
+        """Take a configuration whose changes from the running one are all reloadable (a
+        SIGHUP reload, a ``SetParams`` command at a cycle boundary): thresholds, overrun
+        streak, decimation, and the integration's ``reload_hooks``."""
+        self.config = merged
+        self.loop.set_overrun_streak(merged.loop.overrun_streak)
+        self.supervisor.set_thresholds(merged.failsafe)
+        self.hub.set_every_n("jsonl", merged.telemetry.jsonl.every_n_cycles)
+        for hook in self.reload_hooks:
+            try:
+                hook(merged, applied)
+            except Exception:
+                log.exception("reload hook failed")
 
     # ------------------------------------------------------------------ running
 

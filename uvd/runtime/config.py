@@ -27,6 +27,7 @@ Sections and where their dataclass lives:
                      ``[can.log]``), converted into the CAN driver's plain
                      :class:`drivers.can.config.CanConfig`
 ``[telemetry]``      :class:`TelemetrySection`
+``[mavlink]``        :class:`MavlinkSection` — the ground-station link (docs/mavlink.md)
 ``[daemon]``         :class:`DaemonSection` — start/stop timeouts, the shutdown sequence
 ===================  =========================================================================
 
@@ -412,6 +413,83 @@ class TelemetrySection:
     zenoh: ZenohSection = section(ZenohSection)
 
 
+def _check_udp(addr: str, key: str) -> list[tuple[str, str]]:
+    host, sep, port = addr.rpartition(":")
+    try:
+        ok = bool(sep) and 0 < int(port) < 65536
+        ipaddress.ip_address(host.strip("[]"))
+    except ValueError:
+        ok = False
+    return [] if ok else [(key, f"{addr!r} is not ADDRESS:PORT (a numeric IPv4/IPv6 address "
+                                "and a port 1-65535)")]
+
+
+@dataclass(frozen=True)
+class MavlinkSection:
+    """The ground-station link (``[mavlink]``, docs/mavlink.md): MAVLink 2 over UDP and
+    serial."""
+
+    enabled: bool = setting(False, doc="run the MAVLink link (QGroundControl, MAVProxy)")
+    listen: str = setting("127.0.0.1:14551",
+                          doc="UDP ADDRESS:PORT the link listens on; ground stations send "
+                              "here and get telemetry back at their own address; empty: none")
+    connect: tuple[str, ...] = setting(
+        (), doc="UDP ADDRESS:PORT the link also sends to (a station that listens, e.g. "
+                "QGroundControl on 127.0.0.1:14550)")
+    serial: str = setting("", doc="a serial device to also speak MAVLink on (a telemetry "
+                                  "radio, e.g. /dev/ttyUSB0); empty: none")
+    serial_baud: int = setting(57600, min=1200, max=4_000_000, doc="its baud rate")
+    system_id: int = setting(1, min=1, max=255, doc="the vehicle's MAVLink system id")
+    component_id: int = setting(1, min=1, max=255,
+                                doc="its component id (1 = MAV_COMP_ID_AUTOPILOT1)")
+    gcs_system_ids: tuple[int, ...] = setting(
+        (255,), min=1, max=255,
+        doc="system ids of the ground stations: only their heartbeats count as the "
+            "operator's and only their commands are taken (others are counted and dropped)")
+    heartbeat_hz: float = setting(1.0, unit="Hz", gt=0.0, max=50.0,
+                                  doc="HEARTBEAT and SYS_STATUS rate")
+    state_hz: float = setting(10.0, unit="Hz", min=0.0, max=100.0,
+                              doc="ATTITUDE, LOCAL_POSITION_NED, SCALED_PRESSURE, VFR_HUD and "
+                                  "the thruster outputs (0: off)")
+    estimate_hz: float = setting(1.0, unit="Hz", min=0.0, max=50.0,
+                                 doc="NAMED_VALUE_FLOAT of the online estimates (0: off)")
+    station_timeout_s: float = setting(
+        10.0, unit="s", gt=0.0, max=3600.0,
+        doc="a station that listens (not in connect) gets telemetry while heard within this")
+    operator_timeout_s: float = setting(
+        5.0, unit="s", min=0.0, max=600.0,
+        doc="operator-loss failsafe: no ground-station heartbeat for this long while armed "
+            "(after one was heard) triggers operator_action; 0 = off (ArduSub's 5 s)")
+    operator_action: Literal["warn", "fallback", "hold-depth", "zero-thrust", "disarm"] = \
+        setting("hold-depth", doc="the failsafe action on operator loss")
+    manual_force_n: float = setting(
+        50.0, unit="N", gt=0.0, max=10000.0,
+        doc="MANUAL_CONTROL x, y, z at ±1000 map to this body force (surge, sway, heave)")
+    manual_torque_nm: float = setting(
+        10.0, unit="N m", gt=0.0, max=10000.0,
+        doc="MANUAL_CONTROL r at ±1000 maps to this yaw torque")
+    manual_timeout_s: float = setting(
+        0.5, unit="s", gt=0.0, max=10.0,
+        doc="a manual wrench holds this long after its MANUAL_CONTROL (then zero)")
+    params_file: str = setting(
+        "uvd-mavlink-params.toml",
+        doc="parameters set over MAVLink are kept here and applied at the next start "
+            "(relative to the working directory); empty: not kept")
+    signing_key_file: str = setting(
+        "", doc="MAVLink 2 signing: a file of the 32-byte secret key (raw, or 64 hex digits), "
+                "readable by the owner only; commands must then be signed; empty: off")
+    signing_timestamp_file: str = setting(
+        "uvd-mavlink-signing.ts",
+        doc="where the signing timestamp is kept across restarts (relative to the working "
+            "directory)")
+
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        out = _check_udp(self.listen, "listen") if self.listen else []
+        for i, a in enumerate(self.connect):
+            out += _check_udp(a, f"connect[{i}]")
+        return out
+
+
 @dataclass(frozen=True)
 class RecordingSection:
     """The black-box recorder (``[recording]``, docs/recording.md): every cycle record, event
@@ -518,6 +596,7 @@ class Config:
     can: CanConfig = section(CanConfig)
     telemetry: TelemetrySection = section(TelemetrySection)
     recording: RecordingSection = section(RecordingSection)
+    mavlink: MavlinkSection = section(MavlinkSection)
     daemon: DaemonSection = section(DaemonSection)
     simulation: SimulationSection = section(SimulationSection)
     source: str | None = field(default=None, init=False, compare=False)

@@ -36,15 +36,17 @@ from uvd.runtime.commands import Arm, CommandResult, SetParams
 from uvd.runtime.config import Config
 from uvd.runtime.cycle import Cycle, CycleInputs, CycleResult, inputs_record
 from uvd.runtime.failsafe import Action
-from uvd.runtime.leak import LeakInput, leak_sensor_fault_trigger
+from uvd.runtime.leak import LeakInput
 from uvd.runtime.lifecycle import State
 from uvd.runtime.loop import CpuLatencyRequest
 from uvd.runtime.mailbox import Mailbox
+from uvd.runtime.schema import reloadable_changes, with_values
 from uvd.runtime.sensors import make_sensors
 from uvd.runtime.supervisor import Supervisor
+from uvd.runtime.triggers import OPERATOR_AGE, plugin_triggers
 from uvd.telemetry.records import CycleRecord, estimate_record
 
-__all__ = ["Daemon", "LastCycle"]
+__all__ = ["Daemon", "LastCycle", "kept_params"]
 
 log = logging.getLogger("uvd.daemon")
 
@@ -59,6 +61,28 @@ class LastCycle:
     status: str = ""
     thrust_n: np.ndarray | None = None
     mode: str = "idle"
+
+
+def kept_params(config: Config, path: str) -> tuple[Config, dict[str, Any]]:
+    """``config`` with the parameters a ground station set (``[mavlink] params_file``,
+    docs/mavlink.md), and those applied; a value that is no longer valid is named in the log
+    and skipped."""
+    from uvd.runtime.mavlink_params import read_params_file
+    try:
+        values = read_params_file(path)
+    except ValueError as exc:
+        log.error("%s (parameters kept over MAVLink not applied)", exc)
+        return config, {}
+    applied = {}
+    for key, value in values.items():
+        new, errors = with_values(config, {key: value})
+        if errors:
+            log.error("%s: %s (not applied)", path, "; ".join(f"{k}: {r}" for k, r in errors))
+            continue
+        config, applied[key] = new, value
+    if applied:
+        log.info("parameters set over MAVLink applied from %s: %s", path, ", ".join(applied))
+    return config, applied
 
 
 class Daemon:
@@ -81,6 +105,11 @@ class Daemon:
                  notifier=None, clock=None, realtime: bool = True) -> None:
         cold = _jitcache.cache_is_empty()  # before anything below calls a kernel
         t_init = time.perf_counter()
+        #: parameters a ground station set before this start (in the start record: a replay
+        #: applies them too)
+        self.params_kept: dict[str, Any] = {}
+        if config.mavlink.enabled and config.mavlink.params_file:
+            config, self.params_kept = kept_params(config, config.mavlink.params_file)
         self.config = config
         self.vehicle = config.load_vehicle()
         self.ins_box: Mailbox = Mailbox("ins")
@@ -99,9 +128,7 @@ class Daemon:
         self.can = CanComponent(config, self.vehicle, self.depth_box,
                                 tap=None if self.recorder is None else self.recorder.tap_can)
         self.leak = LeakInput(config.sensors.leak) if config.sensors.leak.enabled else None
-        self.supervisor = Supervisor(
-            config.failsafe,
-            extra_triggers=[leak_sensor_fault_trigger()] if self.leak is not None else ())
+        self.supervisor = Supervisor(config.failsafe, extra_triggers=plugin_triggers(config))
         nav = config.navigation
         self.control = Cycle(build_core(config, self.vehicle), self.supervisor,
                              hold_on_arm=config.control.reference == "hold",
@@ -120,6 +147,17 @@ class Daemon:
                     s.on_sample = self.app.loop.wake
         self.app.set_amplifier_hooks(zero=self.can.zero, disable=self.can.disable)
         self.app.reload_hooks.append(self._on_reload)
+        self.mavlink = None
+        if config.mavlink.enabled:
+            from uvd.runtime.mavlink_link import MavlinkLink
+            f = config.failsafe
+            self.mavlink = MavlinkLink(
+                config.mavlink, self.app.commands, lambda: self.app.config,
+                thresholds={"ins": f.ins_stale_s, "dvl": f.dvl_stale_s,
+                            "depth": f.depth_stale_s, "feedback": f.feedback_stale_s},
+                max_thrust_n=self.max_thrust, controller=config.control.controller,
+                step1_s=config.control.step1_duration_s)
+            self.app.hub.add_sink(self.mavlink)
         est = config.estimation
         self._estimate_period_ns = int(est.publish_every_s * 1e9)
         self._next_estimate_ns = 0
@@ -159,7 +197,8 @@ class Daemon:
 
     def start_record(self) -> dict[str, Any]:
         """The ``"start"`` record: what a replay needs besides the cycles — the configuration
-        file's text and the online estimators' θ̂(0) (a resumed estimate starts elsewhere
+        file's text, the parameters kept over MAVLink applied on top of it, and the online
+        estimators' θ̂(0) (a resumed estimate starts elsewhere
         than the file says)."""
         text = None
         if self.config.source:
@@ -169,6 +208,7 @@ class Daemon:
                 log.warning("the start record carries no configuration: %s", exc)
         return {"type": "start", "t_ns": time.monotonic_ns(), "version": __version__,
                 "config_path": str(self.config.source or ""), "config_toml": text,
+                "params_kept": dict(self.params_kept),
                 "estimators": {spec.name: spec.diagnostics(st).theta for spec, st in
                                zip(self.core_cfg.estimators, self.state.est, strict=True)}}
 
@@ -285,6 +325,11 @@ class Daemon:
         if self.leak is not None:
             leak, fault = self.leak.health(t_ns)
             extra = {"leak_sensor_fault": fault}
+        if self.mavlink is not None:
+            # the operator's heartbeat counts while armed, once one was heard (triggers.py)
+            hb = self.mavlink.operator_heartbeat_ns
+            age = None if hb is None or not self.supervisor.armed else (t_ns - hb) * 1e-9
+            extra = {**(extra or {}), OPERATOR_AGE: age}
         return CycleInputs(t_ns, self.ins_box.take(), self.dvl_box.take(), self.depth_box.take(),
                            act, loop.overrun_streak, loop.streak_exceeded, leak, extra)
 
@@ -337,14 +382,25 @@ class Daemon:
         """Apply one command; its result is published as a ``"command"`` record (what a
         replay applies again at the same cycle)."""
         try:
-            res = CommandResult(False, "SetParams is not supported yet") \
-                if isinstance(c, SetParams) else self.control.apply(c, t_ns)
+            res = self._set_params(c) if isinstance(c, SetParams) else \
+                self.control.apply(c, t_ns)
         except Exception as exc:  # noqa: BLE001 - a bad command never breaks the cycle
             res = CommandResult(False, f"{type(exc).__name__}: {exc}")
         self.app.hub.publish({"type": "command", "t_ns": t_ns, "command": type(c).__name__,
                               "args": asdict(c), "source": c.source, "ok": res.ok,
                               "reason": res.reason}, always=True)
         return res
+
+    def _set_params(self, c: SetParams) -> CommandResult:
+        """Reloadable keys changed at this cycle boundary, exactly as a SIGHUP reload changes
+        them; refused as a whole when a key is unknown, needs a restart or its value is bad."""
+        old = self.app.config
+        new, errors = with_values(old, c.values, reload_only=True)
+        if errors:
+            return CommandResult(False, "; ".join(f"{k}: {r}" for k, r in errors))
+        merged, applied, _ = reloadable_changes(old, new)
+        self.app.apply_config(merged, applied)
+        return CommandResult(True)
 
     def _auto_arm(self, t_ns: int) -> None:
         """``uvd run --arm``: an ``Arm`` command every 200 ms of cycles (every second cycle

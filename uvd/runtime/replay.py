@@ -40,9 +40,10 @@ from uvd.runtime.build import build_core
 from uvd.runtime.commands import SetParams, command_from_record
 from uvd.runtime.config import Config, load_config
 from uvd.runtime.cycle import Cycle, inputs_from_record
-from uvd.runtime.leak import leak_sensor_fault_trigger
+from uvd.runtime.schema import with_values
 from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
+from uvd.runtime.triggers import plugin_triggers
 from uvd.telemetry.mcap_recorder import RecordingError, read_messages
 
 __all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport", "tracking"]
@@ -132,9 +133,16 @@ def _config_of(rec: Recording, override: str | Path | None) -> tuple[Config, boo
         fh.write(rec.start["config_toml"])
         tmp = Path(fh.name)
     try:
-        return load_config(tmp), True
+        cfg = load_config(tmp)
     finally:
         tmp.unlink(missing_ok=True)
+    kept = rec.start.get("params_kept") or {}
+    if kept:  # parameters a ground station had set, applied at start on top of the file
+        cfg, errors = with_values(cfg, kept)
+        if errors:
+            raise ConfigError(f"{rec.path}: the recorded params_kept do not apply: "
+                              + "; ".join(f"{k}: {r}" for k, r in errors))
+    return cfg, True
 
 
 def _samples(cfg: Config, rec: Recording) -> dict[tuple[str, int], Any]:
@@ -211,8 +219,7 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
     report = ReplayReport(recording=str(rec.path), same_config=same)
     vehicle = cfg.load_vehicle()
     core_cfg = build_core(cfg, vehicle, estimators=_estimators(cfg, rec))
-    extra = [leak_sensor_fault_trigger()] if cfg.sensors.leak.enabled else []
-    sup = Supervisor(cfg.failsafe, extra_triggers=extra)
+    sup = Supervisor(cfg.failsafe, extra_triggers=plugin_triggers(cfg))
     nav = cfg.navigation
     cyc = Cycle(core_cfg, sup, hold_on_arm=cfg.control.reference == "hold",
                 north_m=nav.initial_north_m, east_m=nav.initial_east_m)
@@ -222,6 +229,8 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
     cmds = sorted(rec.commands, key=lambda c: int(c["t_ns"]))
     ci = 0
     stop_at = min((int(r["t_ns"]) for r in rec.reloads if r.get("applied")), default=None)
+    set_at = min((int(c["t_ns"]) for c in cmds if c.get("command") == "SetParams"
+                  and c.get("ok")), default=None)
     replayed, recorded_thrust = [], []
     n = len(rec.cycles)
     for k, r in enumerate(rec.cycles):
@@ -229,6 +238,10 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
         if stop_at is not None and t > stop_at:
             report.stopped = (f"a reload applied {', '.join(_applied(rec, stop_at))} at "
                               f"t = {stop_at} ns: the replay covers the cycles before it")
+            break
+        if set_at is not None and t >= set_at:
+            report.stopped = (f"parameters were set (SetParams) at t = {set_at} ns: the replay "
+                              "covers the cycles before it")
             break
         if r.get("inputs") is None:
             report.stopped = f"cycle {k} (t = {t} ns) carries no inputs: recorded by an older uvd"

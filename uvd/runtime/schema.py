@@ -42,7 +42,8 @@ from pathlib import Path
 from typing import Any, Literal, get_args, get_origin
 
 __all__ = ["Meta", "setting", "section", "build", "describe", "KeyDoc", "BuildContext",
-           "reloadable_changes", "as_dict", "DECLARED_BY", "PerAxis", "AXES"]
+           "reloadable_changes", "as_dict", "DECLARED_BY", "PerAxis", "AXES", "with_values",
+           "leaf_keys", "LeafKey"]
 
 _META = "uvd.schema"
 
@@ -533,3 +534,111 @@ def reloadable_changes(old: Any, new: Any, prefix: str = ""
         if not f.init:
             object.__setattr__(merged, f.name, getattr(old, f.name))
     return merged, applied, refused
+
+
+@dataclass(frozen=True)
+class LeafKey:
+    """One key of a section as :func:`leaf_keys` lists it: dotted name, type, metadata and
+    default."""
+
+    key: str
+    type: Any
+    meta: Meta
+    default: Any
+
+
+def leaf_keys(cls: type, prefix: str = "") -> list[LeafKey]:
+    """Every non-table key of ``cls`` (nested tables flattened), in declaration order."""
+    if cls in DECLARED_BY:
+        return leaf_keys(DECLARED_BY[cls], prefix)
+    hints = _hints(cls)
+    out: list[LeafKey] = []
+    for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        key = f"{prefix}.{f.name}" if prefix else f.name
+        inner = _is_optional(hints[f.name])[1]
+        if dataclasses.is_dataclass(inner):
+            out += leaf_keys(inner, key)
+            continue
+        default = f.default if f.default is not MISSING else (
+            f.default_factory() if f.default_factory is not MISSING else None)
+        out.append(LeafKey(key, hints[f.name], _meta(f), default))
+    return out
+
+
+def with_values(obj: Any, values: Mapping[str, Any], *, reload_only: bool = False,
+                ctx: BuildContext | None = None) -> tuple[Any, list[tuple[str, str]]]:
+    """``obj`` with dotted keys replaced, each value validated as :func:`build` validates it
+    (type, range, choices; a section's ``_check`` runs again).
+
+    Parameters
+    ----------
+    obj : dataclass instance
+        A configuration (or section).
+    values : mapping
+        ``{"control.kp": 350.0, …}``.
+    reload_only : bool
+        Refuse keys that may not change while running (not marked *reload*).
+    ctx : BuildContext, optional
+        For the sections' checks; by default the folder of ``obj.source`` (a Config's file).
+
+    Returns
+    -------
+    new : same type as ``obj``
+        ``obj`` itself when there are errors.
+    errors : list of (key, reason)
+        Unknown keys, keys that need a restart, bad values — every one named.
+    """
+    if ctx is None:  # relative paths as the file they came from says (a Config's source)
+        src = getattr(obj, "source", None)
+        ctx = BuildContext(Path(src) if src else None)
+    errors: list[tuple[str, str]] = []
+    new = _with(obj, dict(values), "", errors, reload_only, ctx)
+    return (obj, errors) if errors else (new, errors)
+
+
+def _with(obj: Any, values: dict[str, Any], prefix: str, errors: list, reload_only: bool,
+          ctx: BuildContext) -> Any:
+    cls = type(obj)
+    hints = _hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    groups: dict[str, dict[str, Any]] = {}
+    for k, v in values.items():
+        head, _, rest = k.partition(".")
+        groups.setdefault(head, {})[rest] = v
+    changes: dict[str, Any] = {}
+    n_err = len(errors)
+    for head, sub in groups.items():
+        key = f"{prefix}.{head}" if prefix else head
+        f = fields.get(head)
+        if f is None:
+            errors.append((key, "unknown key"))
+            continue
+        cur = getattr(obj, head)
+        if dataclasses.is_dataclass(cur) and type(cur) not in DECLARED_BY:
+            if "" in sub:
+                errors.append((key, "is a table, not a key"))
+                continue
+            changes[head] = _with(cur, sub, key, errors, reload_only, ctx)
+            continue
+        if set(sub) != {""}:
+            errors.append((key, "not a table (or a table these keys cannot change)"))
+            continue
+        meta = _meta(f)
+        if reload_only and not meta.reload:
+            errors.append((key, "cannot change while running (needs a restart)"))
+            continue
+        conv = _value(sub[""], hints[head], meta, key, errors, ctx)
+        if conv is not MISSING:
+            changes[head] = conv
+    if len(errors) != n_err or not changes:
+        return obj
+    new = dataclasses.replace(obj, **changes)
+    for f in dataclasses.fields(cls):  # carry non-init fields (e.g. the file name) over
+        if not f.init:
+            object.__setattr__(new, f.name, getattr(obj, f.name))
+    check = getattr(new, "_check", None)
+    if check is not None and prefix:  # the whole Config's check loads the vehicle: not here
+        errors += [(f"{prefix}.{k}", r) for k, r in check(ctx)]
+    return new

@@ -1,0 +1,193 @@
+"""The MAVLink link alone on loopback (no daemon): a station made of a UDP socket and
+pymavlink's codec sends what an operator sends; the link's command queue shows what the cycle
+would get. Bounded: every wait has a deadline."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import time
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from uvd.runtime.commands import CommandQueue, HoldPose, ManualWrench
+from uvd.runtime.config import DEFAULT_CONFIG, MavlinkSection, load_config
+from uvd.runtime.mavlink_link import MavlinkLink
+
+mav = mavlink
+
+
+class Peer:
+    def __init__(self, system: int = 255) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.05)
+        self.enc = mavlink.MAVLink(None, system, 190)
+        self.enc.WIRE_PROTOCOL_VERSION = "2.0"
+        self.dec = mavlink.MAVLink(None, 255, 190)
+        self.dec.robust_parsing = True
+
+    @property
+    def port(self) -> int:
+        return self.sock.getsockname()[1]
+
+    def send(self, msg, port: int) -> None:
+        self.sock.sendto(msg.pack(self.enc), ("127.0.0.1", port))
+
+    def wait(self, kind: str, cond=lambda m: True, timeout: float = 3.0):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                data = self.sock.recv(4096)
+            except TimeoutError:
+                continue
+            for m in self.dec.parse_buffer(data) or []:
+                if m.get_type() == kind and cond(m):
+                    return m
+        raise AssertionError(f"no {kind} within {timeout} s")
+
+
+def cycle_record(**kw):
+    rec = {"type": "cycle", "t_ns": 1, "state": "STANDBY", "action": "none", "mode": "zero",
+           "operator_mode": "auto", "p": np.array([1.0, 2.0, 3.0]), "R": np.eye(3),
+           "v": np.zeros(6), "thrust": np.array([1.0, -2.0, 0, 0, 0, 0]),
+           "ages": (0.01, 0.1, 0.05, 0.01), "armed_at_ns": None}
+    return {**rec, **kw}
+
+
+def run_link(scenario, **cfg):
+    station = Peer()
+    link = MavlinkLink(
+        MavlinkSection(enabled=True, listen="127.0.0.1:0", params_file="",
+                       connect=(f"127.0.0.1:{station.port}",), **cfg),
+        CommandQueue(), lambda: load_config(DEFAULT_CONFIG),
+        thresholds={"ins": 0.25, "dvl": 1.0, "depth": 0.5, "feedback": 0.5},
+        max_thrust_n=[20.0] * 6)
+
+    async def main():
+        await link.open()
+        try:
+            await link.write([cycle_record()])
+            return await asyncio.to_thread(scenario, link, station)
+        finally:
+            await link.aclose()
+            station.sock.close()
+    return asyncio.run(asyncio.wait_for(main(), 30.0))
+
+
+def queued(link, n: int = 1, timeout: float = 2.0):
+    deadline = time.monotonic() + timeout
+    got = []
+    while len(got) < n and time.monotonic() < deadline:
+        got += [p.command for p in link.commands.drain()]
+        time.sleep(0.01)
+    return got
+
+
+def test_connect_endpoint_telemetry_manual_setpoint_and_refusals():
+    def scenario(link, st):
+        hb = st.wait("HEARTBEAT")  # to the connect endpoint, before it said anything
+        assert hb.type == mav.MAV_TYPE_SUBMARINE and hb.system_status == mav.MAV_STATE_STANDBY
+        pos = st.wait("LOCAL_POSITION_NED")
+        assert (pos.x, pos.y, pos.z) == (1.0, 2.0, 3.0)
+        act = st.wait("ACTUATOR_OUTPUT_STATUS")
+        assert list(act.actuator[:3]) == [1.0, -2.0, 0.0] and act.active == 0b111111
+        servo = st.wait("SERVO_OUTPUT_RAW")
+        assert (servo.servo1_raw, servo.servo2_raw, servo.servo3_raw) == (1520, 1460, 1500)
+        st.send(st.enc.manual_control_encode(1, 500, -1000, 1000, 250, 0), link.port)
+        (c,) = queued(link)
+        assert isinstance(c, ManualWrench)
+        assert np.allclose(c.u, (25.0, -50.0, -50.0, 0.0, 0.0, 2.5))  # z 1000: up = -z
+        st.send(st.enc.set_position_target_local_ned_encode(
+            0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b0000_1011_1111_1000, 4.0, 5.0, 6.0,
+            0, 0, 0, 0, 0, 0, 0.5, 0), link.port)
+        (c,) = queued(link)
+        assert c == HoldPose(4.0, 5.0, 6.0, 0.5, source="mavlink 255")
+        st.send(st.enc.set_position_target_local_ned_encode(  # yaw ignored: present heading
+            0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b0000_1111_1111_1000, 4.0, 5.0, 6.0,
+            0, 0, 0, 0, 0, 0, 0.5, 0), link.port)
+        (c,) = queued(link)
+        assert c.heading_rad == 0.0
+        st.send(st.enc.command_long_encode(1, 1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0,
+                                           0), link.port)
+        ack = st.wait("COMMAND_ACK")
+        assert ack.command == mav.MAV_CMD_NAV_TAKEOFF
+        assert ack.result == mav.MAV_RESULT_UNSUPPORTED
+        st.send(st.enc.timesync_encode(0, 12345), link.port)
+        assert st.wait("TIMESYNC", lambda m: m.ts1 == 12345).tc1 > 0
+        other = Peer(system=42)
+        other.send(other.enc.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0), link.port)
+        other.sock.close()
+        time.sleep(0.2)
+        assert queued(link, timeout=0.2) == [] and link.counters["not_a_gcs"] == 1
+
+    run_link(scenario)
+
+
+def test_a_long_reason_goes_out_in_statustext_chunks():
+    reason = "x" * 120
+
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        asyncio.run(link.write([{"type": "failsafe", "kind": "fired", "trigger": "leak",
+                                 "action": "disarm", "reason": reason}]))
+        text = f"failsafe fired: leak -> disarm ({reason})"  # 153 bytes: 4 chunks of <= 50
+        parts = [st.wait("STATUSTEXT", lambda m, i=i: m.chunk_seq == i) for i in range(4)]
+        assert len({p.id for p in parts}) == 1 and parts[0].id > 0
+        assert parts[0].severity == mav.MAV_SEVERITY_WARNING
+        assert "".join(p.text for p in parts) == text
+
+    run_link(scenario)
+
+
+def test_serial_line_carries_telemetry_and_commands(tmp_path):
+    """A pseudo-terminal as the radio: the station writes a HEARTBEAT and an ARM on the master
+    side; the link queues the Arm and sends its telemetry down the line."""
+    import os
+
+    from uvd.runtime.commands import Arm
+    master, slave = os.openpty()
+    os.set_blocking(master, False)
+    enc = mavlink.MAVLink(None, 255, 190)
+    enc.WIRE_PROTOCOL_VERSION = "2.0"
+    dec = mavlink.MAVLink(None, 255, 190)
+    dec.robust_parsing = True
+    link = MavlinkLink(
+        MavlinkSection(enabled=True, listen="127.0.0.1:0", params_file="",
+                       serial=os.ttyname(slave), serial_baud=115200),
+        CommandQueue(), lambda: load_config(DEFAULT_CONFIG),
+        thresholds={"ins": 0.25, "dvl": 1.0, "depth": 0.5, "feedback": 0.5},
+        max_thrust_n=[20.0] * 6)
+
+    def scenario():
+        # split mid-packet: the line is a byte stream
+        data = enc.heartbeat_encode(6, 8, 0, 0, 0).pack(enc) + \
+            enc.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0).pack(enc)
+        os.write(master, data[:15])
+        time.sleep(0.05)
+        os.write(master, data[15:])
+        (c,) = queued(link)
+        assert isinstance(c, Arm) and link.operator_heartbeat_ns is not None
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline:
+            try:
+                msgs = dec.parse_buffer(os.read(master, 4096)) or []
+            except BlockingIOError:
+                time.sleep(0.02)
+                continue
+            if any(m.get_type() == "HEARTBEAT" and m.type == mav.MAV_TYPE_SUBMARINE
+                   for m in msgs):
+                return
+        raise AssertionError("no HEARTBEAT down the serial line")
+
+    async def main():
+        await link.open()
+        try:
+            await link.write([cycle_record()])
+            await asyncio.to_thread(scenario)
+        finally:
+            await link.aclose()
+            os.close(master)
+            os.close(slave)
+    asyncio.run(asyncio.wait_for(main(), 30.0))

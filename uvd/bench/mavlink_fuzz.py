@@ -1,0 +1,99 @@
+"""Random and malformed MAVLink datagrams, and a bounded sender: the fuzz of the MAVLink link
+(tests/test_mavlink.py, ``uvd bench loop --mavlink-fuzz N``)."""
+
+from __future__ import annotations
+
+import random
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+__all__ = ["fuzz_datagrams", "FuzzSender", "fuzz_process"]
+
+
+def fuzz_datagrams(n: int, seed: int = 21) -> list[bytes]:
+    """``n`` datagrams, six kinds in turn: random bytes; a valid packet (ARM, PARAM_SET far out
+    of range, MANUAL_CONTROL at full scale, SET_MODE 99, HEARTBEAT) truncated; with one bit
+    flipped; with a wrong CRC; a valid header before a random payload; 2 kB of noise behind a
+    MAVLink 2 start byte."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+    rng = random.Random(seed)
+    enc = mavlink.MAVLink(None, 255, 190)
+    enc.WIRE_PROTOCOL_VERSION = "2.0"
+    good = [m.pack(enc) for m in (
+        enc.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0),
+        enc.param_set_encode(1, 1, b"CTL_KP", 1e9, 9),
+        enc.manual_control_encode(1, 1000, 1000, 1000, 1000, 0),
+        enc.set_mode_encode(1, 1, 99), enc.heartbeat_encode(6, 8, 0, 0, 0))]
+
+    def noise(k: int) -> bytes:
+        return bytes(rng.getrandbits(8) for _ in range(k))
+
+    out = []
+    for i in range(n):
+        g = bytearray(rng.choice(good))
+        kind = i % 6
+        if kind == 0:
+            d = noise(rng.randint(0, 300))
+        elif kind == 1:
+            d = bytes(g[:rng.randint(0, len(g) - 1)])
+        elif kind == 2:
+            g[rng.randrange(len(g))] ^= 1 << rng.randrange(8)
+            d = bytes(g)
+        elif kind == 3:
+            g[-1] ^= 0xFF
+            d = bytes(g)
+        elif kind == 4:
+            d = bytes(g[:10]) + noise(rng.randint(0, 255))
+        else:
+            d = b"\xfd" + noise(2000)
+        out.append(d)
+    return out
+
+
+class FuzzSender:
+    """Send datagrams to ``(host, port)`` from a thread, spread evenly over ``duration_s``."""
+
+    def __init__(self, datagrams: list[bytes], host: str, port: int, duration_s: float) -> None:
+        self.datagrams, self.addr, self.duration_s = datagrams, (host, port), duration_s
+        self.sent = 0
+        self._thread = threading.Thread(target=self._run, name="mavlink-fuzz", daemon=True)
+
+    def _run(self) -> None:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        t0 = time.monotonic()
+        n = len(self.datagrams)
+        try:
+            for i, d in enumerate(self.datagrams):
+                due = t0 + self.duration_s * i / n
+                wait = due - time.monotonic()
+                if wait > 0:
+                    time.sleep(wait)
+                sock.sendto(d, self.addr)
+                self.sent += 1
+        finally:
+            sock.close()
+
+    def start(self) -> FuzzSender:
+        self._thread.start()
+        return self
+
+    def join(self, timeout: float | None = None) -> None:
+        self._thread.join(timeout)
+
+
+def fuzz_process(port: int, n: int, duration_s: float, host: str = "127.0.0.1"
+                 ) -> subprocess.Popen:
+    """A second process sending ``n`` fuzz datagrams to ``host:port`` over ``duration_s`` (a
+    sender thread in the measured process would compete with its loop for the GIL)."""
+    return subprocess.Popen([sys.executable, "-m", "uvd.bench.mavlink_fuzz", host, str(port),
+                             str(n), str(duration_s)])
+
+
+if __name__ == "__main__":
+    h, p, k, d = sys.argv[1:5]
+    s = FuzzSender(fuzz_datagrams(int(k)), h, int(p), float(d)).start()
+    s.join()
+    print(s.sent)

@@ -1,0 +1,702 @@
+"""The MAVLink ground-station link (``[mavlink]``, docs/mavlink.md): a telemetry sink and a
+command receiver, never on the loop's critical path.
+
+:class:`MavlinkLink` is a :class:`~uvd.telemetry.sink.TelemetrySink` of the daemon's hub: its
+``write`` (event loop, off the cycle) only keeps the newest cycle and estimate records and
+queues a STATUSTEXT for each failsafe event, lifecycle transition and refused command. One
+daemon thread owns the UDP socket and the two pymavlink codecs; it
+
+* reads UDP datagrams at ``listen`` and, when ``serial`` is set, a serial line (a telemetry
+  radio);
+* sends HEARTBEAT and SYS_STATUS at ``heartbeat_hz``; ATTITUDE, LOCAL_POSITION_NED,
+  SCALED_PRESSURE, VFR_HUD, SERVO_OUTPUT_RAW and ACTUATOR_OUTPUT_STATUS at ``state_hz``;
+  NAMED_VALUE_FLOAT of the online estimates at ``estimate_hz`` — to every station heard within
+  ``station_timeout_s``, to the ``connect`` addresses and down the serial line;
+* turns what stations send into commands of :mod:`uvd.runtime.commands` on the daemon's one
+  command queue (``App.commands``) — the cycle applies them at its next start — and answers
+  each with COMMAND_ACK (and a STATUSTEXT with the reason of a refusal) once the cycle has
+  resolved it; PARAM_* and TIMESYNC it answers itself.
+
+Everything bad that arrives (not MAVLink, bad CRC, unknown or malformed message, a command
+for another system, from a station not in ``gcs_system_ids``, unsigned or wrongly signed when
+signing is on) is counted under a named reason (:attr:`MavlinkLink.counters`) and dropped.
+The loop reads one thing of the link: :attr:`MavlinkLink.operator_heartbeat_ns`, the time of
+the newest operator HEARTBEAT (the operator-loss failsafe, :mod:`uvd.runtime.triggers`).
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import math
+import select
+import socket
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from uvd.model.params import N_DECOUPLED, N_THETA_UV, decoupled_from_theta
+from uvd.runtime import mavlink_params as mp
+from uvd.runtime import schema
+from uvd.runtime.commands import (
+    Arm,
+    CommandQueue,
+    CommandResult,
+    Disarm,
+    HoldPose,
+    ManualWrench,
+    SetMode,
+    SetParams,
+)
+from uvd.runtime.config import MavlinkSection
+from uvd.telemetry.mavlink_signing import (
+    SigningState,
+    load_key,
+    load_timestamp,
+    save_timestamp,
+)
+from uvd.telemetry.records import euler_of
+
+__all__ = ["MavlinkLink", "CUSTOM_MODES", "APPLIED_MODES", "custom_mode_of"]
+
+log = logging.getLogger("uvd.mavlink")
+
+#: HEARTBEAT custom_mode, low byte: the operator's mode (what SET_MODE / DO_SET_MODE set)
+CUSTOM_MODES = {"auto": 1, "pdc": 2, "hold-depth": 3, "manual": 4, "observe": 5}
+_MODE_OF = {v: k for k, v in CUSTOM_MODES.items()}
+#: HEARTBEAT custom_mode, second byte: what the cycle applies (report only)
+APPLIED_MODES = {"standby": 0, "pdc": 1, "ambc": 2, "two-step-1": 3, "two-step-2": 4,
+                 "observe": 5, "manual": 6, "hold-depth": 7, "zero-thrust": 8}
+_SEVERITY = {"emergency": 0, "alert": 1, "critical": 2, "error": 3, "warning": 4,
+             "notice": 5, "info": 6}
+_STATE_STATUS = {"BOOT": 1, "STANDBY": 3, "ARMED": 4, "FAILSAFE": 5, "SHUTDOWN": 7}
+#: SYS_STATUS sensor bits: INS (gyro, accelerometer, magnetometer), DVL (as optical flow:
+#: velocity over ground), depth (absolute pressure), amplifiers (motor outputs)
+_INS_BITS, _DVL_BIT, _DEPTH_BIT, _MOTOR_BIT = 0x7, 0x40, 0x8, 0x8000
+_RHO_G = 1000.0 * 9.80665  # fresh water, for SCALED_PRESSURE from depth (docs/mavlink.md)
+_SIGNED_ONLY = {"COMMAND_LONG", "COMMAND_INT", "SET_MODE", "MANUAL_CONTROL",
+                "SET_POSITION_TARGET_LOCAL_NED", "PARAM_SET", "HEARTBEAT"}
+
+
+def custom_mode_of(rec: Mapping[str, Any], controller: str, step1_s: float) -> int:
+    """HEARTBEAT custom_mode of a cycle record: operator mode | applied mode << 8."""
+    op = CUSTOM_MODES.get(str(rec.get("operator_mode")), 0)
+    mode = str(rec.get("mode"))
+    if rec.get("state") != "ARMED":
+        applied = "standby"
+    elif mode == "control":
+        if controller == "two-step-ambc":
+            armed = rec.get("armed_at_ns")
+            t = 0.0 if armed is None else (int(rec["t_ns"]) - int(armed)) * 1e-9
+            applied = "two-step-1" if t < step1_s else "two-step-2"
+        else:
+            applied = controller
+    else:
+        applied = {"pdc-fallback": "pdc", "hold-depth": "hold-depth", "manual": "manual",
+                   "zero": "observe" if rec.get("operator_mode") == "observe"
+                   else "zero-thrust"}.get(mode, "zero-thrust")
+    return op | APPLIED_MODES[applied] << 8
+
+
+#: the station at the end of the serial line (a radio): always a destination when configured
+SERIAL = ("serial",)
+
+
+def _addr(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    return host.strip("[]"), int(port)
+
+
+def _framed(data: bytes) -> bool:
+    """True when ``data`` is whole MAVLink packets back to back, judged by their headers'
+    lengths alone (a station sends whole packets per datagram)."""
+    i, n = 0, len(data)
+    while i < n:
+        if i + 3 > n:
+            return False
+        if data[i] == 0xFD:
+            i += data[i + 1] + 12 + (13 if data[i + 2] & 0x01 else 0)
+        elif data[i] == 0xFE:
+            i += data[i + 1] + 8
+        else:
+            return False
+    return i == n and n > 0
+
+
+class _Out:
+    """pymavlink's encoder writes here; the link sends the bytes to every station."""
+
+    def __init__(self) -> None:
+        self.buf = b""
+
+    def write(self, b: bytes) -> None:
+        self.buf = bytes(b)
+
+
+class MavlinkLink:
+    """The ground-station link (module docstring).
+
+    Parameters
+    ----------
+    cfg : MavlinkSection
+    commands : CommandQueue
+        The daemon's command queue (``App.commands``).
+    config : callable
+        Returns the running :class:`~uvd.runtime.config.Config` (parameter values).
+    thresholds : mapping
+        Source ages that count as healthy in SYS_STATUS (``ins``, ``dvl``, ``depth``,
+        ``feedback`` in s).
+    max_thrust_n : sequence of float
+        Per-thruster thrust limit (SERVO_OUTPUT_RAW's scale).
+    controller : str
+        ``[control] controller``; ``step1_s`` its step-1 length (custom mode).
+    """
+
+    name = "mavlink"
+
+    def __init__(self, cfg: MavlinkSection, commands: CommandQueue, config: Callable[[], Any],
+                 *, thresholds: Mapping[str, float], max_thrust_n: Sequence[float],
+                 controller: str = "pdc", step1_s: float = 0.0) -> None:
+        from pymavlink.dialects.v20 import ardupilotmega as mavlink
+        self.mavlink = mavlink
+        self.cfg = cfg
+        self.commands = commands
+        self.config = config
+        self.thresholds = dict(thresholds)
+        self.max_thrust_n = np.asarray(max_thrust_n, dtype=float)
+        self.controller = controller
+        self.step1_s = float(step1_s)
+        self._out = _Out()
+        self.tx = mavlink.MAVLink(self._out, cfg.system_id, cfg.component_id, use_native=False)
+        self.tx.WIRE_PROTOCOL_VERSION = "2.0"
+        self.rx = mavlink.MAVLink(None, cfg.system_id, cfg.component_id, use_native=False)
+        self.rx.robust_parsing = True
+        self.signing: SigningState | None = None
+        if cfg.signing_key_file:
+            key = load_key(cfg.signing_key_file)
+            self.signing = SigningState(key, load_timestamp(cfg.signing_timestamp_file))
+            self.tx.signing.secret_key = key
+            self.tx.signing.sign_outgoing = True
+            self.tx.signing.timestamp = self.signing.timestamp
+        self.gcs_ids = frozenset(cfg.gcs_system_ids)
+        self.connect = [_addr(a) for a in cfg.connect]
+        self.peers: dict[tuple, float] = {}
+        #: monotonic ns of the newest HEARTBEAT of a configured ground station (None: none)
+        self.operator_heartbeat_ns: int | None = None
+        self.counters: collections.Counter = collections.Counter()
+        #: parameters set during this run that apply at the next start
+        self.pending: dict[str, Any] = {}
+        self._cycle: Mapping[str, Any] | None = None
+        self._estimate: Mapping[str, Any] | None = None
+        self._texts: collections.deque = collections.deque(maxlen=64)
+        self._replies: collections.deque = collections.deque(maxlen=256)
+        self._text_id = 0
+        self._sock: socket.socket | None = None
+        self._serial = None
+        self.rx_serial = mavlink.MAVLink(None, cfg.system_id, cfg.component_id,
+                                         use_native=False)
+        self.rx_serial.robust_parsing = True
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._t0 = time.monotonic()
+
+    def _text(self, item: tuple[str, str]) -> None:
+        self._push(self._texts, item, "statustext")
+
+    def _push(self, queue: collections.deque, item: Any, what: str) -> None:
+        """Append to a bounded deque; when full its oldest item is dropped and counted."""
+        if len(queue) == queue.maxlen:
+            self.counters[f"{what}_dropped"] += 1
+        queue.append(item)
+
+    # ------------------------------------------------------------------ sink (event loop)
+
+    async def open(self) -> None:
+        fam = socket.AF_INET6 if ":" in self.cfg.listen.rpartition(":")[0] else socket.AF_INET
+        sock = socket.socket(fam, socket.SOCK_DGRAM)
+        try:
+            if self.cfg.listen:
+                sock.bind(_addr(self.cfg.listen))
+            sock.setblocking(False)
+        except OSError as exc:
+            sock.close()
+            log.error("MAVLink link off: [mavlink] listen %s: %s", self.cfg.listen,
+                      exc.strerror or exc)
+            raise OSError(f"[mavlink] listen {self.cfg.listen}: {exc.strerror or exc}") from exc
+        self._sock = sock
+        if self.cfg.serial:
+            import serial
+            try:
+                self._serial = serial.Serial(self.cfg.serial, self.cfg.serial_baud, timeout=0,
+                                             write_timeout=0)
+            except (serial.SerialException, OSError) as exc:
+                sock.close()
+                log.error("MAVLink link off: [mavlink] serial %s: %s", self.cfg.serial, exc)
+                raise OSError(f"[mavlink] serial {self.cfg.serial}: {exc}") from exc
+        self._thread = threading.Thread(target=self._run, name="uvd-mavlink", daemon=True)
+        self._thread.start()
+        log.info("MAVLink link on udp %s (system %d, signing %s)", self.cfg.listen,
+                 self.cfg.system_id, "on" if self.signing else "off")
+
+    @property
+    def port(self) -> int:
+        """The UDP port bound (tests listen on port 0)."""
+        return self._sock.getsockname()[1] if self._sock is not None else 0
+
+    async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
+        for r in records:
+            kind = r.get("type")
+            if kind == "cycle":
+                self._cycle = r
+            elif kind == "estimate":
+                self._estimate = r
+            elif kind == "failsafe":
+                sev = "warning" if r["kind"] in ("fired", "action") else "info"
+                self._text((sev, f"failsafe {r['kind']}: {r['trigger']} -> "
+                                         f"{r['action']} ({r['reason']})"))
+            elif kind == "lifecycle":
+                self._text(("notice", f"{r['from']} -> {r['to']}: {r['cause']}"))
+            elif kind == "command" and not r.get("ok"):
+                self._text(("warning", f"{r['command']} refused: {r['reason']}"))
+
+    async def flush(self) -> None:
+        pass
+
+    async def aclose(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=0.5)
+        if self._sock is not None:
+            self._sock.close()
+        if self._serial is not None:
+            self._serial.close()
+        self._save_timestamp()
+
+    def stats(self) -> dict[str, Any]:
+        out = dict(self.counters)
+        out["stations"] = len(self.peers)
+        if self.signing is not None:
+            out["signing"] = dict(self.signing.counts)
+        return out
+
+    # ------------------------------------------------------------------ the link's thread
+
+    def _run(self) -> None:
+        next_hb = next_state = next_est = next_ts = time.monotonic()
+        c = self.cfg
+        while not self._stop.is_set():
+            try:
+                ins = [self._sock] if self._serial is None else [self._sock, self._serial]
+                readable, _, _ = select.select(ins, [], [], 0.02)
+                if self._sock in readable:
+                    self._receive()
+                if self._serial is not None and self._serial in readable:
+                    self._receive_serial()
+                while self._replies:
+                    done, result = self._replies.popleft()
+                    done(result)
+                now = time.monotonic()
+                if now >= next_hb:
+                    next_hb = now + 1.0 / c.heartbeat_hz
+                    self._send_status()
+                if c.state_hz > 0 and now >= next_state:
+                    next_state = now + 1.0 / c.state_hz
+                    self._send_state()
+                if c.estimate_hz > 0 and now >= next_est:
+                    next_est = now + 1.0 / c.estimate_hz
+                    self._send_estimates()
+                while self._texts:
+                    self._statustext(*self._texts.popleft())
+                if self.signing is not None and now >= next_ts:
+                    next_ts = now + 10.0
+                    self._save_timestamp()
+            except Exception as exc:  # noqa: BLE001 - the link's thread must not die
+                self.counters["errors"] += 1
+                log.warning("MAVLink link: %s: %s", type(exc).__name__, exc)
+
+    def _save_timestamp(self) -> None:
+        if self.signing is None or not self.cfg.signing_timestamp_file:
+            return
+        ts = max(self.signing.timestamp, self.tx.signing.timestamp)
+        try:
+            save_timestamp(self.cfg.signing_timestamp_file, ts)
+        except OSError as exc:
+            self.counters["timestamp_save_failed"] += 1
+            log.warning("cannot keep the signing timestamp: %s", exc)
+
+    def _receive(self) -> None:
+        # bounded per wake (every 20 ms at most): under a flood the kernel drops the rest, and
+        # this thread never holds the interpreter long enough to delay the loop
+        for _ in range(64):
+            try:
+                data, addr = self._sock.recvfrom(4096)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                self.counters["recv_errors"] += 1
+                return
+            self.counters["datagrams"] += 1
+            self._datagram(data, addr)
+
+    def _receive_serial(self) -> None:
+        """A byte stream: one parser keeps its state across reads (at most 4 KiB a wake)."""
+        data = self._serial.read(4096)
+        self.counters["serial_bytes"] += len(data)
+        try:
+            msgs = self.rx_serial.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - whatever pymavlink raises on garbage
+            msgs = []
+        for m in msgs:
+            if m.get_type() == "BAD_DATA":
+                self.counters["bad_serial"] += 1
+                continue
+            try:
+                self._message(m, SERIAL)
+            except Exception as exc:  # noqa: BLE001 - a message we cannot use is dropped
+                self.counters["bad_messages"] += 1
+                log.debug("MAVLink %s on serial dropped: %s", m.get_type(), exc)
+
+    def _datagram(self, data: bytes, addr: tuple) -> None:
+        if not _framed(data):  # cheap: most garbage never reaches pymavlink's parser
+            self.counters["bad_datagrams"] += 1
+            return
+        rx = self.rx
+        rx.buf, rx.buf_index, rx.expected_length = bytearray(), 0, self.mavlink.HEADER_LEN_V1 + 2
+        rx.have_prefix_error = False
+        try:
+            msgs = rx.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - whatever pymavlink raises on garbage
+            msgs = []
+        good = [m for m in msgs if m.get_type() != "BAD_DATA"]
+        if len(good) < len(msgs) or not msgs:
+            self.counters["bad_datagrams"] += 1
+        for m in good:
+            try:
+                self._message(m, addr)
+            except Exception as exc:  # noqa: BLE001 - a message we cannot use is dropped
+                self.counters["bad_messages"] += 1
+                log.debug("MAVLink %s from %s dropped: %s", m.get_type(), addr, exc)
+
+    def _message(self, m: Any, addr: tuple) -> None:
+        kind = m.get_type()
+        src = m.get_srcSystem()
+        if src not in self.gcs_ids:
+            self.counters["not_a_gcs"] += 1
+            return
+        if addr not in self.peers and len(self.peers) >= 16:
+            self.peers.pop(min(self.peers, key=self.peers.get))
+        self.peers[addr] = time.monotonic()
+        if self.signing is not None and kind in _SIGNED_ONLY:  # telemetry still goes out
+            why = self.signing.verify(m.get_msgbuf())
+            if why is not None:
+                self.counters[f"refused_{why.split()[0]}"] += 1
+                if kind != "HEARTBEAT":
+                    self._text(("warning", f"{kind} refused: {why}"))
+                    if kind == "COMMAND_LONG":
+                        self._ack(m, self.mavlink.MAV_RESULT_DENIED)
+                return
+            self.tx.signing.timestamp = max(self.tx.signing.timestamp, self.signing.timestamp)
+        handler = getattr(self, f"_on_{kind.lower()}", None)
+        if handler is None:
+            self.counters["ignored"] += 1
+            return
+        self.counters[kind.lower()] += 1
+        handler(m, addr)
+
+    def _for_us(self, m: Any) -> bool:
+        ok = m.target_system in (0, self.cfg.system_id) and getattr(
+            m, "target_component", 0) in (0, self.cfg.component_id)
+        if not ok:
+            self.counters["other_target"] += 1
+        return ok
+
+    # ------------------------------------------------------------------ commands in
+
+    def _on_heartbeat(self, m: Any, addr: tuple) -> None:
+        self.operator_heartbeat_ns = time.monotonic_ns()
+
+    def _queue(self, command: Any, done: Callable[[CommandResult], None] | None = None) -> None:
+        fut = self.commands.put(command)
+        if done is not None:  # runs where the cycle resolves it: only a deque append
+            fut.add_done_callback(lambda f: self._push(self._replies, (done, f.result()),
+                                                       "replies"))
+
+    def _ack(self, m: Any, result: int) -> None:
+        cmd = m.command if m.get_type() == "COMMAND_LONG" else m.get_msgId()
+        self._send(self.tx.command_ack_encode(cmd, result, 0, 0, m.get_srcSystem(),
+                                              m.get_srcComponent()))
+
+    def _ack_when_done(self, m: Any) -> Callable[[CommandResult], None]:
+        mav = self.mavlink
+
+        def done(res: CommandResult) -> None:  # the reason goes out with the command record
+            full = res.reason == "command queue full"
+            self._ack(m, mav.MAV_RESULT_ACCEPTED if res.ok else
+                      mav.MAV_RESULT_TEMPORARILY_REJECTED if full else mav.MAV_RESULT_DENIED)
+        return done
+
+    def _on_command_long(self, m: Any, addr: tuple) -> None:
+        if not self._for_us(m):
+            return
+        mav = self.mavlink
+        source = f"mavlink {m.get_srcSystem()}/{m.get_srcComponent()}"
+        if m.command == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            c = Arm(cause="ground station", source=source) if m.param1 >= 0.5 else \
+                Disarm(cause="ground station", source=source)
+        elif m.command == mav.MAV_CMD_DO_SET_MODE:
+            c = self._set_mode(int(m.param1), int(m.param2), source)
+            if c is None:
+                self._ack(m, mav.MAV_RESULT_DENIED)
+                return
+        else:
+            self.counters["unsupported_commands"] += 1
+            self._ack(m, mav.MAV_RESULT_UNSUPPORTED)
+            return
+        self._queue(c, self._ack_when_done(m))
+
+    def _on_command_int(self, m: Any, addr: tuple) -> None:
+        if self._for_us(m):
+            self.counters["unsupported_commands"] += 1
+            self._ack(m, self.mavlink.MAV_RESULT_UNSUPPORTED)
+
+    def _set_mode(self, base_mode: int, custom: int, source: str) -> SetMode | None:
+        mode = _MODE_OF.get(custom & 0xFF)
+        if not base_mode & self.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED or mode is None:
+            self._text(("warning", f"mode {custom} refused: custom modes are "
+                                f"{', '.join(f'{v} {k}' for k, v in CUSTOM_MODES.items())}"))
+            return None
+        return SetMode(mode, source=source)
+
+    def _on_set_mode(self, m: Any, addr: tuple) -> None:
+        if m.target_system not in (0, self.cfg.system_id):
+            self.counters["other_target"] += 1
+            return
+        c = self._set_mode(m.base_mode, m.custom_mode, f"mavlink {m.get_srcSystem()}")
+        if c is None:
+            self._ack(m, self.mavlink.MAV_RESULT_DENIED)
+            return
+        self._queue(c, self._ack_when_done(m))
+
+    def _on_manual_control(self, m: Any, addr: tuple) -> None:
+        """x forward, y right, r yaw at ±1000; z 0-1000 with 500 neutral, up above (ArduSub's
+        convention): body force and yaw torque, [f; τ] with z keel-down."""
+        if m.target not in (0, self.cfg.system_id):
+            self.counters["other_target"] += 1
+            return
+        f, t = self.cfg.manual_force_n, self.cfg.manual_torque_nm
+        x, y, z, r = (max(-1.0, min(1.0, v)) for v in (m.x / 1000, m.y / 1000,
+                                                       (m.z - 500) / 500, m.r / 1000))
+        self._queue(ManualWrench((x * f, y * f, -z * f, 0.0, 0.0, r * t),
+                                 timeout_s=self.cfg.manual_timeout_s,
+                                 source=f"mavlink {m.get_srcSystem()}"))
+
+    def _on_set_position_target_local_ned(self, m: Any, addr: tuple) -> None:
+        if not self._for_us(m):
+            return
+        if m.coordinate_frame != self.mavlink.MAV_FRAME_LOCAL_NED or m.type_mask & 0x7:
+            self._text(("warning", "SET_POSITION_TARGET_LOCAL_NED refused: needs "
+                                           "MAV_FRAME_LOCAL_NED and a position"))
+            return
+        yaw = m.yaw
+        if m.type_mask & 0x400:  # yaw ignored: keep the heading the vehicle has
+            rec = self._cycle
+            yaw = 0.0 if rec is None else euler_of(rec["R"])[2]
+        self._queue(HoldPose(m.x, m.y, m.z, yaw, source=f"mavlink {m.get_srcSystem()}"))
+
+    def _on_timesync(self, m: Any, addr: tuple) -> None:
+        if m.tc1 == 0:
+            self._send(self.tx.timesync_encode(time.monotonic_ns(), m.ts1), (addr,))
+
+    # ------------------------------------------------------------------ parameters
+
+    def _param_value(self, p: mp.Param, to: tuple | None = None) -> None:
+        pending = self.pending.get(p.key)
+        if pending is not None:
+            v = float(pending if p.index is None else pending[p.index])
+        else:
+            v = mp.value_of(p, self.config())
+        self._send(self.tx.param_value_encode(
+            p.name.encode(), v, self.mavlink.MAV_PARAM_TYPE_REAL32, len(mp.PARAMS),
+            mp.PARAMS.index(p)), None if to is None else (to,))
+
+    def _on_param_request_list(self, m: Any, addr: tuple) -> None:
+        if self._for_us(m):
+            for p in mp.PARAMS:
+                self._param_value(p, addr)
+
+    def _on_param_request_read(self, m: Any, addr: tuple) -> None:
+        if not self._for_us(m):
+            return
+        name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else ""
+        p = mp.BY_NAME.get(name) if m.param_index < 0 else (
+            mp.PARAMS[m.param_index] if m.param_index < len(mp.PARAMS) else None)
+        if p is None:
+            self.counters["unknown_params"] += 1
+            self._text(("warning", f"no parameter {name or m.param_index!r}"))
+            return
+        self._param_value(p, addr)
+
+    def _on_param_set(self, m: Any, addr: tuple) -> None:
+        if not self._for_us(m):
+            return
+        name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else ""
+        p = mp.BY_NAME.get(name)
+        if p is None:
+            self.counters["unknown_params"] += 1
+            self._text(("warning", f"no parameter {name!r}"))
+            return
+        why = mp.check_value(p, float(m.param_value))
+        cfg = self.config()
+        value = None if why else mp.key_value(p, float(m.param_value), cfg)
+        if why is None and not p.reload:
+            why = self._keep_for_restart(p, value, cfg)
+            if why is None:
+                self._param_value(p)
+                self._text(("notice", f"{p.name} = {m.param_value:g} kept; applies at "
+                                              "the next start"))
+                return
+        if why is not None:
+            self.counters["params_refused"] += 1
+            self._text(("warning", why))
+            self._param_value(p, addr)
+            return
+
+        def done(res: CommandResult) -> None:
+            if res.ok:  # a refusal's reason goes out with the command record
+                why = self._persist({p.key: value})
+                if why is not None:
+                    self._statustext("warning", why)
+            self._param_value(p)
+        self._queue(SetParams({p.key: value}, source=f"mavlink {m.get_srcSystem()}"), done)
+
+    def _keep_for_restart(self, p: mp.Param, value: Any, cfg: Any) -> str | None:
+        rec = self._cycle
+        if rec is not None and rec.get("state") == "ARMED":
+            return f"{p.name} cannot change while armed (it applies at a restart)"
+        _, errors = schema.with_values(cfg, {**self.pending, p.key: value})
+        if errors:
+            return "; ".join(f"{k}: {r}" for k, r in errors)
+        self.pending[p.key] = value
+        return self._persist({p.key: value})
+
+    def _persist(self, values: Mapping[str, Any]) -> str | None:
+        if not self.cfg.params_file:
+            return None
+        try:
+            kept = mp.read_params_file(self.cfg.params_file)
+            mp.write_params_file(self.cfg.params_file, {**kept, **values})
+        except (OSError, ValueError) as exc:
+            self.counters["params_not_kept"] += 1
+            return f"cannot keep the parameter in {self.cfg.params_file}: {exc}"
+        return None
+
+    # ------------------------------------------------------------------ telemetry out
+
+    def _stations(self) -> list[tuple]:
+        now = time.monotonic()
+        live = [a for a, t in self.peers.items() if now - t <= self.cfg.station_timeout_s]
+        out = live + [a for a in self.connect if a not in live]
+        return out + [SERIAL] if self._serial is not None and SERIAL not in out else out
+
+    def _send(self, msg: Any, to: Sequence[tuple] | None = None) -> None:
+        self.tx.send(msg)
+        buf = self._out.buf
+        for a in (self._stations() if to is None else to):
+            try:
+                if a == SERIAL:  # never blocks: what the line cannot take is dropped
+                    self._serial.write(buf)
+                else:
+                    self._sock.sendto(buf, a)
+                self.counters["sent"] += 1
+            except Exception:  # noqa: BLE001 - OSError, or pyserial's timeout on a full line
+                self.counters["send_errors"] += 1
+
+    def _statustext(self, severity: str, text: str) -> None:
+        """One STATUSTEXT, in 50-character chunks sharing an id when longer (MAVLink 2)."""
+        data = text.encode("utf-8", "replace")
+        chunks = [data[i:i + 50] for i in range(0, len(data), 50)] or [b""]
+        self._text_id = self._text_id % 65535 + 1
+        tid = self._text_id if len(chunks) > 1 else 0
+        for i, ch in enumerate(chunks):
+            self._send(self.tx.statustext_encode(_SEVERITY[severity], ch, tid, i))
+
+    def _ms(self) -> int:
+        return int((time.monotonic() - self._t0) * 1000) & 0xFFFFFFFF
+
+    def _send_status(self) -> None:
+        mav = self.mavlink
+        rec = self._cycle
+        state = "BOOT" if rec is None else str(rec["state"])
+        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        custom = 0
+        status = _STATE_STATUS.get(state, 0)
+        if rec is not None:
+            custom = custom_mode_of(rec, self.controller, self.step1_s)
+            if state == "ARMED":
+                base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
+                if rec.get("action") in ("hold-depth", "zero-thrust", "disarm"):
+                    status = mav.MAV_STATE_CRITICAL
+        self._send(self.tx.heartbeat_encode(mav.MAV_TYPE_SUBMARINE, mav.MAV_AUTOPILOT_GENERIC,
+                                            base, custom, status))
+        if rec is None:
+            return
+        ages = [math.inf if a is None else float(a) for a in rec["ages"]]
+        th = self.thresholds
+        bits = (_INS_BITS, _DVL_BIT, _DEPTH_BIT, _MOTOR_BIT)
+        present = _INS_BITS | _DVL_BIT | _DEPTH_BIT | _MOTOR_BIT
+        health = 0
+        for b, a, lim in zip(bits, ages, (th["ins"], th["dvl"], th["depth"], th["feedback"]),
+                             strict=True):
+            if a <= lim:
+                health |= b
+        drops = self.counters["bad_datagrams"] + self.counters["bad_messages"]
+        self._send(self.tx.sys_status_encode(present, present, health, 0, 65535, -1, -1, 0,
+                                             min(drops, 65535), 0, 0, 0, 0))
+
+    def _send_state(self) -> None:
+        rec = self._cycle
+        if rec is None:
+            return
+        ms = self._ms()
+        p = np.asarray(rec["p"], dtype=float)
+        R = np.asarray(rec["R"], dtype=float).reshape(3, 3)
+        v = np.asarray(rec["v"], dtype=float)
+        roll, pitch, yaw = euler_of(R)
+        self._send(self.tx.attitude_encode(ms, roll, pitch, yaw, *map(float, v[3:6])))
+        vw = R @ v[:3]
+        self._send(self.tx.local_position_ned_encode(ms, *map(float, p), *map(float, vw)))
+        depth = float(p[2])
+        self._send(self.tx.scaled_pressure_encode(ms, 1013.25 + _RHO_G * depth / 100.0, 0.0,
+                                                  0))
+        hdg = int(round(math.degrees(yaw))) % 360
+        self._send(self.tx.vfr_hud_encode(float(np.linalg.norm(v[:3])),
+                                          float(np.hypot(vw[0], vw[1])), hdg, 0, -depth,
+                                          -float(vw[2])))
+        thrust = np.asarray(rec["thrust"], dtype=float)
+        n = min(len(thrust), 16)
+        scale = np.where(self.max_thrust_n[:n] > 0, self.max_thrust_n[:n], 1.0)
+        pwm = np.clip(1500 + 400 * thrust[:n] / scale, 1100, 1900).astype(int).tolist()
+        self._send(self.tx.servo_output_raw_encode(int(ms * 1000), 0, *(pwm + [0] * (16 - n))))
+        act = [float(x) for x in thrust[:32]] + [0.0] * (32 - min(len(thrust), 32))
+        self._send(self.tx.actuator_output_status_encode(int(ms * 1000),
+                                                         (1 << min(len(thrust), 32)) - 1, act))
+
+    def _send_estimates(self) -> None:
+        rec = self._estimate
+        if rec is None or rec.get("theta") is None:
+            return
+        theta = np.asarray(rec["theta"], dtype=float)
+        if theta.size == N_THETA_UV:
+            theta = decoupled_from_theta(theta)
+        ms = self._ms()
+        if theta.size == N_DECOUPLED:
+            names = [f"M{i + 1}" for i in range(6)] + [f"D{i + 1}" for i in range(6)] + \
+                ["G", "B1", "B2", "B3"]
+            for n, x in zip(names, theta, strict=True):
+                self._send(self.tx.named_value_float_encode(ms, n.encode(), float(x)))
+        if rec.get("m_min_eig") is not None:
+            self._send(self.tx.named_value_float_encode(ms, b"MMINEIG",
+                                                        float(rec["m_min_eig"])))
