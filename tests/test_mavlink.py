@@ -122,22 +122,23 @@ def test_a_station_and_mavproxy_see_arm_switch_tune_and_drive_the_submarine(brid
             assert abs(manual[-1]["u_cmd"][1]) < 1e-9
 
             params = s.params()
-            assert params["CTL_KP"] == 300.0 and params["FS_INS_STALE_S"] == 0.5
+            assert params["CTL_KP_1"] == params["CTL_KP_6"] == 300.0
+            assert params["FS_INS_STALE_S"] == 0.5
             assert params["EST_GAINS_2"] == 5000.0 and all(len(n) <= 16 for n in params)
-            assert s.param_set("CTL_KP", 350.0) == 350.0
-            assert s.param_read("CTL_KP") == 350.0
-            assert d.app.config.control.kp == 350.0
-            assert s.param_set("CTL_KD", -1.0) == 100.0  # out of range: refused, unchanged
+            assert s.param_set("CTL_KP_1", 350.0) == 350.0  # surge only: kp becomes six values
+            assert s.param_read("CTL_KP_1") == 350.0 and s.param_read("CTL_KP_2") == 300.0
+            assert d.app.config.control.kp == (350.0,) + (300.0,) * 5
+            assert s.param_set("CTL_KD_1", -1.0) == 100.0  # out of range: refused, unchanged
             assert s.param_set("CTL_EPS", 2.0) == 1.0  # not while armed
             st = s.wait("STATUSTEXT", lambda m: "while armed" in m.text)
             assert st.severity == mav.MAV_SEVERITY_WARNING
 
             # MAVProxy: its own connection, system 255 too, driven on stdin
             mavproxy(bridge["run"], port, [("mode 2", "DO_SET_MODE: ACCEPTED"),
-                                           ("param fetch", "Received 20 parameters"),
-                                           ("param set CTL_KP 360", ""),
-                                           ("param show CTL_KP", "360")])
-            assert d.app.config.control.kp == 360.0
+                                           ("param fetch", f"Received {len(params)} parameters"),
+                                           ("param set CTL_KP_1 360", ""),
+                                           ("param show CTL_KP_1", "360")])
+            assert d.app.config.control.kp[0] == 360.0
             s.wait("HEARTBEAT", lambda m: m.get_srcSystem() == 1 and mode_of(m) == (2, 1))
 
             # fuzz: every kind of bad datagram, from this station's address too
@@ -155,7 +156,7 @@ def test_a_station_and_mavproxy_see_arm_switch_tune_and_drive_the_submarine(brid
                 time.sleep(0.5)
             fuzz_s = time.monotonic() - t0
             print("after fuzz:", d.mavlink.stats())
-            assert s.param_read("CTL_KP") == 360.0  # still answering
+            assert s.param_read("CTL_KP_1") == 360.0  # still answering
             s.wait("HEARTBEAT", lambda m: m.get_srcSystem() == 1 and m.base_mode & 128)
             stats = d.mavlink.stats()
             # loopback UDP may drop some under a flood: most must have reached the link
@@ -242,8 +243,8 @@ def test_signing_refuses_unsigned_wrong_and_forged_and_params_survive_a_restart(
         wrong = Station(port, signing_key=hashlib.sha256(b"not the key").digest())
         try:
             s.heartbeat()
-            assert s.param_read("CTL_KP") == 360.0  # set before the restart
-            assert d.app.config.control.kp == 360.0
+            assert s.param_read("CTL_KP_1") == 360.0  # set before the restart
+            assert d.app.config.control.kp[0] == 360.0
             plain.heartbeat()  # telemetry goes out to an unsigned station too
             assert plain.arm().result == mav.MAV_RESULT_DENIED
             # a station with the wrong key cannot read the vehicle's signed replies (pymavlink

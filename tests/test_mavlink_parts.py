@@ -55,8 +55,8 @@ class VectorConfig:
 def test_parameters_come_from_the_schema_and_a_vector_becomes_per_axis_names():
     assert all(len(p.name) <= 16 for p in PARAMS)
     assert len({p.name for p in PARAMS}) == len(PARAMS)
-    assert {"CTL_KP", "CTL_KD", "FS_INS_STALE_S", "EST_GAINS_1"} <= {p.name for p in PARAMS}
-    kp = next(p for p in PARAMS if p.name == "CTL_KP")
+    assert {"CTL_KP_1", "CTL_KD_6", "FS_INS_STALE_S", "EST_GAINS_1"} <= {p.name for p in PARAMS}
+    kp = next(p for p in PARAMS if p.name == "CTL_KP_1")
     assert kp.reload and check_value(kp, -1.0) and check_value(kp, float("nan"))
     assert check_value(kp, 350.0) is None
 
@@ -135,7 +135,7 @@ def test_docs_mavlink_md_lists_the_parameters_generated_from_the_schema():
     doc = Path(__file__).resolve().parents[1] / "docs" / "mavlink.md"
     text = doc.read_text(encoding="utf-8")
     assert refresh_doc(text) == text, "run: uvd check-config --doc-out docs/config.md"
-    assert "`CTL_KP`" in text and "| 4 | `manual` |" in text
+    assert "`CTL_KP_1`" in text and "| 4 | `manual` |" in text
 
 
 def test_a_replay_applies_the_parameters_kept_at_start_on_top_of_the_recorded_file(tmp_path):

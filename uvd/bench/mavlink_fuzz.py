@@ -24,7 +24,7 @@ def fuzz_datagrams(n: int, seed: int = 21) -> list[bytes]:
     enc.WIRE_PROTOCOL_VERSION = "2.0"
     good = [m.pack(enc) for m in (
         enc.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0),
-        enc.param_set_encode(1, 1, b"CTL_KP", 1e9, 9),
+        enc.param_set_encode(1, 1, b"CTL_KP_1", 1e9, 9),
         enc.manual_control_encode(1, 1000, 1000, 1000, 1000, 0),
         enc.set_mode_encode(1, 1, 99), enc.heartbeat_encode(6, 8, 0, 0, 0))]
 
