@@ -45,6 +45,7 @@ from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
 from uvd.runtime.triggers import plugin_triggers
 from uvd.telemetry.mcap_recorder import RecordingError, read_messages
+from uvd.telemetry.records import tracking_error_norms
 
 __all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport", "tracking"]
 
@@ -170,19 +171,9 @@ def _samples(cfg: Config, rec: Recording) -> dict[tuple[str, int], Any]:
 
 def tracking(cycles: list[Mapping[str, Any]], thrusts) -> dict[str, Any]:
     """Position and velocity MNE (navigation vs reference) over the armed cycles."""
-    from uvd.control.errors import error_coordinates
-
-    dpsi, dv = [], []
-    for r in cycles:
-        if r.get("state") not in ("ARMED", "FAILSAFE") or r.get("p_ref") is None:
-            continue
-        H, Hr = np.eye(4), np.eye(4)
-        H[:3, :3], H[:3, 3] = np.asarray(r["R"], float), np.asarray(r["p"], float)
-        Hr[:3, :3], Hr[:3, 3] = np.asarray(r["R_ref"], float), np.asarray(r["p_ref"], float)
-        _, e_psi, e_v, _ = error_coordinates(H, np.asarray(r["v"], float), Hr,
-                                             np.asarray(r["v_ref"], float))
-        dpsi.append(np.linalg.norm(e_psi))
-        dv.append(np.linalg.norm(e_v))
+    norms = [tracking_error_norms(r) for r in cycles
+             if r.get("state") in ("ARMED", "FAILSAFE") and r.get("p_ref") is not None]
+    dpsi, dv = [a for a, _ in norms], [b for _, b in norms]
     if not dpsi:
         return {"cycles": 0}
     return {"cycles": len(dpsi), "position_mne": float(np.mean(dpsi)),

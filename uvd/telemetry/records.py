@@ -32,7 +32,8 @@ import numpy as np
 
 from drivers.samples import R_to_euler
 
-__all__ = ["CycleRecord", "estimate_record", "euler_of", "eta_of_record", "CYCLE"]
+__all__ = ["CycleRecord", "estimate_record", "euler_of", "eta_of_record", "CYCLE",
+           "tracking_error_norms"]
 
 CYCLE = "cycle"
 
@@ -191,3 +192,16 @@ def euler_of(R: Any) -> tuple[float, float, float]:
 def eta_of_record(d: Mapping[str, Any]) -> np.ndarray:
     """[north, east, down, roll, pitch, heading] of a cycle record in hub or JSON form."""
     return np.array([*np.asarray(d["p"], dtype=float), *euler_of(d["R"])])
+
+
+def tracking_error_norms(d: Mapping[str, Any]) -> tuple[float, float]:
+    """‖Δψ‖ (5.3) and ‖Δv‖ (5.4) of one cycle record: its navigation state against its
+    reference (the record must carry ``p_ref``, ``R_ref`` and ``v_ref``)."""
+    from uvd.control.errors import error_coordinates
+
+    H, Hr = np.eye(4), np.eye(4)
+    H[:3, :3], H[:3, 3] = np.asarray(d["R"], float), np.asarray(d["p"], float)
+    Hr[:3, :3], Hr[:3, 3] = np.asarray(d["R_ref"], float), np.asarray(d["p_ref"], float)
+    _, e_psi, e_v, _ = error_coordinates(H, np.asarray(d["v"], float), Hr,
+                                         np.asarray(d["v_ref"], float))
+    return float(np.linalg.norm(e_psi)), float(np.linalg.norm(e_v))

@@ -31,6 +31,7 @@ from drivers.frames import wrap_pi_array
 from drivers.samples import R_to_euler
 from uvd.io.figures import estimates_figure, mne_figure
 from uvd.telemetry.mcap_recorder import RecordingError, read_messages
+from uvd.telemetry.records import tracking_error_norms
 
 __all__ = ["write_report"]
 
@@ -156,18 +157,8 @@ def _tracking_figures(plt, save, cyc: list, t: np.ndarray, armed: np.ndarray) ->
     axes[-1, 1].set_xlabel("time (s)")
     save(fig, "tracking.png", "Reference and navigation state per DOF (armed cycles) and "
                               "their difference.")
-    from uvd.control.errors import error_coordinates
-    dpsi, dv = [], []
-    for r, a in zip(cyc, armed, strict=True):
-        if not a:
-            continue
-        H, Hr = np.eye(4), np.eye(4)
-        H[:3, :3], H[:3, 3] = np.asarray(r["R"], float), np.asarray(r["p"], float)
-        Hr[:3, :3], Hr[:3, 3] = np.asarray(r["R_ref"], float), np.asarray(r["p_ref"], float)
-        _, e_psi, e_v, _ = error_coordinates(H, np.asarray(r["v"], float), Hr,
-                                             np.asarray(r["v_ref"], float))
-        dpsi.append(np.linalg.norm(e_psi))
-        dv.append(np.linalg.norm(e_v))
+    norms = np.array([tracking_error_norms(r) for r, a in zip(cyc, armed, strict=True) if a])
+    dpsi, dv = norms[:, 0], norms[:, 1]
     span = ta[-1] - ta[0]
     win = 900.0 if span >= 1800.0 else max(span / 10.0, 1.0)
     edges = np.arange(ta[0], ta[-1] + 1e-9, win)
