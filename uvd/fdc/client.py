@@ -21,11 +21,31 @@ import time
 from uvd.fdc.detector import CusumSettings, VehicleDetector
 
 
+def client_config(connect: list[str], config_file: str | None = None):
+    """The ``zenoh.Config`` of a client of the key space: ``config_file`` (JSON5) when given,
+    else a peer with multicast scouting off; ``connect`` endpoints (default, without a file,
+    ``tcp/127.0.0.1:7447``: the demo's daemon) replace the file's."""
+    import zenoh
+    if config_file:
+        conf = zenoh.Config.from_file(str(config_file))
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"peer"')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        connect = connect or ["tcp/127.0.0.1:7447"]
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    return conf
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="uvd-fdc", description=__doc__.split("\n\n")[0])
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                    help="endpoint of a daemon or router (repeatable; default "
                         "tcp/127.0.0.1:7447)")
+    p.add_argument("--zenoh-config", metavar="FILE",
+                   help="a Zenoh JSON5 configuration (client mode through a router, "
+                        "user/password, TLS: config/zenoh/fdc.json5, docs/zenoh.md)")
     p.add_argument("--vehicle", default="*", help="vehicle key or * (default: every vehicle)")
     p.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: never)")
     p.add_argument("--warmup-s", type=float, default=CusumSettings.warmup_s)
@@ -37,11 +57,7 @@ def main(argv: list[str] | None = None) -> int:
 
     settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s, k=args.k,
                              h=args.threshold)
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("connect/endpoints",
-                      json.dumps(args.connect or ["tcp/127.0.0.1:7447"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
     detectors: dict[tuple[str, str], VehicleDetector] = {}
     session = zenoh.open(conf)
