@@ -470,27 +470,31 @@ def _fmt(d: dict) -> str:
     return "  ".join(f"{k} {d[k]:8.1f}" for k in ("p50", "p99", "p999", "max") if k in d)
 
 
-def _recorded(cycle, directory: str):
-    """``cycle`` followed by what the daemon's write phase does for the black box: build one
-    cycle record and publish it to a hub whose sink is the MCAP recorder (6 thrusters)."""
-    from uvd.telemetry.mcap_recorder import McapRecorder
+_Z3, _Z6, _EYE = np.zeros(3), np.zeros(6), np.eye(3)
+
+
+def bench_cycle_record(t_ns: int, dt: float) -> dict:
+    """A cycle record as the daemon's write phase builds it (6 thrusters, tracking), as the
+    hub's sinks get it."""
     from uvd.telemetry.records import CycleRecord
-    from uvd.telemetry.sink import TelemetryHub
+    z3, z6, eye = _Z3, _Z6, _EYE
+    return CycleRecord(
+        t_ns=t_ns, dt=dt, state="ARMED", action="none", mode="control", status="ok",
+        p=z3, R=eye, v=z6, nav_valid=True, u=z6, u_cmd=z6, thrust=z6,
+        ages=(0.01, 0.1, 0.05, 0.01), ins_rx_ns=t_ns, inputs={
+            "actuators": {"omega_rad_s": z6, "enabled": True, "faults": [],
+                          "feedback_t_ns": t_ns, "bus_off": False},
+            "overrun_streak": 0, "overrun_streak_exceeded": False, "leak": False,
+            "extra": None}, p_ref=z3, R_ref=eye, v_ref=z6).to_dict()
 
-    hub = TelemetryHub([McapRecorder(directory)])
-    z3, z6, eye = np.zeros(3), np.zeros(6), np.eye(3)
 
-    def recorded(t_ns: int, dt: float) -> None:
+def _published(cycle, hub):
+    """``cycle`` followed by what the daemon's write phase does for its sinks: build one cycle
+    record and publish it to ``hub`` (the MCAP recorder, Zenoh)."""
+    def published(t_ns: int, dt: float) -> None:
         cycle(t_ns, dt)
-        hub.publish(CycleRecord(
-            t_ns=t_ns, dt=dt, state="ARMED", action="none", mode="control", status="ok",
-            p=z3, R=eye, v=z6, nav_valid=True, u=z6, u_cmd=z6, thrust=z6,
-            ages=(0.01, 0.1, 0.05, 0.01), ins_rx_ns=t_ns, inputs={
-                "actuators": {"omega_rad_s": z6, "enabled": True, "faults": [],
-                              "feedback_t_ns": t_ns, "bus_off": False},
-                "overrun_streak": 0, "overrun_streak_exceeded": False, "leak": False,
-                "extra": None}, p_ref=z3, R_ref=eye, v_ref=z6).to_dict())
-    return recorded, hub
+        hub.publish(bench_cycle_record(t_ns, dt))
+    return published
 
 
 def _run(args) -> dict:
@@ -503,7 +507,10 @@ def _run(args) -> dict:
     cycle = CYCLES[args.cycle]()
     hub = None
     if args.record:
-        cycle, hub = _recorded(cycle, args.record)
+        from uvd.telemetry.mcap_recorder import McapRecorder
+        from uvd.telemetry.sink import TelemetryHub
+        hub = TelemetryHub([McapRecorder(args.record)])
+        cycle = _published(cycle, hub)
     for _ in range(20):
         t = time.monotonic_ns()
         cycle(t, 1.0 / args.rate)

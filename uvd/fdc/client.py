@@ -21,6 +21,40 @@ import time
 from uvd.fdc.detector import CusumSettings, VehicleDetector
 
 
+class LinkStats:
+    """Per key: samples received, samples lost (gaps in ``seq``, which the daemon raises by
+    one a sample per key) and end-to-end latencies (receipt − ``wall_time``, seconds)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.received: dict[str, int] = {}
+        self.lost: dict[str, int] = {}
+        self.last_seq: dict[str, int] = {}
+        self.latency_s: list[float] = []
+
+    def take(self, key: str, payload: dict) -> None:
+        now = time.time()
+        with self._lock:
+            self.received[key] = self.received.get(key, 0) + 1
+            seq, last = payload.get("seq"), self.last_seq.get(key)
+            if isinstance(seq, int):
+                if last is not None and seq > last + 1:
+                    self.lost[key] = self.lost.get(key, 0) + seq - last - 1
+                self.last_seq[key] = seq
+            if isinstance(payload.get("wall_time"), (int, float)):
+                self.latency_s.append(now - payload["wall_time"])
+
+    def summary(self) -> dict:
+        with self._lock:
+            lat = sorted(self.latency_s)
+            q = (lambda f: lat[min(len(lat) - 1, int(f * len(lat)))] * 1e3) if lat else (
+                lambda f: None)
+            return {"received": dict(self.received), "lost": dict(self.lost),
+                    "last_seq": dict(self.last_seq),
+                    "latency_ms": {"n": len(lat), "p50": q(0.5), "p99": q(0.99),
+                                   "max": lat[-1] * 1e3 if lat else None}}
+
+
 def client_config(connect: list[str], config_file: str | None = None):
     """The ``zenoh.Config`` of a client of the key space: ``config_file`` (JSON5) when given,
     else a peer with multicast scouting off; ``connect`` endpoints (default, without a file,
@@ -48,6 +82,10 @@ def main(argv: list[str] | None = None) -> int:
                         "user/password, TLS: config/zenoh/fdc.json5, docs/zenoh.md)")
     p.add_argument("--vehicle", default="*", help="vehicle key or * (default: every vehicle)")
     p.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: never)")
+    p.add_argument("--stats", metavar="FILE",
+                   help="also take uvd/<vehicle>/state and write, at the end, per key the "
+                        "samples received, those lost (gaps in seq) and the end-to-end "
+                        "latency (receipt − the payload's wall_time: same machine only)")
     p.add_argument("--warmup-s", type=float, default=CusumSettings.warmup_s)
     p.add_argument("--baseline-s", type=float, default=CusumSettings.baseline_s)
     p.add_argument("-k", type=float, default=CusumSettings.k, help="CUSUM allowance (σ)")
@@ -59,6 +97,7 @@ def main(argv: list[str] | None = None) -> int:
                              h=args.threshold)
     conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
+    link = LinkStats()
     detectors: dict[tuple[str, str], VehicleDetector] = {}
     session = zenoh.open(conf)
 
@@ -76,6 +115,8 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             say(f"{sample.key_expr}: not JSON ({exc}); dropped")
             return
+        if args.stats:
+            link.take(str(sample.key_expr), payload)
         with lock:
             det = detectors.setdefault((vehicle, estimator), VehicleDetector(vehicle, settings))
             try:
@@ -99,8 +140,16 @@ def main(argv: list[str] | None = None) -> int:
                 del detectors[key]
         say(f"{vehicle}: gone (its baseline is forgotten)")
 
+    def on_state(sample) -> None:
+        try:
+            link.take(str(sample.key_expr), json.loads(sample.payload.to_bytes()))
+        except ValueError as exc:
+            say(f"{sample.key_expr}: not JSON ({exc}); dropped")
+
     try:
         session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*", on_estimate)
+        if args.stats:
+            session.declare_subscriber(f"uvd/{args.vehicle}/state", on_state)
         session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive", on_alive,
                                                 history=True)
         say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* (baseline after "
@@ -113,6 +162,9 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         session.close()
+        if args.stats:
+            with open(args.stats, "w") as f:
+                json.dump(link.summary(), f)
     return 0
 
 
