@@ -20,6 +20,7 @@ import asyncio
 import json
 import math
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -42,10 +43,71 @@ def _add(p) -> None:
     p.add_argument("--estimate-hz", type=float, default=10.0, help="estimate rate (10 Hz)")
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A free TCP port on loopback (for a listening endpoint)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+class FdcProcess:
+    """A ``uvd-fdc`` process connected to ``endpoints`` that counts what it receives
+    (``--stats``). Its output goes to a file, never to a pipe nobody reads (a full pipe
+    would stop its callbacks, and then its session's close).
+
+    Parameters
+    ----------
+    endpoints : list of str
+        What it connects to.
+    seconds : float, optional
+        It ends by itself this long after it subscribed; else :meth:`finish` interrupts it.
+    """
+
+    def __init__(self, endpoints: list[str], seconds: float | None = None) -> None:
+        self.dir = Path(tempfile.mkdtemp(prefix="uvd-fdc-"))
+        self.stats_path, self.log_path = self.dir / "stats.json", self.dir / "output.txt"
+        cmd = [sys.executable, "-m", "uvd.fdc.client", "--stats", str(self.stats_path)]
+        if seconds is not None:
+            cmd += ["--seconds", str(seconds)]
+        for ep in endpoints:
+            cmd += ["--connect", ep]
+        with self.log_path.open("w") as log:
+            self.proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+
+    def output(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    async def subscribed(self, timeout_s: float = 60.0) -> None:
+        """Wait for its "watching" line (its subscriptions declared)."""
+        deadline = time.monotonic() + timeout_s
+        while "watching" not in self.output():
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"uvd-fdc did not start: {self.output()[-500:]!r}")
+            await asyncio.sleep(0.1)
+
+    def finish(self, timeout_s: float = 60.0) -> dict:
+        """Wait for it to end (interrupt it first if it was given no ``seconds``); its
+        counts (:class:`uvd.fdc.client.LinkStats`)."""
+        try:
+            if "--seconds" not in self.proc.args:
+                self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.proc.send_signal(signal.SIGINT)
+                try:
+                    self.proc.wait(10.0)
+                except subprocess.TimeoutExpired:
+                    self.proc.kill()
+                    self.proc.wait()
+            text = self.stats_path.read_text() if self.stats_path.exists() else ""
+            if not text:
+                raise RuntimeError(f"uvd-fdc (exit code {self.proc.returncode}) wrote no "
+                                   f"counts; its output ends: {self.output()[-500:]!r}")
+            return json.loads(text)
+        finally:
+            self.out = self.output()
+            shutil.rmtree(self.dir, ignore_errors=True)
 
 
 def _fmt(x) -> str:
@@ -115,30 +177,20 @@ def _run(args) -> dict:
     from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
 
     theta = np.asarray(load_vehicle("jhu-rov").params.theta, dtype=float)
-    endpoints = [f"tcp/127.0.0.1:{_free_port()}" for _ in range(args.vehicles)]
+    endpoints = [f"tcp/127.0.0.1:{free_port()}" for _ in range(args.vehicles)]
     sinks = [ZenohSink(f"bench{i:02d}", zenoh_config(listen=[ep]), state_hz=args.state_hz,
                        health_hz=0.0)
              for i, ep in enumerate(endpoints)]
     for s in sinks:
         s._put_all = _thread_cpu(s._put_all)
-    stats_file = Path(tempfile.mkstemp(prefix="uvd-bench-zenoh-", suffix=".json")[1])
     fdc = None
 
     async def main() -> dict:
         nonlocal fdc
         for s in sinks:
             await s.open()
-        cmd = [sys.executable, "-m", "uvd.fdc.client", "--stats", str(stats_file),
-               "--seconds", str(args.duration + 120.0)]
-        for ep in endpoints:
-            cmd += ["--connect", ep]
-        fdc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                               text=True)
-        lines = []
-        while not any("watching" in x for x in lines):  # "<vehicle>: up" lines come first
-            lines.append(await asyncio.wait_for(asyncio.to_thread(fdc.stdout.readline), 60))
-            if not lines[-1] or len(lines) > args.vehicles + 5:
-                raise RuntimeError(f"uvd-fdc did not start: {''.join(lines)!r}")
+        fdc = FdcProcess(endpoints, seconds=args.duration + 8.0)  # ends ~6 s after the last
+        await fdc.subscribed()
         await asyncio.sleep(2.0)  # its subscriptions reach every vehicle
         try:
             return await _publish(sinks, theta, args)
@@ -149,17 +201,8 @@ def _run(args) -> dict:
     wall0 = time.monotonic()
     try:
         pub = asyncio.run(main())
-        time.sleep(2.0)  # the last samples arrive
     finally:
-        if fdc is not None:
-            fdc.send_signal(signal.SIGINT)
-            try:
-                out, _ = fdc.communicate(timeout=30)
-            except subprocess.TimeoutExpired:
-                fdc.kill()
-                out, _ = fdc.communicate()
-    stats = json.loads(stats_file.read_text() or "{}")
-    os.unlink(stats_file)
+        stats = fdc.finish() if fdc is not None else {}
     published = {k: n for s in sinks for k, n in s._seq.items()}  # key → samples sent
     received = stats.get("received", {})
     per_kind = {}
@@ -187,7 +230,8 @@ def _run(args) -> dict:
         "cycles": cycles,
         "loadavg_1min": os.getloadavg()[0],
         "wall_s": time.monotonic() - wall0,
-        "fdc_output_tail": out.strip().splitlines()[-3:],
+        "fdc_exit_code": fdc.proc.returncode,
+        "fdc_output_tail": fdc.out.strip().splitlines()[-3:],
     }
     c = figures["publish_cost_us_per_cycle"]
     print(f"uvd bench zenoh: {args.vehicles} vehicles × {args.duration:g} s, state "

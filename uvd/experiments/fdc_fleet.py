@@ -16,13 +16,8 @@ from __future__ import annotations
 
 import asyncio
 import json
-import signal
-import subprocess
-import sys
-import tempfile
 import threading
 import time
-from pathlib import Path
 
 from uvd.experiments import Experiment, ExperimentOptions
 from uvd.experiments.fdc import FAULTS
@@ -31,7 +26,7 @@ from uvd.experiments.fdc import FAULTS
 def run(opts: ExperimentOptions) -> dict:
     import zenoh
 
-    from uvd.bench.zenoh import free_port
+    from uvd.bench.zenoh import FdcProcess, free_port
     from uvd.experiments.fdc import SimVehicle
     from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
 
@@ -54,24 +49,17 @@ def run(opts: ExperimentOptions) -> dict:
         with lock:
             found.setdefault(vehicle, []).append(json.loads(sample.payload.to_bytes()))
 
-    stats_file = Path(tempfile.mkstemp(prefix="uvd-fdc-fleet-", suffix=".json")[1])
     t0 = time.perf_counter()
     with zenoh.open(conf) as observer:
         observer.declare_subscriber("uvd/*/fault/*", on_fault)
-        cmd = [sys.executable, "-m", "uvd.fdc.client", "--stats", str(stats_file),
-               "--connect", observer_ep]
-        for ep in endpoints:
-            cmd += ["--connect", ep]
+        fdc = None
 
-        async def main() -> subprocess.Popen:
+        async def main() -> None:
+            nonlocal fdc
             for s in sinks:
                 await s.open()
-            fdc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                   text=True)
-            for _ in range(len(sinks) + 5):  # "<vehicle>: up" lines, then "watching"
-                line = await asyncio.wait_for(asyncio.to_thread(fdc.stdout.readline), 60.0)
-                if "watching" in line or not line:
-                    break
+            fdc = FdcProcess([observer_ep, *endpoints])
+            await fdc.subscribed()
             await asyncio.sleep(2.0)  # its subscriptions reach every vehicle
             try:
                 report = n_cycles // 4
@@ -88,13 +76,11 @@ def run(opts: ExperimentOptions) -> dict:
             finally:
                 for s in sinks:
                     await s.aclose()
-            return fdc
 
-        fdc = asyncio.run(main())
-        fdc.send_signal(signal.SIGINT)
-        out, _ = fdc.communicate(timeout=30)
-    stats = json.loads(stats_file.read_text() or "{}")
-    stats_file.unlink()
+        try:
+            asyncio.run(main())
+        finally:
+            stats = fdc.finish() if fdc is not None else {}
     published = {k: n for s in sinks for k, n in s._seq.items()}
     received = stats.get("received", {})
     runs = {}
@@ -120,7 +106,7 @@ def run(opts: ExperimentOptions) -> dict:
             "hours": hours, "published": published, "received": received,
             "estimates_lost": lost, "gaps_in_seq": sum(stats.get("lost", {}).values()),
             "latency_ms": stats.get("latency_ms"), "wall_s": wall,
-            "fdc_output": out.strip().splitlines()[-40:]}
+            "fdc_output": fdc.out.strip().splitlines()[-40:]}
 
 
 EXPERIMENTS = [Experiment("fdc-fleet", "a fleet of lockstep vehicles (one per fault of issue "

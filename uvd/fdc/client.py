@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import sys
 import threading
 import time
@@ -155,9 +156,15 @@ def main(argv: list[str] | None = None) -> int:
         say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* (baseline after "
             f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; k {settings.k:g}, "
             f"h {settings.h:g})")
+        # SIGTERM (systemd, a parent) and SIGINT (Ctrl-C; also when started in the background,
+        # where a shell would have it ignored) end it cleanly: counts written
+        stop = threading.Event()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: stop.set())
         deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
-        while time.monotonic() < deadline:
-            time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
+        while not stop.wait(min(0.2, max(0.0, deadline - time.monotonic()))):
+            if time.monotonic() >= deadline:
+                break
     except KeyboardInterrupt:
         pass
     finally:
