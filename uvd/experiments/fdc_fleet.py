@@ -19,6 +19,7 @@ import json
 import threading
 import time
 
+from uvd.errors import ExperimentError
 from uvd.experiments import Experiment, ExperimentOptions
 from uvd.experiments.fdc import FAULTS
 
@@ -31,7 +32,11 @@ def run(opts: ExperimentOptions) -> dict:
     from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
 
     hours = 1.0 if opts.hours is None else opts.hours
-    nominal_min = min(30.0, hours * 30.0)
+    nominal_min = 30.0  # uvd-fdc's baseline is learned from 5 to 25 min
+    if hours * 60.0 <= nominal_min:
+        raise ExperimentError(f"fdc-fleet: --hours {hours:g} is too short: the faults come "
+                              f"after {nominal_min:g} min (uvd-fdc learns its baseline over "
+                              "the first 25)")
     faults = [*FAULTS, None]
     vehicles = [SimVehicle(f, nominal_min, opts.seed + i) for i, f in enumerate(faults)]
     names = [f"sim{i}" for i in range(len(vehicles))]
