@@ -8,7 +8,9 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 
@@ -124,6 +126,9 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     assert len(faults) == 1, faults
     key, d = faults[0]
     assert key == "uvd/sub1/fault/entanglement" and d["channel"].startswith("drag")
+    schema = json.loads((Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
+                         / "uvd.fault.v1.json").read_text())
+    jsonschema.Draft202012Validator(schema).validate(d)
     assert 200e9 <= d["t_ns"] <= 203e9
     assert "FAULT sub1: entanglement" in out and "not JSON" in out and "sub1: gone" in out
     stats = json.loads((tmp_path / "stats.json").read_text())  # --stats: what arrived

@@ -48,12 +48,13 @@ class LinkStats:
     def summary(self) -> dict:
         with self._lock:
             lat = sorted(self.latency_s)
-            q = (lambda f: lat[min(len(lat) - 1, int(f * len(lat)))] * 1e3) if lat else (
-                lambda f: None)
+            ms = {"n": len(lat), "p50": None, "p99": None, "max": None}
+            if lat:
+                ms.update(p50=lat[len(lat) // 2] * 1e3,
+                          p99=lat[min(len(lat) - 1, int(0.99 * len(lat)))] * 1e3,
+                          max=lat[-1] * 1e3)
             return {"received": dict(self.received), "lost": dict(self.lost),
-                    "last_seq": dict(self.last_seq),
-                    "latency_ms": {"n": len(lat), "p50": q(0.5), "p99": q(0.99),
-                                   "max": lat[-1] * 1e3 if lat else None}}
+                    "last_seq": dict(self.last_seq), "latency_ms": ms}
 
 
 def client_config(connect: list[str], config_file: str | None = None):
@@ -111,10 +112,8 @@ def main(argv: list[str] | None = None) -> int:
         if len(parts) != 4:
             return
         vehicle, estimator = parts[1], parts[3]
-        try:
-            payload = json.loads(sample.payload.to_bytes())
-        except ValueError as exc:
-            say(f"{sample.key_expr}: not JSON ({exc}); dropped")
+        payload = _json_object(sample)
+        if payload is None:
             return
         if args.stats:
             link.take(str(sample.key_expr), payload)
@@ -141,11 +140,21 @@ def main(argv: list[str] | None = None) -> int:
                 del detectors[key]
         say(f"{vehicle}: gone (its baseline is forgotten)")
 
-    def on_state(sample) -> None:
+    def _json_object(sample) -> dict | None:
         try:
-            link.take(str(sample.key_expr), json.loads(sample.payload.to_bytes()))
+            payload = json.loads(sample.payload.to_bytes())
         except ValueError as exc:
             say(f"{sample.key_expr}: not JSON ({exc}); dropped")
+            return None
+        if not isinstance(payload, dict):
+            say(f"{sample.key_expr}: not a JSON object; dropped")
+            return None
+        return payload
+
+    def on_state(sample) -> None:
+        payload = _json_object(sample)
+        if payload is not None:
+            link.take(str(sample.key_expr), payload)
 
     try:
         session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*", on_estimate)
@@ -165,8 +174,6 @@ def main(argv: list[str] | None = None) -> int:
         while not stop.wait(min(0.2, max(0.0, deadline - time.monotonic()))):
             if time.monotonic() >= deadline:
                 break
-    except KeyboardInterrupt:
-        pass
     finally:
         session.close()
         if args.stats:
