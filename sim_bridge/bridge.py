@@ -53,6 +53,7 @@ import logging
 import math
 import os
 import socket
+import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -177,6 +178,7 @@ class SimBridge:
         self._stop: asyncio.Event | None = None
         self._pending: list[tuple[str, Any]] = []
         self._timed: list[tuple[int, str, dict]] = []  # (due ns, op, args), soonest first
+        self._timed_lock = threading.Lock()  # the control thread adds, the plant loop takes
         self.timed_results: list[dict] = []
         self._links = self._links_from(config)
         ins_protocol = "ascii" if config.sensors.ins.format == "phins-ascii" else "stdbin"
@@ -367,8 +369,9 @@ class SimBridge:
                 if op == "plant_fault":
                     PlantFault(**_plant_fault_args(kw))  # a bad fault is refused now
                 due = now + int(at_s * 1e9)
-                self._timed.append((due, op, kw))
-                self._timed.sort(key=lambda x: x[0])
+                with self._timed_lock:
+                    self._timed.append((due, op, kw))
+                    self._timed.sort(key=lambda x: x[0])
                 return {"ok": True, "t_ns": now, "scheduled_ns": due}
             if op == "plant_fault":
                 fault = PlantFault(**_plant_fault_args(kw))
@@ -418,8 +421,11 @@ class SimBridge:
 
     def run_due(self, t_ns: int) -> None:
         """Carry out the scheduled commands due by ``t_ns`` (the plant's loop calls it)."""
-        while self._timed and self._timed[0][0] <= t_ns:
-            due, op, kw = self._timed.pop(0)
+        while True:
+            with self._timed_lock:
+                if not (self._timed and self._timed[0][0] <= t_ns):
+                    return
+                due, op, kw = self._timed.pop(0)
             ans = self.call(op, **kw)
             self.timed_results.append({"op": op, **kw, "due_ns": due, **ans})
             (log.info if ans.get("ok") else log.warning)(
