@@ -18,12 +18,8 @@ import time
 def register(sub) -> None:
     p = sub.add_parser("watch", help="watch running vehicles over Zenoh (docs/zenoh.md)",
                        description="Print the state, events and liveliness of uvd vehicles.")
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                   help="a daemon's (or router's) endpoint (repeatable; default "
-                        "tcp/127.0.0.1:7447)")
-    p.add_argument("--zenoh-config", metavar="FILE",
-                   help="a Zenoh JSON5 configuration (client mode through a router, "
-                        "user/password, TLS: config/zenoh/fdc.json5, docs/zenoh.md)")
+    from uvd.fdc.client import add_connection_arguments
+    add_connection_arguments(p)
     p.add_argument("--vehicle", default="*", help="vehicle key, or * for all (default)")
     p.add_argument("--seconds", type=float, default=0.0,
                    help="stop after this long (default: until Ctrl-C)")

@@ -57,6 +57,16 @@ class LinkStats:
                     "last_seq": dict(self.last_seq), "latency_ms": ms}
 
 
+def add_connection_arguments(p: argparse.ArgumentParser) -> None:
+    """``--connect`` and ``--zenoh-config`` of a client (:func:`client_config`)."""
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                   help="a daemon's (or router's) endpoint (repeatable; default "
+                        "tcp/127.0.0.1:7447)")
+    p.add_argument("--zenoh-config", metavar="FILE",
+                   help="a Zenoh JSON5 configuration (client mode through a router, "
+                        "user/password, TLS: config/zenoh/fdc.json5, docs/zenoh.md)")
+
+
 def client_config(connect: list[str], config_file: str | None = None):
     """The ``zenoh.Config`` of a client of the key space: ``config_file`` (JSON5) when given,
     else a peer with multicast scouting off; ``connect`` endpoints (default, without a file,
@@ -76,12 +86,7 @@ def client_config(connect: list[str], config_file: str | None = None):
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="uvd-fdc", description=__doc__.split("\n\n")[0])
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                   help="endpoint of a daemon or router (repeatable; default "
-                        "tcp/127.0.0.1:7447)")
-    p.add_argument("--zenoh-config", metavar="FILE",
-                   help="a Zenoh JSON5 configuration (client mode through a router, "
-                        "user/password, TLS: config/zenoh/fdc.json5, docs/zenoh.md)")
+    add_connection_arguments(p)
     p.add_argument("--vehicle", default="*", help="vehicle key or * (default: every vehicle)")
     p.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: never)")
     p.add_argument("--stats", metavar="FILE",
