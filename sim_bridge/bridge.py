@@ -362,10 +362,14 @@ class SimBridge:
         try:
             now = self.clock()
             if "at_s" in kw:
-                at_s = float(kw.pop("at_s"))
+                raw = kw.pop("at_s")
+                try:
+                    at_s = float(raw)
+                except (TypeError, ValueError):
+                    at_s = math.nan
                 if not (math.isfinite(at_s) and at_s >= 0.0):
                     raise ValueError(f"at_s must be a finite number of seconds >= 0, not "
-                                     f"{at_s!r}")
+                                     f"{raw!r}")
                 if op == "plant_fault":
                     PlantFault(**_plant_fault_args(kw))  # a bad fault is refused now
                 due = now + int(at_s * 1e9)
