@@ -29,6 +29,14 @@ instead of each frame), ``nan`` (NaN attitude / depth in otherwise valid frames)
 instrument was written, for ``uvd bench latency``). Every answer carries the bridge's
 monotonic time ``t_ns`` (the same clock as the daemon's on this machine).
 
+**Faults of the vehicle** (for fault detection, docs/zenoh.md): ``plant_fault`` changes the
+plant's true parameters (:class:`~sim_bridge.plant.PlantFault`: ``drag_scale`` 1.5 for an
+entanglement, ``mass_scale`` 1.1 for a flooding, ``g_delta``/``b_delta`` for a buoyancy
+change; no argument: the vehicle file's own again); ``health`` (``node``, ``value``) weakens
+one thruster (0.5) or kills it (0). Any command given ``at_s`` is carried out that many
+seconds later, by the plant's loop (answer: ``scheduled_ns``); ``sim-bridge --at S JSON``
+schedules one from the start.
+
 **Truth.** ``truth_log`` receives one row per plant step: monotonic time (s), the true
 [x, y, z, roll, pitch, heading], body velocity [ν; ω] and the thrust produced (float64,
 ``TRUTH_COLUMNS``), for the demo's tracking errors.
@@ -37,12 +45,15 @@ monotonic time ``t_ns`` (the same clock as the daemon's on this machine).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import copy
+import dataclasses
 import json
 import logging
 import math
 import os
 import socket
+import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -55,7 +66,7 @@ from drivers.samples import R_to_euler
 from sim_bridge.instruments.faults import SENSOR_MODES, FaultyInstruments, SensorFaults
 from sim_bridge.instruments.models import instrument_config
 from sim_bridge.instruments.pty_emulators import EmulatorConfig, InstrumentEmulators, PtyPort
-from sim_bridge.plant import Plant, PlantConfig
+from sim_bridge.plant import Plant, PlantConfig, PlantFault
 from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
 
 __all__ = ["SimBridge", "SensorFaults", "TRUTH_COLUMNS", "read_truth", "write_local_config",
@@ -166,6 +177,9 @@ class SimBridge:
                          "rpdo_rx": 0, "rpdo_out_of_range": 0, "rpdo_max_abs_permille": 0}
         self._stop: asyncio.Event | None = None
         self._pending: list[tuple[str, Any]] = []
+        self._timed: list[tuple[int, str, dict]] = []  # (due ns, op, args), soonest first
+        self._timed_lock = threading.Lock()  # the control thread adds, the plant loop takes
+        self.timed_results: list[dict] = []
         self._links = self._links_from(config)
         ins_protocol = "ascii" if config.sensors.ins.format == "phins-ascii" else "stdbin"
         self.instruments = FaultyInstruments(instrument_config(config.simulation.instruments),
@@ -276,6 +290,8 @@ class SimBridge:
 
     # -- plant --
     def _plant_step(self, t_ns: int) -> None:
+        if self._timed:
+            self.run_due(t_ns)
         plant = self.plant
         with self.can.lock:
             cmd = self.thrust_commands()
@@ -342,9 +358,31 @@ class SimBridge:
 
     # -- control --
     def call(self, op: str, **kw) -> dict:
-        """One control command; never raises (``{"ok": false, "error": …}``)."""
+        """One control command; never raises (``{"ok": false, "error": …}``). With ``at_s``
+        it is scheduled that many seconds from now instead (:meth:`run_due`)."""
         try:
             now = self.clock()
+            if "at_s" in kw:
+                raw = kw.pop("at_s")
+                try:
+                    at_s = float(raw)
+                except (TypeError, ValueError):
+                    at_s = math.nan
+                if not (math.isfinite(at_s) and at_s >= 0.0):
+                    raise ValueError(f"at_s must be a finite number of seconds >= 0, not "
+                                     f"{raw!r}")
+                if op == "plant_fault":
+                    PlantFault(**_plant_fault_args(kw))  # a bad fault is refused now
+                due = now + int(at_s * 1e9)
+                with self._timed_lock:
+                    self._timed.append((due, op, kw))
+                    self._timed.sort(key=lambda x: x[0])
+                return {"ok": True, "t_ns": now, "scheduled_ns": due}
+            if op == "plant_fault":
+                fault = PlantFault(**_plant_fault_args(kw))
+                with self.can.lock if self.can is not None else contextlib.nullcontext():
+                    self.plant.set_fault(fault)
+                return {"ok": True, "t_ns": now, "fault": dataclasses.asdict(fault)}
             if op == "ping":
                 return {"ok": True, "t_ns": now}
             if op == "sensor":
@@ -386,12 +424,27 @@ class SimBridge:
         except (KeyError, ValueError, TypeError) as exc:
             return {"ok": False, "error": f"{op}: {exc}"}
 
+    def run_due(self, t_ns: int) -> None:
+        """Carry out the scheduled commands due by ``t_ns`` (the plant's loop calls it)."""
+        while True:
+            with self._timed_lock:
+                if not (self._timed and self._timed[0][0] <= t_ns):
+                    return
+                due, op, kw = self._timed.pop(0)
+            ans = self.call(op, **kw)
+            self.timed_results.append({"op": op, **kw, "due_ns": due, **ans})
+            (log.info if ans.get("ok") else log.warning)(
+                "scheduled %s %s: %s", op, kw, ans)
+
     def stats(self, history: bool = False) -> dict:
         ports = {n: {"device": p.device, "frames_written": p.frames_written,
                      "frames_dropped": p.frames_dropped, "garbage": p.garbage_written}
                  for n, p in self.emulators.ports.items()}
         return {"counters": dict(self.counters), "ports": ports,
                 "faults": dict(self.faults.mode), "held": self.held,
+                "plant_fault": dataclasses.asdict(self.plant.fault),
+                "thruster_health": self.plant.thrusters.health.tolist(),
+                "timed": list(self.timed_results), "scheduled": len(self._timed),
                 "leak_wet": self.leak_wet,
                 "released_at_ns": self.released_at_ns,
                 "can": self.can.stats(history) if self.can is not None else {}}
@@ -445,6 +498,23 @@ class SimBridge:
                         "pressure_node": self.config.can.depth.node_id
                         if self.config.can.depth.enabled else None},
                 "start_eta": [*self.H0[:3, 3], roll, pitch, heading], "held": self.held}
+
+
+def _plant_fault_args(kw: dict) -> dict:
+    """The :class:`PlantFault` arguments of a ``plant_fault`` command (unknown names are
+    refused by name)."""
+    known = {"drag_scale", "mass_scale", "g_delta", "b_delta"}
+    unknown = sorted(set(kw) - known)
+    if unknown:
+        raise ValueError(f"unknown argument(s) {', '.join(unknown)} (known: "
+                         f"{', '.join(sorted(known))})")
+    out = {k: float(v) for k, v in kw.items() if k != "b_delta"}
+    if "b_delta" in kw:
+        b = tuple(float(x) for x in kw["b_delta"])
+        if len(b) != 3:
+            raise ValueError(f"b_delta must be 3 numbers (N m), not {kw['b_delta']!r}")
+        out["b_delta"] = b
+    return out
 
 
 def read_truth(path: str | Path) -> np.ndarray:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import logging
 import os
 import signal
@@ -36,6 +37,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write the true state at every plant step (float64 rows)")
     p.add_argument("--control", action="store_true",
                    help="JSON commands on stdin, answers on stdout; exit when stdin closes")
+    p.add_argument("--at", nargs=2, action="append", default=[], metavar=("S", "JSON"),
+                   help="carry out a control command S seconds after the start (repeatable),"
+                        " e.g. --at 60 '{\"op\": \"plant_fault\", \"drag_scale\": 1.5}' or "
+                        "--at 120 '{\"op\": \"health\", \"node\": 4, \"value\": 0}'")
     p.add_argument("--realtime", type=int, nargs="?", const=10, default=0, metavar="PRIO",
                    help="SCHED_FIFO priority (10 without a value) if permitted: the emulated "
                         "devices answer on time whatever else the machine runs")
@@ -73,6 +78,17 @@ def main(argv: list[str] | None = None) -> int:
     except (UvdError, ValueError, OSError) as exc:
         emit({"event": "error", "error": str(exc)})
         return 2
+    for seconds, text in args.at:
+        try:
+            cmd = json.loads(text)
+            ans = bridge.call(cmd.pop("op"), at_s=seconds, **cmd)
+        except (ValueError, KeyError, AttributeError, TypeError) as exc:
+            ans = {"ok": False, "error": f"{exc}"}
+        if not ans.get("ok"):
+            msg = f"sim-bridge: --at {seconds} {text}: {ans.get('error')}"
+            print(msg, file=sys.stderr)
+            emit({"event": "error", "error": msg})
+            return 2
     import gc
     gc.collect()  # the heavy start-up work is done at normal priority…
     gc.freeze()

@@ -71,12 +71,14 @@ class Plant:
         self.H = np.eye(4) if H0 is None else np.array(H0, dtype=float)
         self.v = np.zeros(6) if v0 is None else np.array(v0, dtype=float)
         self.u = np.zeros(6)  # body wrench applied during the last step (u = B f)
+        self.fault = PlantFault()  # none
         self._H_next = np.empty((4, 4))
         self._v_next = np.empty(6)
 
     def set_fault(self, fault: PlantFault | None) -> None:
         """From now on the vehicle's true parameters are ``fault.apply(vehicle.params)``
         (None: the vehicle file's own again); the state carries on."""
+        self.fault = fault if fault is not None else PlantFault()
         p = self.vehicle.params if fault is None else fault.apply(self.vehicle.params)
         self.model = UVModel.from_params(p)
 

@@ -8,7 +8,9 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 
@@ -98,14 +100,17 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
             (str(x.key_expr), json.loads(x.payload.to_bytes()))))
         proc = subprocess.Popen(
             [sys.executable, "-m", "uvd.fdc.client", "--connect", f"tcp/127.0.0.1:{port}",
-             "--warmup-s", "10", "--baseline-s", "100", "--seconds", "30"],
+             "--warmup-s", "10", "--baseline-s", "100", "--seconds", "30",
+             "--stats", str(tmp_path / "stats.json")],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         try:
             time.sleep(3.0)  # the client connects and subscribes
             rng = np.random.default_rng(3)
             for k in range(300):  # 300 simulated seconds, a drag step at 200 s
                 scale = {"drags": 1.5} if k >= 200 else None
-                pub.put(json.dumps(_payload(float(k), rng, scale=scale)))
+                if k != 150:  # one sample lost: a gap in seq
+                    pub.put(json.dumps({**_payload(float(k), rng, scale=scale), "seq": k,
+                                        "wall_time": time.time()}))
                 time.sleep(0.01)
             deadline = time.monotonic() + 10.0
             while not faults and time.monotonic() < deadline:
@@ -121,5 +126,12 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     assert len(faults) == 1, faults
     key, d = faults[0]
     assert key == "uvd/sub1/fault/entanglement" and d["channel"].startswith("drag")
+    schema = json.loads((Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
+                         / "uvd.fault.v1.json").read_text())
+    jsonschema.Draft202012Validator(schema).validate(d)
     assert 200e9 <= d["t_ns"] <= 203e9
     assert "FAULT sub1: entanglement" in out and "not JSON" in out and "sub1: gone" in out
+    stats = json.loads((tmp_path / "stats.json").read_text())  # --stats: what arrived
+    key = "uvd/sub1/estimate/aid6"
+    assert stats["received"] == {key: 299} and stats["lost"] == {key: 1}
+    assert stats["latency_ms"]["n"] == 299 and 0 < stats["latency_ms"]["p50"] < 1000

@@ -364,6 +364,40 @@ def _add(p) -> None:
                         "a loopback port: once quiet, then again while N random and "
                         "malformed datagrams arrive spread over the run (same process); "
                         "prints both lateness figures")
+    p.add_argument("--zenoh-stall", type=float, default=0.0, metavar="SECONDS",
+                   help="also publish every cycle's state over Zenoh (the daemon's sink) to a "
+                        "uvd-fdc process, and measure three phases of SECONDS each: it reads, "
+                        "it stops reading (SIGSTOP), it reads again; lateness of each "
+                        "(--duration is then ignored)")
+
+
+async def _with_stalled_reader(settings: LoopSettings, cycle, seconds: float, warmup: float,
+                               steal: Callable[[], float | None], hub, endpoint: str) -> dict:
+    """The loop measured three times, ``seconds`` each, while a Zenoh subscriber (a
+    ``uvd-fdc`` process taking every state sample) reads, is stopped (SIGSTOP: its socket
+    fills, nothing is read) and reads again (SIGCONT). Returns each phase's :func:`_measure`
+    figures and what the subscriber counted."""
+    import signal
+
+    from uvd.bench.zenoh import FdcProcess
+
+    pump = asyncio.get_running_loop().create_task(hub.run())
+    sub = FdcProcess([endpoint])
+    phases = {}
+    try:
+        await sub.subscribed()
+        await asyncio.sleep(1.0)  # connected, samples flowing
+        phases["reading"] = await _measure(settings, cycle, seconds, warmup, steal)
+        sub.proc.send_signal(signal.SIGSTOP)
+        phases["stalled"] = await _measure(settings, cycle, seconds, 0.0, steal)
+        sub.proc.send_signal(signal.SIGCONT)
+        phases["reading_again"] = await _measure(settings, cycle, seconds, 0.0, steal)
+    finally:
+        sub.proc.send_signal(signal.SIGCONT)
+        phases["hub"] = await hub.aclose()
+        await pump
+        phases["subscriber"] = sub.finish()
+    return phases
 
 
 async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float,
@@ -597,9 +631,20 @@ def _run(args) -> dict:
     # would hold the CPU for hundreds of ms from every lower-priority task on it — the HIL
     # demo's daemon, which the acceptance runs beside this benchmark, included.
     cycle = CYCLES[args.cycle]()
-    hub, rec_times = None, {}
+    hub, rec_times, endpoint = None, {}, None
+    if args.record and args.zenoh_stall > 0:
+        raise SystemExit("uvd bench loop: --record and --zenoh-stall each measure one sink "
+                         "against none; give one of them")
     if args.record:
         cycle, hub = _recorded(cycle, args.record, rec_times)
+    if args.zenoh_stall > 0:
+        from uvd.bench.zenoh import free_port
+        from uvd.telemetry.sink import TelemetryHub
+        from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        hub = TelemetryHub([ZenohSink("bench", zenoh_config(listen=[endpoint]),
+                                      state_hz=args.rate, health_hz=0.0)])
+        cycle = _published(cycle, hub)
     for _ in range(20):
         t = time.monotonic_ns()
         cycle(t, 1.0 / args.rate)
@@ -614,8 +659,15 @@ def _run(args) -> dict:
     load0 = os.getloadavg()
     # the hypervisor's steal on the loop's CPUs: a paused vCPU stalls us whatever our priority
     steal_cpus = sorted(rt.cpu_affinity) if args.cpu else None
-    ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup,
-                             lambda: host_steal_s(steal_cpus), hub))
+    stall = None
+    if endpoint is not None:
+        stall = asyncio.run(_with_stalled_reader(settings, cycle, args.zenoh_stall,
+                                                 args.warmup, lambda: host_steal_s(steal_cpus),
+                                                 hub, endpoint))
+        ours = stall["reading"]
+    else:
+        ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup,
+                                 lambda: host_steal_s(steal_cpus), hub))
     # the measured cycles' (warm-up and back-to-back runs left out), half with the recorder
     recording = None
     if args.record:
@@ -639,7 +691,7 @@ def _run(args) -> dict:
     naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
     figures = {
         "rate_hz": args.rate,
-        "duration_s": args.duration,
+        "duration_s": args.duration if stall is None else 3 * args.zenoh_stall,
         "cycle": args.cycle,
         "recording": recording,
         "lateness_us": ours["lateness_us"],
@@ -672,7 +724,18 @@ def _run(args) -> dict:
         figures["naive_asyncio"] = naive
     if fuzz is not None:
         figures["mavlink_fuzz"] = fuzz
-    print(f"uvd bench loop: {args.rate:g} Hz, {args.duration:g} s, cycle '{args.cycle}', "
+    if stall is not None:
+        p99 = {k: stall[k]["lateness_us"]["p99"] for k in ("reading", "stalled",
+                                                           "reading_again")}
+        figures["zenoh_stall"] = {
+            "seconds": args.zenoh_stall,
+            **{k: {f: stall[k][f] for f in ("lateness_us", "compute_us", "cycles", "overruns")}
+               for k in p99},
+            "lateness_p99_change": p99["stalled"] / p99["reading"] - 1.0,
+            "lateness_p99_change_vs_reading_again": p99["stalled"] / p99["reading_again"] - 1.0,
+            "hub": stall["hub"], "subscriber": stall["subscriber"]}
+    seconds = f"3 × {args.zenoh_stall:g}" if stall is not None else f"{args.duration:g}"
+    print(f"uvd bench loop: {args.rate:g} Hz, {seconds} s, cycle '{args.cycle}', "
           f"load {load0[0]:.2f}")
     print(f"  lateness µs  ours  : {_fmt(ours['lateness_us'])}   overruns {ours['overruns']}"
           f"  skipped {ours['skipped']}")
@@ -684,6 +747,16 @@ def _run(args) -> dict:
         print(f"  cycle µs with the black box   : {_fmt(recording['with_us'])}")
         print(f"  cycle µs without (interleaved): {_fmt(recording['without_us'])}   median "
               f"cost {recording['p50_cost_us']:.1f} µs")
+    if stall is not None:
+        z = figures["zenoh_stall"]
+        for k in ("reading", "stalled", "reading_again"):
+            print(f"  zenoh subscriber {k:<13}: lateness µs {_fmt(z[k]['lateness_us'])}   "
+                  f"overruns {z[k]['overruns']}")
+        zs = z["hub"].get("zenoh", {})
+        print(f"  lateness p99 stalled vs reading {100 * z['lateness_p99_change']:+.1f} %, vs "
+              f"reading again {100 * z['lateness_p99_change_vs_reading_again']:+.1f} %; hub "
+              f"dropped {zs.get('dropped')}; subscriber received "
+              f"{sum(z['subscriber'].get('received', {}).values())}")
     if warm is not None:
         print(f"  compute  µs  back to back (warm caches, 2000 in bursts of 10): {_fmt(warm)}")
     hs = figures["host_steal"]

@@ -1,4 +1,4 @@
-"""``uvd watch [--connect tcp/127.0.0.1:7447] [--vehicle '*'] [--seconds S]``.
+"""``uvd watch [--connect ENDPOINT] [--zenoh-config FILE] [--vehicle '*'] [--seconds S]``.
 
 Watches vehicles over Zenoh (docs/zenoh.md) as any client would — through the documented key
 space and JSON payloads only, nothing of the daemon's classes: one line a second per vehicle
@@ -18,8 +18,8 @@ import time
 def register(sub) -> None:
     p = sub.add_parser("watch", help="watch running vehicles over Zenoh (docs/zenoh.md)",
                        description="Print the state, events and liveliness of uvd vehicles.")
-    p.add_argument("--connect", default="tcp/127.0.0.1:7447", metavar="ENDPOINT",
-                   help="a daemon's (or router's) endpoint (default tcp/127.0.0.1:7447)")
+    from uvd.fdc.client import add_connection_arguments
+    add_connection_arguments(p)
     p.add_argument("--vehicle", default="*", help="vehicle key, or * for all (default)")
     p.add_argument("--seconds", type=float, default=0.0,
                    help="stop after this long (default: until Ctrl-C)")
@@ -29,10 +29,8 @@ def register(sub) -> None:
 def _run(args) -> int:
     import zenoh
 
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("connect/endpoints", json.dumps([args.connect]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    from uvd.fdc.client import client_config
+    conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
     last_line: dict[str, float] = {}
 
@@ -73,7 +71,8 @@ def _run(args) -> int:
         session.declare_subscriber(f"uvd/{v}/state", on_state)
         session.declare_subscriber(f"uvd/{v}/event", on_event)
         session.liveliness().declare_subscriber(f"uvd/{v}/alive", on_alive, history=True)
-        out(f"watching uvd/{v}/… through {args.connect} (Ctrl-C to stop)")
+        via = ", ".join(args.connect) or args.zenoh_config or "tcp/127.0.0.1:7447"
+        out(f"watching uvd/{v}/… through {via} (Ctrl-C to stop)")
         deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
         while time.monotonic() < deadline:
             time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))

@@ -27,63 +27,98 @@ FAULTS = {
 EVERY_S = 10.0
 
 
+class SimVehicle:
+    """One lockstep vehicle of this experiment (demo configuration, online 6-DOF AID from the
+    vehicle's own parameters), ``fault`` (a key of :data:`FAULTS`, or None) injected into its
+    plant after ``minutes_before``; :meth:`next_estimate` advances it to its next estimate."""
+
+    def __init__(self, fault: str | None, minutes_before: float, seed: int) -> None:
+        from uvd.estimation.aid import aid6_estimator
+        from uvd.experiments.lockstep import Lockstep, LockstepConfig
+        from uvd.runtime.build import build_core, start_pose
+        from uvd.runtime.config import DEFAULT_CONFIG, load_config
+
+        cfg = load_config(DEFAULT_CONFIG)
+        vehicle = cfg.load_vehicle()
+        core_cfg = build_core(cfg, vehicle, estimators=(
+            aid6_estimator(vehicle.params.theta, cfg.estimation.aid_params()),))
+        H0, v0 = start_pose(cfg)
+        self.sim = Lockstep(vehicle, core_cfg, LockstepConfig(
+            control_rate_hz=cfg.loop.rate_hz, seed=seed), H0=H0, v0=v0)
+        self.spec = core_cfg.estimators[0]
+        self.rate = cfg.loop.rate_hz
+        self.fault = fault
+        self.k = 0
+        self.k_fault = int(round(minutes_before * 60.0 * self.rate)) if fault else None
+        self.every = int(round(EVERY_S * self.rate))
+        self.t_fault_ns: int | None = None
+
+    @property
+    def next_k(self) -> int:
+        """The cycle (from 0) whose estimate :meth:`next_estimate` returns."""
+        return 0 if self.k == 0 else self.k - 1 + self.every
+
+    def next_estimate(self) -> dict:
+        """Run to the next estimate (every :data:`EVERY_S` simulated seconds, the first at
+        the start); its ``"estimate"`` hub record, stamped with the simulated clock."""
+        from sim_bridge.plant import PlantFault
+        from uvd.telemetry.records import estimate_record
+
+        sim = self.sim
+        while True:
+            if self.k == self.k_fault:
+                self.t_fault_ns = sim.t_ns
+                args = FAULTS[self.fault][1]
+                if "health" in args:
+                    i, h = args["health"]
+                    sim.plant.thrusters.health[i] = h
+                else:
+                    sim.plant.set_fault(PlantFault(**args))
+            sim.cycle()
+            self.k += 1
+            if (self.k - 1) % self.every == 0:
+                return estimate_record(sim.t_ns, self.spec.name,
+                                       self.spec.diagnostics(sim.state.est[0]))
+
+    def outcome(self, detections: list[dict]) -> dict:
+        """This vehicle's figures from the detections reported for it (first one counts)."""
+        first = detections[0] if detections else None
+        t_fault = self.t_fault_ns
+        out = {"fault": self.fault, "injected_at_s": None if t_fault is None
+               else t_fault * 1e-9, "detections": detections}
+        if self.fault is not None:
+            want = FAULTS[self.fault][2]
+            out["expected_kind"] = want
+            out["detected"] = first is not None and t_fault is not None \
+                and first["t_ns"] >= t_fault
+            out["kind"] = None if first is None else first["kind"]
+            out["right_kind"] = out["kind"] == want
+            out["latency_s"] = None if not out["detected"] else (first["t_ns"] - t_fault) * 1e-9
+            out["false_alarm_before_fault"] = first is not None and (
+                t_fault is None or first["t_ns"] < t_fault)
+        else:
+            out["false_alarms"] = len(detections)
+        return out
+
+
 def _run_one(fault: str | None, minutes_before: float, minutes_after: float, seed: int,
              progress) -> dict:
-    from sim_bridge.plant import PlantFault
-    from uvd.estimation.aid import aid6_estimator
-    from uvd.experiments.lockstep import Lockstep, LockstepConfig
     from uvd.fdc.detector import VehicleDetector
-    from uvd.runtime.build import build_core, start_pose
-    from uvd.runtime.config import DEFAULT_CONFIG, load_config
-    from uvd.telemetry.records import estimate_record
     from uvd.telemetry.zenoh_link import estimate_payload
 
-    cfg = load_config(DEFAULT_CONFIG)
-    vehicle = cfg.load_vehicle()
-    core_cfg = build_core(cfg, vehicle, estimators=(
-        aid6_estimator(vehicle.params.theta, cfg.estimation.aid_params()),))
-    H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, core_cfg, LockstepConfig(control_rate_hz=cfg.loop.rate_hz,
-                                                     seed=seed), H0=H0, v0=v0)
-    spec = core_cfg.estimators[0]
+    v = SimVehicle(fault, minutes_before, seed)
     det = VehicleDetector("jhu-rov")
-    rate = cfg.loop.rate_hz
-    n = int(round((minutes_before + minutes_after) * 60.0 * rate))
-    k_fault = int(round(minutes_before * 60.0 * rate)) if fault else None
-    every = int(round(EVERY_S * rate))
+    n = int(round((minutes_before + minutes_after) * 60.0 * v.rate))
     detections = []
-    t_fault_ns = None
-    for k in range(n):
-        if k == k_fault:
-            t_fault_ns = sim.t_ns
-            args = FAULTS[fault][1]
-            if "health" in args:
-                i, h = args["health"]
-                sim.plant.thrusters.health[i] = h
-            else:
-                sim.plant.set_fault(PlantFault(**args))
-        sim.cycle()
-        if k % every == 0:
-            rec = estimate_record(sim.t_ns, spec.name, spec.diagnostics(sim.state.est[0]))
-            payload = {"t_ns": sim.t_ns, **estimate_payload(rec)}
-            detections += [d.as_dict() for d in det.update(payload)]
-        if progress is not None and k and k % int(1800 * rate) == 0:
-            progress(f"  fdc {fault or 'fault-free'}: simulated {k / rate / 60:.0f} / "
-                     f"{n / rate / 60:.0f} min")
-    first = detections[0] if detections else None
-    out = {"fault": fault, "injected_at_s": None if t_fault_ns is None else t_fault_ns * 1e-9,
-           "detections": detections, "baseline": {"mu": det.mu, "sigma": det.sigma}}
-    if fault is not None:
-        want = FAULTS[fault][2]
-        out["expected_kind"] = want
-        out["detected"] = first is not None and first["t_ns"] >= t_fault_ns
-        out["kind"] = None if first is None else first["kind"]
-        out["right_kind"] = out["kind"] == want
-        out["latency_s"] = None if not out["detected"] else (first["t_ns"] - t_fault_ns) * 1e-9
-        out["false_alarm_before_fault"] = first is not None and first["t_ns"] < t_fault_ns
-    else:
-        out["false_alarms"] = len(detections)
-    return out
+    report = int(1800 * v.rate)
+    while v.next_k < n:
+        rec = v.next_estimate()
+        payload = {"t_ns": rec["t_ns"], **estimate_payload(rec)}
+        detections += [d.as_dict() for d in det.update(payload)]
+        if progress is not None and v.k // report != (v.k - v.every) // report:
+            progress(f"  fdc {fault or 'fault-free'}: simulated {v.k / v.rate / 60:.0f} / "
+                     f"{n / v.rate / 60:.0f} min")
+    return {**v.outcome(detections), "baseline": {"mu": det.mu, "sigma": det.sigma}}
 
 
 def run(opts: ExperimentOptions) -> dict:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import sys
 import threading
 import time
@@ -21,13 +22,77 @@ import time
 from uvd.fdc.detector import CusumSettings, VehicleDetector
 
 
+class LinkStats:
+    """Per key: samples received, samples lost (gaps in ``seq``, which the daemon raises by
+    one a sample per key) and end-to-end latencies (receipt − ``wall_time``, seconds)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.received: dict[str, int] = {}
+        self.lost: dict[str, int] = {}
+        self.last_seq: dict[str, int] = {}
+        self.latency_s: list[float] = []
+
+    def take(self, key: str, payload: dict) -> None:
+        now = time.time()
+        with self._lock:
+            self.received[key] = self.received.get(key, 0) + 1
+            seq, last = payload.get("seq"), self.last_seq.get(key)
+            if isinstance(seq, int):
+                if last is not None and seq > last + 1:
+                    self.lost[key] = self.lost.get(key, 0) + seq - last - 1
+                self.last_seq[key] = seq
+            if isinstance(payload.get("wall_time"), (int, float)):
+                self.latency_s.append(now - payload["wall_time"])
+
+    def summary(self) -> dict:
+        with self._lock:
+            lat = sorted(self.latency_s)
+            ms = {"n": len(lat), "p50": None, "p99": None, "max": None}
+            if lat:
+                ms.update(p50=lat[len(lat) // 2] * 1e3,
+                          p99=lat[min(len(lat) - 1, int(0.99 * len(lat)))] * 1e3,
+                          max=lat[-1] * 1e3)
+            return {"received": dict(self.received), "lost": dict(self.lost),
+                    "last_seq": dict(self.last_seq), "latency_ms": ms}
+
+
+def add_connection_arguments(p: argparse.ArgumentParser) -> None:
+    """``--connect`` and ``--zenoh-config`` of a client (:func:`client_config`)."""
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                   help="a daemon's (or router's) endpoint (repeatable; default "
+                        "tcp/127.0.0.1:7447)")
+    p.add_argument("--zenoh-config", metavar="FILE",
+                   help="a Zenoh JSON5 configuration (client mode through a router, "
+                        "user/password, TLS: config/zenoh/fdc.json5, docs/zenoh.md)")
+
+
+def client_config(connect: list[str], config_file: str | None = None):
+    """The ``zenoh.Config`` of a client of the key space: ``config_file`` (JSON5) when given,
+    else a peer with multicast scouting off; ``connect`` endpoints (default, without a file,
+    ``tcp/127.0.0.1:7447``: the demo's daemon) replace the file's."""
+    import zenoh
+    if config_file:
+        conf = zenoh.Config.from_file(str(config_file))
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"peer"')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        connect = connect or ["tcp/127.0.0.1:7447"]
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    return conf
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="uvd-fdc", description=__doc__.split("\n\n")[0])
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                   help="endpoint of a daemon or router (repeatable; default "
-                        "tcp/127.0.0.1:7447)")
+    add_connection_arguments(p)
     p.add_argument("--vehicle", default="*", help="vehicle key or * (default: every vehicle)")
     p.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: never)")
+    p.add_argument("--stats", metavar="FILE",
+                   help="also take uvd/<vehicle>/state and write, at the end, per key the "
+                        "samples received, those lost (gaps in seq) and the end-to-end "
+                        "latency (receipt − the payload's wall_time: same machine only)")
     p.add_argument("--warmup-s", type=float, default=CusumSettings.warmup_s)
     p.add_argument("--baseline-s", type=float, default=CusumSettings.baseline_s)
     p.add_argument("-k", type=float, default=CusumSettings.k, help="CUSUM allowance (σ)")
@@ -37,12 +102,9 @@ def main(argv: list[str] | None = None) -> int:
 
     settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s, k=args.k,
                              h=args.threshold)
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("connect/endpoints",
-                      json.dumps(args.connect or ["tcp/127.0.0.1:7447"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
+    link = LinkStats()
     detectors: dict[tuple[str, str], VehicleDetector] = {}
     session = zenoh.open(conf)
 
@@ -55,11 +117,11 @@ def main(argv: list[str] | None = None) -> int:
         if len(parts) != 4:
             return
         vehicle, estimator = parts[1], parts[3]
-        try:
-            payload = json.loads(sample.payload.to_bytes())
-        except ValueError as exc:
-            say(f"{sample.key_expr}: not JSON ({exc}); dropped")
+        payload = _json_object(sample)
+        if payload is None:
             return
+        if args.stats:
+            link.take(str(sample.key_expr), payload)
         with lock:
             det = detectors.setdefault((vehicle, estimator), VehicleDetector(vehicle, settings))
             try:
@@ -83,20 +145,45 @@ def main(argv: list[str] | None = None) -> int:
                 del detectors[key]
         say(f"{vehicle}: gone (its baseline is forgotten)")
 
+    def _json_object(sample) -> dict | None:
+        try:
+            payload = json.loads(sample.payload.to_bytes())
+        except ValueError as exc:
+            say(f"{sample.key_expr}: not JSON ({exc}); dropped")
+            return None
+        if not isinstance(payload, dict):
+            say(f"{sample.key_expr}: not a JSON object; dropped")
+            return None
+        return payload
+
+    def on_state(sample) -> None:
+        payload = _json_object(sample)
+        if payload is not None:
+            link.take(str(sample.key_expr), payload)
+
     try:
         session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*", on_estimate)
+        if args.stats:
+            session.declare_subscriber(f"uvd/{args.vehicle}/state", on_state)
         session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive", on_alive,
                                                 history=True)
         say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* (baseline after "
             f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; k {settings.k:g}, "
             f"h {settings.h:g})")
+        # SIGTERM (systemd, a parent) and SIGINT (Ctrl-C; also when started in the background,
+        # where a shell would have it ignored) end it cleanly: counts written
+        stop = threading.Event()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: stop.set())
         deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
-        while time.monotonic() < deadline:
-            time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
-    except KeyboardInterrupt:
-        pass
+        while not stop.wait(min(0.2, max(0.0, deadline - time.monotonic()))):
+            if time.monotonic() >= deadline:
+                break
     finally:
         session.close()
+        if args.stats:
+            with open(args.stats, "w") as f:
+                json.dump(link.summary(), f)
     return 0
 
 
