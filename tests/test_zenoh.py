@@ -99,7 +99,11 @@ def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path)
                                                       "uvd/rov7/params?colour=blue")
                 info["bad_what"] = await asyncio.to_thread(w.query,
                                                            "uvd/rov7/params?what=gains")
-                await asyncio.sleep(3.0)
+                # at least 4 s of state from the first sample the watcher got (it may connect
+                # late on a loaded machine), bounded
+                end = time.monotonic() + 15.0
+                while len(w.samples["uvd/rov7/state"]) < 41 and time.monotonic() < end:
+                    await asyncio.sleep(0.1)
 
             d, cycles = run_scenario(cfg, scenario)
         time.sleep(0.5)
