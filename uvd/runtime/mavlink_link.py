@@ -340,6 +340,7 @@ class MavlinkLink:
                 return
             self.counters["datagrams"] += 1
             self._datagram(data, addr)
+            time.sleep(0)  # hand the interpreter to the loop's thread if it is waiting for it
 
     def _receive_serial(self) -> None:
         """A byte stream: one parser keeps its state across reads (at most 4 KiB a wake)."""
