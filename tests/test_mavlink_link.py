@@ -5,6 +5,7 @@ would get. Bounded: every wait has a deadline."""
 from __future__ import annotations
 
 import asyncio
+import collections
 import socket
 import time
 
@@ -191,3 +192,45 @@ def test_serial_line_carries_telemetry_and_commands(tmp_path):
             os.close(master)
             os.close(slave)
     asyncio.run(asyncio.wait_for(main(), 30.0))
+
+
+def test_the_receiver_process_forwards_only_good_mavlink_and_counts_the_rest():
+    from uvd.runtime.mavlink_rx import read_forwarded, spawn_receiver
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    proc, pair = spawn_receiver(sock)
+    st = Peer()
+    try:
+        good = st.enc.heartbeat_encode(6, 8, 0, 0, 0).pack(st.enc)
+        flipped = bytearray(good)
+        flipped[-1] ^= 0xFF  # bad CRC
+        for dg in (b"\x00garbage", good[:5], bytes(flipped), good):
+            st.sock.sendto(dg, sock.getsockname())
+        counts, got, deadline = collections.Counter(), [], time.monotonic() + 5.0
+        while (len(got) < 1 or counts["datagrams"] < 4) and time.monotonic() < deadline:
+            got += read_forwarded(pair, counts)
+            time.sleep(0.02)
+        assert got == [(good, ("127.0.0.1", st.port))]
+        assert counts == {"datagrams": 4, "bad_datagrams": 3}
+    finally:
+        pair.close()  # the receiver ends on it
+        assert proc.wait(timeout=5.0) == 0
+        sock.close()
+        st.sock.close()
+
+
+def test_a_receiver_that_dies_is_replaced_and_commands_go_on():
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        link._receiver.kill()
+        deadline = time.monotonic() + 5.0
+        while link.counters["receiver_restarts"] < 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert link.counters["receiver_ended"] == 1
+        got = []
+        while not got and time.monotonic() < deadline:  # the new one reads the same socket
+            st.send(st.enc.manual_control_encode(1, 500, 0, 500, 0, 0), link.port)
+            got = queued(link, timeout=0.3)
+        assert isinstance(got[0], ManualWrench)
+
+    run_link(scenario)

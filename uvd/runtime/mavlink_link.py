@@ -3,11 +3,14 @@ command receiver, never on the loop's critical path.
 
 :class:`MavlinkLink` is a :class:`~uvd.telemetry.sink.TelemetrySink` of the daemon's hub: its
 ``write`` (event loop, off the cycle) only keeps the newest cycle and estimate records and
-queues a STATUSTEXT for each failsafe event, lifecycle transition and refused command. One
-daemon thread owns the UDP socket and the two pymavlink codecs; it
+queues a STATUSTEXT for each failsafe event, lifecycle transition and refused command. The
+UDP socket at ``listen`` is read by a process of its own (:mod:`uvd.runtime.mavlink_rx`),
+which judges every datagram and forwards only good MAVLink, so that a flood of garbage never
+holds this process's interpreter lock against the loop. One daemon thread owns the socket's
+sending side and the pymavlink codecs; it
 
-* reads UDP datagrams at ``listen`` and, when ``serial`` is set, a serial line (a telemetry
-  radio);
+* reads what the receiver forwards and, when ``serial`` is set, a serial line (a telemetry
+  radio; a radio's few kB/s are read here);
 * sends HEARTBEAT and SYS_STATUS at ``heartbeat_hz``; ATTITUDE, LOCAL_POSITION_NED,
   SCALED_PRESSURE, VFR_HUD, SERVO_OUTPUT_RAW and ACTUATOR_OUTPUT_STATUS at ``state_hz``;
   NAMED_VALUE_FLOAT of the online estimates at ``estimate_hz`` — to every station heard within
@@ -52,6 +55,12 @@ from uvd.runtime.commands import (
     SetParams,
 )
 from uvd.runtime.config import MavlinkSection
+from uvd.runtime.mavlink_rx import (
+    decode_datagram,
+    read_forwarded,
+    spawn_receiver,
+    stop_receiver,
+)
 from uvd.telemetry.mavlink_signing import (
     SigningState,
     load_key,
@@ -110,22 +119,6 @@ def _addr(text: str) -> tuple[str, int]:
     return host.strip("[]"), int(port)
 
 
-def _framed(data: bytes) -> bool:
-    """True when ``data`` is whole MAVLink packets back to back, judged by their headers'
-    lengths alone (a station sends whole packets per datagram)."""
-    i, n = 0, len(data)
-    while i < n:
-        if i + 3 > n:
-            return False
-        if data[i] == 0xFD:
-            i += data[i + 1] + 12 + (13 if data[i + 2] & 0x01 else 0)
-        elif data[i] == 0xFE:
-            i += data[i + 1] + 8
-        else:
-            return False
-    return i == n and n > 0
-
-
 class _Out:
     """pymavlink's encoder writes here; the link sends the bytes to every station."""
 
@@ -174,6 +167,8 @@ class MavlinkLink:
         self.tx.WIRE_PROTOCOL_VERSION = "2.0"
         self.rx = mavlink.MAVLink(None, cfg.system_id, cfg.component_id, use_native=False)
         self.rx.robust_parsing = True
+        self._receiver = None  # the receiver process (uvd.runtime.mavlink_rx) and its pair
+        self._pair = None
         self.signing: SigningState | None = None
         if cfg.signing_key_file:
             key = load_key(cfg.signing_key_file)
@@ -227,12 +222,19 @@ class MavlinkLink:
                       exc.strerror or exc)
             raise OSError(f"[mavlink] listen {self.cfg.listen}: {exc.strerror or exc}") from exc
         self._sock = sock
+        try:
+            self._receiver, self._pair = spawn_receiver(sock)
+        except OSError as exc:
+            sock.close()
+            log.error("MAVLink link off: its receiver process: %s", exc)
+            raise
         if self.cfg.serial:
             import serial
             try:
                 self._serial = serial.Serial(self.cfg.serial, self.cfg.serial_baud, timeout=0,
                                              write_timeout=0)
             except (serial.SerialException, OSError) as exc:
+                self._end_receiver()
                 sock.close()
                 log.error("MAVLink link off: [mavlink] serial %s: %s", self.cfg.serial, exc)
                 raise OSError(f"[mavlink] serial {self.cfg.serial}: {exc}") from exc
@@ -269,11 +271,17 @@ class MavlinkLink:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=0.5)
+        self._end_receiver()
         if self._sock is not None:
             self._sock.close()
         if self._serial is not None:
             self._serial.close()
         self._save_timestamp()
+
+    def _end_receiver(self) -> None:
+        if self._receiver is not None:
+            stop_receiver(self._receiver, self._pair, self.counters)
+        self._pair = self._receiver = None
 
     def stats(self) -> dict[str, Any]:
         out = dict(self.counters)
@@ -285,13 +293,18 @@ class MavlinkLink:
     # ------------------------------------------------------------------ the link's thread
 
     def _run(self) -> None:
-        next_hb = next_state = next_est = next_ts = time.monotonic()
+        next_hb = next_state = next_est = next_ts = next_spawn = time.monotonic()
         c = self.cfg
         while not self._stop.is_set():
             try:
-                ins = [self._sock] if self._serial is None else [self._sock, self._serial]
+                now = time.monotonic()
+                if self._pair is None and now >= next_spawn:  # the receiver ended: again
+                    next_spawn = now + 1.0
+                    self._receiver, self._pair = spawn_receiver(self._sock)
+                    self.counters["receiver_restarts"] += 1
+                ins = [f for f in (self._pair, self._serial) if f is not None]
                 readable, _, _ = select.select(ins, [], [], 0.02)
-                if self._sock in readable:
+                if self._pair is not None and self._pair in readable:
                     self._receive()
                 if self._serial is not None and self._serial in readable:
                     self._receive_serial()
@@ -328,19 +341,17 @@ class MavlinkLink:
             log.warning("cannot keep the signing timestamp: %s", exc)
 
     def _receive(self) -> None:
-        # bounded per wake (every 20 ms at most): under a flood the kernel drops the rest, and
-        # this thread never holds the interpreter long enough to delay the loop
-        for _ in range(64):
-            try:
-                data, addr = self._sock.recvfrom(4096)
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError:
-                self.counters["recv_errors"] += 1
-                return
-            self.counters["datagrams"] += 1
+        """What the receiver process forwarded: good datagrams only (its counters of the
+        bad ones come with them, uvd.runtime.mavlink_rx)."""
+        try:
+            got = read_forwarded(self._pair, self.counters)
+        except EOFError:
+            self.counters["receiver_ended"] += 1
+            log.error("MAVLink link: its receiver process ended; starting another")
+            self._end_receiver()
+            return
+        for data, addr in got:
             self._datagram(data, addr)
-            time.sleep(0)  # hand the interpreter to the loop's thread if it is waiting for it
 
     def _receive_serial(self) -> None:
         """A byte stream: one parser keeps its state across reads (at most 4 KiB a wake)."""
@@ -361,20 +372,11 @@ class MavlinkLink:
                 log.debug("MAVLink %s on serial dropped: %s", m.get_type(), exc)
 
     def _datagram(self, data: bytes, addr: tuple) -> None:
-        if not _framed(data):  # cheap: most garbage never reaches pymavlink's parser
+        msgs = decode_datagram(self.rx, data)
+        if msgs is None:  # the receiver passed it: not expected, but never trusted
             self.counters["bad_datagrams"] += 1
             return
-        rx = self.rx
-        rx.buf, rx.buf_index, rx.expected_length = bytearray(), 0, self.mavlink.HEADER_LEN_V1 + 2
-        rx.have_prefix_error = False
-        try:
-            msgs = rx.parse_buffer(data) or []
-        except Exception:  # noqa: BLE001 - whatever pymavlink raises on garbage
-            msgs = []
-        good = [m for m in msgs if m.get_type() != "BAD_DATA"]
-        if len(good) < len(msgs) or not msgs:
-            self.counters["bad_datagrams"] += 1
-        for m in good:
+        for m in msgs:
             try:
                 self._message(m, addr)
             except Exception as exc:  # noqa: BLE001 - a message we cannot use is dropped
