@@ -234,3 +234,20 @@ def test_a_receiver_that_dies_is_replaced_and_commands_go_on():
         assert isinstance(got[0], ManualWrench)
 
     run_link(scenario)
+
+
+def test_bench_loop_fuzzes_the_link_in_every_other_block(tmp_path):
+    """``uvd bench loop --mavlink-fuzz``'s wiring (its figures are the benchmark's): quiet and
+    fuzzed blocks in turn, every datagram sent in the fuzzed ones read and judged bad."""
+    import json
+
+    from uvd.cli import main
+    out = tmp_path / "loop.json"
+    assert main(["bench", "loop", "--rate", "100", "--cycle", "none", "--no-naive",
+                 "--duration", "2", "--warmup", "0", "--mavlink-fuzz", "600", "--json",
+                 str(out)]) == 0
+    f = json.loads(out.read_text())["mavlink_fuzz"]
+    assert f["blocks"]["n"] == 2 and f["quiet"]["n"] >= 150 and f["fuzzed"]["n"] >= 150
+    c = f["link_counters"]
+    assert c["datagrams"] == 600 and c["bad_datagrams"] == 600
+    assert isinstance(f["lateness_p99_change"], float)

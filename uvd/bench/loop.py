@@ -451,6 +451,8 @@ async def _measure(settings: LoopSettings, cycle, duration: float, warmup: float
         "histogram": {"lateness_us": snap["lateness_us"], "compute_us": snap["compute_us"]},
         "host_steal_s": None if steal0 is None or steal1 is None else steal1 - steal0,
         "wall_s": wall,
+        "trace_n": int(n),
+        "lateness_ns": lat.copy(),
     }
 
 
@@ -588,13 +590,21 @@ def _mavlink_link():
 
 
 async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: float,
-                     n_fuzz: int, steal) -> dict:
-    """Our loop running ``cycle`` plus a MAVLink link's cycle record, with ``n_fuzz`` bad
-    datagrams sent to the link over the measured run (0: none)."""
+                     n_fuzz: int, steal, block_s: float = 2.0, guard_s: float = 0.25) -> dict:
+    """Our loop running ``cycle`` plus a MAVLink link's cycle record, for ``2 × duration`` in
+    blocks of ``block_s`` that are quiet and fuzzed in turn: a second process sends the
+    ``n_fuzz`` bad datagrams to the link in the fuzzed blocks only. Interleaving puts the
+    machine's drifting background load on both sides alike (two runs one after the other,
+    as before, differed by more than the 10 % sought with no fuzz at all). The first
+    ``guard_s`` of each block is left out of both (the tail of a fuzzed block's backlog).
+    Quiet blocks 0, 4, 8… against 2, 6, 10… — two samples of the same condition — give the
+    measurement's own resolution."""
     from uvd.bench.mavlink_fuzz import fuzz_process
     link, publish, hub = _mavlink_link()
+    stamps: list[int] = []
 
     def both(t_ns: int, dt: float) -> None:
+        stamps.append(t_ns)
         cycle(t_ns, dt)
         publish(t_ns, dt)
 
@@ -604,22 +614,33 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
     sys.setswitchinterval(DaemonSection().gil_switch_interval_us * 1e-6)
     pump = asyncio.get_running_loop().create_task(hub.run())
     await asyncio.sleep(0.2)  # the hub opens the link
-    sender = None
-    if n_fuzz:  # from a second process, as a station's would come; it builds its datagrams
-        sender = fuzz_process(link.port, n_fuzz, duration)  # during the warm-up
+    n_blocks = 2 * max(1, int(round(duration / block_s)))
+    t0 = time.monotonic() + warmup + 1.0  # the sender builds its datagrams meanwhile
+    windows = [(t0 + k * block_s, t0 + (k + 1) * block_s) for k in range(1, n_blocks, 2)]
+    sender = fuzz_process(link.port, n_fuzz, windows)
     try:
-        out = await _measure(settings, both, duration, warmup, steal)
+        out = await _measure(settings, both, t0 + n_blocks * block_s - time.monotonic()
+                             - warmup, warmup, steal)
     finally:
-        if sender is not None:
-            try:
-                await asyncio.to_thread(sender.wait, 30.0)
-            except Exception:  # noqa: BLE001 - a sender that hangs is ended, never waited for
-                sender.kill()
+        try:
+            await asyncio.to_thread(sender.wait, 30.0)
+        except Exception:  # noqa: BLE001 - a sender that hangs is ended, never waited for
+            sender.kill()
         await hub.aclose()
         await pump
         sys.setswitchinterval(old_switch)
+    n = out["trace_n"]
+    t = (np.asarray(stamps[-n:], dtype=np.int64) - int(t0 * 1e9)) * 1e-9 if n else np.zeros(0)
+    lat = out.pop("lateness_ns")[:len(t)]
+    block = np.floor(t / block_s).astype(np.int64)
+    keep = (t >= 0) & (block < n_blocks) & (t - block * block_s >= guard_s)
+    quiet, fuzzed = keep & (block % 2 == 0), keep & (block % 2 == 1)
+    out["blocks"] = {"n": n_blocks, "seconds": block_s, "guard_s": guard_s}
+    out["quiet"] = percentiles(lat[quiet] * 1e-9)
+    out["fuzzed"] = percentiles(lat[fuzzed] * 1e-9)
+    out["quiet_a"] = percentiles(lat[keep & (block % 4 == 0)] * 1e-9)
+    out["quiet_b"] = percentiles(lat[keep & (block % 4 == 2)] * 1e-9)
     out["mavlink"] = link.stats()
-    out["fuzz_read"] = link.stats().get("datagrams", 0) if sender is not None else 0
     return out
 
 
@@ -676,17 +697,16 @@ def _run(args) -> dict:
         recording = {"with_us": w, "without_us": wo, "p50_cost_us": w["p50"] - wo["p50"]}
     fuzz = None
     if args.mavlink_fuzz:
-        def steal():
-            return host_steal_s(steal_cpus)
-        quiet = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup, 0, steal))
-        loud = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup,
-                                      args.mavlink_fuzz, steal))
-        p99q, p99l = quiet["lateness_us"]["p99"], loud["lateness_us"]["p99"]
-        fuzz = {"datagrams": args.mavlink_fuzz, "read": loud["fuzz_read"],
-                "link_counters": loud["mavlink"],
-                "quiet": {k: quiet[k] for k in ("lateness_us", "compute_us", "overruns")},
-                "fuzzed": {k: loud[k] for k in ("lateness_us", "compute_us", "overruns")},
-                "lateness_p99_change": (p99l - p99q) / p99q if p99q > 0 else None}
+        f = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup,
+                                   args.mavlink_fuzz, lambda: host_steal_s(steal_cpus)))
+
+        def change(a: dict, b: dict) -> float | None:
+            return (b["p99"] - a["p99"]) / a["p99"] if a["n"] and b["n"] and a["p99"] else None
+        fuzz = {"datagrams": args.mavlink_fuzz, "blocks": f["blocks"],
+                "link_counters": f["mavlink"], "overruns": f["overruns"],
+                **{k: f[k] for k in ("quiet", "fuzzed", "quiet_a", "quiet_b")},
+                "lateness_p99_change": change(f["quiet"], f["fuzzed"]),
+                "quiet_a_vs_b_p99_change": change(f["quiet_a"], f["quiet_b"])}
     warm = _back_to_back(cycle, args.rate, 2000) if args.cycle != "none" else None
     naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
     figures = {
@@ -769,15 +789,19 @@ def _run(args) -> dict:
           f"spin {oa['paused_in_spin']}  compute {oa['compute']};  stall over the run "
           f"{oa['stall_ms_total']:.1f} ms, longest {oa['max_stall_us']:.0f} µs")
     if fuzz is not None:
-        c = fuzz["link_counters"]
-        print(f"  MAVLink link, quiet : lateness µs {_fmt(fuzz['quiet']['lateness_us'])}   "
-              f"overruns {fuzz['quiet']['overruns']}")
-        print(f"  MAVLink link, fuzzed: lateness µs {_fmt(fuzz['fuzzed']['lateness_us'])}   "
-              f"overruns {fuzz['fuzzed']['overruns']}   ({fuzz['datagrams']} datagrams sent, "
-              f"{c.get('datagrams', 0)} read, {c.get('bad_datagrams', 0)} bad)")
-        ch = fuzz["lateness_p99_change"]
-        print(f"  lateness p99 change with fuzz: "
-              f"{'n/a' if ch is None else f'{100 * ch:+.1f} %'}")
+        c, b = fuzz["link_counters"], fuzz["blocks"]
+        print(f"  MAVLink link, {b['n']} blocks of {b['seconds']:g} s, quiet and fuzzed in turn "
+              f"(first {b['guard_s']:g} s of each left out); overruns {fuzz['overruns']}")
+        for k in ("quiet", "fuzzed"):
+            print(f"    {k:<6}: lateness µs {_fmt(fuzz[k])}")
+        print(f"    {fuzz['datagrams']} datagrams sent, {c.get('datagrams', 0)} read, "
+              f"{c.get('bad_datagrams', 0)} bad")
+
+        def pct(x):
+            return "n/a" if x is None else f"{100 * x:+.1f} %"
+        print(f"  lateness p99 change with fuzz: {pct(fuzz['lateness_p99_change'])}  (quiet "
+              f"blocks against each other, the measurement's resolution: "
+              f"{pct(fuzz['quiet_a_vs_b_p99_change'])})")
     g = ours["gc"]
     print(f"  gc ({g['policy']}): collections {g['collections']}  forced {g['forced']}  "
           f"max µs {[round(x, 1) for x in g['max_us']]}")

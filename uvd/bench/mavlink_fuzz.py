@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import random
 import socket
 import subprocess
@@ -54,21 +55,31 @@ def fuzz_datagrams(n: int, seed: int = 21) -> list[bytes]:
 
 
 class FuzzSender:
-    """Send datagrams to ``(host, port)`` from a thread, spread evenly over ``duration_s``."""
+    """Send datagrams to ``(host, port)`` from a thread, spread evenly over the ``windows``
+    (``(start, end)`` in ``time.monotonic`` seconds, a clock every process of the machine
+    shares), nothing outside them."""
 
-    def __init__(self, datagrams: list[bytes], host: str, port: int, duration_s: float) -> None:
-        self.datagrams, self.addr, self.duration_s = datagrams, (host, port), duration_s
+    def __init__(self, datagrams: list[bytes], host: str, port: int,
+                 windows: list[tuple[float, float]]) -> None:
+        self.datagrams, self.addr, self.windows = datagrams, (host, port), windows
         self.sent = 0
         self._thread = threading.Thread(target=self._run, name="mavlink-fuzz", daemon=True)
 
+    def _due(self, i: int) -> float:
+        """When datagram ``i`` goes: at its share of the windows' summed length."""
+        total = sum(b - a for a, b in self.windows)
+        at = total * i / len(self.datagrams)
+        for a, b in self.windows:
+            if at < b - a:
+                return a + at
+            at -= b - a
+        return self.windows[-1][1]
+
     def _run(self) -> None:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        t0 = time.monotonic()
-        n = len(self.datagrams)
         try:
             for i, d in enumerate(self.datagrams):
-                due = t0 + self.duration_s * i / n
-                wait = due - time.monotonic()
+                wait = self._due(i) - time.monotonic()
                 if wait > 0:
                     time.sleep(wait)
                 sock.sendto(d, self.addr)
@@ -84,16 +95,17 @@ class FuzzSender:
         self._thread.join(timeout)
 
 
-def fuzz_process(port: int, n: int, duration_s: float, host: str = "127.0.0.1"
-                 ) -> subprocess.Popen:
-    """A second process sending ``n`` fuzz datagrams to ``host:port`` over ``duration_s`` (a
-    sender thread in the measured process would compete with its loop for the GIL)."""
+def fuzz_process(port: int, n: int, windows: list[tuple[float, float]],
+                 host: str = "127.0.0.1") -> subprocess.Popen:
+    """A second process sending ``n`` fuzz datagrams to ``host:port`` within ``windows``
+    (:class:`FuzzSender`; a sender thread in the measured process would compete with its loop
+    for the interpreter lock)."""
     return subprocess.Popen([sys.executable, "-m", "uvd.bench.mavlink_fuzz", host, str(port),
-                             str(n), str(duration_s)])
+                             str(n), json.dumps(windows)])
 
 
 if __name__ == "__main__":
-    h, p, k, d = sys.argv[1:5]
-    s = FuzzSender(fuzz_datagrams(int(k)), h, int(p), float(d)).start()
+    h, p, k, w = sys.argv[1:5]
+    s = FuzzSender(fuzz_datagrams(int(k)), h, int(p), [tuple(x) for x in json.loads(w)]).start()
     s.join()
     print(s.sent)

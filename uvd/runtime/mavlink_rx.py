@@ -79,7 +79,9 @@ def decode_datagram(rx: Any, data: bytes) -> list | None:
         msgs = rx.parse_buffer(data) or []
     except Exception:  # noqa: BLE001 - whatever pymavlink raises on garbage
         return None
-    if not msgs or any(m.get_type() == "BAD_DATA" for m in msgs):
+    # an unknown message id (a flipped bit of a known one, often) has no CRC seed to check
+    if not msgs or any(m.get_type() == "BAD_DATA" or m.get_type().startswith("UNKNOWN_")
+                       for m in msgs):
         return None
     return msgs
 
