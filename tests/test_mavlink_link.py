@@ -247,7 +247,7 @@ def test_bench_loop_fuzzes_the_link_in_every_other_block(tmp_path):
                  "--duration", "2", "--warmup", "0", "--mavlink-fuzz", "600", "--json",
                  str(out)]) == 0
     f = json.loads(out.read_text())["mavlink_fuzz"]
-    assert f["blocks"]["n"] == 2 and f["quiet"]["n"] >= 150 and f["fuzzed"]["n"] >= 150
+    assert f["blocks"] == 3 and f["quiet"]["n"] >= 300 and f["fuzzed"]["n"] >= 150
     c = f["link_counters"]
     assert c["datagrams"] == 600 and c["bad_datagrams"] == 600
     assert isinstance(f["lateness_p99_change"], float)

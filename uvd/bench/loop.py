@@ -361,43 +361,95 @@ def _add(p) -> None:
                         "without)")
     p.add_argument("--mavlink-fuzz", type=int, default=0, metavar="N",
                    help="also run a MAVLink link (its sink fed a cycle record every cycle) on "
-                        "a loopback port: once quiet, then again while N random and "
-                        "malformed datagrams arrive spread over the run (same process); "
-                        "prints both lateness figures")
+                        "a loopback port, in 2-s blocks, quiet and fuzzed in turn (--duration "
+                        "of each): N random and malformed datagrams arrive in the fuzzed ones "
+                        "from a second process; prints both lateness figures")
     p.add_argument("--zenoh-stall", type=float, default=0.0, metavar="SECONDS",
                    help="also publish every cycle's state over Zenoh (the daemon's sink) to a "
-                        "uvd-fdc process, and measure three phases of SECONDS each: it reads, "
-                        "it stops reading (SIGSTOP), it reads again; lateness of each "
-                        "(--duration is then ignored)")
+                        "uvd-fdc process, and measure blocks of SECONDS in turn: it reads, "
+                        "it stops reading (SIGSTOP), it reads again (SIGCONT), …; lateness of "
+                        "each (--duration is then ignored)")
+    p.add_argument("--stall-rounds", type=int, default=2, metavar="N",
+                   help="with --zenoh-stall: N stops, so 2N + 1 blocks (default 2)")
 
 
-async def _with_stalled_reader(settings: LoopSettings, cycle, seconds: float, warmup: float,
-                               steal: Callable[[], float | None], hub, endpoint: str) -> dict:
-    """The loop measured three times, ``seconds`` each, while a Zenoh subscriber (a
-    ``uvd-fdc`` process taking every state sample) reads, is stopped (SIGSTOP: its socket
-    fills, nothing is read) and reads again (SIGCONT). Returns each phase's :func:`_measure`
-    figures and what the subscriber counted."""
+async def _with_stalled_reader(settings: LoopSettings, cycle, seconds: float, rounds: int,
+                               warmup: float, steal: Callable[[], float | None], hub,
+                               endpoint: str) -> dict:
+    """The loop measured in one run of ``2 × rounds + 1`` blocks of ``seconds`` while a Zenoh
+    subscriber (a ``uvd-fdc`` process taking every state sample) reads, is stopped (SIGSTOP:
+    its socket fills, nothing is read), reads again (SIGCONT), … (:func:`_phased`). Returns
+    the run's :func:`_measure` figures by phase and what the subscriber counted."""
     import signal
 
     from uvd.bench.zenoh import FdcProcess
 
     pump = asyncio.get_running_loop().create_task(hub.run())
     sub = FdcProcess([endpoint])
-    phases = {}
     try:
         await sub.subscribed()
         await asyncio.sleep(1.0)  # connected, samples flowing
-        phases["reading"] = await _measure(settings, cycle, seconds, warmup, steal)
-        sub.proc.send_signal(signal.SIGSTOP)
-        phases["stalled"] = await _measure(settings, cycle, seconds, 0.0, steal)
-        sub.proc.send_signal(signal.SIGCONT)
-        phases["reading_again"] = await _measure(settings, cycle, seconds, 0.0, steal)
+
+        def block(k: int) -> None:
+            sub.proc.send_signal(signal.SIGSTOP if k % 2 else signal.SIGCONT)
+        out = await _phased(settings, cycle, warmup, steal, 2 * rounds + 1, seconds,
+                            ("reading", "stalled"), time.monotonic() + warmup + 0.1, block)
     finally:
         sub.proc.send_signal(signal.SIGCONT)
-        phases["hub"] = await hub.aclose()
+        hub_stats = await hub.aclose()
         await pump
-        phases["subscriber"] = sub.finish()
-    return phases
+    out["hub"], out["subscriber"] = hub_stats, sub.finish()
+    return out
+
+
+async def _phased(settings: LoopSettings, cycle, warmup: float,
+                  steal: Callable[[], float | None], n_blocks: int, block_s: float,
+                  names: tuple[str, str], t0: float, on_block=None,
+                  guard_s: float = 0.25) -> dict:
+    """One :func:`_measure` run from ``t0`` (``time.monotonic``) over ``n_blocks`` blocks of
+    ``block_s``: even blocks are ``names[0]`` (the baseline), odd ones ``names[1]`` (the
+    condition), ``on_block(k)`` called as block k starts. Alternating blocks put the machine's
+    drifting background load on both sides alike (two runs one after the other differ by more
+    than the 10 % sought with nothing changed). The first ``guard_s`` of a baseline block
+    counts with the condition block before it (the condition's tail: a backlog read, a
+    subscriber catching up). The baseline's blocks 0, 4, 8… against 2, 6, 10…, two samples
+    of the same condition, give the measurement's own resolution (``resolution``)."""
+    stamps: list[int] = []
+
+    def stamped(t_ns: int, dt: float) -> None:
+        stamps.append(t_ns)
+        cycle(t_ns, dt)
+
+    async def blocks() -> None:
+        for k in range(n_blocks):
+            await asyncio.sleep(max(0.0, t0 + k * block_s - time.monotonic()))
+            on_block(k)
+    toggler = None if on_block is None else asyncio.get_running_loop().create_task(blocks())
+    try:
+        out = await _measure(settings, stamped, t0 + n_blocks * block_s - time.monotonic()
+                             - warmup, warmup, steal)
+    finally:
+        if toggler is not None:
+            toggler.cancel()
+    n = out["trace_n"]
+    t = (np.asarray(stamps[len(stamps) - n:], dtype=np.int64) - int(t0 * 1e9)) * 1e-9
+    lat = out.pop("lateness_ns")[:len(t)]
+    k = np.floor(t / block_s).astype(np.int64)
+    k = np.where((k % 2 == 0) & (k > 0) & (t - k * block_s < guard_s), k - 1, k)
+    valid = (t >= 0) & (k < n_blocks)
+    base, cond = valid & (k % 2 == 0), valid & (k % 2 == 1)
+    pct = {names[0]: percentiles(lat[base] * 1e-9), names[1]: percentiles(lat[cond] * 1e-9),
+           "a": percentiles(lat[base & (k % 4 == 0)] * 1e-9),
+           "b": percentiles(lat[base & (k % 4 == 2)] * 1e-9)}
+
+    def change(x: dict, y: dict) -> float | None:
+        return (y["p99"] - x["p99"]) / x["p99"] if x["n"] and y["n"] and x["p99"] else None
+    out["phases"] = {"blocks": n_blocks, "block_s": block_s, "guard_s": guard_s,
+                     **{name: pct[name] for name in names},
+                     f"{names[0]}_a": pct["a"], f"{names[0]}_b": pct["b"],
+                     "lateness_p99_change": change(pct[names[0]], pct[names[1]]),
+                     "resolution": change(pct["a"], pct["b"])}
+    return out
 
 
 async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float,
@@ -590,21 +642,14 @@ def _mavlink_link():
 
 
 async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: float,
-                     n_fuzz: int, steal, block_s: float = 2.0, guard_s: float = 0.25) -> dict:
-    """Our loop running ``cycle`` plus a MAVLink link's cycle record, for ``2 × duration`` in
-    blocks of ``block_s`` that are quiet and fuzzed in turn: a second process sends the
-    ``n_fuzz`` bad datagrams to the link in the fuzzed blocks only. Interleaving puts the
-    machine's drifting background load on both sides alike (two runs one after the other,
-    as before, differed by more than the 10 % sought with no fuzz at all). The first
-    ``guard_s`` of each block is left out of both (the tail of a fuzzed block's backlog).
-    Quiet blocks 0, 4, 8… against 2, 6, 10… — two samples of the same condition — give the
-    measurement's own resolution."""
+                     n_fuzz: int, steal, block_s: float = 2.0) -> dict:
+    """Our loop running ``cycle`` plus a MAVLink link's cycle record, in blocks of
+    ``block_s``, quiet and fuzzed in turn (:func:`_phased`; ``duration`` of each): a second
+    process sends the ``n_fuzz`` bad datagrams to the link in the fuzzed blocks only."""
     from uvd.bench.mavlink_fuzz import fuzz_process
     link, publish, hub = _mavlink_link()
-    stamps: list[int] = []
 
     def both(t_ns: int, dt: float) -> None:
-        stamps.append(t_ns)
         cycle(t_ns, dt)
         publish(t_ns, dt)
 
@@ -614,13 +659,13 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
     sys.setswitchinterval(DaemonSection().gil_switch_interval_us * 1e-6)
     pump = asyncio.get_running_loop().create_task(hub.run())
     await asyncio.sleep(0.2)  # the hub opens the link
-    n_blocks = 2 * max(1, int(round(duration / block_s)))
+    n_blocks = 2 * max(1, int(round(duration / block_s))) + 1
     t0 = time.monotonic() + warmup + 1.0  # the sender builds its datagrams meanwhile
-    windows = [(t0 + k * block_s, t0 + (k + 1) * block_s) for k in range(1, n_blocks, 2)]
-    sender = fuzz_process(link.port, n_fuzz, windows)
+    sender = fuzz_process(link.port, n_fuzz, [(t0 + k * block_s, t0 + (k + 1) * block_s)
+                                              for k in range(1, n_blocks, 2)])
     try:
-        out = await _measure(settings, both, t0 + n_blocks * block_s - time.monotonic()
-                             - warmup, warmup, steal)
+        out = await _phased(settings, both, warmup, steal, n_blocks, block_s,
+                            ("quiet", "fuzzed"), t0)
     finally:
         try:
             await asyncio.to_thread(sender.wait, 30.0)
@@ -629,17 +674,6 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
         await hub.aclose()
         await pump
         sys.setswitchinterval(old_switch)
-    n = out["trace_n"]
-    t = (np.asarray(stamps[-n:], dtype=np.int64) - int(t0 * 1e9)) * 1e-9 if n else np.zeros(0)
-    lat = out.pop("lateness_ns")[:len(t)]
-    block = np.floor(t / block_s).astype(np.int64)
-    keep = (t >= 0) & (block < n_blocks) & (t - block * block_s >= guard_s)
-    quiet, fuzzed = keep & (block % 2 == 0), keep & (block % 2 == 1)
-    out["blocks"] = {"n": n_blocks, "seconds": block_s, "guard_s": guard_s}
-    out["quiet"] = percentiles(lat[quiet] * 1e-9)
-    out["fuzzed"] = percentiles(lat[fuzzed] * 1e-9)
-    out["quiet_a"] = percentiles(lat[keep & (block % 4 == 0)] * 1e-9)
-    out["quiet_b"] = percentiles(lat[keep & (block % 4 == 2)] * 1e-9)
     out["mavlink"] = link.stats()
     return out
 
@@ -683,9 +717,10 @@ def _run(args) -> dict:
     stall = None
     if endpoint is not None:
         stall = asyncio.run(_with_stalled_reader(settings, cycle, args.zenoh_stall,
-                                                 args.warmup, lambda: host_steal_s(steal_cpus),
-                                                 hub, endpoint))
-        ours = stall["reading"]
+                                                 args.stall_rounds, args.warmup,
+                                                 lambda: host_steal_s(steal_cpus), hub,
+                                                 endpoint))
+        ours = stall
     else:
         ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup,
                                  lambda: host_steal_s(steal_cpus), hub))
@@ -699,19 +734,14 @@ def _run(args) -> dict:
     if args.mavlink_fuzz:
         f = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup,
                                    args.mavlink_fuzz, lambda: host_steal_s(steal_cpus)))
-
-        def change(a: dict, b: dict) -> float | None:
-            return (b["p99"] - a["p99"]) / a["p99"] if a["n"] and b["n"] and a["p99"] else None
-        fuzz = {"datagrams": args.mavlink_fuzz, "blocks": f["blocks"],
-                "link_counters": f["mavlink"], "overruns": f["overruns"],
-                **{k: f[k] for k in ("quiet", "fuzzed", "quiet_a", "quiet_b")},
-                "lateness_p99_change": change(f["quiet"], f["fuzzed"]),
-                "quiet_a_vs_b_p99_change": change(f["quiet_a"], f["quiet_b"])}
+        fuzz = {"datagrams": args.mavlink_fuzz, "link_counters": f["mavlink"],
+                "overruns": f["overruns"], **f["phases"]}
     warm = _back_to_back(cycle, args.rate, 2000) if args.cycle != "none" else None
     naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
     figures = {
         "rate_hz": args.rate,
-        "duration_s": args.duration if stall is None else 3 * args.zenoh_stall,
+        "duration_s": args.duration if stall is None
+        else (2 * args.stall_rounds + 1) * args.zenoh_stall,
         "cycle": args.cycle,
         "recording": recording,
         "lateness_us": ours["lateness_us"],
@@ -745,16 +775,11 @@ def _run(args) -> dict:
     if fuzz is not None:
         figures["mavlink_fuzz"] = fuzz
     if stall is not None:
-        p99 = {k: stall[k]["lateness_us"]["p99"] for k in ("reading", "stalled",
-                                                           "reading_again")}
-        figures["zenoh_stall"] = {
-            "seconds": args.zenoh_stall,
-            **{k: {f: stall[k][f] for f in ("lateness_us", "compute_us", "cycles", "overruns")}
-               for k in p99},
-            "lateness_p99_change": p99["stalled"] / p99["reading"] - 1.0,
-            "lateness_p99_change_vs_reading_again": p99["stalled"] / p99["reading_again"] - 1.0,
-            "hub": stall["hub"], "subscriber": stall["subscriber"]}
-    seconds = f"3 × {args.zenoh_stall:g}" if stall is not None else f"{args.duration:g}"
+        figures["zenoh_stall"] = {"seconds": args.zenoh_stall, "rounds": args.stall_rounds,
+                                  **stall["phases"], "hub": stall["hub"],
+                                  "subscriber": stall["subscriber"]}
+    seconds = f"{2 * args.stall_rounds + 1} × {args.zenoh_stall:g}" if stall is not None \
+        else f"{args.duration:g}"
     print(f"uvd bench loop: {args.rate:g} Hz, {seconds} s, cycle '{args.cycle}', "
           f"load {load0[0]:.2f}")
     print(f"  lateness µs  ours  : {_fmt(ours['lateness_us'])}   overruns {ours['overruns']}"
@@ -769,13 +794,9 @@ def _run(args) -> dict:
               f"cost {recording['p50_cost_us']:.1f} µs")
     if stall is not None:
         z = figures["zenoh_stall"]
-        for k in ("reading", "stalled", "reading_again"):
-            print(f"  zenoh subscriber {k:<13}: lateness µs {_fmt(z[k]['lateness_us'])}   "
-                  f"overruns {z[k]['overruns']}")
+        _print_phases("Zenoh subscriber", z, ("reading", "stalled"))
         zs = z["hub"].get("zenoh", {})
-        print(f"  lateness p99 stalled vs reading {100 * z['lateness_p99_change']:+.1f} %, vs "
-              f"reading again {100 * z['lateness_p99_change_vs_reading_again']:+.1f} %; hub "
-              f"dropped {zs.get('dropped')}; subscriber received "
+        print(f"    hub dropped {zs.get('dropped')}; subscriber received "
               f"{sum(z['subscriber'].get('received', {}).values())}")
     if warm is not None:
         print(f"  compute  µs  back to back (warm caches, 2000 in bursts of 10): {_fmt(warm)}")
@@ -789,23 +810,26 @@ def _run(args) -> dict:
           f"spin {oa['paused_in_spin']}  compute {oa['compute']};  stall over the run "
           f"{oa['stall_ms_total']:.1f} ms, longest {oa['max_stall_us']:.0f} µs")
     if fuzz is not None:
-        c, b = fuzz["link_counters"], fuzz["blocks"]
-        print(f"  MAVLink link, {b['n']} blocks of {b['seconds']:g} s, quiet and fuzzed in turn "
-              f"(first {b['guard_s']:g} s of each left out); overruns {fuzz['overruns']}")
-        for k in ("quiet", "fuzzed"):
-            print(f"    {k:<6}: lateness µs {_fmt(fuzz[k])}")
+        c = fuzz["link_counters"]
+        _print_phases("MAVLink link", fuzz, ("quiet", "fuzzed"))
         print(f"    {fuzz['datagrams']} datagrams sent, {c.get('datagrams', 0)} read, "
-              f"{c.get('bad_datagrams', 0)} bad")
-
-        def pct(x):
-            return "n/a" if x is None else f"{100 * x:+.1f} %"
-        print(f"  lateness p99 change with fuzz: {pct(fuzz['lateness_p99_change'])}  (quiet "
-              f"blocks against each other, the measurement's resolution: "
-              f"{pct(fuzz['quiet_a_vs_b_p99_change'])})")
+              f"{c.get('bad_datagrams', 0)} bad; overruns {fuzz['overruns']}")
     g = ours["gc"]
     print(f"  gc ({g['policy']}): collections {g['collections']}  forced {g['forced']}  "
           f"max µs {[round(x, 1) for x in g['max_us']]}")
     return figures
+
+
+def _print_phases(what: str, ph: dict, names: tuple[str, str]) -> None:
+    def pct(x: float | None) -> str:
+        return "n/a" if x is None else f"{100 * x:+.1f} %"
+    print(f"  {what}: {ph['blocks']} blocks of {ph['block_s']:g} s, {names[0]} and {names[1]} "
+          f"in turn (a {names[1]} block's next {ph['guard_s']:g} s count with it)")
+    for k in names:
+        print(f"    {k:<8}: lateness µs {_fmt(ph[k])}")
+    print(f"    lateness p99 change, {names[1]} vs {names[0]}: "
+          f"{pct(ph['lateness_p99_change'])}  (the {names[0]} blocks against each other, "
+          f"the measurement's resolution here: {pct(ph['resolution'])})")
 
 
 BENCH = Bench(name="loop", summary="Fixed-rate loop deadline precision vs a naive asyncio.sleep "
