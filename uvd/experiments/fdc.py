@@ -5,7 +5,9 @@ The demo's configuration (``config/sim.toml``: two-step AMBC tracking RefTraj1 o
 ``jhu-rov``) with online 6-DOF AID, started from the vehicle's own parameters (a vehicle
 identified before it dives); every 10 simulated seconds the estimate is turned into the Zenoh
 payload a fault-detection client receives (``uvd.telemetry.zenoh_link.estimate_payload``) and
-fed to ``uvd-fdc``'s detector (:mod:`uvd.fdc.detector`). Each fault is injected into the plant
+fed to ``uvd-fdc``'s detector (:mod:`uvd.fdc.detector`), and so is every cycle's state payload
+(``state_payload``: velocity, attitude, per-thruster commands) with the vehicle's thruster
+matrix, from which the detector names a weak thruster. Each fault is injected into the plant
 after ``nominal`` simulated minutes (30) and watched for ``after`` minutes (30); one more run
 goes ``fault_free`` hours (4) without a fault. Figures: per fault the kind detected and the
 latency from the injection; false alarms of the fault-free run.
@@ -14,6 +16,8 @@ latency from the injection; false alarms of the fault-free run.
 from __future__ import annotations
 
 import time
+
+import numpy as np
 
 from uvd.experiments import Experiment, ExperimentOptions
 
@@ -52,6 +56,9 @@ class SimVehicle:
         self.k_fault = int(round(minutes_before * 60.0 * self.rate)) if fault else None
         self.every = int(round(EVERY_S * self.rate))
         self.t_fault_ns: int | None = None
+        self.B = vehicle.B
+        #: the ``"cycle"`` hub records since the last estimate (:meth:`next_estimate`)
+        self.cycles: list[dict] = []
 
     @property
     def next_k(self) -> int:
@@ -65,6 +72,7 @@ class SimVehicle:
         from uvd.telemetry.records import estimate_record
 
         sim = self.sim
+        self.cycles = []
         while True:
             if self.k == self.k_fault:
                 self.t_fault_ns = sim.t_ns
@@ -74,7 +82,8 @@ class SimVehicle:
                     sim.plant.thrusters.health[i] = h
                 else:
                     sim.plant.set_fault(PlantFault(**args))
-            sim.cycle()
+            out = sim.cycle()
+            self.cycles.append(_cycle_record(sim.t_ns, sim.dt_control, out))
             self.k += 1
             if (self.k - 1) % self.every == 0:
                 return estimate_record(sim.t_ns, self.spec.name,
@@ -101,24 +110,43 @@ class SimVehicle:
         return out
 
 
+def _cycle_record(t_ns: int, dt: float, out) -> dict:
+    """The ``"cycle"`` hub record of one lockstep cycle (what the daemon's write phase
+    publishes; the parts the state payload carries)."""
+    from uvd.telemetry.records import CycleRecord
+
+    nav, ref = out.nav, out.reference
+    return CycleRecord(
+        t_ns=t_ns, dt=dt, state="ARMED", action="none", mode=out.mode, status=out.status,
+        p=nav.H[:3, 3], R=nav.H[:3, :3], v=nav.v, nav_valid=nav.valid, u=out.u_applied,
+        u_cmd=out.u_cmd, thrust=out.thrust_n, ages=(None,) * 4,
+        p_ref=None if ref is None else ref.H[:3, 3],
+        R_ref=None if ref is None else ref.H[:3, :3],
+        v_ref=None if ref is None else np.asarray(ref.v)).to_dict()
+
+
 def _run_one(fault: str | None, minutes_before: float, minutes_after: float, seed: int,
              progress) -> dict:
     from uvd.fdc.detector import VehicleDetector
-    from uvd.telemetry.zenoh_link import estimate_payload
+    from uvd.telemetry.zenoh_link import estimate_payload, state_payload
 
     v = SimVehicle(fault, minutes_before, seed)
-    det = VehicleDetector("jhu-rov")
+    det = VehicleDetector("jhu-rov", B=v.B)
     n = int(round((minutes_before + minutes_after) * 60.0 * v.rate))
     detections = []
     report = int(1800 * v.rate)
     while v.next_k < n:
         rec = v.next_estimate()
+        for c in v.cycles:
+            detections += [d.as_dict() for d in det.update_state(
+                {"t_ns": c["t_ns"], **state_payload(c)})]
         payload = {"t_ns": rec["t_ns"], **estimate_payload(rec)}
         detections += [d.as_dict() for d in det.update(payload)]
         if progress is not None and v.k // report != (v.k - v.every) // report:
             progress(f"  fdc {fault or 'fault-free'}: simulated {v.k / v.rate / 60:.0f} / "
                      f"{n / v.rate / 60:.0f} min")
-    return {**v.outcome(detections), "baseline": {"mu": det.mu, "sigma": det.sigma}}
+    return {**v.outcome(detections), "baseline": {"mu": det.mu, "sigma": det.sigma,
+                                                   "delta": det.delta}}
 
 
 def run(opts: ExperimentOptions) -> dict:
@@ -131,16 +159,18 @@ def run(opts: ExperimentOptions) -> dict:
         runs[name] = _run_one(name, 30.0, 30.0, opts.seed, progress)
     progress(f"fdc: {hours:g} h without a fault")
     runs["fault-free"] = _run_one(None, hours * 60.0, 0.0, opts.seed + 1, progress)
-    lines = ["fdc: CUSUM on AID's estimates (uvd-fdc's detector), jhu-rov tracking RefTraj1, "
+    lines = ["fdc: uvd-fdc's detector (CUSUM on AID's estimates, the wrench residual names the "
+             "fault), jhu-rov tracking RefTraj1, "
              "faults after 30 min, estimates every 10 s",
              f"{'fault':>14} {'injected':>26} {'detected':>9} {'kind':>13} {'right':>6} "
-             f"{'latency':>9} {'channel':>8}"]
+             f"{'latency':>9} {'channel':>12} {'change':>8}"]
     for name, (label, _, _) in FAULTS.items():
         r = runs[name]
         first = r["detections"][0] if r["detections"] else {}
         lat = "-" if r["latency_s"] is None else f"{r['latency_s']:.0f} s"
         lines.append(f"{name:>14} {label:>26} {str(r['detected']):>9} {str(r['kind']):>13} "
-                     f"{str(r['right_kind']):>6} {lat:>9} {first.get('channel', '-'):>8}")
+                     f"{str(r['right_kind']):>6} {lat:>9} {first.get('channel', '-'):>12} "
+                     f"{first.get('relative_change', float('nan')):>+8.1%}")
     ff = runs["fault-free"]
     lines.append(f"fault-free {hours:g} h: {ff['false_alarms']} false alarm(s)")
     lines.append(f"wall {time.perf_counter() - t0:.0f} s")
