@@ -4,6 +4,7 @@ between two Zenoh sessions on loopback (a publisher of estimates, a listener for
 from __future__ import annotations
 
 import json
+import math
 import socket
 import subprocess
 import sys
@@ -14,7 +15,7 @@ import jsonschema
 import numpy as np
 import pytest
 
-from uvd.fdc.detector import CusumSettings, VehicleDetector, channels_of
+from uvd.fdc.detector import CusumSettings, VehicleDetector, autocorrelation_time, channels_of
 
 MU = {"masses": [640, 800, 1050, 96, 146, 108], "drags": [-1250, -1420, -3080, -726, -781, -467],
       "g": 3.6, "b": [1.7, 3.1, 302.0]}
@@ -63,6 +64,34 @@ def test_a_step_is_found_quickly_with_its_kind(key, factor, kind, channel):
     assert d.kind == kind and d.channel.startswith(channel) and d.confidence >= 1.0
     assert (d.t_ns * 1e-9 - 200) <= 3.0  # within three samples of the step
     assert det.update(_payload(261.0, rng, scale={key: factor})) == []  # reported once
+
+
+def test_a_slow_wander_below_half_a_fault_never_alarms_and_a_fault_still_does():
+    """AID's estimates wander over hours further than a baseline's spread (masses 2.6 % in a
+    fault-free 4 h, docs/zenoh.md): a wander below δ/2 of every channel never accumulates,
+    however long (here ±3 % and 0.5 % noise over 20 000 samples), while the fault the CUSUM
+    is sized for is found within a few samples."""
+    rng = np.random.default_rng(3)
+    det = VehicleDetector("v", FAST)
+    found = []
+    for k in range(20_000):
+        drift = 0.03 * math.sin(2 * math.pi * k / 7000.0) if k > 200 else 0.0  # ±3 %
+        found += det.update(_payload(k * 1.0, rng, scale={"masses": 1 + drift,
+                                                          "drags": 1 - drift}))
+    assert det.ready and found == []
+    for k in range(20_000, 20_020):
+        found += det.update(_payload(k * 1.0, rng, scale={"masses": 1.1}))
+    assert [d.kind for d in found] == ["flooding"] and found[0].t_ns * 1e-9 <= 20_005
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.8, 0.95])
+def test_the_autocorrelation_time_of_an_ar1_series(phi):
+    """τ = (1 + φ)/(1 − φ) for x_k = φ x_{k−1} + ε_k."""
+    rng = np.random.default_rng(4)
+    x = np.zeros(20_000)
+    for k in range(1, x.size):
+        x[k] = phi * x[k - 1] + rng.standard_normal()
+    assert autocorrelation_time(x) == pytest.approx((1 + phi) / (1 - phi), rel=0.25)
 
 
 def test_frozen_estimates_are_ignored_and_reset_learns_again():

@@ -212,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive", on_alive,
                                                 history=True)
         say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* (baseline after "
-            f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; k {settings.k:g}, "
+            f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; "
             f"h {settings.h:g})")
         # SIGTERM (systemd, a parent) and SIGINT (Ctrl-C; also when started in the background,
         # where a shell would have it ignored) end it cleanly: counts written

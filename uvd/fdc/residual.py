@@ -75,11 +75,19 @@ class FrozenModel:
 
     @classmethod
     def from_theta(cls, theta, B) -> FrozenModel:
-        """From θ ∈ R²⁴¹ in the order of (2.48) and B (6 × N)."""
-        from uvd.model.params import UVParams
-        p = UVParams.from_theta(np.asarray(theta, dtype=float))
-        return cls(M=0.5 * (p.M + p.M.T), D_flat=np.hstack(list(p.D)), g=float(p.g),
-                   b=np.asarray(p.b, dtype=float), B=np.asarray(B, dtype=float))
+        """From θ ∈ R²⁴¹ as the estimate payload documents it, in the order of (2.48): the 21
+        entries of M's upper triangle row by row (2.45), D₁ˢ … D₆ˢ (each column-stacked, (2.8)),
+        g, b — decoded here from that contract alone (uvd-fdc imports nothing of the daemon);
+        and B (6 × N)."""
+        theta = np.asarray(theta, dtype=float).reshape(-1)
+        if theta.shape != (241,) or not np.isfinite(theta).all():
+            raise ValueError(f"θ: 241 finite numbers expected, got {theta.shape[0]} entries")
+        M = np.zeros((6, 6))
+        M[np.triu_indices(6)] = theta[:21]
+        M = M + np.triu(M, 1).T
+        D = theta[21:237].reshape(6, 6, 6).transpose(0, 2, 1)  # Dᵢ from its column stack
+        return cls(M=M, D_flat=np.hstack(list(D)), g=float(theta[237]),
+                   b=theta[238:241].copy(), B=np.asarray(B, dtype=float))
 
 
 @dataclass(frozen=True)
