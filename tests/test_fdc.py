@@ -164,3 +164,77 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     key = "uvd/sub1/estimate/aid6"
     assert stats["received"] == {key: 299} and stats["lost"] == {key: 1}
     assert stats["latency_ms"]["n"] == 299 and 0 < stats["latency_ms"]["p50"] < 1000
+
+
+@pytest.mark.slow
+def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path):
+    """A vehicle written from the schemas alone (a second Zenoh session: estimates, state and
+    a params queryable answering its thruster matrix) loses half of thruster 4; AID-like
+    estimates move b₁ (what AID does, docs/zenoh.md); uvd-fdc reports kind thruster, naming
+    thruster 4 at η ≈ 0.5, with the residual's explanation, valid against uvd.fault.v1."""
+    import zenoh
+
+    from tests.test_fdc_residual import B, _estimate, _simulate
+
+    port = _free_port()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    samples = _simulate(260.0, t_fault=200.0, eta=[1, 1, 1, 0.5, 1, 1], noise=0.002)
+    faults, asked = [], []
+
+    def on_params(q):
+        asked.append(str(q.selector))
+        q.reply("uvd/sub2/params", json.dumps({"vehicle": "sub2", "t_ns": 0, "estimates": {},
+                                               "configuration": {"thruster_matrix":
+                                                                 B.tolist()}}))
+
+    with zenoh.open(conf) as s:
+        token = s.liveliness().declare_token("uvd/sub2/alive")
+        s.declare_queryable("uvd/sub2/params", on_params)
+        est = s.declare_publisher("uvd/sub2/estimate/aid6")
+        state = s.declare_publisher("uvd/sub2/state")
+        s.declare_subscriber("uvd/*/fault/*", lambda x: faults.append(
+            (str(x.key_expr), json.loads(x.payload.to_bytes()))))
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvd.fdc.client", "--connect", f"tcp/127.0.0.1:{port}",
+             "--warmup-s", "10", "--baseline-s", "150", "--seconds", "40"],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            time.sleep(3.0)  # the client connects and subscribes
+            next_est, seq = 0.0, 0
+            for i, (t, v, R, f) in enumerate(samples):
+                if t >= next_est:
+                    b1 = 20.0 if t >= 200.0 else 0.0
+                    est.put(json.dumps({**_estimate(t, b1=b1), "seq": seq,
+                                        "vehicle": "sub2", "wall_time": time.time()}))
+                    next_est, seq = next_est + 1.0, seq + 1
+                    if i == 0:
+                        deadline = time.monotonic() + 10.0  # it asks for B
+                        while not asked and time.monotonic() < deadline:
+                            time.sleep(0.05)
+                        time.sleep(0.3)
+                state.put(json.dumps({"seq": i, "t_ns": int(round(t * 1e9)), "vehicle": "sub2",
+                                      "wall_time": time.time(), "v": v.tolist(),
+                                      "R": R.tolist(), "thrust": f.tolist()}))
+                if i % 20 == 0:
+                    time.sleep(0.01)
+            deadline = time.monotonic() + 10.0
+            while not faults and time.monotonic() < deadline:
+                time.sleep(0.1)
+            token.undeclare()
+        finally:
+            proc.terminate()
+            out, _ = proc.communicate(timeout=10)
+    print(out)
+    assert asked and "what=configuration" in asked[0]
+    assert len(faults) == 1, faults
+    key, d = faults[0]
+    assert key == "uvd/sub2/fault/thruster" and d["channel"] == "thruster4", d
+    assert d["relative_change"] == pytest.approx(-0.5, abs=0.05)
+    assert abs(d["explanation"]["since_t_ns"] * 1e-9 - 200.0) <= 10.0
+    schema = json.loads((Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
+                         / "uvd.fault.v1.json").read_text())
+    jsonschema.Draft202012Validator(schema).validate(d)
+    assert "FAULT sub2: thruster (thruster4" in out
