@@ -238,3 +238,9 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path):
                          / "uvd.fault.v1.json").read_text())
     jsonschema.Draft202012Validator(schema).validate(d)
     assert "FAULT sub2: thruster (thruster4" in out
+
+
+@pytest.mark.parametrize("B", [[[1.0, 2.0]], np.full((6, 6), np.nan), np.zeros((6, 0))])
+def test_a_malformed_thruster_matrix_is_refused_by_name(B):
+    with pytest.raises(ValueError, match="thruster matrix: 6 × N finite"):
+        VehicleDetector("v", FAST, B=B)

@@ -153,14 +153,15 @@ def main(argv: list[str] | None = None) -> int:
             try:
                 conf = json.loads(reply.ok.payload.to_bytes())["configuration"]
                 B = conf["thruster_matrix"]
+                VehicleDetector(vehicle, settings, B=B)  # refuses a malformed one by name
             except (AttributeError, KeyError, TypeError, ValueError) as exc:
-                say(f"uvd/{vehicle}/params: no thruster matrix ({exc!r}); thruster faults "
-                    "are reported by the estimates' kind")
-                B = None
+                say(f"uvd/{vehicle}/params: no usable thruster matrix ({exc!r}); faults are "
+                    "reported with the kind of the estimates' channel")
+                return
             with lock:
                 thrusters[vehicle] = B
                 for (v, _), det in detectors.items():
-                    if v == vehicle and B is not None:
+                    if v == vehicle:
                         det.set_thrusters(B)
             return
 

@@ -144,7 +144,9 @@ class VehicleDetector:
     def __init__(self, vehicle: str, settings: CusumSettings | None = None, B=None) -> None:
         self.vehicle = vehicle
         self.settings = settings or CusumSettings()
-        self.B = None if B is None else np.asarray(B, dtype=float)
+        self.B = None
+        if B is not None:
+            self.set_thrusters(B)
         self.reset()
 
     def reset(self) -> None:
@@ -166,8 +168,13 @@ class VehicleDetector:
         self.segments: deque = deque(maxlen=self.settings.window)
 
     def set_thrusters(self, B) -> None:
-        """The thruster matrix B (6 × N, u = B f) of the vehicle (its ``params``)."""
-        self.B = np.asarray(B, dtype=float)
+        """The thruster matrix B (6 × N, u = B f) of the vehicle (its ``params``); anything
+        but 6 rows of N finite numbers is refused with a ValueError naming it."""
+        B = np.asarray(B, dtype=float)
+        if B.ndim != 2 or B.shape[0] != 6 or B.shape[1] < 1 or not np.isfinite(B).all():
+            raise ValueError(f"thruster matrix: 6 × N finite numbers expected, got shape "
+                             f"{B.shape}")
+        self.B = B
 
     @property
     def ready(self) -> bool:

@@ -131,7 +131,7 @@ class SegmentIntegrator:
         self.length_s = length_s
         self.max_gap_s = max_gap_s
         self._start = None  # (t, v) at the segment's start
-        self._prev = None   # (t, v, the integrands at t)
+        self._prev = None   # (t, the integrands at t) of the previous sample
         self._acc = None
 
     def _integrands(self, v: np.ndarray, R: np.ndarray, f: np.ndarray) -> tuple:
@@ -152,13 +152,13 @@ class SegmentIntegrator:
                              f"{self.model.B.shape[1]} finite numbers")
         cur = self._integrands(v, R, f)
         if self._prev is None or not 0.0 < t - self._prev[0] <= self.max_gap_s:
-            self._start, self._prev = (t, v), (t, v, cur)
+            self._start, self._prev = (t, v), (t, cur)
             self._acc = [np.zeros_like(x) for x in cur]
             return None
         h = 0.5 * (t - self._prev[0])
-        for acc, a, b in zip(self._acc, self._prev[2], cur, strict=True):
+        for acc, a, b in zip(self._acc, self._prev[1], cur, strict=True):
             acc += h * (a + b)
-        self._prev = (t, v, cur)
+        self._prev = (t, cur)
         if t - self._start[0] < self.length_s - 1e-9:
             return None
         m = self.model
