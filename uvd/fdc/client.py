@@ -128,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
             return
         if args.stats:
             link.take(str(sample.key_expr), payload)
+        if payload.get("source") == "controller":
+            return  # an adaptive controller's θ̂ moves by design (AMBC's step 1 → 2)
         with lock:
             det = detectors.get((vehicle, estimator))
             if det is None:
