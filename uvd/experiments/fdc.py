@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from uvd.experiments import Experiment, ExperimentOptions
 
 FAULTS = {
@@ -69,6 +67,7 @@ class SimVehicle:
         """Run to the next estimate (every :data:`EVERY_S` simulated seconds, the first at
         the start); its ``"estimate"`` hub record, stamped with the simulated clock."""
         from sim_bridge.plant import PlantFault
+        from uvd.experiments._control_runner import lockstep_cycle_record
         from uvd.telemetry.records import estimate_record
 
         sim = self.sim
@@ -83,7 +82,7 @@ class SimVehicle:
                 else:
                     sim.plant.set_fault(PlantFault(**args))
             out = sim.cycle()
-            self.cycles.append(_cycle_record(sim.t_ns, sim.dt_control, out))
+            self.cycles.append(lockstep_cycle_record(sim.t_ns, sim.dt_control, out))
             self.k += 1
             if (self.k - 1) % self.every == 0:
                 return estimate_record(sim.t_ns, self.spec.name,
@@ -108,21 +107,6 @@ class SimVehicle:
         else:
             out["false_alarms"] = len(detections)
         return out
-
-
-def _cycle_record(t_ns: int, dt: float, out) -> dict:
-    """The ``"cycle"`` hub record of one lockstep cycle (what the daemon's write phase
-    publishes; the parts the state payload carries)."""
-    from uvd.telemetry.records import CycleRecord
-
-    nav, ref = out.nav, out.reference
-    return CycleRecord(
-        t_ns=t_ns, dt=dt, state="ARMED", action="none", mode=out.mode, status=out.status,
-        p=nav.H[:3, 3], R=nav.H[:3, :3], v=nav.v, nav_valid=nav.valid, u=out.u_applied,
-        u_cmd=out.u_cmd, thrust=out.thrust_n, ages=(None,) * 4,
-        p_ref=None if ref is None else ref.H[:3, 3],
-        R_ref=None if ref is None else ref.H[:3, :3],
-        v_ref=None if ref is None else np.asarray(ref.v)).to_dict()
 
 
 def _run_one(fault: str | None, minutes_before: float, minutes_after: float, seed: int,
