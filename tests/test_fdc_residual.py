@@ -173,3 +173,22 @@ def test_a_buoyancy_change_stays_a_buoyancy_change():
     _, found = _run_detector(samples, 200.0, g=20.0)
     assert [(x.kind, x.channel) for x in found] == [("buoyancy", "buoyancy")]
     assert found[0].explanation["coef"][0] == pytest.approx(20.0, abs=1.0)
+
+
+def test_a_malformed_state_or_theta_is_refused_and_the_detector_goes_on():
+    """A bad state sample raises a ValueError naming it (uvd-fdc counts and drops it) and is
+    never kept for the baseline; an estimate whose θ is not 241 numbers is not used for the
+    frozen model; the residual still runs."""
+    samples = _simulate(200.0, noise=0.002)
+    det = VehicleDetector("v", FAST, B=B)
+    for t, v, R, f in samples:
+        if abs(t - round(t)) < 1e-9:
+            det.update({**_estimate(t), **({"theta": [1.0, None]} if t < 50 else {})})
+        if abs(t - 100.0) < 1e-9:
+            for bad in ({"v": [0.0] * 5}, {"thrust": ["x"] * 6}, {"R": [[math.nan] * 3] * 3}):
+                with pytest.raises(ValueError, match="state sample"):
+                    det.update_state({"t_ns": int(t * 1e9), "v": v.tolist(), "R": R.tolist(),
+                                      "thrust": f.tolist(), **bad})
+        det.update_state({"t_ns": int(round(t * 1e9)), "v": v.tolist(), "R": R.tolist(),
+                          "thrust": f.tolist()})
+    assert det.ready and det.explains and len(det.segments) >= 3

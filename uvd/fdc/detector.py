@@ -19,10 +19,13 @@ buoyancy change of 20 N (``g_change_n``), the buoyancy torque b judged as one ve
 scale of ‖b‖ (``b_change``·‖b‖: b₁, b₂ of a centre-of-gravity offset are tiny beside b₃).
 The allowance δ/2 is what makes the detector sound against what the baseline cannot see:
 AID's estimates are filtered (lag-1 autocorrelation 0.99 for the masses and drags) and wander
-slowly over hours further than the spread of a 20-minute baseline (measured over 4 h fault-free
-runs of `uvd experiment fdc`: masses up to 2.6 %, drags 6 %, g 1.5 N, b₁ 1.2 N m) — a σ-scaled
-allowance (k = 1σ of the baseline) alarmed on that wander once in every fault-free run; a
-wander below δ/2 now never accumulates, whatever its duration.
+slowly over hours further than the spread of a 20-minute baseline (measured over six 4 h
+fault-free runs of `uvd experiment fdc`'s vehicle: masses up to 2.9 %, drags 6 %, g 6 N) — a
+σ-scaled allowance (k = 1σ of the baseline) alarmed on that wander once in each of the six,
+40–50 minutes in; a wander below δ/2 never accumulates, whatever its duration (there the
+largest deviation was 0.61 of δ/2). What it costs: a change of less than δ/2 is not found,
+and a drift that keeps going (mass₃, about 0.7 % an hour) reaches δ/2 after many hours — a
+long mission wants a fresh baseline (:meth:`VehicleDetector.reset`) now and then.
 
 σ. The estimates are autocorrelated, so n of them carry the information of n/τ independent
 ones, τ = 1 + 2 Σ ρₗ the integrated autocorrelation time (Sokal's window: the sum stops at the
@@ -120,6 +123,15 @@ def _kind(channel: str, direction: float) -> str:
     return "buoyancy"
 
 
+def _theta(x) -> np.ndarray | None:
+    """θ_UV of an estimate payload when it is 241 finite numbers, else None (not used)."""
+    try:
+        th = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return th if th.shape == (241,) and np.isfinite(th).all() else None
+
+
 def autocorrelation_time(x) -> float:
     """τ = 1 + 2 Σₗ ρₗ of a series, the sum stopped at the first lag L ≥ 5τ (Sokal's window)
     or at a quarter of its length; at least 1."""
@@ -206,8 +218,9 @@ class VehicleDetector:
             if age < st.warmup_s + st.baseline_s:
                 for k, v in ch.items():
                     self.baseline.setdefault(k, []).append(v)
-                if payload.get("theta") is not None:
-                    self.thetas.append(payload["theta"])
+                theta = _theta(payload.get("theta"))
+                if theta is not None:
+                    self.thetas.append(theta)
                 return []
             self._learn()
         if self.alarmed:
@@ -260,8 +273,7 @@ class VehicleDetector:
                              st.g_change_n if k == "g" else st.b_change * b_norm)
         if self.B is not None and len(self.thetas) >= 5:
             from uvd.fdc.residual import FrozenModel, SegmentIntegrator
-            self.model = FrozenModel.from_theta(np.median(np.asarray(self.thetas, float), 0),
-                                                self.B)
+            self.model = FrozenModel.from_theta(np.median(self.thetas, axis=0), self.B)
             self.integrator = SegmentIntegrator(self.model, st.segment_s)
             end = self.t0_ns + int((st.warmup_s + st.baseline_s) * 1e9)
             segs = [g for g in (self.integrator.add(*x) for x in self.states
@@ -290,8 +302,10 @@ class VehicleDetector:
         """Take one state payload (``uvd.state.v1``: ``t_ns``, ``v``, ``R``, ``thrust``)."""
         if self.B is None or self.t0_ns is None or self.alarmed:
             return []
+        from uvd.fdc.residual import state_sample
         t = int(payload["t_ns"]) * 1e-9
-        sample = (t, payload["v"], payload["R"], payload["thrust"])
+        sample = (t, *state_sample(payload["v"], payload["R"], payload["thrust"],
+                                   self.B.shape[1]))
         if self.model is None:
             if not self.mu and self._age(int(payload["t_ns"])) >= self.settings.warmup_s:
                 if len(self.states) < 1_000_000:

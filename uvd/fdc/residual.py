@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FrozenModel", "Segment", "SegmentIntegrator", "Explanation", "explain",
-           "explanations"]
+           "explanations", "state_sample"]
 
 
 @dataclass(frozen=True)
@@ -117,6 +117,22 @@ def _ad_T(v: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.concatenate([np.cross(p, w), np.cross(p, nu) + np.cross(h, w)])
 
 
+def state_sample(v, R, f, n_thrusters: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A state payload's v (6), R (3 × 3 or 9 numbers) and per-thruster commands f (N) as
+    arrays; a ValueError naming what is wrong otherwise."""
+    try:
+        v = np.asarray(v, dtype=float)
+        R = np.asarray(R, dtype=float).reshape(3, 3)
+        f = np.asarray(f, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"state sample: v, R or thrust is not numbers ({exc})") from exc
+    if v.shape != (6,) or f.shape != (n_thrusters,) or not (
+            np.isfinite(v).all() and np.isfinite(R).all() and np.isfinite(f).all()):
+        raise ValueError("state sample: v must be 6 finite numbers, R 3×3 finite, thrust "
+                         f"{n_thrusters} finite numbers")
+    return v, R, f
+
+
 class SegmentIntegrator:
     """Turn a stream of state samples into :class:`Segment` s of ``length_s``.
 
@@ -143,13 +159,7 @@ class SegmentIntegrator:
         return (ad, drag, grav, r, f)
 
     def add(self, t: float, v, R, f) -> Segment | None:
-        v = np.asarray(v, dtype=float)
-        R = np.asarray(R, dtype=float).reshape(3, 3)
-        f = np.asarray(f, dtype=float)
-        if not (np.isfinite(v).all() and np.isfinite(R).all() and np.isfinite(f).all()) \
-                or f.shape != (self.model.B.shape[1],) or v.shape != (6,):
-            raise ValueError("state sample: v must be 6 finite numbers, R 3×3 finite, thrust "
-                             f"{self.model.B.shape[1]} finite numbers")
+        v, R, f = state_sample(v, R, f, self.model.B.shape[1])
         cur = self._integrands(v, R, f)
         if self._prev is None or not 0.0 < t - self._prev[0] <= self.max_gap_s:
             self._start, self._prev = (t, v), (t, cur)
