@@ -32,7 +32,7 @@ EVERY_S = 10.0
 class SimVehicle:
     """One lockstep vehicle of this experiment (demo configuration, online 6-DOF AID from the
     vehicle's own parameters), ``fault`` (a key of :data:`FAULTS`, or None) injected into its
-    plant after ``minutes_before``; :meth:`next_estimate` advances it to its next estimate."""
+    plant after ``minutes_before``; :meth:`next_estimates` advances it to its next estimate."""
 
     def __init__(self, fault: str | None, minutes_before: float, seed: int) -> None:
         from uvd.estimation.aid import aid6_estimator
@@ -47,7 +47,6 @@ class SimVehicle:
         H0, v0 = start_pose(cfg)
         self.sim = Lockstep(vehicle, core_cfg, LockstepConfig(
             control_rate_hz=cfg.loop.rate_hz, seed=seed), H0=H0, v0=v0)
-        self.spec = core_cfg.estimators[0]
         self.rate = cfg.loop.rate_hz
         self.fault = fault
         self.k = 0
@@ -55,20 +54,22 @@ class SimVehicle:
         self.every = int(round(EVERY_S * self.rate))
         self.t_fault_ns: int | None = None
         self.B = vehicle.B
-        #: the ``"cycle"`` hub records since the last estimate (:meth:`next_estimate`)
+        #: the ``"cycle"`` hub records since the last estimate (:meth:`next_estimates`)
         self.cycles: list[dict] = []
 
     @property
     def next_k(self) -> int:
-        """The cycle (from 0) whose estimate :meth:`next_estimate` returns."""
+        """The cycle (from 0) whose estimate :meth:`next_estimates` returns."""
         return 0 if self.k == 0 else self.k - 1 + self.every
 
-    def next_estimate(self) -> dict:
-        """Run to the next estimate (every :data:`EVERY_S` simulated seconds, the first at
-        the start); its ``"estimate"`` hub record, stamped with the simulated clock."""
+    def next_estimates(self) -> list[dict]:
+        """Run to the next estimates (every :data:`EVERY_S` simulated seconds, the first at
+        the start); their ``"estimate"`` hub records as the daemon publishes them (AID's and
+        the two-step AMBC's own θ̂: :func:`uvd.telemetry.records.estimate_records`), stamped
+        with the simulated clock."""
         from sim_bridge.plant import PlantFault
         from uvd.experiments._control_runner import lockstep_cycle_record
-        from uvd.telemetry.records import estimate_record
+        from uvd.telemetry.records import estimate_records
 
         sim = self.sim
         self.cycles = []
@@ -85,8 +86,7 @@ class SimVehicle:
             self.cycles.append(lockstep_cycle_record(sim.t_ns, sim.dt_control, out))
             self.k += 1
             if (self.k - 1) % self.every == 0:
-                return estimate_record(sim.t_ns, self.spec.name,
-                                       self.spec.diagnostics(sim.state.est[0]))
+                return estimate_records(self.sim.core_cfg, sim.state, sim.t_ns)
 
     def outcome(self, detections: list[dict]) -> dict:
         """This vehicle's figures from the detections reported for it (first one counts)."""
@@ -120,12 +120,14 @@ def _run_one(fault: str | None, minutes_before: float, minutes_after: float, see
     detections = []
     report = int(1800 * v.rate)
     while v.next_k < n:
-        rec = v.next_estimate()
+        records = v.next_estimates()
         for c in v.cycles:
             detections += [d.as_dict() for d in det.update_state(
                 {"t_ns": c["t_ns"], **state_payload(c)})]
-        payload = {"t_ns": rec["t_ns"], **estimate_payload(rec)}
-        detections += [d.as_dict() for d in det.update(payload)]
+        for rec in records:  # AID's (uvd-fdc does not judge a controller's θ̂)
+            if rec["source"] == "estimator":
+                payload = {"t_ns": rec["t_ns"], **estimate_payload(rec)}
+                detections += [d.as_dict() for d in det.update(payload)]
         if progress is not None and v.k // report != (v.k - v.every) // report:
             progress(f"  fdc {fault or 'fault-free'}: simulated {v.k / v.rate / 60:.0f} / "
                      f"{n / v.rate / 60:.0f} min")
@@ -164,5 +166,6 @@ def run(opts: ExperimentOptions) -> dict:
                            "false_alarms_fault_free": ff["false_alarms"]}}
 
 
-EXPERIMENTS = [Experiment("fdc", "fault detection from AID's estimates: each fault of issue 19 "
-                                 "after 30 min, and hours without one (uvd-fdc's CUSUM)", run)]
+EXPERIMENTS = [Experiment("fdc", "fault detection from AID's estimates and the commanded vs "
+                                 "realised wrench: each fault of issue 19 after 30 min, and "
+                                 "hours without one (uvd-fdc's detector)", run)]

@@ -2,11 +2,11 @@
 ``uvd-fdc`` process, on the simulated clock.
 
 One vehicle per fault of :data:`uvd.experiments.fdc.FAULTS` (injected after 30 simulated
-minutes) and one without a fault, each a :class:`~uvd.experiments.fdc.SimVehicle` whose AID
-estimates (every 10 simulated seconds) and state (``STATE_HZ``) go through the daemon's own
-Zenoh sink (:class:`~uvd.telemetry.zenoh_link.ZenohSink`, key ``sim<i>``, its own loopback
-port, its ``params`` queryable answering the thruster matrix), stamped with the simulated
-clock — so an hour of a fleet passes in about a minute. A separate
+minutes) and one without a fault, each a :class:`~uvd.experiments.fdc.SimVehicle` whose
+estimates (AID's and AMBC's, every 10 simulated seconds) and state (``STATE_HZ``) go through
+the daemon's own Zenoh sink (:class:`~uvd.telemetry.zenoh_link.ZenohSink`, key ``sim<i>``, its
+own loopback port, its ``params`` queryable answering the thruster matrix), stamped with the
+simulated clock — so an hour of a fleet passes in about a minute. A separate
 ``uvd-fdc`` process connects to every vehicle and learns, detects and publishes on
 ``uvd/<vehicle>/fault/<kind>`` exactly as it would for real vehicles; this experiment listens
 to those fault samples (the documented key space, ``uvd.fault.v1``) and to the client's
@@ -77,8 +77,8 @@ def run(opts: ExperimentOptions) -> dict:
                 while any(v.next_k < n_cycles for v in vehicles):
                     for v, s in zip(vehicles, sinks, strict=True):
                         if v.next_k < n_cycles:
-                            estimate = v.next_estimate()
-                            await s.write([*v.cycles, estimate])
+                            estimates = v.next_estimates()
+                            await s.write([*v.cycles, *estimates])
                     k = vehicles[0].k
                     if report and k // report != (k - vehicles[0].every) // report:
                         opts.progress(f"  fdc-fleet: simulated {k / vehicles[0].rate / 60:.0f}"
