@@ -22,7 +22,7 @@ import sys
 import threading
 import time
 
-from uvd.fdc.detector import CusumSettings, VehicleDetector
+from uvd.fdc.detector import CusumSettings, VehicleDetector, thruster_matrix
 
 
 class LinkStats:
@@ -154,8 +154,7 @@ def main(argv: list[str] | None = None) -> int:
         for reply in session.get(f"uvd/{vehicle}/params?what=configuration", timeout=2.0):
             try:
                 conf = json.loads(reply.ok.payload.to_bytes())["configuration"]
-                B = conf["thruster_matrix"]
-                VehicleDetector(vehicle, settings, B=B)  # refuses a malformed one by name
+                B = thruster_matrix(conf["thruster_matrix"])
             except (AttributeError, KeyError, TypeError, ValueError) as exc:
                 say(f"uvd/{vehicle}/params: no usable thruster matrix ({exc!r}); faults are "
                     "reported with the kind of the estimates' channel")
@@ -214,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         session.declare_subscriber(f"uvd/{args.vehicle}/state", on_state)
         session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive", on_alive,
                                                 history=True)
-        say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* (baseline after "
+        say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* and state (baseline after "
             f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; "
             f"h {settings.h:g})")
         # SIGTERM (systemd, a parent) and SIGINT (Ctrl-C; also when started in the background,

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["CusumSettings", "Detection", "VehicleDetector", "autocorrelation_time",
-           "channels_of"]
+           "channels_of", "thruster_matrix"]
 
 
 @dataclass(frozen=True)
@@ -123,6 +123,19 @@ def _kind(channel: str, direction: float) -> str:
     return "buoyancy"
 
 
+def thruster_matrix(B) -> np.ndarray:
+    """B (``params``' ``configuration.thruster_matrix``) as a 6 × N array; anything but 6 rows
+    of N finite numbers is refused with a ValueError naming it."""
+    try:
+        B = np.asarray(B, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"thruster matrix: not numbers ({exc})") from exc
+    if B.ndim != 2 or B.shape[0] != 6 or B.shape[1] < 1 or not np.isfinite(B).all():
+        raise ValueError(f"thruster matrix: 6 × N finite numbers expected, got shape "
+                         f"{B.shape}")
+    return B
+
+
 def _theta(x) -> np.ndarray | None:
     """θ_UV of an estimate payload when it is 241 finite numbers, else None (not used)."""
     try:
@@ -180,13 +193,8 @@ class VehicleDetector:
         self.segments: deque = deque(maxlen=self.settings.window)
 
     def set_thrusters(self, B) -> None:
-        """The thruster matrix B (6 × N, u = B f) of the vehicle (its ``params``); anything
-        but 6 rows of N finite numbers is refused with a ValueError naming it."""
-        B = np.asarray(B, dtype=float)
-        if B.ndim != 2 or B.shape[0] != 6 or B.shape[1] < 1 or not np.isfinite(B).all():
-            raise ValueError(f"thruster matrix: 6 × N finite numbers expected, got shape "
-                             f"{B.shape}")
-        self.B = B
+        """The thruster matrix B (6 × N, u = B f) of the vehicle (its ``params``)."""
+        self.B = thruster_matrix(B)
 
     @property
     def ready(self) -> bool:
