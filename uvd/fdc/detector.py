@@ -59,6 +59,11 @@ __all__ = ["CusumSettings", "Detection", "VehicleDetector", "autocorrelation_tim
            "channels_of", "thruster_matrix"]
 
 
+#: state samples kept for the residual's baseline (20 minutes at 100 Hz and some; a faster
+#: stream keeps its first ones only)
+MAX_BASELINE_STATES = 150_000
+
+
 @dataclass(frozen=True)
 class CusumSettings:
     """The detector's settings (module docstring): baseline window, the CUSUM's threshold h
@@ -316,7 +321,7 @@ class VehicleDetector:
                                    self.B.shape[1]))
         if self.model is None:
             if not self.mu and self._age(int(payload["t_ns"])) >= self.settings.warmup_s:
-                if len(self.states) < 1_000_000:
+                if len(self.states) < MAX_BASELINE_STATES:
                     self.states.append(sample)
             return []
         seg = self.integrator.add(*sample)
