@@ -59,8 +59,8 @@ __all__ = ["CusumSettings", "Detection", "VehicleDetector", "autocorrelation_tim
            "channels_of", "thruster_matrix"]
 
 
-#: state samples kept for the residual's baseline (20 minutes at 100 Hz and some; a faster
-#: stream keeps its first ones only)
+#: state samples kept for the residual's baseline (20 minutes at 100 Hz and some, 200 B each;
+#: a faster stream keeps its first ones only)
 MAX_BASELINE_STATES = 150_000
 
 
@@ -191,7 +191,7 @@ class VehicleDetector:
         self.s_neg: dict[str, float] = {}
         self.alarmed = False
         self.pending: tuple[Detection, float] | None = None  # a CUSUM alarm awaiting a kind
-        self.states: list[tuple] = []  # state samples until the model is frozen
+        self.states: list[np.ndarray] = []  # state samples until the model is frozen
         self.model = None
         self.integrator = None
         self.bias = self.spread = None
@@ -289,12 +289,13 @@ class VehicleDetector:
             self.model = FrozenModel.from_theta(np.median(self.thetas, axis=0), self.B)
             self.integrator = SegmentIntegrator(self.model, st.segment_s)
             end = self.t0_ns + int((st.warmup_s + st.baseline_s) * 1e9)
-            segs = [g for g in (self.integrator.add(*x) for x in self.states
-                                if x[0] * 1e9 < end) if g is not None]
-            later = [x for x in self.states if x[0] * 1e9 >= end]
+            rows = [(x[0], x[1:7], x[7:16], x[16:]) for x in self.states]
+            segs = [g for g in (self.integrator.add(*x) for x in rows if x[0] * 1e9 < end)
+                    if g is not None]
             self._learn_residual(segs)
-            for x in later:
-                self.integrator.add(*x)
+            for x in rows:
+                if x[0] * 1e9 >= end:
+                    self.integrator.add(*x)
         self.baseline.clear()
         self.thetas.clear()
         self.states.clear()
@@ -321,8 +322,9 @@ class VehicleDetector:
                                    self.B.shape[1]))
         if self.model is None:
             if not self.mu and self._age(int(payload["t_ns"])) >= self.settings.warmup_s:
-                if len(self.states) < MAX_BASELINE_STATES:
-                    self.states.append(sample)
+                if len(self.states) < MAX_BASELINE_STATES:  # one row: t, v, R, f
+                    self.states.append(np.concatenate([[t], sample[1], sample[2].ravel(),
+                                                       sample[3]]))
             return []
         seg = self.integrator.add(*sample)
         if seg is not None and self.spread is not None:
