@@ -47,7 +47,7 @@ group: drags up → ``entanglement``; masses up → ``flooding``, down → ``los
 ``buoyancy``. Without a state stream or B the CUSUM alone decides, as before.
 
 Why the residual names and does not detect: run alone as a sliding GLR it alarmed in each of
-six fault-free 4 h runs about 40 minutes in (a thruster 1 or 2 at η 0.81–1.03, scores 40–51):
+six fault-free 4 h runs about 40 minutes in (a thruster 1 or 2 at η 0.81–1.03, scores 39–51):
 the model frozen from the first 25 minutes mispredicts the surge where the trajectory goes
 beyond what the baseline excited. Behind the CUSUM it decides only once the estimates moved.
 """
