@@ -53,8 +53,17 @@ def test_aid_estimate_is_published_saved_and_resumed(hil, tmp_path):
     save_path = cfg.estimation.save_path
     d, records = run_daemon(cfg, 3.0)
 
-    est = [r for r in records if r.get("type") == "estimate"]
+    every = [r for r in records if r.get("type") == "estimate"]
+    est = [r for r in every if r["source"] == "estimator"]
     cycles = [r for r in records if r.get("type") == "cycle"]
+    # the adaptive controller's own θ̂ beside AID's, named as the controller (issue 19: "AID
+    # and AMBC separately"), each aged from its last step (within a cycle or two here)
+    ctl = [r for r in every if r["source"] == "controller"]
+    assert len(ctl) == len(est) and {r["estimator"] for r in ctl} == {cfg.control.controller}
+    assert all(r["theta"] is not None for r in ctl)
+    ages = [r["age_s"] for r in every]
+    assert all(a is None or 0.0 <= a <= 0.25 for a in ages), ages  # None: not stepped yet
+    assert all(a is not None for a in ages[-10:]), ages
     # every 0.2 s from the first cycle on, plus the final one at shutdown
     span_s = (cycles[-1]["t_ns"] - cycles[0]["t_ns"]) * 1e-9
     assert int(span_s / 0.2) + 1 <= len(est) <= int(span_s / 0.2) + 3, (len(est), span_s)
@@ -73,7 +82,7 @@ def test_aid_estimate_is_published_saved_and_resumed(hil, tmp_path):
     assert not any(p.name.endswith(".tmp") for p in Path(save_path).parent.iterdir())
     stats = d.app.shutdown_report["telemetry"]["params-file"]
     assert stats["errors"] == 0 and stats["dropped"] == 0
-    assert stats["written"] == len(est)  # only estimate records reach that sink
+    assert stats["written"] == len(every)  # only estimate records reach that sink
     # rewritten at the first estimate, then at most once per save_every_s = 1 s, and at close
     sink = next(s for s in d.app.hub.sinks if s.name == "params-file")
     assert 3 <= sink.writes <= int(span_s / 1.0) + 2, (sink.writes, span_s)
@@ -122,11 +131,18 @@ def test_a_frozen_estimate_is_published_and_logged_once(tmp_path, caplog):
     with caplog.at_level("WARNING", logger="uvd.daemon"):
         d._publish_estimates(123)
         d._publish_estimates(456)
-    recs = [r for r in lane.queue.drain() if r["type"] == "estimate"]  # not the start record
+    recs = [r for r in lane.queue.drain()  # not the start record nor the controller's
+            if r["type"] == "estimate" and r["source"] == "estimator"]
     assert [r["t_ns"] for r in recs] == [123, 456]
     assert all(r["frozen"] and "t = 9 s" in r["freeze_reason"] for r in recs)
     np.testing.assert_array_equal(recs[0]["theta"], st.theta)
     assert recs[0]["theta"] is not st.theta  # a copy: the record never changes afterwards
+    # age_s: the time since the estimator last stepped, not a constant
+    d.state.est_t_ns = 10**9
+    d._publish_estimates(int(3.5e9))
+    (rec,) = [r for r in lane.queue.drain() if r["type"] == "estimate" and
+              r["source"] == "estimator"]
+    assert rec["age_s"] == pytest.approx(2.5)
     warnings = [r.getMessage() for r in caplog.records if "stopped adapting" in r.getMessage()]
     assert len(warnings) == 1 and "aid6" in warnings[0] and "t = 9 s" in warnings[0]
 

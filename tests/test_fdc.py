@@ -4,6 +4,7 @@ between two Zenoh sessions on loopback (a publisher of estimates, a listener for
 from __future__ import annotations
 
 import json
+import math
 import socket
 import subprocess
 import sys
@@ -14,7 +15,7 @@ import jsonschema
 import numpy as np
 import pytest
 
-from uvd.fdc.detector import CusumSettings, VehicleDetector, channels_of
+from uvd.fdc.detector import CusumSettings, VehicleDetector, autocorrelation_time, channels_of
 
 MU = {"masses": [640, 800, 1050, 96, 146, 108], "drags": [-1250, -1420, -3080, -726, -781, -467],
       "g": 3.6, "b": [1.7, 3.1, 302.0]}
@@ -63,6 +64,34 @@ def test_a_step_is_found_quickly_with_its_kind(key, factor, kind, channel):
     assert d.kind == kind and d.channel.startswith(channel) and d.confidence >= 1.0
     assert (d.t_ns * 1e-9 - 200) <= 3.0  # within three samples of the step
     assert det.update(_payload(261.0, rng, scale={key: factor})) == []  # reported once
+
+
+def test_a_slow_wander_below_half_a_fault_never_alarms_and_a_fault_still_does():
+    """AID's estimates wander over hours further than a baseline's spread (masses 2.6 % in a
+    fault-free 4 h, docs/zenoh.md): a wander below δ/2 of every channel never accumulates,
+    however long (here ±3 % and 0.5 % noise over 20 000 samples), while the fault the CUSUM
+    is sized for is found within a few samples."""
+    rng = np.random.default_rng(3)
+    det = VehicleDetector("v", FAST)
+    found = []
+    for k in range(20_000):
+        drift = 0.03 * math.sin(2 * math.pi * k / 7000.0) if k > 200 else 0.0  # ±3 %
+        found += det.update(_payload(k * 1.0, rng, scale={"masses": 1 + drift,
+                                                          "drags": 1 - drift}))
+    assert det.ready and found == []
+    for k in range(20_000, 20_020):
+        found += det.update(_payload(k * 1.0, rng, scale={"masses": 1.1}))
+    assert [d.kind for d in found] == ["flooding"] and found[0].t_ns * 1e-9 <= 20_005
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.8, 0.95])
+def test_the_autocorrelation_time_of_an_ar1_series(phi):
+    """τ = (1 + φ)/(1 − φ) for x_k = φ x_{k−1} + ε_k."""
+    rng = np.random.default_rng(4)
+    x = np.zeros(20_000)
+    for k in range(1, x.size):
+        x[k] = phi * x[k - 1] + rng.standard_normal()
+    assert autocorrelation_time(x) == pytest.approx((1 + phi) / (1 - phi), rel=0.25)
 
 
 def test_frozen_estimates_are_ignored_and_reset_learns_again():
@@ -135,3 +164,83 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     key = "uvd/sub1/estimate/aid6"
     assert stats["received"] == {key: 299} and stats["lost"] == {key: 1}
     assert stats["latency_ms"]["n"] == 299 and 0 < stats["latency_ms"]["p50"] < 1000
+
+
+@pytest.mark.slow
+def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path):
+    """A vehicle written from the schemas alone (a second Zenoh session: estimates, state and
+    a params queryable answering its thruster matrix) loses half of thruster 4; AID-like
+    estimates move b₁ (what AID does, docs/zenoh.md); uvd-fdc reports kind thruster, naming
+    thruster 4 at η ≈ 0.5, with the residual's explanation, valid against uvd.fault.v1."""
+    import zenoh
+
+    from tests.test_fdc_residual import B, _estimate, _simulate
+
+    port = _free_port()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    samples = _simulate(260.0, t_fault=200.0, eta=[1, 1, 1, 0.5, 1, 1], noise=0.002)
+    faults, asked = [], []
+
+    def on_params(q):
+        asked.append(str(q.selector))
+        q.reply("uvd/sub2/params", json.dumps({"vehicle": "sub2", "t_ns": 0, "estimates": {},
+                                               "configuration": {"thruster_matrix":
+                                                                 B.tolist()}}))
+
+    with zenoh.open(conf) as s:
+        token = s.liveliness().declare_token("uvd/sub2/alive")
+        s.declare_queryable("uvd/sub2/params", on_params)
+        est = s.declare_publisher("uvd/sub2/estimate/aid6")
+        state = s.declare_publisher("uvd/sub2/state")
+        s.declare_subscriber("uvd/*/fault/*", lambda x: faults.append(
+            (str(x.key_expr), json.loads(x.payload.to_bytes()))))
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvd.fdc.client", "--connect", f"tcp/127.0.0.1:{port}",
+             "--warmup-s", "10", "--baseline-s", "150", "--seconds", "40"],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            time.sleep(3.0)  # the client connects and subscribes
+            next_est, seq = 0.0, 0
+            for i, (t, v, R, f) in enumerate(samples):
+                if t >= next_est:
+                    b1 = 20.0 if t >= 200.0 else 0.0
+                    est.put(json.dumps({**_estimate(t, b1=b1), "seq": seq,
+                                        "vehicle": "sub2", "wall_time": time.time()}))
+                    next_est, seq = next_est + 1.0, seq + 1
+                    if i == 0:
+                        deadline = time.monotonic() + 10.0  # it asks for B
+                        while not asked and time.monotonic() < deadline:
+                            time.sleep(0.05)
+                        time.sleep(0.3)
+                state.put(json.dumps({"seq": i, "t_ns": int(round(t * 1e9)), "vehicle": "sub2",
+                                      "wall_time": time.time(), "v": v.tolist(),
+                                      "R": R.tolist(), "thrust": f.tolist()}))
+                if i % 20 == 0:
+                    time.sleep(0.01)
+            deadline = time.monotonic() + 10.0
+            while not faults and time.monotonic() < deadline:
+                time.sleep(0.1)
+            token.undeclare()
+        finally:
+            proc.terminate()
+            out, _ = proc.communicate(timeout=10)
+    print(out)
+    assert asked and "what=configuration" in asked[0]
+    assert len(faults) == 1, faults
+    key, d = faults[0]
+    assert key == "uvd/sub2/fault/thruster" and d["channel"] == "thruster4", d
+    assert d["relative_change"] == pytest.approx(-0.5, abs=0.05)
+    assert abs(d["explanation"]["since_t_ns"] * 1e-9 - 200.0) <= 10.0
+    schema = json.loads((Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
+                         / "uvd.fault.v1.json").read_text())
+    jsonschema.Draft202012Validator(schema).validate(d)
+    assert "FAULT sub2: thruster (thruster4" in out
+
+
+@pytest.mark.parametrize("B", [[[1.0, 2.0]], np.full((6, 6), np.nan), np.zeros((6, 0))])
+def test_a_malformed_thruster_matrix_is_refused_by_name(B):
+    with pytest.raises(ValueError, match="thruster matrix: 6 × N finite"):
+        VehicleDetector("v", FAST, B=B)

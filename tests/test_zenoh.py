@@ -134,6 +134,12 @@ def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path)
     assert not err and len(ok) == 1 and dt < 0.1
     assert ok[0]["configuration"]["controller"] == "two-step-ambc"
     assert "aid6" in ok[0]["estimates"]
+    # B for a client that names a weak thruster; AMBC's own θ̂ beside AID's; a real age
+    assert len(ok[0]["configuration"]["thruster_matrix"]) == 6
+    assert all(len(row) == 6 for row in ok[0]["configuration"]["thruster_matrix"])
+    assert ok[0]["estimates"]["two-step-ambc"]["source"] == "controller"
+    assert ok[0]["estimates"]["aid6"]["source"] == "estimator"
+    assert 0.0 <= ok[0]["estimates"]["aid6"]["age_s"] < 1.0
     for key in ("bad", "bad_what"):
         ok, err, _ = info[key]
         assert not ok and len(err) == 1 and "uvd/rov7/params" in err[0]["error"]

@@ -158,6 +158,7 @@ class CoreState:
     cycles: int = 0
     u_last: np.ndarray = field(default_factory=lambda: np.zeros(6))
     hold: Reference | None = None  # the pose HOLD_DEPTH holds, taken when the mode was entered
+    ctrl_t_ns: int | None = None  # when the controller last stepped its state (AMBC's θ̂)
 
 
 class CoreOutputs(NamedTuple):
@@ -471,7 +472,8 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     out = CoreOutputs(thrust, u_cmd, sensed.u_applied, nav, ref, saturated, status, lead, label,
                       guard)
     return out, CoreState(sensed.nav_mem, ctrl, sensed.est, t0, sensed.est_t_ns,
-                          state.cycles + 1, u_cmd, hold)
+                          state.cycles + 1, u_cmd, hold,
+                          inputs.t_ns if ctrl is not state.ctrl else state.ctrl_t_ns)
 
 
 def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float

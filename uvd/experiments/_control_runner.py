@@ -112,6 +112,22 @@ def make_core(vehicle: Vehicle, controller: core.ControllerSpec, reference, *,
                            lag_compensation=lag_compensation, ff_preview_s=ff_preview_s)
 
 
+def lockstep_cycle_record(t_ns: int, dt: float, out: core.CoreOutputs,
+                          inputs: dict | None = None) -> dict:
+    """The ``"cycle"`` hub record of one lockstep cycle (armed, no failsafe), as the daemon's
+    write phase publishes it: what its sinks (the MCAP recorder, Zenoh's state) take."""
+    from uvd.telemetry.records import CycleRecord
+
+    nav, ref = out.nav, out.reference
+    return CycleRecord(
+        t_ns=t_ns, dt=dt, state="ARMED", action="none", mode=out.mode, status=out.status,
+        p=nav.H[:3, 3], R=nav.H[:3, :3], v=nav.v, nav_valid=nav.valid, u=out.u_applied,
+        u_cmd=out.u_cmd, thrust=out.thrust_n, ages=(None,) * 4, inputs=inputs,
+        p_ref=None if ref is None else ref.H[:3, 3],
+        R_ref=None if ref is None else ref.H[:3, :3],
+        v_ref=None if ref is None else np.asarray(ref.v)).to_dict()
+
+
 class _BlackBox:
     """``--record DIR``: the run's cycles and θ̂ on the daemon's MCAP channels
     (docs/recording.md) — the files ``uvd report`` draws — in ``DIR/<label>/``, on the
@@ -131,18 +147,9 @@ class _BlackBox:
                              "config_toml": f'[vehicle]\nname = "{vehicle.name}"\n'}])
 
     def cycle(self, k: int, out: core.CoreOutputs, omega: np.ndarray) -> None:
-        from uvd.telemetry.records import CycleRecord
-
-        nav, ref = out.nav, out.reference
-        self.rec.write_now([CycleRecord(
-            t_ns=k * self.dt_ns, dt=self.dt, state="ARMED", action="none", mode=out.mode,
-            status=out.status, p=nav.H[:3, 3], R=nav.H[:3, :3], v=nav.v, nav_valid=nav.valid,
-            u=out.u_applied, u_cmd=out.u_cmd, thrust=out.thrust_n, ages=(None,) * 4,
-            inputs={"actuators": {"omega_rad_s": omega, "enabled": True, "faults": [],
-                                  "bus_off": False}},
-            p_ref=None if ref is None else ref.H[:3, 3],
-            R_ref=None if ref is None else ref.H[:3, :3],
-            v_ref=None if ref is None else np.asarray(ref.v)).to_dict()])
+        self.rec.write_now([lockstep_cycle_record(k * self.dt_ns, self.dt, out, inputs={
+            "actuators": {"omega_rad_s": omega, "enabled": True, "faults": [],
+                          "bus_off": False}})])
 
     def estimate(self, k: int, theta: np.ndarray) -> None:
         self.rec.write_now([{"type": "estimate", "t_ns": k * self.dt_ns,

@@ -5,7 +5,9 @@ The demo's configuration (``config/sim.toml``: two-step AMBC tracking RefTraj1 o
 ``jhu-rov``) with online 6-DOF AID, started from the vehicle's own parameters (a vehicle
 identified before it dives); every 10 simulated seconds the estimate is turned into the Zenoh
 payload a fault-detection client receives (``uvd.telemetry.zenoh_link.estimate_payload``) and
-fed to ``uvd-fdc``'s detector (:mod:`uvd.fdc.detector`). Each fault is injected into the plant
+fed to ``uvd-fdc``'s detector (:mod:`uvd.fdc.detector`), and so is every cycle's state payload
+(``state_payload``: velocity, attitude, per-thruster commands) with the vehicle's thruster
+matrix, from which the detector names a weak thruster. Each fault is injected into the plant
 after ``nominal`` simulated minutes (30) and watched for ``after`` minutes (30); one more run
 goes ``fault_free`` hours (4) without a fault. Figures: per fault the kind detected and the
 latency from the injection; false alarms of the fault-free run.
@@ -30,7 +32,7 @@ EVERY_S = 10.0
 class SimVehicle:
     """One lockstep vehicle of this experiment (demo configuration, online 6-DOF AID from the
     vehicle's own parameters), ``fault`` (a key of :data:`FAULTS`, or None) injected into its
-    plant after ``minutes_before``; :meth:`next_estimate` advances it to its next estimate."""
+    plant after ``minutes_before``; :meth:`next_estimates` advances it to its next estimate."""
 
     def __init__(self, fault: str | None, minutes_before: float, seed: int) -> None:
         from uvd.estimation.aid import aid6_estimator
@@ -45,26 +47,32 @@ class SimVehicle:
         H0, v0 = start_pose(cfg)
         self.sim = Lockstep(vehicle, core_cfg, LockstepConfig(
             control_rate_hz=cfg.loop.rate_hz, seed=seed), H0=H0, v0=v0)
-        self.spec = core_cfg.estimators[0]
         self.rate = cfg.loop.rate_hz
         self.fault = fault
         self.k = 0
         self.k_fault = int(round(minutes_before * 60.0 * self.rate)) if fault else None
         self.every = int(round(EVERY_S * self.rate))
         self.t_fault_ns: int | None = None
+        self.B = vehicle.B
+        #: the ``"cycle"`` hub records since the last estimate (:meth:`next_estimates`)
+        self.cycles: list[dict] = []
 
     @property
     def next_k(self) -> int:
-        """The cycle (from 0) whose estimate :meth:`next_estimate` returns."""
+        """The cycle (from 0) whose estimate :meth:`next_estimates` returns."""
         return 0 if self.k == 0 else self.k - 1 + self.every
 
-    def next_estimate(self) -> dict:
-        """Run to the next estimate (every :data:`EVERY_S` simulated seconds, the first at
-        the start); its ``"estimate"`` hub record, stamped with the simulated clock."""
+    def next_estimates(self) -> list[dict]:
+        """Run to the next estimates (every :data:`EVERY_S` simulated seconds, the first at
+        the start); their ``"estimate"`` hub records as the daemon publishes them (AID's and
+        the two-step AMBC's own θ̂: :func:`uvd.telemetry.records.estimate_records`), stamped
+        with the simulated clock."""
         from sim_bridge.plant import PlantFault
-        from uvd.telemetry.records import estimate_record
+        from uvd.experiments._control_runner import lockstep_cycle_record
+        from uvd.telemetry.records import estimate_records
 
         sim = self.sim
+        self.cycles = []
         while True:
             if self.k == self.k_fault:
                 self.t_fault_ns = sim.t_ns
@@ -74,11 +82,11 @@ class SimVehicle:
                     sim.plant.thrusters.health[i] = h
                 else:
                     sim.plant.set_fault(PlantFault(**args))
-            sim.cycle()
+            out = sim.cycle()
+            self.cycles.append(lockstep_cycle_record(sim.t_ns, sim.dt_control, out))
             self.k += 1
             if (self.k - 1) % self.every == 0:
-                return estimate_record(sim.t_ns, self.spec.name,
-                                       self.spec.diagnostics(sim.state.est[0]))
+                return estimate_records(self.sim.core_cfg, sim.state, sim.t_ns)
 
     def outcome(self, detections: list[dict]) -> dict:
         """This vehicle's figures from the detections reported for it (first one counts)."""
@@ -104,21 +112,27 @@ class SimVehicle:
 def _run_one(fault: str | None, minutes_before: float, minutes_after: float, seed: int,
              progress) -> dict:
     from uvd.fdc.detector import VehicleDetector
-    from uvd.telemetry.zenoh_link import estimate_payload
+    from uvd.telemetry.zenoh_link import estimate_payload, state_payload
 
     v = SimVehicle(fault, minutes_before, seed)
-    det = VehicleDetector("jhu-rov")
+    det = VehicleDetector("jhu-rov", B=v.B)
     n = int(round((minutes_before + minutes_after) * 60.0 * v.rate))
     detections = []
     report = int(1800 * v.rate)
     while v.next_k < n:
-        rec = v.next_estimate()
-        payload = {"t_ns": rec["t_ns"], **estimate_payload(rec)}
-        detections += [d.as_dict() for d in det.update(payload)]
+        records = v.next_estimates()
+        for c in v.cycles:
+            detections += [d.as_dict() for d in det.update_state(
+                {"t_ns": c["t_ns"], **state_payload(c)})]
+        for rec in records:  # AID's (uvd-fdc does not judge a controller's θ̂)
+            if rec["source"] == "estimator":
+                payload = {"t_ns": rec["t_ns"], **estimate_payload(rec)}
+                detections += [d.as_dict() for d in det.update(payload)]
         if progress is not None and v.k // report != (v.k - v.every) // report:
             progress(f"  fdc {fault or 'fault-free'}: simulated {v.k / v.rate / 60:.0f} / "
                      f"{n / v.rate / 60:.0f} min")
-    return {**v.outcome(detections), "baseline": {"mu": det.mu, "sigma": det.sigma}}
+    return {**v.outcome(detections), "baseline": {"mu": det.mu, "sigma": det.sigma,
+                                                   "delta": det.delta}}
 
 
 def run(opts: ExperimentOptions) -> dict:
@@ -131,16 +145,18 @@ def run(opts: ExperimentOptions) -> dict:
         runs[name] = _run_one(name, 30.0, 30.0, opts.seed, progress)
     progress(f"fdc: {hours:g} h without a fault")
     runs["fault-free"] = _run_one(None, hours * 60.0, 0.0, opts.seed + 1, progress)
-    lines = ["fdc: CUSUM on AID's estimates (uvd-fdc's detector), jhu-rov tracking RefTraj1, "
+    lines = ["fdc: uvd-fdc's detector (CUSUM on AID's estimates, the wrench residual names the "
+             "fault), jhu-rov tracking RefTraj1, "
              "faults after 30 min, estimates every 10 s",
              f"{'fault':>14} {'injected':>26} {'detected':>9} {'kind':>13} {'right':>6} "
-             f"{'latency':>9} {'channel':>8}"]
+             f"{'latency':>9} {'channel':>12} {'change':>8}"]
     for name, (label, _, _) in FAULTS.items():
         r = runs[name]
         first = r["detections"][0] if r["detections"] else {}
         lat = "-" if r["latency_s"] is None else f"{r['latency_s']:.0f} s"
         lines.append(f"{name:>14} {label:>26} {str(r['detected']):>9} {str(r['kind']):>13} "
-                     f"{str(r['right_kind']):>6} {lat:>9} {first.get('channel', '-'):>8}")
+                     f"{str(r['right_kind']):>6} {lat:>9} {first.get('channel', '-'):>12} "
+                     f"{first.get('relative_change', float('nan')):>+8.1%}")
     ff = runs["fault-free"]
     lines.append(f"fault-free {hours:g} h: {ff['false_alarms']} false alarm(s)")
     lines.append(f"wall {time.perf_counter() - t0:.0f} s")
@@ -150,5 +166,6 @@ def run(opts: ExperimentOptions) -> dict:
                            "false_alarms_fault_free": ff["false_alarms"]}}
 
 
-EXPERIMENTS = [Experiment("fdc", "fault detection from AID's estimates: each fault of issue 19 "
-                                 "after 30 min, and hours without one (uvd-fdc's CUSUM)", run)]
+EXPERIMENTS = [Experiment("fdc", "fault detection from AID's estimates and the commanded vs "
+                                 "realised wrench: each fault of issue 19 after 30 min, and "
+                                 "hours without one (uvd-fdc's detector)", run)]

@@ -2,10 +2,11 @@
 ``uvd-fdc`` process, on the simulated clock.
 
 One vehicle per fault of :data:`uvd.experiments.fdc.FAULTS` (injected after 30 simulated
-minutes) and one without a fault, each a :class:`~uvd.experiments.fdc.SimVehicle` whose AID
-estimates (every 10 simulated seconds) go through the daemon's own Zenoh sink
-(:class:`~uvd.telemetry.zenoh_link.ZenohSink`, key ``sim<i>``, its own loopback port), stamped
-with the simulated clock — so an hour of a fleet passes in about a minute. A separate
+minutes) and one without a fault, each a :class:`~uvd.experiments.fdc.SimVehicle` whose
+estimates (AID's and AMBC's, every 10 simulated seconds) and state (``STATE_HZ``) go through
+the daemon's own Zenoh sink (:class:`~uvd.telemetry.zenoh_link.ZenohSink`, key ``sim<i>``, its
+own loopback port, its ``params`` queryable answering the thruster matrix), stamped with the
+simulated clock — so an hour of a fleet passes in about a minute. A separate
 ``uvd-fdc`` process connects to every vehicle and learns, detects and publishes on
 ``uvd/<vehicle>/fault/<kind>`` exactly as it would for real vehicles; this experiment listens
 to those fault samples (the documented key space, ``uvd.fault.v1``) and to the client's
@@ -22,6 +23,10 @@ import time
 from uvd.errors import ExperimentError
 from uvd.experiments import Experiment, ExperimentOptions
 from uvd.experiments.fdc import FAULTS
+
+#: state samples a simulated second (of the 10 Hz loop): enough for the residual's 10 s
+#: segments (the detector names the faults alike from 2 to 10 Hz), a fifth of the load
+STATE_HZ = 2.0
 
 
 def run(opts: ExperimentOptions) -> dict:
@@ -41,8 +46,9 @@ def run(opts: ExperimentOptions) -> dict:
     vehicles = [SimVehicle(f, nominal_min, opts.seed + i) for i, f in enumerate(faults)]
     names = [f"sim{i}" for i in range(len(vehicles))]
     endpoints = [f"tcp/127.0.0.1:{free_port()}" for _ in vehicles]
-    sinks = [ZenohSink(name, zenoh_config(listen=[ep]), state_hz=0.0, health_hz=0.0)
-             for name, ep in zip(names, endpoints, strict=True)]
+    sinks = [ZenohSink(name, zenoh_config(listen=[ep]), state_hz=STATE_HZ, health_hz=0.0,
+                       configuration={"thruster_matrix": v.B.tolist()})
+             for name, ep, v in zip(names, endpoints, vehicles, strict=True)]
     n_cycles = int(round(hours * 3600.0 * vehicles[0].rate))
     observer_ep = f"tcp/127.0.0.1:{free_port()}"
     conf = zenoh_config(listen=[observer_ep])
@@ -71,7 +77,8 @@ def run(opts: ExperimentOptions) -> dict:
                 while any(v.next_k < n_cycles for v in vehicles):
                     for v, s in zip(vehicles, sinks, strict=True):
                         if v.next_k < n_cycles:
-                            await s.write([v.next_estimate()])
+                            estimates = v.next_estimates()
+                            await s.write([*v.cycles, *estimates])
                     k = vehicles[0].k
                     if report and k // report != (k - vehicles[0].every) // report:
                         opts.progress(f"  fdc-fleet: simulated {k / vehicles[0].rate / 60:.0f}"
@@ -92,9 +99,11 @@ def run(opts: ExperimentOptions) -> dict:
     for name, v in zip(names, vehicles, strict=True):
         runs[name] = v.outcome(found.get(name, []))
     lost = sum(n - received.get(k, 0) for k, n in published.items())
+    n_state = sum(n for k, n in published.items() if k.endswith("/state"))
     wall = time.perf_counter() - t0
     lines = [f"fdc-fleet: {len(vehicles)} lockstep vehicles × {hours:g} h → Zenoh → one uvd-fdc"
-             f" process; estimates published {sum(published.values())}, lost {lost}",
+             f" process; samples published {sum(published.values())} (estimates "
+             f"{sum(published.values()) - n_state}, state {n_state}), lost {lost}",
              f"{'vehicle':>8} {'fault':>12} {'detected':>9} {'kind':>13} {'right':>6} "
              f"{'latency':>9} {'alarms':>7}"]
     for name, r in runs.items():

@@ -1,9 +1,12 @@
 """``uvd-fdc``: watch one vehicle or a fleet over Zenoh and report faults.
 
-Subscribes to ``uvd/*/estimate/**`` (the key space of docs/zenoh.md; JSON payloads of schema
-``uvd.zestimate.v1``), runs one :class:`~uvd.fdc.detector.VehicleDetector` per vehicle and
-estimator, prints each detection and publishes it on ``uvd/<vehicle>/fault/<kind>`` (JSON:
-kind, t_ns, channel, magnitude in σ, relative change, confidence). Vehicles are followed by
+Subscribes to ``uvd/*/estimate/**`` and ``uvd/*/state`` (the key space of docs/zenoh.md; JSON
+payloads of schemas ``uvd.zestimate.v1`` and ``uvd.state.v1``), asks each vehicle's
+``uvd/<vehicle>/params?what=configuration`` for its thruster matrix, runs one
+:class:`~uvd.fdc.detector.VehicleDetector` per vehicle and estimator (the state stream and the
+thruster matrix let it name a weak thruster), prints each detection and publishes it on
+``uvd/<vehicle>/fault/<kind>`` (``uvd.fault.v1``: kind, t_ns, channel, magnitude in σ,
+relative change, confidence, the residual's explanation). Vehicles are followed by
 their liveliness token ``uvd/<vehicle>/alive``: one that goes away is forgotten, and one that
 comes back starts a new baseline (it may have been repaired, or restarted with other
 parameters). Nothing of the daemon is imported: only the wire contract.
@@ -19,7 +22,7 @@ import sys
 import threading
 import time
 
-from uvd.fdc.detector import CusumSettings, VehicleDetector
+from uvd.fdc.detector import CusumSettings, VehicleDetector, thruster_matrix
 
 
 class LinkStats:
@@ -90,22 +93,25 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--vehicle", default="*", help="vehicle key or * (default: every vehicle)")
     p.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: never)")
     p.add_argument("--stats", metavar="FILE",
-                   help="also take uvd/<vehicle>/state and write, at the end, per key the "
-                        "samples received, those lost (gaps in seq) and the end-to-end "
-                        "latency (receipt − the payload's wall_time: same machine only)")
+                   help="write, at the end, per key the samples received, those lost (gaps "
+                        "in seq) and the end-to-end latency (receipt − the payload's "
+                        "wall_time: same machine only)")
     p.add_argument("--warmup-s", type=float, default=CusumSettings.warmup_s)
     p.add_argument("--baseline-s", type=float, default=CusumSettings.baseline_s)
-    p.add_argument("-k", type=float, default=CusumSettings.k, help="CUSUM allowance (σ)")
-    p.add_argument("--threshold", type=float, default=CusumSettings.h, help="CUSUM h (σ)")
+    p.add_argument("--threshold", type=float, default=CusumSettings.h,
+                   help="CUSUM h (a log-likelihood ratio: about one false alarm in e^h "
+                        "estimates)")
     args = p.parse_args(argv)
     import zenoh
 
-    settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s, k=args.k,
+    settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s,
                              h=args.threshold)
     conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
     link = LinkStats()
     detectors: dict[tuple[str, str], VehicleDetector] = {}
+    thrusters: dict[str, object] = {}  # vehicle → its thruster matrix B (None: not known)
+    asked: set[str] = set()  # vehicles whose params were asked for B (again when they return)
     session = zenoh.open(conf)
 
     def say(text: str) -> None:
@@ -122,18 +128,43 @@ def main(argv: list[str] | None = None) -> int:
             return
         if args.stats:
             link.take(str(sample.key_expr), payload)
+        if payload.get("source") == "controller":
+            return  # an adaptive controller's θ̂ moves by design (AMBC's step 1 → 2)
         with lock:
-            det = detectors.setdefault((vehicle, estimator), VehicleDetector(vehicle, settings))
+            det = detectors.get((vehicle, estimator))
+            if det is None:
+                det = detectors[vehicle, estimator] = VehicleDetector(
+                    vehicle, settings, B=thrusters.setdefault(vehicle, None))
             try:
                 found = det.update(payload)
             except (KeyError, TypeError, ValueError) as exc:
                 print(f"{sample.key_expr}: malformed estimate ({exc}); dropped", flush=True)
                 return
+        report(vehicle, found)
+
+    def report(vehicle: str, found) -> None:
         for d in found:
             say(f"FAULT {vehicle}: {d.kind} ({d.channel} {d.relative_change:+.1%}, "
                 f"{d.magnitude:+.1f} σ, confidence {d.confidence:.1f})")
             session.put(f"uvd/{vehicle}/fault/{d.kind}", json.dumps(d.as_dict()),
                         encoding=zenoh.Encoding("application/json;schema=uvd.fault.v1"))
+
+    def ask_thrusters(vehicle: str) -> None:
+        """The vehicle's thruster matrix from its ``params`` queryable (main thread)."""
+        for reply in session.get(f"uvd/{vehicle}/params?what=configuration", timeout=2.0):
+            try:
+                conf = json.loads(reply.ok.payload.to_bytes())["configuration"]
+                B = thruster_matrix(conf["thruster_matrix"])
+            except (AttributeError, KeyError, TypeError, ValueError) as exc:
+                say(f"uvd/{vehicle}/params: no usable thruster matrix ({exc!r}); faults are "
+                    "reported with the kind of the estimates' channel")
+                return
+            with lock:
+                thrusters[vehicle] = B
+                for (v, _), det in detectors.items():
+                    if v == vehicle:
+                        det.set_thrusters(B)
+            return
 
     def on_alive(sample) -> None:
         vehicle = str(sample.key_expr).split("/")[1]
@@ -143,6 +174,8 @@ def main(argv: list[str] | None = None) -> int:
         with lock:
             for key in [k for k in detectors if k[0] == vehicle]:
                 del detectors[key]
+            thrusters.pop(vehicle, None)
+            asked.discard(vehicle)
         say(f"{vehicle}: gone (its baseline is forgotten)")
 
     def _json_object(sample) -> dict | None:
@@ -158,17 +191,30 @@ def main(argv: list[str] | None = None) -> int:
 
     def on_state(sample) -> None:
         payload = _json_object(sample)
-        if payload is not None:
+        if payload is None:
+            return
+        if args.stats:
             link.take(str(sample.key_expr), payload)
+        vehicle = str(sample.key_expr).split("/")[1]
+        found = []
+        with lock:
+            for (v, _), det in detectors.items():
+                if v != vehicle:
+                    continue
+                try:
+                    found += det.update_state(payload)
+                except (KeyError, TypeError, ValueError) as exc:
+                    print(f"{sample.key_expr}: malformed state ({exc}); dropped", flush=True)
+                    return
+        report(vehicle, found)
 
     try:
         session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*", on_estimate)
-        if args.stats:
-            session.declare_subscriber(f"uvd/{args.vehicle}/state", on_state)
+        session.declare_subscriber(f"uvd/{args.vehicle}/state", on_state)
         session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive", on_alive,
                                                 history=True)
-        say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* (baseline after "
-            f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; k {settings.k:g}, "
+        say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* and state (baseline after "
+            f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; "
             f"h {settings.h:g})")
         # SIGTERM (systemd, a parent) and SIGINT (Ctrl-C; also when started in the background,
         # where a shell would have it ignored) end it cleanly: counts written
@@ -179,6 +225,11 @@ def main(argv: list[str] | None = None) -> int:
         while not stop.wait(min(0.2, max(0.0, deadline - time.monotonic()))):
             if time.monotonic() >= deadline:
                 break
+            with lock:
+                unknown = [v for v, B in thrusters.items() if B is None and v not in asked]
+            for vehicle in unknown:
+                asked.add(vehicle)
+                ask_thrusters(vehicle)
     finally:
         session.close()
         if args.stats:

@@ -1,60 +1,98 @@
-"""Change detection on a vehicle's parameter estimates (thesis §6.2): CUSUM on normalised
-deviations from a learned baseline. Pure: numbers in, detections out.
+"""Change detection for one vehicle (thesis §6.2): CUSUM on its parameter estimates, and the
+GLR of the commanded vs realised wrench (:mod:`uvd.fdc.residual`) to say which fault it is.
+Pure: numbers in, detections out.
 
 Why CUSUM. A fault changes the vehicle's parameters once and for good (a net caught on it, a
 flooded housing, a lost float), so the estimates' mean steps and stays; Page's cumulative sum
 is the optimal detector of such a step in the sense of Lorden (the shortest worst-case delay
-for a given mean time between false alarms) when the step size is known, and robust when it is
-not. For each channel i the estimate x is normalised, z = (x − μᵢ)/σᵢ, and two one-sided sums
-run, S⁺ = max(0, S⁺ + z − k), S⁻ = max(0, S⁻ − z − k); an alarm is S > h.
+for a given mean time between false alarms). For a step of δ in Gaussian noise of standard
+deviation σ the sum of log-likelihood ratios is
 
-The trade-off, in the units of z: k is half the smallest step worth detecting (k = 1: steps of
-2σ and more; smaller steps pass unnoticed, drifts slower than k per sample never accumulate);
-h sets the false-alarm rate against the delay. For independent Gaussian z, Siegmund's
-approximation gives a mean run length to a false alarm of about e^{2k(h+1.166)}/(2k²) samples
-(≈ 4·10¹¹ for k = 1, h = 12) and a delay of about (h + 1.166)/(δ − k) samples for a step of δσ
-(δ = 5: 3.3 samples). AID's estimates are not independent samples — they are filtered, so
-noise is correlated and the real rate of false alarms is higher than the formula says; the
-margins above (and σ floored at ``rel_floor`` of the baseline value, so a slow drift of a few
-per cent an hour, as the unexcited drift of `aid-hover`, never accumulates) are what
-`uvd experiment fdc` checks over a fault-free run of hours.
+    S⁺ = max(0, S⁺ + (δ/σ²)(d − δ/2)),   S⁻ = max(0, S⁻ + (δ/σ²)(−d − δ/2)),
 
-Baseline. μ and σ are learned from the first ``baseline_s`` of estimates after ``warmup_s``:
-the median, and the larger of the median absolute deviation (×1.4826, Gaussian-consistent)
-and the standard deviation (which sees the slow wander of a filtered estimate that the MAD of
-near neighbours misses: with the MAD alone, b₂ of a fault-free hour alarmed); σ is floored at
-``rel_floor``·|μ| and ``abs_floor``.
+d = x − μ the deviation from the baseline, and an alarm S > h comes at most once in about eʰ
+fault-free samples (Lorden; h = 15: one in 3·10⁶ estimates, a year of one every 10 s).
 
-Kinds (the channel group whose sum crosses h first): drags up → ``entanglement``; masses up →
-``flooding``, down → ``lost-part``; g or b → ``buoyancy``. A thruster that turns but pushes
-less (a fouled propeller) is not separable from these by the estimates alone: AID attributes
-the missing thrust to b and the masses of the DOFs it drives (measured, docs/zenoh.md).
+δ is the size of the fault to find, in the parameter's own units, not a multiple of the
+baseline's σ: a mass up 10 % (``mass_change``), a drag up 50 % (``drag_change``), a net
+buoyancy change of 20 N (``g_change_n``), the buoyancy torque b judged as one vector on the
+scale of ‖b‖ (``b_change``·‖b‖: b₁, b₂ of a centre-of-gravity offset are tiny beside b₃).
+The allowance δ/2 is what makes the detector sound against what the baseline cannot see:
+AID's estimates are filtered (lag-1 autocorrelation 0.99 for the masses and drags) and wander
+slowly over hours further than the spread of a 20-minute baseline (measured over six 4 h
+fault-free runs of `uvd experiment fdc`'s vehicle: masses up to 2.9 %, drags 6 %, g 6 N) — a
+σ-scaled allowance (k = 1σ of the baseline) alarmed on that wander once in each of the six,
+40–50 minutes in; a wander below δ/2 never accumulates, whatever its duration (there the
+largest deviation was 0.61 of δ/2). What it costs: a change of less than δ/2 is not found,
+and a drift that keeps going (mass₃, about 0.7 % an hour) reaches δ/2 after many hours — a
+long mission wants a fresh baseline (:meth:`VehicleDetector.reset`) now and then.
+
+σ. The estimates are autocorrelated, so n of them carry the information of n/τ independent
+ones, τ = 1 + 2 Σ ρₗ the integrated autocorrelation time (Sokal's window: the sum stops at the
+first lag L ≥ 5τ); the sums use σ² = τ·s², s² the baseline's variance — the long-run variance
+of the estimate, with which a sum of n deviations has its true spread. Baseline: median μ and
+that σ over the first ``baseline_s`` after ``warmup_s``.
+
+Which fault. The estimates alone cannot tell a weak thruster from a buoyancy change (AID puts
+the missing thrust into b and the masses). With the state stream (velocity, attitude and the
+per-thruster commands) and the thruster matrix B, the detector freezes the plant model of the
+baseline (the medians of θ̂) and tests, on 10 s segments of commanded vs realised wrench, which
+explanation — thruster i at efficiency ηᵢ, a buoyancy change, an entanglement, a flooding —
+fits (:func:`uvd.fdc.residual.explain`, GLR with an unknown change time over the last
+``window`` segments). Its score Λ − p ln n is compared with 2h (Λ is twice a log-likelihood
+ratio). A residual whose best explanation scores above it is a detection of that kind
+(``thruster``, naming the thruster, with ηᵢ − 1 as its relative change); a CUSUM alarm waits up
+to ``confirm_s`` for the residual to name the fault and otherwise keeps the kind of its channel
+group: drags up → ``entanglement``; masses up → ``flooding``, down → ``lost-part``; g or b →
+``buoyancy``. Without a state stream or B the CUSUM alone decides, as before.
+
+Why the residual names and does not detect: run alone as a sliding GLR it alarmed in each of
+six fault-free 4 h runs about 40 minutes in (a thruster 1 or 2 at η 0.81–1.03, scores 39–51):
+the model frozen from the first 25 minutes mispredicts the surge where the trajectory goes
+beyond what the baseline excited. Behind the CUSUM it decides only once the estimates moved.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["CusumSettings", "Detection", "VehicleDetector", "channels_of"]
+__all__ = ["CusumSettings", "Detection", "VehicleDetector", "autocorrelation_time",
+           "channels_of", "thruster_matrix"]
+
+
+#: state samples kept for the residual's baseline (20 minutes at 100 Hz and some, 200 B each;
+#: a faster stream keeps its first ones only)
+MAX_BASELINE_STATES = 150_000
 
 
 @dataclass(frozen=True)
 class CusumSettings:
+    """The detector's settings (module docstring): baseline window, the CUSUM's threshold h
+    and the fault sizes δ it is tuned for, the residual's segments, window and wait."""
+
     warmup_s: float = 300.0
     baseline_s: float = 1200.0
-    k: float = 1.0
-    h: float = 12.0
-    rel_floor: float = 0.02
-    abs_floor: float = 0.1
+    h: float = 15.0
+    mass_change: float = 0.10
+    drag_change: float = 0.5
+    g_change_n: float = 20.0
+    b_change: float = 0.05
+    segment_s: float = 10.0
+    window: int = 12
+    confirm_s: float = 30.0
 
 
 @dataclass(frozen=True)
 class Detection:
-    """One fault: ``kind``, when (the estimate's ``t_ns``), which channel crossed, its
-    normalised deviation and the sum at the crossing (``confidence``: S/h ≥ 1)."""
+    """One fault: ``kind``, when (the ``t_ns`` of the sample that completed it), which channel
+    (a parameter, or the residual's explanation: ``thruster4``, ``buoyancy`` …), its deviation
+    in σ, its relative change (for a thruster ηᵢ − 1) and ``confidence`` (the sum or score over
+    its threshold, ≥ 1). ``explanation``: the residual's fit when it named the fault (its
+    unknowns ``coef`` and the change time ``since_t_ns``), else None."""
 
     vehicle: str
     kind: str
@@ -63,6 +101,7 @@ class Detection:
     magnitude: float
     relative_change: float
     confidence: float
+    explanation: dict | None = None
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -94,34 +133,102 @@ def _kind(channel: str, direction: float) -> str:
     return "buoyancy"
 
 
-@dataclass
-class VehicleDetector:
-    """The detector of one vehicle; feed it every estimate payload with :meth:`update`."""
+def thruster_matrix(B) -> np.ndarray:
+    """B (``params``' ``configuration.thruster_matrix``) as a 6 × N array; anything but 6 rows
+    of N finite numbers is refused with a ValueError naming it."""
+    try:
+        B = np.asarray(B, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"thruster matrix: not numbers ({exc})") from exc
+    if B.ndim != 2 or B.shape[0] != 6 or B.shape[1] < 1 or not np.isfinite(B).all():
+        raise ValueError(f"thruster matrix: 6 × N finite numbers expected, got shape "
+                         f"{B.shape}")
+    return B
 
-    vehicle: str
-    settings: CusumSettings = field(default_factory=CusumSettings)
-    t0_ns: int | None = None
-    baseline: dict[str, list[float]] = field(default_factory=dict)
-    mu: dict[str, float] = field(default_factory=dict)
-    sigma: dict[str, float] = field(default_factory=dict)
-    s_pos: dict[str, float] = field(default_factory=dict)
-    s_neg: dict[str, float] = field(default_factory=dict)
-    alarmed: bool = False
+
+def _theta(x) -> np.ndarray | None:
+    """θ_UV of an estimate payload when it is 241 finite numbers, else None (not used)."""
+    try:
+        th = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return th if th.shape == (241,) and np.isfinite(th).all() else None
+
+
+def autocorrelation_time(x) -> float:
+    """τ = 1 + 2 Σₗ ρₗ of a series, the sum stopped at the first lag L ≥ 5τ (Sokal's window)
+    or at a quarter of its length; at least 1."""
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    n, var = x.size, float(x @ x)
+    if n < 8 or var <= 0.0:
+        return 1.0
+    tau = 1.0
+    for lag in range(1, n // 4):
+        tau += 2.0 * float(x[:-lag] @ x[lag:]) / var
+        if lag >= 5.0 * tau:
+            break
+    return max(1.0, tau)
+
+
+class VehicleDetector:
+    """The detector of one vehicle: feed it every estimate payload with :meth:`update` and,
+    when there is one, every state payload with :meth:`update_state` (after
+    :meth:`set_thrusters`); each returns the detections it completes (at most one: after it
+    the vehicle is faulty until :meth:`reset`)."""
+
+    def __init__(self, vehicle: str, settings: CusumSettings | None = None, B=None) -> None:
+        self.vehicle = vehicle
+        self.settings = settings or CusumSettings()
+        self.B = None
+        if B is not None:
+            self.set_thrusters(B)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the baseline and the sums (the vehicle came back, repaired or restarted)."""
+        self.t0_ns: int | None = None
+        self.baseline: dict[str, list[float]] = {}
+        self.thetas: list = []
+        self.mu: dict[str, float] = {}
+        self.delta: dict[str, float] = {}
+        self.sigma: dict[str, float] = {}
+        self.s_pos: dict[str, float] = {}
+        self.s_neg: dict[str, float] = {}
+        self.alarmed = False
+        self.pending: tuple[Detection, float] | None = None  # a CUSUM alarm awaiting a kind
+        self.states: list[np.ndarray] = []  # state samples until the model is frozen
+        self.model = None
+        self.integrator = None
+        self.bias = self.spread = None
+        self.segments: deque = deque(maxlen=self.settings.window)
+
+    def set_thrusters(self, B) -> None:
+        """The thruster matrix B (6 × N, u = B f) of the vehicle (its ``params``)."""
+        self.B = thruster_matrix(B)
 
     @property
     def ready(self) -> bool:
         return bool(self.mu)
 
+    @property
+    def explains(self) -> bool:
+        """The residual is running (the model is frozen and its baseline learned)."""
+        return self.spread is not None
+
+    def _age(self, t_ns: int) -> float:
+        return (t_ns - self.t0_ns) * 1e-9
+
+    # -- the estimates --
+
     def update(self, payload: dict) -> list[Detection]:
-        """Take one estimate payload; returns the detections it completes (at most one: after
-        an alarm the vehicle is faulty until :meth:`reset`)."""
+        """Take one estimate payload (``uvd.zestimate.v1``)."""
         t_ns = int(payload["t_ns"])
         if payload.get("frozen"):
             return []
         ch = {k: v for k, v in channels_of(payload).items() if math.isfinite(v)}
         if self.t0_ns is None:
             self.t0_ns = t_ns
-        age = (t_ns - self.t0_ns) * 1e-9
+        age = self._age(t_ns)
         st = self.settings
         if not self.mu:
             if age < st.warmup_s:
@@ -129,27 +236,45 @@ class VehicleDetector:
             if age < st.warmup_s + st.baseline_s:
                 for k, v in ch.items():
                     self.baseline.setdefault(k, []).append(v)
+                theta = _theta(payload.get("theta"))
+                if theta is not None:
+                    self.thetas.append(theta)
                 return []
             self._learn()
         if self.alarmed:
             return []
+        if self.pending is not None:
+            return self._settle(t_ns)
         best: tuple[float, str, float] | None = None
         for k, v in ch.items():
             if k not in self.mu:
                 continue
-            z = (v - self.mu[k]) / self.sigma[k]
-            sp = self.s_pos[k] = max(0.0, self.s_pos.get(k, 0.0) + z - st.k)
-            sn = self.s_neg[k] = max(0.0, self.s_neg.get(k, 0.0) - z - st.k)
+            d, delta, var = v - self.mu[k], self.delta[k], self.sigma[k] ** 2
+            sp = self.s_pos[k] = max(0.0, self.s_pos.get(k, 0.0) + delta / var * (d - delta / 2))
+            sn = self.s_neg[k] = max(0.0, self.s_neg.get(k, 0.0) + delta / var * (-d - delta / 2))
             s, sign = (sp, 1.0) if sp >= sn else (sn, -1.0)
             if s > st.h and (best is None or s > best[0]):
-                best = (s, k, sign * abs(z))
+                best = (s, k, sign)
         if best is None:
             return []
-        s, k, z = best
-        self.alarmed = True
+        s, k, sign = best
         rel = (ch[k] - self.mu[k]) / abs(self.mu[k]) if self.mu[k] else math.inf
-        return [Detection(self.vehicle, _kind(k, z), t_ns, k, float(z), float(rel),
-                          float(s / st.h))]
+        det = Detection(self.vehicle, _kind(k, sign), t_ns, k,
+                        float((ch[k] - self.mu[k]) / self.sigma[k]), float(rel),
+                        float(s / st.h))
+        if self.model is None:
+            self.alarmed = True
+            return [det]
+        self.pending = (det, t_ns + st.confirm_s * 1e9)
+        return []
+
+    def _settle(self, t_ns: int) -> list[Detection]:
+        """A pending CUSUM alarm whose wait for the residual is over keeps its own kind."""
+        det, deadline = self.pending
+        if t_ns < deadline:
+            return []
+        self.pending, self.alarmed = None, True
+        return [det]
 
     def _learn(self) -> None:
         st = self.settings
@@ -157,20 +282,80 @@ class VehicleDetector:
             if len(xs) < 5:
                 continue
             a = np.asarray(xs)
-            mu = float(np.median(a))
-            mad = 1.4826 * float(np.median(np.abs(a - mu)))
-            self.mu[k] = mu
-            # the estimates wander slowly (filtered, autocorrelated): the baseline's standard
-            # deviation sees that wander where the MAD of near neighbours does not
-            self.sigma[k] = max(mad, float(np.std(a)), st.rel_floor * abs(mu), st.abs_floor)
+            self.mu[k] = float(np.median(a))
+            self.sigma[k] = max(float(np.std(a)) * math.sqrt(autocorrelation_time(a)), 1e-12)
+        b_norm = math.sqrt(sum(self.mu.get(f"b{i}", 0.0) ** 2 for i in (1, 2, 3)))
+        for k, mu in self.mu.items():
+            self.delta[k] = (st.mass_change * abs(mu) if k.startswith("mass") else
+                             st.drag_change * abs(mu) if k.startswith("drag") else
+                             st.g_change_n if k == "g" else st.b_change * b_norm)
+        if self.B is not None and len(self.thetas) >= 5:
+            from uvd.fdc.residual import FrozenModel, SegmentIntegrator
+            self.model = FrozenModel.from_theta(np.median(self.thetas, axis=0), self.B)
+            self.integrator = SegmentIntegrator(self.model, st.segment_s)
+            end = self.t0_ns + int((st.warmup_s + st.baseline_s) * 1e9)
+            rows = [(x[0], x[1:7], x[7:16], x[16:]) for x in self.states]
+            segs = [g for g in (self.integrator.add(*x) for x in rows if x[0] * 1e9 < end)
+                    if g is not None]
+            self._learn_residual(segs)
+            for x in rows:
+                if x[0] * 1e9 >= end:
+                    self.integrator.add(*x)
         self.baseline.clear()
+        self.thetas.clear()
+        self.states.clear()
 
-    def reset(self) -> None:
-        """Forget the baseline and the sums (the vehicle came back, repaired or restarted)."""
-        self.t0_ns = None
-        self.baseline.clear()
-        self.mu.clear()
-        self.sigma.clear()
-        self.s_pos.clear()
-        self.s_neg.clear()
-        self.alarmed = False
+    def _learn_residual(self, segs) -> None:
+        """The healthy residual's mean rate and spread per DOF, from the baseline's segments."""
+        if len(segs) < 10:
+            self.model = None
+            return
+        rates = np.array([g.e / g.duration for g in segs])
+        self.bias = np.median(rates, axis=0)
+        dev = np.array([g.e - self.bias * g.duration for g in segs])
+        self.spread = np.maximum(dev.std(axis=0), 1e-9)
+
+    # -- the state stream --
+
+    def update_state(self, payload: dict) -> list[Detection]:
+        """Take one state payload (``uvd.state.v1``: ``t_ns``, ``v``, ``R``, ``thrust``)."""
+        if self.B is None or self.t0_ns is None or self.alarmed:
+            return []
+        from uvd.fdc.residual import state_sample
+        t = int(payload["t_ns"]) * 1e-9
+        sample = (t, *state_sample(payload["v"], payload["R"], payload["thrust"],
+                                   self.B.shape[1]))
+        if self.model is None:
+            if not self.mu and self._age(int(payload["t_ns"])) >= self.settings.warmup_s:
+                if len(self.states) < MAX_BASELINE_STATES:  # one row: t, v, R, f
+                    self.states.append(np.concatenate([[t], sample[1], sample[2].ravel(),
+                                                       sample[3]]))
+            return []
+        seg = self.integrator.add(*sample)
+        if seg is not None and self.spread is not None:
+            self.segments.append(seg)
+            if self.pending:
+                return self._explain(int(payload["t_ns"]))
+        return self._settle(int(payload["t_ns"])) if self.pending else []
+
+    def _explain(self, t_ns: int) -> list[Detection]:
+        from uvd.fdc.residual import explain
+        best = explain(list(self.segments), self.model, self.bias, self.spread)[0]
+        limit = 2.0 * self.settings.h
+        if best.score <= limit:
+            return self._settle(t_ns)
+        self.pending, self.alarmed = None, True
+        coef = best.coef
+        if best.kind.startswith("thruster"):
+            kind, rel = "thruster", -float(coef[0])
+        elif best.kind == "buoyancy":
+            mu_g = self.mu.get("g", self.model.g)
+            kind, rel = "buoyancy", float(coef[0]) / max(abs(mu_g), 1e-9)
+        else:
+            kind, rel = best.kind, float(coef[0])
+        if kind in ("entanglement", "flooding") and rel < 0:
+            kind = "drag-decrease" if kind == "entanglement" else "lost-part"
+        return [Detection(self.vehicle, kind, t_ns, best.kind,
+                          float(math.sqrt(max(best.glr, 0.0))), rel, float(best.score / limit),
+                          {"coef": [float(x) for x in coef],
+                           "since_t_ns": int(round(best.since * 1e9))})]

@@ -98,7 +98,9 @@ def zenoh_sink(config: Config, hub: TelemetryHub):
     configuration = {"vehicle": config.vehicle.name, "controller": c.controller,
                      "model": c.model, "kp": c.kp, "kd": c.kd, "eps": c.eps,
                      "reference": c.reference, "rate_hz": config.loop.rate_hz,
-                     "failsafe": as_dict(config.failsafe)}
+                     "failsafe": as_dict(config.failsafe),
+                     # u = B f: what a client needs to tell a weak thruster (uvd-fdc)
+                     "thruster_matrix": config.load_vehicle().B.tolist()}
     return ZenohSink(key, zenoh_config(mode=z.mode, listen=z.listen, connect=z.connect,
                                        multicast_scouting=z.multicast_scouting,
                                        config_file=file),

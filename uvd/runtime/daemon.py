@@ -44,7 +44,7 @@ from uvd.runtime.schema import reloadable_changes, with_values
 from uvd.runtime.sensors import make_sensors
 from uvd.runtime.supervisor import Supervisor
 from uvd.runtime.triggers import OPERATOR_AGE, plugin_triggers
-from uvd.telemetry.records import CycleRecord, estimate_record
+from uvd.telemetry.records import CycleRecord, estimate_records
 
 __all__ = ["Daemon", "LastCycle", "kept_params"]
 
@@ -162,6 +162,9 @@ class Daemon:
         self._estimate_period_ns = int(est.publish_every_s * 1e9)
         self._next_estimate_ns = 0
         self._frozen_logged: set[str] = set()
+        #: estimates to publish: online estimators, or a controller adapting its own θ̂
+        self._adapts = bool(self.core_cfg.estimators) or \
+            self.core_cfg.controller.diagnostics(self.state.ctrl).theta is not None
         if self.core_cfg.estimators:
             if est.save_path:
                 from uvd.telemetry.params_file import RECORD_TYPE, ParamsFileSink
@@ -280,7 +283,8 @@ class Daemon:
     # -- the estimates --
 
     def estimate_records(self, t_ns: int) -> list[dict[str, Any]]:
-        """One ``"estimate"`` telemetry record per online estimator (``[estimation]``).
+        """One ``"estimate"`` telemetry record per online estimator (``[estimation]``) and one
+        for an adaptive controller's own θ̂ (AMBC; :func:`uvd.telemetry.records.estimate_records`).
 
         Keys: ``estimator`` (name), ``theta`` (θ̂, for AID θ_UV ∈ R²⁴¹ in the order of (2.48),
         a copy), ``m_min_eig``/``m_max_eig`` (M̂'s extreme eigenvalues), ``frozen`` and
@@ -288,8 +292,7 @@ class Daemon:
         keeps the last positive-definite θ̂), ``steps``, ``skipped`` (non-finite inputs),
         ``resyncs`` (v̂ re-synchronised after a navigation gap), ``velocity_error`` (‖v̂ − v‖).
         """
-        return [estimate_record(t_ns, spec.name, spec.diagnostics(st))
-                for spec, st in zip(self.core_cfg.estimators, self.state.est, strict=True)]
+        return estimate_records(self.core_cfg, self.state, t_ns)
 
     def _publish_estimates(self, t_ns: int) -> None:
         for rec in self.estimate_records(t_ns):
@@ -367,7 +370,7 @@ class Daemon:
             v_ref=None if ref is None else np.asarray(ref.v),
             armed_at_ns=self.control.armed_at_ns).to_dict())
         # within half a period of the due time: a cycle a few µs early is not skipped
-        if self.core_cfg.estimators and t_ns >= self._next_estimate_ns - int(dt * 5e8):
+        if self._adapts and t_ns >= self._next_estimate_ns - int(dt * 5e8):
             self._next_estimate_ns = t_ns + self._estimate_period_ns
             self._publish_estimates(t_ns)
 

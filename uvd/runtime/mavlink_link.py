@@ -253,7 +253,7 @@ class MavlinkLink:
             kind = r.get("type")
             if kind == "cycle":
                 self._cycle = r
-            elif kind == "estimate":
+            elif kind == "estimate" and r.get("source", "estimator") == "estimator":
                 self._estimate = r
             elif kind == "failsafe":
                 sev = "warning" if r["kind"] in ("fired", "action") else "info"

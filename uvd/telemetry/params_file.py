@@ -91,7 +91,8 @@ class ParamsFileSink:
 
     async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
         for r in records:
-            if r.get("type") == RECORD_TYPE and r.get("theta") is not None:
+            if r.get("type") == RECORD_TYPE and r.get("theta") is not None \
+                    and r.get("source", "estimator") == "estimator":
                 self._latest = r
         if self._clock() - self._last_write >= self.every_s:
             await self._write_latest()

@@ -173,15 +173,36 @@ class CycleRecord:
         return np.array([*self.p_ref, *euler_of(self.R_ref)])
 
 
-def estimate_record(t_ns: int, estimator: str, g) -> dict[str, Any]:
-    """The ``"estimate"`` record of an online estimator from its spec's diagnostics
+def estimate_record(t_ns: int, estimator: str, g, age_s: float | None = None,
+                    source: str = "estimator") -> dict[str, Any]:
+    """The ``"estimate"`` record of an online estimator (``source`` ``"estimator"``) or of an
+    adaptive controller's own θ̂ (``"controller"``) from its spec's diagnostics
     (:class:`uvd.control.types.Diagnostics`): θ̂ (a copy), M̂'s extreme eigenvalues, frozen
-    and why, the counters and ‖v̂ − v‖."""
-    return {"type": "estimate", "t_ns": int(t_ns), "estimator": estimator,
+    and why, the counters, ‖v̂ − v‖ and ``age_s``, the time since θ̂ was last stepped (None:
+    not known)."""
+    return {"type": "estimate", "t_ns": int(t_ns), "estimator": estimator, "source": source,
             "theta": None if g.theta is None else np.array(g.theta, dtype=float),
             "m_min_eig": g.m_min_eig, "m_max_eig": g.m_max_eig, "frozen": bool(g.frozen),
             "freeze_reason": g.freeze_reason, "steps": g.steps, "skipped": g.skipped,
-            "resyncs": g.resyncs, "velocity_error": g.velocity_error}
+            "resyncs": g.resyncs, "velocity_error": g.velocity_error, "age_s": age_s}
+
+
+def estimate_records(core_cfg, state, t_ns: int) -> list[dict[str, Any]]:
+    """The ``"estimate"`` records of one cycle's state (:class:`uvd.core.CoreState`): one per
+    online estimator (``[estimation]``), aged from when the estimators last stepped
+    (``state.est_t_ns``: they skip cycles without valid navigation), and one for the
+    controller when it adapts a θ̂ of its own (AMBC; named as the controller, e.g.
+    ``two-step-ambc``), aged from the last cycle that ran it in control
+    (``state.ctrl_t_ns``)."""
+    def age(since: int | None) -> float | None:
+        return None if since is None else max(0.0, (t_ns - since) * 1e-9)
+    out = [estimate_record(t_ns, spec.name, spec.diagnostics(st), age(state.est_t_ns))
+           for spec, st in zip(core_cfg.estimators, state.est, strict=True)]
+    c = core_cfg.controller
+    g = c.diagnostics(state.ctrl)
+    if g.theta is not None:
+        out.append(estimate_record(t_ns, c.name, g, age(state.ctrl_t_ns), "controller"))
+    return out
 
 
 def euler_of(R: Any) -> tuple[float, float, float]:

@@ -42,7 +42,8 @@ from drivers.samples import R_to_euler
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
 
-__all__ = ["ZenohSink", "zenoh_config", "estimate_payload", "ENCODINGS", "QUERY_WHAT"]
+__all__ = ["ZenohSink", "zenoh_config", "estimate_payload", "state_payload", "ENCODINGS",
+           "QUERY_WHAT"]
 
 #: key (relative to uvd/<vehicle>) → the schema named in its samples' encoding
 ENCODINGS = {"state": "uvd.state.v1", "estimate": "uvd.zestimate.v1",
@@ -204,7 +205,7 @@ class ZenohSink:
                     self._next_state = t_ns + self.state_period_ns - self.state_period_ns // 10
                     key = f"{self.prefix}/state"
                     items.append((key, ENCODINGS["state"], self._stamp(key, t_ns,
-                                                                       _state(r))))
+                                                                       state_payload(r))))
                 if self.health_period_ns and t_ns >= self._next_health:
                     self._next_health = t_ns + self.health_period_ns \
                         - self.health_period_ns // 10
@@ -235,7 +236,9 @@ class ZenohSink:
 
 # ----------------------------------------------------------------------------- payloads
 
-def _state(r: Mapping[str, Any]) -> dict[str, Any]:
+def state_payload(r: Mapping[str, Any]) -> dict[str, Any]:
+    """The body of a ``uvd/<vehicle>/state`` sample (``uvd.state.v1``, without ``seq``,
+    ``vehicle`` and the stamps) of a ``"cycle"`` hub record."""
     R = np.asarray(r["R"], dtype=float)
     out = {"state": str(r["state"]), "mode": str(r["mode"]), "action": str(r["action"]),
            "nav_valid": bool(r["nav_valid"]), "p": r["p"], "R": R, "rpy": _rpy(R), "v": r["v"],
@@ -280,7 +283,8 @@ def estimate_payload(r: Mapping[str, Any]) -> dict[str, Any]:
                         "m_max_eig": r.get("m_max_eig"), "frozen": bool(r.get("frozen")),
                         "freeze_reason": str(r.get("freeze_reason") or ""),
                         "steps": r.get("steps"), "velocity_error": r.get("velocity_error"),
-                        "age_s": 0.0})
+                        "age_s": r.get("age_s"),
+                        "source": str(r.get("source") or "estimator")})
 
 
 def _event(kind: str, r: Mapping[str, Any]) -> dict[str, Any]:
