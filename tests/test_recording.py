@@ -249,9 +249,10 @@ def test_report_writes_valid_pngs_the_html_references(recorded, tmp_path):
     path, _, _, _ = recorded
     out = tmp_path / "report"
     assert main(["report", str(path), "--out", str(out), "--quiet"]) == 0
-    # no estimates.png: the run identified nothing ([estimation] aid is off)
+    # estimates.png: AID is off, but the adaptive controller's θ̂ of the "auto" stretch is
+    # recorded (estimate/<controller>, issue 19)
     _check_report(out, {"tracking.png", "mne.png", "thrust.png", "failsafe.png",
-                        "lateness.png"})
+                        "lateness.png", "estimates.png"})
     assert main(["report", str(tmp_path / "none.mcap"), "--out", str(out), "--quiet"]) == 2
 
 
