@@ -7,7 +7,8 @@ of garbage (the fuzz of issue 21: 10 000 datagrams) then makes the control loop 
 lock at its wake-ups — measured with ``uvd bench loop --mavlink-fuzz 10000``: lateness p99
 +27 % to +2183 % under normal scheduling with the parsing in a thread of the daemon. Here the
 daemon's link thread only reads what this process forwards, so garbage costs the daemon
-nothing but the kernel's share of a CPU.
+nothing but the kernel's share of a CPU; and at ``SCHED_IDLE`` this process never keeps the
+loop from a CPU.
 
 Wire between the two (an ``AF_UNIX`` ``SOCK_SEQPACKET`` pair, one message each, never
 blocking: what the daemon does not take in time is dropped and counted):
@@ -19,10 +20,9 @@ blocking: what the daemon does not take in time is dropped and counted):
   0.25 s.
 
 The daemon creates and binds the UDP socket (so the port is known at once and telemetry goes
-out from it) and hands it over by file descriptor. This process resets the real-time policy
-it may have inherited (``SCHED_OTHER``; a flood must never compete with the loop at its
-priority), and ends when the daemon shuts its end of the pair (after a last count report) or
-dies.
+out from it) and hands it over by file descriptor. This process runs at ``SCHED_IDLE``
+(:func:`_leave_realtime`: a flood must never compete with the loop for a CPU), and ends
+when the daemon shuts its end of the pair (after a last count report) or dies.
 """
 
 from __future__ import annotations
@@ -147,10 +147,14 @@ def stop_receiver(proc: subprocess.Popen, pair: socket.socket, counters: collect
 # ----------------------------------------------------------------------------- the process
 
 def _leave_realtime() -> None:
-    """Normal scheduling on every CPU this process may use (it may have inherited the
-    loop's SCHED_FIFO and CPU set)."""
+    """``SCHED_IDLE`` on every CPU this process may use (it may have inherited the loop's
+    SCHED_FIFO and CPU set): the kernel preempts an idle-policy task at once for any normal
+    one (the loop under normal scheduling too), and it runs whenever a CPU has time to
+    spare. On a machine saturated by other work it gets little (the kernel's weight 3
+    against 1024): datagrams then wait in the socket's buffer, the newest dropped by the
+    kernel when it is full — the ground station's link slows before the loop does."""
     with contextlib.suppress(OSError, AttributeError):
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     with contextlib.suppress(OSError, AttributeError, ValueError):
         os.sched_setaffinity(0, range(os.cpu_count() or 1))
 
