@@ -8,7 +8,8 @@
 * the **instruments** (:class:`~sim_bridge.instruments.pty_emulators.InstrumentEmulators`):
   PHINS (STDBIN or ASCII, per ``[sensors.ins] format``), PD0 DVL and Digiquartz on
   pseudo-terminals linked at the configured ``[sensors.*] port`` paths, with Table A.1 rates
-  and noise from a seeded generator;
+  and noise from a seeded generator (each frame's keyed by its index since the release from
+  the cradle, as the demo's lockstep run draws it);
 * the **CAN nodes** (:class:`~sim_bridge.amplifiers.emulators.CanEmulators`): the six CiA 402
   amplifiers of ``[can.amplifiers]`` and, with ``[can.depth] enabled``, the CiA 404 pressure
   transmitter, on the configured bus (``udp_multicast`` on an interface-local ``ff11::`` group:
@@ -182,8 +183,12 @@ class SimBridge:
         self.timed_results: list[dict] = []
         self._links = self._links_from(config)
         ins_protocol = "ascii" if config.sensors.ins.format == "phins-ascii" else "stdbin"
+        # each frame's noise keyed by (seed, instrument, frame since release) as the demo's
+        # lockstep run draws it (sim_bridge.instruments.models, "Noise streams")
         self.instruments = FaultyInstruments(instrument_config(config.simulation.instruments),
-                                             self.rng, self.faults)
+                                             self.rng, self.faults, frame_seed=seed)
+        if hold:
+            self.instruments.set_epoch(None)
         self.instruments.dr_north, self.instruments.dr_east = self.H0[0, 3], self.H0[1, 3]
         self.emulators = InstrumentEmulators(
             self._truth_now, self._links, self.instruments,
@@ -299,6 +304,7 @@ class SimBridge:
                 if np.any(cmd != 0.0):
                     self.held = False
                     self.released_at_ns = t_ns
+                    self.emulators.set_epoch(t_ns)
                     log.info("released from the cradle by the first thrust command")
             if self.held:
                 plant.thrusters.step(cmd, plant.dt)
@@ -335,6 +341,7 @@ class SimBridge:
                 self.hold = hold
             self.held = self.hold
             self.released_at_ns = None
+            self.emulators.set_epoch(None if self.held else self.clock())
 
     async def _plant_loop(self) -> None:
         period = int(round(1e9 * self.plant.dt))
@@ -402,6 +409,7 @@ class SimBridge:
                 return {"ok": True, "t_ns": now, "write_end_ns": list(port.write_times)}
             if op == "release":
                 self.held = False
+                self.emulators.set_epoch(now)
                 return {"ok": True, "t_ns": now}
             if op == "place":
                 self.place(hold=kw.get("hold"))

@@ -257,6 +257,12 @@ class InstrumentEmulators:
                 delay = 0.0
             await asyncio.sleep(max(0.0, delay))
 
+    def set_epoch(self, t_ns: int | None) -> None:
+        """The instruments' noise epoch at monotonic ``t_ns`` (None: before it), on the
+        emulator's own clock (:meth:`~sim_bridge.instruments.models.Instruments.set_epoch`)."""
+        t0 = self._t0 if self._t0 is not None else t_ns
+        self.instruments.set_epoch(None if t_ns is None else t_ns - t0)
+
     # ---- one emulator step (pure apart from the writes) --------------------------------------
     def step(self, t_ns: int) -> None:
         """Sample the model at ``t_ns`` (since start) and write the frames that fell due."""
