@@ -100,47 +100,48 @@ def test_simulation_instruments_section_is_instrument_config(tmp_path):
 
 
 def _noise_per_frame(ins: Instruments, t_ns, epoch_ns=None, other_draws=None):
-    """Sample a still vehicle at the times ``t_ns``; {(instrument, frame since the epoch):
-    noise} (frames by due index, counted from the epoch when one is set)."""
-    cfg = ins.config
+    """Sample a still vehicle at the times ``t_ns`` (the epoch set at ``epoch_ns``, on the
+    first sample after it); {(instrument, frame since the epoch, its due time since the
+    epoch in ms): noise}."""
     H = make_H(euler_to_R(0.0, 0.0, 0.5), np.array([0.0, 0.0, 2.0]))
     out = {}
+    since = 0 if epoch_ns is None else epoch_ns
     for t in t_ns:
-        if epoch_ns is not None and t >= epoch_ns and ins._epoch_k is None:
+        if epoch_ns is not None and t >= epoch_ns and ins._before_epoch:
             ins.set_epoch(epoch_ns)
         a, b, c = ins.sample(t, H, np.zeros(6))
         if other_draws is not None:
             other_draws.normal(size=3)  # a CAN pressure sensor on the same generator
-        since = 0 if epoch_ns is None else epoch_ns
-        # frame 0: the frame due at or last before the epoch (the sample's time is its due
-        # time on a grid, at most a tick after it on the bridge's)
-        for name, s, rate, val in (("ins", a, cfg.ins_rate_hz, lambda s: s.heading - 0.5),
-                                   ("dvl", b, cfg.dvl_rate_hz, lambda s: s.velocity_body[1]),
-                                   ("depth", c, cfg.depth_rate_hz, lambda s: s.depth_m - 2.0)):
-            if s is not None and s.t_ns >= since:
-                f = math.floor(s.t_ns * rate / 1e9 + 1e-6) - math.floor(since * rate / 1e9)
-                out[(name, f)] = val(s)
+        for name, s, p, val in (("ins", a, ins._ins, lambda s: s.heading - 0.5),
+                                ("dvl", b, ins._dvl, lambda s: s.velocity_body[1]),
+                                ("depth", c, ins._depth, lambda s: s.depth_m - 2.0)):
+            if s is not None and not ins._before_epoch:
+                f = p.k - 1
+                due_ms = round((p.offset_ns + f * 1e9 / p.rate_hz - since) / 1e6)
+                out[(name, f, due_ms)] = val(s)
     return out
 
 
-def test_frame_keyed_noise_is_the_same_on_frame_f_however_the_runs_differ():
+def test_frame_keyed_noise_and_times_are_the_same_on_frame_f_however_the_runs_differ():
     """The demo's comparison (sim_bridge.instruments.models, "Noise streams"): lockstep samples
-    on a 10 ms grid from its epoch t = 0; sim-bridge every ~1 ms, held 2.3 s in its cradle
-    first (before the epoch), with other draws on its generator, and a 70 ms stall that
-    skips frames. Every frame after the epoch that both runs made carries the same noise."""
+    on a 10 ms grid from its epoch t = 0; sim-bridge also on a 10 ms grid, but held 2.31 s in
+    its cradle first (before the epoch), with other draws on its generator, and a 70 ms stall
+    that skips frames. Every frame after the epoch that both runs made falls due at the same
+    time after the epoch and carries the same noise."""
     cfg = InstrumentConfig(ins_rate_hz=50.0, dvl_rate_hz=8.0, depth_rate_hz=10.0)
     lock = _noise_per_frame(Instruments(cfg, np.random.default_rng(1), frame_seed=4),
                             range(0, 3_000_000_000, 10_000_000))
-    epoch = 2_300_400_000
-    bridge_t = [t for t in range(0, 5_300_000_000, 1_003_000)
+    epoch = 2_310_000_000
+    bridge_t = [t for t in range(0, 5_320_000_000, 10_000_000)
                 if not 3_000_000_000 < t < 3_070_000_000]
     bridge = Instruments(cfg, np.random.default_rng(2), frame_seed=4)
     bridge.set_epoch(None)
     hil = _noise_per_frame(bridge, bridge_t, epoch, other_draws=bridge.rng)
     common = [k for k in lock if k in hil and k[1] >= 1]
-    assert len(common) > 0.9 * len(lock)  # all but the stall's and the first frames
-    assert {n for n, _ in common} == {"ins", "dvl", "depth"}
+    assert len(common) > 0.95 * len(lock)  # all but the stall's and frame 0
+    assert {n for n, _, _ in common} == {"ins", "dvl", "depth"}
     assert all(lock[k] == hil[k] for k in common)
+    assert ("dvl", 1, 125) in common and ("depth", 3, 300) in common
     other = _noise_per_frame(Instruments(cfg, np.random.default_rng(1), frame_seed=5),
                              range(0, 3_000_000_000, 10_000_000))
     assert not any(other[k] == lock[k] for k in common)  # another seed, another draw

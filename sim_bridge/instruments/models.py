@@ -22,15 +22,16 @@ covers the tank's surface disturbance; set ``depth_std_m`` to change it.
 **Noise streams.** By default every draw comes from the one generator passed in, in the order
 the samples fall due (the thesis experiments' streams, docs/RESULTS.md). With ``frame_seed``
 the noise of each frame is keyed instead: frame f of an instrument draws from its own
-generator seeded ``(frame_seed, instrument, 0, f)``, f counted from the *epoch*
-(:meth:`Instruments.set_epoch`: 0 is the frame due at or last before it). Two runs with the same
-``frame_seed`` then carry the same noise on their f-th frame whatever else draws, whenever
-they started and whichever frames a late caller skipped — so the demo's hardware-in-the-loop
-run (sim-bridge, epoch = the vehicle leaving its cradle on the first thrust command) and its
-lockstep simulation (epoch = the first cycle) see one noise realisation, and their comparison
-measures the daemon's timing rather than the luck of two draws. Frames before the epoch (the
-vehicle held while the daemon boots; epoch ``None``) draw from ``(frame_seed, instrument, 1,
-k)``, k counted from the start.
+generator seeded ``(frame_seed, instrument, 0, f)``, f counted from the *epoch* (t = 0, or
+:meth:`Instruments.set_epoch`, which also starts the instruments' schedules again there). Two
+runs with the same ``frame_seed`` then carry the same noise on their f-th frame, at the same
+time after the epoch, whatever else draws and whichever frames a late caller skipped — so
+the demo's hardware-in-the-loop run (sim-bridge, epoch = the start of the plant step that
+carries the first thrust command) and its lockstep simulation (epoch = the first cycle) see
+one realisation of noise and sample times, and their comparison measures the daemon's timing
+rather than the luck of two draws. Frames before the epoch (the vehicle held while the daemon
+boots; ``set_epoch(None)``) draw from ``(frame_seed, instrument, 1, k)``, k counted from the
+start.
 
 XY: the thesis's DVLNAV dead-reckons DVL velocity; here the simulated DVLNAV integrates the
 *noisy* DVL velocity rotated by the *noisy* INS attitude, plus a scale error drawn once per run
@@ -133,7 +134,7 @@ class Instruments:
         self._ins = _Periodic(config.ins_rate_hz, round(config.ins_offset_s * 1e9))
         self._dvl = _Periodic(config.dvl_rate_hz)
         self._depth = _Periodic(config.depth_rate_hz)
-        self._epoch_k: dict[str, int] | None = {"ins": 0, "dvl": 0, "depth": 0}
+        self._before_epoch = False  # the construction is the epoch (t = 0)
         self._draw = rng  # the generator of the frame being made
         self.dr_north = 0.0
         self.dr_east = 0.0
@@ -146,26 +147,29 @@ class Instruments:
         self._last_ins: InsSample | None = None
 
     def set_epoch(self, t_ns: int | None) -> None:
-        """Count frames from ``t_ns`` (the frame due at or last before it is frame 0), or,
-        with None, draw from the before-the-epoch streams until the next call. Only
-        frame-keyed noise has an epoch; the one-stream noise ignores it."""
+        """Start every instrument's schedule again at ``t_ns``: frame f of each falls due at
+        t_ns + f/rate (f ≥ 1; frame 0 is the one made at or before the epoch), as in a
+        lockstep run from t = 0, and with frame-keyed noise draws from the key of f. With None
+        the schedules go on and the noise draws from the before-the-epoch keys until the
+        next call (sim-bridge: the vehicle held in its cradle)."""
         if t_ns is None:
-            self._epoch_k = None
+            self._before_epoch = True
             return
-        self._epoch_k = {name: math.floor((t_ns - p.offset_ns) * p.rate_hz / 1e9)
-                         for name, p in (("ins", self._ins), ("dvl", self._dvl),
-                                         ("depth", self._depth))}
+        c = self.config
+        for name, rate, offset in (("_ins", c.ins_rate_hz, round(c.ins_offset_s * 1e9)),
+                                   ("_dvl", c.dvl_rate_hz, 0), ("_depth", c.depth_rate_hz, 0)):
+            p = _Periodic(rate, t_ns + offset)
+            p.k, p.next_ns = 1, p.offset_ns + round(1e9 / rate)
+            setattr(self, name, p)
+        self._before_epoch = False
 
     def _frame(self, name: str, periodic: _Periodic) -> None:
         """Point the noise at the frame that just fell due (the one stream, or its own)."""
         if self.frame_seed is None:
             return
         k = periodic.k - 1  # the index of the due time that fired (_Periodic.due)
-        if self._epoch_k is None:
-            key = (self.frame_seed, _NOISE_KEY[name], 1, k)
-        else:
-            key = (self.frame_seed, _NOISE_KEY[name], 0, max(0, k - self._epoch_k[name]))
-        self._draw = np.random.default_rng(key)
+        self._draw = np.random.default_rng(
+            (self.frame_seed, _NOISE_KEY[name], int(self._before_epoch), k))
 
     def _n(self, std: float, size: int | None = None):
         if not self.config.noise or std == 0.0:
