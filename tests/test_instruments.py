@@ -84,9 +84,10 @@ def test_simulation_instruments_section_is_instrument_config(tmp_path):
     root = Path(__file__).resolve().parents[1]
     assert instrument_config(SimInstrumentsSection()) == InstrumentConfig()
     declared = {f.name for f in dataclasses.fields(SimInstrumentsSection)}
-    assert declared == {f.name for f in dataclasses.fields(InstrumentConfig)} - {"ins_offset_s"}
+    assert declared == {f.name for f in dataclasses.fields(InstrumentConfig)} - {"ins_offset_s",
+                                                                           "dvl_resolution_m_s"}
     assert lockstep_config(load_config(root / "config" / "sim.toml")).instruments == \
-        InstrumentConfig()
+        InstrumentConfig(dvl_resolution_m_s=0.001)  # what PD0 carries, as sim-bridge sends
     fast = lockstep_config(load_config(root / "config" / "sim-bluerov2.toml"), seed=3)
     assert (fast.instruments.ins_rate_hz, fast.instruments.dvl_rate_hz,
             fast.instruments.depth_rate_hz, fast.seed, fast.control_rate_hz) == \
@@ -137,8 +138,9 @@ def test_frame_keyed_noise_and_times_are_the_same_on_frame_f_however_the_runs_di
     bridge = Instruments(cfg, np.random.default_rng(2), frame_seed=4)
     bridge.set_epoch(None)
     hil = _noise_per_frame(bridge, bridge_t, epoch, other_draws=bridge.rng)
-    common = [k for k in lock if k in hil and k[1] >= 1]
-    assert len(common) > 0.95 * len(lock)  # all but the stall's and frame 0
+    common = [k for k in lock if k in hil]
+    assert len(common) > 0.95 * len(lock)  # all but the stall's and the INS's frame 0
+    assert ("dvl", 0, 0) in common and ("ins", 0, 0) not in hil
     assert {n for n, _, _ in common} == {"ins", "dvl", "depth"}
     assert all(lock[k] == hil[k] for k in common)
     assert ("dvl", 1, 125) in common and ("depth", 3, 300) in common
@@ -170,3 +172,17 @@ def test_one_stream_noise_is_drawn_as_before():
     assert np.array_equal(a.omega_body, omega) and np.array_equal(b.velocity_body, dvl)
     assert c.depth_m == 2.0 + depth
     assert a2.heading == (heading2 + math.pi) % (2 * math.pi) - math.pi
+
+
+def test_dvl_resolution_rounds_as_the_pd0_wire_does():
+    from drivers import pd0
+    cfg = InstrumentConfig(dvl_resolution_m_s=pd0.VELOCITY_RESOLUTION_M_S)
+    ins = Instruments(cfg, np.random.default_rng(0))
+    H = make_H(np.eye(3), np.array([0.0, 0.0, 2.0]))
+    v = np.array([0.1234567, -0.0456789, 0.0071234, 0.0, 0.0, 0.0])
+    _, dvl, _ = ins.sample(0, H, v)
+    ens = pd0.from_dvl_velocity(dvl.velocity_body + 1e-9, 2.0)  # what the bridge's wire carries
+    wire = pd0.to_dvl_sample(pd0.decode_ensemble(pd0.encode_ensemble(ens)), 0).velocity_body
+    assert np.allclose(dvl.velocity_body * 1000, np.round(dvl.velocity_body * 1000), atol=1e-9)
+    assert np.allclose(wire, dvl.velocity_body, atol=1e-12)
+    assert not np.allclose(dvl.velocity_body, v[:3], atol=1e-4)  # the noise is there

@@ -67,6 +67,9 @@ class InstrumentConfig:
     depth_rate_hz: float = 7.0
     depth_std_m: float = 0.00075
     xy_scale_error: float = 0.005
+    #: resolution of the DVL's velocity output (0: none): PD0 carries 1 mm/s, to which
+    #: sim-bridge's wire rounds; the demo's lockstep run models it (lockstep_config)
+    dvl_resolution_m_s: float = 0.0
     #: the INS samples at k/ins_rate_hz + ins_offset_s: its phase against a control loop
     #: ticking at k/rate (0: on the tick, as lockstep runs; a real INS has its own clock)
     ins_offset_s: float = 0.0
@@ -148,18 +151,22 @@ class Instruments:
 
     def set_epoch(self, t_ns: int | None) -> None:
         """Start every instrument's schedule again at ``t_ns``: frame f of each falls due at
-        t_ns + f/rate (f ≥ 1; frame 0 is the one made at or before the epoch), as in a
-        lockstep run from t = 0, and with frame-keyed noise draws from the key of f. With None
-        the schedules go on and the noise draws from the before-the-epoch keys until the
-        next call (sim-bridge: the vehicle held in its cradle)."""
+        t_ns + f/rate, as in a lockstep run from t = 0, and with frame-keyed noise draws from
+        the key of f. The epoch is already past when sim-bridge sets it (one plant step): the
+        DVL's and depth's frame 0 are made at the next call, late — the DVL's velocity is
+        integrated into the position, and lockstep's first cycles dead-reckon with frame 0 —
+        while the INS's frame 0 is the one made at or before the epoch (a second one would
+        run one more sensor-synchronous cycle). With None the schedules go on and the noise
+        draws from the before-the-epoch keys until the next call (the vehicle held)."""
         if t_ns is None:
             self._before_epoch = True
             return
         c = self.config
-        for name, rate, offset in (("_ins", c.ins_rate_hz, round(c.ins_offset_s * 1e9)),
-                                   ("_dvl", c.dvl_rate_hz, 0), ("_depth", c.depth_rate_hz, 0)):
+        for name, rate, offset, first in (
+                ("_ins", c.ins_rate_hz, round(c.ins_offset_s * 1e9), 1),
+                ("_dvl", c.dvl_rate_hz, 0, 0), ("_depth", c.depth_rate_hz, 0, 0)):
             p = _Periodic(rate, t_ns + offset)
-            p.k, p.next_ns = 1, p.offset_ns + round(1e9 / rate)
+            p.k, p.next_ns = first, p.offset_ns + round(first * 1e9 / rate)
             setattr(self, name, p)
         self._before_epoch = False
 
@@ -194,8 +201,11 @@ class Instruments:
         if self._dvl.due(t_ns):
             self._frame("dvl", self._dvl)
             altitude = c.dvl_altitude_m - float(H[2, 3])
-            dvl = DvlSample(t_ns=t_ns, velocity_body=v[:3] + self._n(c.dvl_std_m_s, 3),
-                            bottom_lock=True, altitude_m=altitude)
+            vel = v[:3] + self._n(c.dvl_std_m_s, 3)
+            if c.dvl_resolution_m_s > 0.0:
+                vel = np.round(vel / c.dvl_resolution_m_s) * c.dvl_resolution_m_s
+            dvl = DvlSample(t_ns=t_ns, velocity_body=vel, bottom_lock=True,
+                            altitude_m=altitude)
             self._dead_reckon(t_ns, H, dvl)
         if self._depth.due(t_ns):
             self._frame("depth", self._depth)

@@ -58,11 +58,17 @@ class LockstepConfig:
 
 def lockstep_config(cfg, seed: int = 0) -> LockstepConfig:
     """The lockstep run of a daemon configuration (:class:`uvd.runtime.config.Config`): its
-    control rate, its ``[simulation.instruments]`` and sim-bridge's noise of ``seed``
-    (frame ``f`` after arming carries the noise of the bridge's frame ``f`` after release)."""
+    control rate, its ``[simulation.instruments]``, sim-bridge's noise of ``seed`` (frame
+    ``f`` after arming carries the noise of the bridge's frame ``f`` after the release) and
+    the DVL's wire resolution (PD0: 1 mm/s)."""
+    from dataclasses import replace
+
+    from drivers.pd0 import VELOCITY_RESOLUTION_M_S
     from sim_bridge.instruments.models import instrument_config
+    inst = replace(instrument_config(cfg.simulation.instruments),
+                   dvl_resolution_m_s=VELOCITY_RESOLUTION_M_S)
     return LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=seed, frame_noise=True,
-                          instruments=instrument_config(cfg.simulation.instruments))
+                          instruments=inst)
 
 
 @dataclass
