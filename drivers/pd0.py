@@ -549,6 +549,10 @@ def from_dvl_velocity(v_dvl: np.ndarray, altitude_m: float, ensemble_number: int
     return Pd0Ensemble(fixed, variable, bt, {}, {}, (ID_FIXED, ID_VARIABLE, ID_BOTTOM_TRACK))
 
 
+#: the resolution of PD0 velocities (1 mm/s on the wire, :func:`_mm`)
+VELOCITY_RESOLUTION_M_S = 0.001
+
+
 def _mm(v_m_s: float) -> int:
     """m/s → int16 mm/s, saturating short of the 'bad' marker."""
     return max(-32767, min(32767, round(v_m_s * 1000.0)))

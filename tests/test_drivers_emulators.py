@@ -101,10 +101,10 @@ async def _run_nav(emu, readers, seconds, on_tick=None):
             if len(pending) < 3:
                 continue
             ins, dvl, depth = pending["ins"], pending["dvl"], pending["depth"]
-            H_t, _ = truth(dvl.t_ns - emu._t0)
+            H_t, _ = truth(dvl.t_ns - emu.t0_ns)
             mem = nav_init(cfg, north_m=H_t[0, 3], east_m=H_t[1, 3])
         st, mem = nav_step(cfg, mem, now, ins, dvl, depth)
-        out.append((st, now - emu._t0, ins, dvl, depth))
+        out.append((st, now - emu.t0_ns, ins, dvl, depth))
         if on_tick is not None:
             on_tick(st)
     return out
@@ -144,7 +144,7 @@ def _check_against_truth(rows, emu, ins_rates=True):
             # the tick's (carried there by the measured rate, NavConfig.propagate_ins), or
             # with rates derived from attitude (never carried) the sample's receive time
             t_at = ins.t_ns if st.rates_degraded else st.t_ns
-            H_t, v_t = truth(t_at - emu._t0)
+            H_t, v_t = truth(t_at - emu.t0_ns)
             err = log_so3(H_t[:3, :3].T @ st.H[:3, :3])
             assert abs(err[0]) < TILT_TOL and abs(err[1]) < TILT_TOL
             assert np.linalg.norm(err) < HEADING_TOL + 2 * TILT_TOL
@@ -154,7 +154,7 @@ def _check_against_truth(rows, emu, ins_rates=True):
         if dvl is not None:
             np.testing.assert_array_less(np.abs(st.v[:3] - NU), VEL_TOL)
         if depth is not None:
-            H_t, _ = truth(depth.t_ns - emu._t0)
+            H_t, _ = truth(depth.t_ns - emu.t0_ns)
             assert abs(st.H[2, 3] - H_t[2, 3]) < DEPTH_TOL
     assert n_checked >= 10
     st, t_rel, *_ = rows[-1]
@@ -259,6 +259,6 @@ def test_depth_sensor_answers_commands(tmp_path):
     assert one.frame.kind == "pressure"
     conv = cfg.depth
     d = conv.to_sample(one.frame, one.t_ns).depth_m
-    H_t, _ = truth(one.t_ns - emu._t0)
+    H_t, _ = truth(one.t_ns - emu.t0_ns)
     assert abs(d - H_t[2, 3]) < DEPTH_TOL + 0.01  # P3 is answered at the next model sample
     assert 2 <= len(many) <= 7  # 7 Hz for 0.6 s

@@ -184,6 +184,60 @@ def test_default_health_is_not_healthy():
     assert d.zero_thrust
 
 
+NEVER_HEARD = {"ins_age_s": math.inf, "dvl_age_s": math.inf, "depth_age_s": math.inf,
+               "bottom_lock": False, "depth_m": math.nan}
+SOURCE_TRIGGERS = ["ins_stale", "dvl_stale", "dvl_bottom_lock_lost", "depth_stale"]
+
+
+def test_sources_never_heard_from_wait_while_disarmed_and_block_arming():
+    from uvd.runtime.lifecycle import builtin_checks, run_checks
+    sim = Sim()
+    for _ in range(20):  # 2 s of a boot whose sensors are still starting
+        d = sim.step(armed=False, **NEVER_HEARD)
+        assert d.action == Action.NONE and not d.active
+        assert list(d.waiting) == SOURCE_TRIGGERS
+    assert sim.events == []
+    checks = {r.name: r for r in run_checks(builtin_checks(sim.th),
+                                            healthy(sim.t, armed=False, **NEVER_HEARD), d)}
+    assert not checks["failsafe_clear"].ok
+    assert checks["failsafe_clear"].reason == (
+        "waiting for a first sample: ins_stale, dvl_stale, dvl_bottom_lock_lost, depth_stale")
+    # the DVL still silent, the others heard: only the DVL's triggers wait
+    d = sim.step(armed=False, dvl_age_s=math.inf, bottom_lock=False)
+    assert list(d.waiting) == ["dvl_stale", "dvl_bottom_lock_lost"] and sim.events == []
+    # every source heard: nothing waits, nothing to clear — arming may follow at once
+    d = sim.step(armed=False)
+    assert d.waiting == () and d.action == Action.NONE and sim.events == []
+    assert all(r.ok for r in run_checks(builtin_checks(sim.th), healthy(sim.t), d))
+
+
+def test_armed_a_source_never_heard_from_fires_as_before():
+    strict, armed = Sim(), Sim()
+    d_default = strict.step(**NEVER_HEARD)  # Health's default is the strict reading
+    d_armed = armed.step(armed=True, **NEVER_HEARD)
+    for d in (d_default, d_armed):
+        assert active_names(d) == set(SOURCE_TRIGGERS) and d.waiting == ()
+        assert d.action == Action.ZERO_THRUST
+        assert {a.name: a.reason for a in d.active}["dvl_stale"] == "DVL age inf s > 1 s"
+    assert [e.trigger for e in armed.events if e.kind == "fired"] == SOURCE_TRIGGERS
+
+
+def test_disarmed_a_source_heard_once_then_silent_is_stale():
+    sim = Sim()
+    sim.step(armed=False)
+    d = sim.run_until(3.0, lambda t: {"armed": False, "dvl_age_s": 0.05 + t})[-1][1]
+    assert "dvl_stale" in active_names(d) and d.waiting == ()
+    assert [e.trigger for e in sim.events if e.kind == "fired"] == ["dvl_stale"]
+
+
+def test_a_trigger_active_when_disarmed_is_not_turned_into_waiting():
+    sim = Sim()
+    sim.step(armed=True, **NEVER_HEARD)  # fired while armed
+    d = sim.step(armed=False, **NEVER_HEARD)  # then disarmed, still never heard
+    assert active_names(d) == set(SOURCE_TRIGGERS) and d.waiting == ()
+    assert not [e for e in sim.events if e.kind == "cleared"]
+
+
 def test_flicker_does_not_clear_before_the_hysteresis():
     sim = Sim()
     sim.step(ins_age_s=0.5)

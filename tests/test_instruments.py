@@ -84,9 +84,10 @@ def test_simulation_instruments_section_is_instrument_config(tmp_path):
     root = Path(__file__).resolve().parents[1]
     assert instrument_config(SimInstrumentsSection()) == InstrumentConfig()
     declared = {f.name for f in dataclasses.fields(SimInstrumentsSection)}
-    assert declared == {f.name for f in dataclasses.fields(InstrumentConfig)} - {"ins_offset_s"}
+    assert declared == {f.name for f in dataclasses.fields(InstrumentConfig)} - {"ins_offset_s",
+                                                                           "dvl_resolution_m_s"}
     assert lockstep_config(load_config(root / "config" / "sim.toml")).instruments == \
-        InstrumentConfig()
+        InstrumentConfig(dvl_resolution_m_s=0.001)  # what PD0 carries, as sim-bridge sends
     fast = lockstep_config(load_config(root / "config" / "sim-bluerov2.toml"), seed=3)
     assert (fast.instruments.ins_rate_hz, fast.instruments.dvl_rate_hz,
             fast.instruments.depth_rate_hz, fast.seed, fast.control_rate_hz) == \
@@ -97,3 +98,91 @@ def test_simulation_instruments_section_is_instrument_config(tmp_path):
     with pytest.raises(ConfigValidationError, match=r"simulation\.instruments\.ins_rate_hz: "
                                                     r"0\.0 is out of range"):
         load_config(bad)
+
+
+def _noise_per_frame(ins: Instruments, t_ns, epoch_ns=None, other_draws=None):
+    """Sample a still vehicle at the times ``t_ns`` (the epoch set at ``epoch_ns``, on the
+    first sample after it); {(instrument, frame since the epoch, its due time since the
+    epoch in ms): noise}."""
+    H = make_H(euler_to_R(0.0, 0.0, 0.5), np.array([0.0, 0.0, 2.0]))
+    out = {}
+    since = 0 if epoch_ns is None else epoch_ns
+    for t in t_ns:
+        if epoch_ns is not None and t >= epoch_ns and ins._before_epoch:
+            ins.set_epoch(epoch_ns)
+        a, b, c = ins.sample(t, H, np.zeros(6))
+        if other_draws is not None:
+            other_draws.normal(size=3)  # a CAN pressure sensor on the same generator
+        for name, s, p, val in (("ins", a, ins._ins, lambda s: s.heading - 0.5),
+                                ("dvl", b, ins._dvl, lambda s: s.velocity_body[1]),
+                                ("depth", c, ins._depth, lambda s: s.depth_m - 2.0)):
+            if s is not None and not ins._before_epoch:
+                f = p.k - 1
+                due_ms = round((p.offset_ns + f * 1e9 / p.rate_hz - since) / 1e6)
+                out[(name, f, due_ms)] = val(s)
+    return out
+
+
+def test_frame_keyed_noise_and_times_are_the_same_on_frame_f_however_the_runs_differ():
+    """The demo's comparison (sim_bridge.instruments.models, "Noise streams"): lockstep samples
+    on a 10 ms grid from its epoch t = 0; sim-bridge also on a 10 ms grid, but held 2.31 s in
+    its cradle first (before the epoch), with other draws on its generator, and a 70 ms stall
+    that skips frames. Every frame after the epoch that both runs made falls due at the same
+    time after the epoch and carries the same noise."""
+    cfg = InstrumentConfig(ins_rate_hz=50.0, dvl_rate_hz=8.0, depth_rate_hz=10.0)
+    lock = _noise_per_frame(Instruments(cfg, np.random.default_rng(1), frame_seed=4),
+                            range(0, 3_000_000_000, 10_000_000))
+    epoch = 2_310_000_000
+    bridge_t = [t for t in range(0, 5_320_000_000, 10_000_000)
+                if not 3_000_000_000 < t < 3_070_000_000]
+    bridge = Instruments(cfg, np.random.default_rng(2), frame_seed=4)
+    bridge.set_epoch(None)
+    hil = _noise_per_frame(bridge, bridge_t, epoch, other_draws=bridge.rng)
+    common = [k for k in lock if k in hil]
+    assert len(common) > 0.95 * len(lock)  # all but the stall's and the INS's frame 0
+    assert ("dvl", 0, 0) in common and ("ins", 0, 0) not in hil
+    assert {n for n, _, _ in common} == {"ins", "dvl", "depth"}
+    assert all(lock[k] == hil[k] for k in common)
+    assert ("dvl", 1, 125) in common and ("depth", 3, 300) in common
+    other = _noise_per_frame(Instruments(cfg, np.random.default_rng(1), frame_seed=5),
+                             range(0, 3_000_000_000, 10_000_000))
+    assert not any(other[k] == lock[k] for k in common)  # another seed, another draw
+
+
+def test_one_stream_noise_is_drawn_as_before():
+    """Without ``frame_seed`` every draw comes from the one generator in the order samples
+    fall due — the thesis experiments' streams (docs/RESULTS.md) stay as they were."""
+    cfg = InstrumentConfig()
+    ins = Instruments(cfg, np.random.default_rng(9))
+    H = make_H(np.eye(3), np.array([0.0, 0.0, 2.0]))
+    a, b, c = ins.sample(0, H, np.zeros(6))
+    ins.set_epoch(None)  # no effect on the one stream
+    a2, _, _ = ins.sample(100_000_000, H, np.zeros(6))
+    ref = np.random.default_rng(9)
+    scale = 1.0 + ref.uniform(-1, 1) * cfg.xy_scale_error
+    heading, roll, pitch = ref.normal(0, cfg.heading_std_rad), ref.normal(
+        0, cfg.roll_pitch_std_rad), ref.normal(0, cfg.roll_pitch_std_rad)
+    omega = ref.normal(0, cfg.rate_std_rad_s, 3)
+    dvl = ref.normal(0, cfg.dvl_std_m_s, 3)
+    depth = ref.normal(0, cfg.depth_std_m)
+    heading2 = ref.normal(0, cfg.heading_std_rad)
+    assert ins._dr_scale == scale
+    assert a.heading == (heading + math.pi) % (2 * math.pi) - math.pi
+    assert (a.roll, a.pitch) == (roll, pitch)
+    assert np.array_equal(a.omega_body, omega) and np.array_equal(b.velocity_body, dvl)
+    assert c.depth_m == 2.0 + depth
+    assert a2.heading == (heading2 + math.pi) % (2 * math.pi) - math.pi
+
+
+def test_dvl_resolution_rounds_as_the_pd0_wire_does():
+    from drivers import pd0
+    cfg = InstrumentConfig(dvl_resolution_m_s=pd0.VELOCITY_RESOLUTION_M_S)
+    ins = Instruments(cfg, np.random.default_rng(0))
+    H = make_H(np.eye(3), np.array([0.0, 0.0, 2.0]))
+    v = np.array([0.1234567, -0.0456789, 0.0071234, 0.0, 0.0, 0.0])
+    _, dvl, _ = ins.sample(0, H, v)
+    ens = pd0.from_dvl_velocity(dvl.velocity_body + 1e-9, 2.0)  # what the bridge's wire carries
+    wire = pd0.to_dvl_sample(pd0.decode_ensemble(pd0.encode_ensemble(ens)), 0).velocity_body
+    assert np.allclose(dvl.velocity_body * 1000, np.round(dvl.velocity_body * 1000), atol=1e-9)
+    assert np.allclose(wire, dvl.velocity_body, atol=1e-12)
+    assert not np.allclose(dvl.velocity_body, v[:3], atol=1e-4)  # the noise is there

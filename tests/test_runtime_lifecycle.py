@@ -4,6 +4,7 @@ every refusal and a cause on every transition; the supervisor that steps it with
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from uvd.runtime.failsafe import Action, ActiveTrigger, Decision, Health, Thresholds
 from uvd.runtime.lifecycle import (
@@ -193,3 +194,47 @@ def test_supervisor_reset_and_listener_failures():
     sup.set_thresholds(Thresholds(disabled=("leak",)))
     assert "leak" not in {d.name for d in sup.registry}
     assert not sup.step(good(4 * NS, leak=True)).active
+
+
+def test_the_cycle_waits_for_a_dvl_still_starting_at_boot_and_fires_on_its_silence_armed():
+    """The boot of the sensor-synchronous BlueROV2 (docs/runtime.md, "not yet available"):
+    the first cycles run before the DVL's first frame. No failsafe event while disarmed, arming
+    refused until the DVL is heard, then at once; armed, the DVL's silence is stale as before."""
+    from drivers.samples import DepthSample, DvlSample, InsSample
+    from uvd.runtime import commands as cmd
+    from uvd.runtime.build import build_core
+    from uvd.runtime.config import load_config
+    from uvd.runtime.cycle import ActuatorStatus, Cycle, CycleInputs
+
+    cfg = load_config("config/sim-bluerov2.toml")
+    sup = Supervisor(cfg.failsafe)
+    cyc = Cycle(build_core(cfg, cfg.load_vehicle()), sup, north_m=0.5, east_m=0.5)
+    sup.boot_complete(0, "test")
+    dt_ns = 20_000_000  # 50 Hz
+
+    def step(k: int, dvl: bool):
+        t = (k + 1) * dt_ns
+        inp = CycleInputs(t, InsSample(t, 0.0, 0.0, 0.0, np.zeros(3)),
+                          DvlSample(t, np.zeros(3), True, 2.0) if dvl else None,
+                          DepthSample(t, 1.8 + 1e-4 * (k % 3)),
+                          ActuatorStatus(np.zeros(8), True, (), t))
+        return cyc.update(inp, 0.02), t
+
+    for k in range(10):  # 0.2 s of a DVL still starting
+        r, t = step(k, dvl=False)
+        assert r.decision.waiting == ("dvl_stale", "dvl_bottom_lock_lost")
+        assert r.decision.action == Action.NONE
+    res = cyc.apply(cmd.Arm(), t)
+    assert not res.ok and "failsafe_clear: waiting for a first sample: dvl_stale" in res.reason
+    r, t = step(10, dvl=True)  # the DVL's first frame
+    assert r.decision.waiting == ()
+    assert cyc.apply(cmd.Arm(), t).ok  # no clear_after_s to sit out: nothing had fired
+    assert not [e for e in sup.failsafe_events() if e["type"] == "failsafe"]
+    fired = None
+    for k in range(11, 11 + 60):  # armed, the DVL silent for 1.2 s > dvl_stale_s = 1 s
+        r, t = step(k, dvl=False)
+        if "dvl_stale" in {a.name for a in r.decision.active}:
+            fired = t
+            break
+    assert fired is not None and r.decision.action == Action.HOLD_DEPTH
+    assert (fired - 11 * dt_ns) * 1e-9 == pytest.approx(cfg.failsafe.dvl_stale_s, abs=0.021)

@@ -60,8 +60,8 @@ class FaultyInstruments(Instruments):
     """The instrument models with the injected faults applied to their samples."""
 
     def __init__(self, config: InstrumentConfig, rng: np.random.Generator,
-                 faults: SensorFaults) -> None:
-        super().__init__(config, rng)
+                 faults: SensorFaults, *, frame_seed: int | None = None) -> None:
+        super().__init__(config, rng, frame_seed=frame_seed)
         self.faults = faults
 
     def sample(self, t_ns, H, v):

@@ -19,6 +19,20 @@ Table A.1 gives the Digiquartz only as a resolution (2 ppm of its 10 m range = 2
 extracted text's ">0.75 …" has lost its unit). We use 0.75 mm standard deviation, which also
 covers the tank's surface disturbance; set ``depth_std_m`` to change it.
 
+**Noise streams.** By default every draw comes from the one generator passed in, in the order
+the samples fall due (the thesis experiments' streams, docs/RESULTS.md). With ``frame_seed``
+the noise of each frame is keyed instead: frame f of an instrument draws from its own
+generator seeded ``(frame_seed, instrument, 0, f)``, f counted from the *epoch* (t = 0, or
+:meth:`Instruments.set_epoch`, which also starts the instruments' schedules again there). Two
+runs with the same ``frame_seed`` then carry the same noise on their f-th frame, at the same
+time after the epoch, whatever else draws and whichever frames a late caller skipped — so
+the demo's hardware-in-the-loop run (sim-bridge, epoch = the start of the plant step that
+carries the first thrust command) and its lockstep simulation (epoch = the first cycle) see
+one realisation of noise and sample times, and their comparison measures the daemon's timing
+rather than the luck of two draws. Frames before the epoch (the vehicle held while the daemon
+boots; ``set_epoch(None)``) draw from ``(frame_seed, instrument, 1, k)``, k counted from the
+start.
+
 XY: the thesis's DVLNAV dead-reckons DVL velocity; here the simulated DVLNAV integrates the
 *noisy* DVL velocity rotated by the *noisy* INS attitude, plus a scale error drawn once per run
 (uniform within ±``xy_scale_error`` = 0.5 %), so its drift matches Table A.1. The daemon's own
@@ -53,6 +67,9 @@ class InstrumentConfig:
     depth_rate_hz: float = 7.0
     depth_std_m: float = 0.00075
     xy_scale_error: float = 0.005
+    #: resolution of the DVL's velocity output (0: none): PD0 carries 1 mm/s, to which
+    #: sim-bridge's wire rounds; the demo's lockstep run models it (lockstep_config)
+    dvl_resolution_m_s: float = 0.0
     #: the INS samples at k/ins_rate_hz + ins_offset_s: its phase against a control loop
     #: ticking at k/rate (0: on the tick, as lockstep runs; a real INS has its own clock)
     ins_offset_s: float = 0.0
@@ -92,30 +109,79 @@ class _Periodic:
         return False
 
 
+#: key of each instrument's noise in the frame-keyed streams (module docstring)
+_NOISE_KEY = {"ins": 0, "dvl": 1, "depth": 2, "dvlnav": 3}
+
+
 class Instruments:
     """INS, DVL, depth and DVLNAV models sampling a plant's true state.
 
     Call :meth:`sample` after every plant step with the simulated time and true (H, v); it
     returns the samples that fell due (possibly none).
+
+    Parameters
+    ----------
+    config : InstrumentConfig
+    rng : numpy.random.Generator
+        The one noise stream (and whatever else of the caller's draws from it).
+    frame_seed : int, optional
+        Key each frame's noise by (instrument, frame index since the epoch) instead
+        (module docstring, "Noise streams"); the epoch is t = 0 until :meth:`set_epoch`.
     """
 
-    def __init__(self, config: InstrumentConfig, rng: np.random.Generator) -> None:
+    def __init__(self, config: InstrumentConfig, rng: np.random.Generator, *,
+                 frame_seed: int | None = None) -> None:
         self.config = config
         self.rng = rng
+        self.frame_seed = frame_seed
         self._ins = _Periodic(config.ins_rate_hz, round(config.ins_offset_s * 1e9))
         self._dvl = _Periodic(config.dvl_rate_hz)
         self._depth = _Periodic(config.depth_rate_hz)
+        self._before_epoch = False  # the construction is the epoch (t = 0)
+        self._draw = rng  # the generator of the frame being made
         self.dr_north = 0.0
         self.dr_east = 0.0
-        self._dr_scale = 1.0 + (rng.uniform(-1, 1) * config.xy_scale_error if config.noise else 0)
+        if frame_seed is not None:
+            self._draw = np.random.default_rng((frame_seed, _NOISE_KEY["dvlnav"]))
+        self._dr_scale = 1.0 + (self._draw.uniform(-1, 1) * config.xy_scale_error
+                                if config.noise else 0)
         self._last_dvl: DvlSample | None = None
         self._last_dr_ns: int | None = None
         self._last_ins: InsSample | None = None
 
+    def set_epoch(self, t_ns: int | None) -> None:
+        """Start every instrument's schedule again at ``t_ns``: frame f of each falls due at
+        t_ns + f/rate, as in a lockstep run from t = 0, and with frame-keyed noise draws from
+        the key of f. The epoch is already past when sim-bridge sets it (one plant step): the
+        DVL's and depth's frame 0 are made at the next call, late — the DVL's velocity is
+        integrated into the position, and lockstep's first cycles dead-reckon with frame 0 —
+        while the INS's frame 0 is the one made at or before the epoch (a second one would
+        run one more sensor-synchronous cycle). With None the schedules go on and the noise
+        draws from the before-the-epoch keys until the next call (the vehicle held)."""
+        if t_ns is None:
+            self._before_epoch = True
+            return
+        c = self.config
+        for name, rate, offset, first in (
+                ("_ins", c.ins_rate_hz, round(c.ins_offset_s * 1e9), 1),
+                ("_dvl", c.dvl_rate_hz, 0, 0), ("_depth", c.depth_rate_hz, 0, 0)):
+            p = _Periodic(rate, t_ns + offset)
+            p.k, p.next_ns = first, p.offset_ns + round(first * 1e9 / rate)
+            setattr(self, name, p)
+        self._before_epoch = False
+
+    def _frame(self, name: str, periodic: _Periodic) -> None:
+        """Point the noise at the frame that just fell due (the one stream, or its own)."""
+        if self.frame_seed is None:
+            return
+        k = periodic.k - 1  # the index of the due time that fired (_Periodic.due)
+        self._draw = np.random.default_rng(
+            (self.frame_seed, _NOISE_KEY[name], int(self._before_epoch), k))
+
     def _n(self, std: float, size: int | None = None):
         if not self.config.noise or std == 0.0:
             return 0.0 if size is None else np.zeros(size)
-        return self.rng.normal(0.0, std, size)
+        return self._draw.normal(0.0, std, size)
 
     def sample(self, t_ns: int, H: np.ndarray, v: np.ndarray
                ) -> tuple[InsSample | None, DvlSample | None, DepthSample | None]:
@@ -125,6 +191,7 @@ class Instruments:
         c = self.config
         ins = dvl = depth = None
         if self._ins.due(t_ns):
+            self._frame("ins", self._ins)
             roll, pitch, heading = R_to_euler(H[:3, :3])
             heading = (heading + self._n(c.heading_std_rad) + math.pi) % (2 * math.pi) - math.pi
             ins = InsSample(t_ns=t_ns, roll=roll + self._n(c.roll_pitch_std_rad),
@@ -132,11 +199,16 @@ class Instruments:
                             omega_body=v[3:] + self._n(c.rate_std_rad_s, 3))
             self._last_ins = ins
         if self._dvl.due(t_ns):
+            self._frame("dvl", self._dvl)
             altitude = c.dvl_altitude_m - float(H[2, 3])
-            dvl = DvlSample(t_ns=t_ns, velocity_body=v[:3] + self._n(c.dvl_std_m_s, 3),
-                            bottom_lock=True, altitude_m=altitude)
+            vel = v[:3] + self._n(c.dvl_std_m_s, 3)
+            if c.dvl_resolution_m_s > 0.0:
+                vel = np.round(vel / c.dvl_resolution_m_s) * c.dvl_resolution_m_s
+            dvl = DvlSample(t_ns=t_ns, velocity_body=vel, bottom_lock=True,
+                            altitude_m=altitude)
             self._dead_reckon(t_ns, H, dvl)
         if self._depth.due(t_ns):
+            self._frame("depth", self._depth)
             depth = DepthSample(t_ns=t_ns, depth_m=float(H[2, 3]) + self._n(c.depth_std_m))
         return ins, dvl, depth
 

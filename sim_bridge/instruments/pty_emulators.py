@@ -196,7 +196,7 @@ class InstrumentEmulators:
         self.depth_continuous = self.config.depth_continuous
         self._depth_once = False
         self._cmd = StreamDecoder(digiquartz.DigiquartzCodec())
-        self._t0: int | None = None
+        self.t0_ns: int | None = None  # monotonic time of t = 0 (set by start)
         self._task: asyncio.Task | None = None
         self._stop = False
         self._counter = 0
@@ -221,9 +221,16 @@ class InstrumentEmulators:
         """Plug it back: a new pty at the same symlink path."""
         self.ports[name].open()
 
-    def start(self) -> asyncio.Task:
+    def start(self, t0_ns: int | None = None) -> asyncio.Task | None:
+        """Open the ports and write frames on the emulator's own ``tick_s`` loop; or, given
+        ``t0_ns`` (monotonic), let the owner call :meth:`step` with times counted from it
+        (sim-bridge, after each plant step: the instruments then sample the state of that
+        step's instant, on the plant's grid as in lockstep simulation)."""
         self.open()
         self._stop = False
+        if t0_ns is not None:
+            self.t0_ns = t0_ns
+            return None
         if self._task is None or self._task.done():
             self._task = asyncio.get_running_loop().create_task(self.run(), name="instruments")
         return self._task
@@ -245,17 +252,23 @@ class InstrumentEmulators:
 
     async def run(self) -> None:
         """Emit frames until stopped (absolute-deadline loop, ``tick_s`` period)."""
-        self._t0 = self.clock()
+        self.t0_ns = t0 = self.clock()
         tick = int(self.config.tick_s * 1e9)
         k = 0
         while not self._stop:
-            self.step(self.clock() - self._t0)
+            self.step(self.clock() - t0)
             k += 1
-            delay = (self._t0 + k * tick - self.clock()) * 1e-9
+            delay = (t0 + k * tick - self.clock()) * 1e-9
             if delay < -0.05:  # fell far behind (suspended): do not burst
-                k = (self.clock() - self._t0) // tick + 1
+                k = (self.clock() - t0) // tick + 1
                 delay = 0.0
             await asyncio.sleep(max(0.0, delay))
+
+    def set_epoch(self, t_ns: int | None) -> None:
+        """The instruments' noise epoch at monotonic ``t_ns`` (None: before it), on the
+        emulator's own clock (:meth:`~sim_bridge.instruments.models.Instruments.set_epoch`)."""
+        t0 = self.t0_ns if self.t0_ns is not None else t_ns
+        self.instruments.set_epoch(None if t_ns is None else t_ns - t0)
 
     # ---- one emulator step (pure apart from the writes) --------------------------------------
     def step(self, t_ns: int) -> None:

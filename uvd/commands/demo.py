@@ -8,9 +8,12 @@ arming checks pass and tracks RefTraj1 (Table 5.1) with two-step AMBC, robust ad
 (``config/sim.toml``). Afterwards the demo prints the tracking error per DOF (true state vs
 reference), the loop statistics, the failsafe events and the memory of both processes, and
 compares the tracking error with a lockstep simulation of the same configuration (the same
-core, no I/O, simulated clock) — and with the spread of ``SPREAD_SEEDS`` lockstep runs of
-other instrument seeds, since where dead reckoning's random walk dominates one seed's figure
-is no prediction of another's. ``--config config/sim-bluerov2.toml`` runs the BlueROV2 Heavy.
+core, no I/O, simulated clock) and the same seed: both draw each instrument's noise per frame
+from the seed (frame f after arming carries the same noise in both,
+:mod:`sim_bridge.instruments.models`, "Noise streams"), so the ratio measures the daemon's
+timing, not two draws of dead reckoning's random walk — and with the spread of
+``SPREAD_SEEDS`` lockstep runs of other seeds, how wide that walk is.
+``--config config/sim-bluerov2.toml`` runs the BlueROV2 Heavy.
 
 Every process is bounded in time and killed in all cases. ``--record DIR`` keeps the run:
 configuration, telemetry, truth log, CAN log, both processes' logs and the figures.

@@ -44,6 +44,10 @@ class LockstepConfig:
     plant: PlantConfig = field(default_factory=PlantConfig)
     instruments: InstrumentConfig = field(default_factory=InstrumentConfig)
     seed: int = 0
+    #: instrument noise keyed per frame as sim-bridge draws it (``frame_seed`` of
+    #: :class:`~sim_bridge.instruments.models.Instruments`, the epoch at the first cycle);
+    #: off, the one stream of ``seed`` the thesis experiments (docs/RESULTS.md) draw from
+    frame_noise: bool = False
 
     def __post_init__(self) -> None:
         ratio = self.plant_rate_hz / self.control_rate_hz
@@ -54,10 +58,17 @@ class LockstepConfig:
 
 def lockstep_config(cfg, seed: int = 0) -> LockstepConfig:
     """The lockstep run of a daemon configuration (:class:`uvd.runtime.config.Config`): its
-    control rate and its ``[simulation.instruments]``."""
+    control rate, its ``[simulation.instruments]``, sim-bridge's noise of ``seed`` (frame
+    ``f`` after arming carries the noise of the bridge's frame ``f`` after the release) and
+    the DVL's wire resolution (PD0: 1 mm/s)."""
+    from dataclasses import replace
+
+    from drivers.pd0 import VELOCITY_RESOLUTION_M_S
     from sim_bridge.instruments.models import instrument_config
-    return LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=seed,
-                          instruments=instrument_config(cfg.simulation.instruments))
+    inst = replace(instrument_config(cfg.simulation.instruments),
+                   dvl_resolution_m_s=VELOCITY_RESOLUTION_M_S)
+    return LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=seed, frame_noise=True,
+                          instruments=inst)
 
 
 @dataclass
@@ -92,7 +103,8 @@ class Lockstep:
         self.t_ns = 0
         #: instrument faults, on the simulated clock (``faults.set("ins", "silence", 0.5)``)
         self.faults = SensorFaults(clock=lambda: self.t_ns)
-        self.instruments = FaultyInstruments(cfg.instruments, self.rng, self.faults)
+        self.instruments = FaultyInstruments(cfg.instruments, self.rng, self.faults,
+                                             frame_seed=cfg.seed if cfg.frame_noise else None)
         #: amplifier faults the cycle sees (names, e.g. ``("node 3: overcurrent",)``)
         self.amplifier_faults: tuple[str, ...] = ()
         #: signals of plug-in failsafe triggers the cycle sees, as the daemon's read phase

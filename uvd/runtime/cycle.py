@@ -284,7 +284,7 @@ class Cycle:
                    bus_off=bool(a is not None and a.bus_off),
                    overrun_streak=inp.overrun_streak,
                    overrun_streak_exceeded=inp.overrun_streak_exceeded, leak=inp.leak,
-                   extra=inp.extra)
+                   extra=inp.extra, armed=self.supervisor.armed)
         sup = self.supervisor
         d = sup.step(h)
         armed = sup.armed

@@ -51,6 +51,14 @@ cycle_exception         the cycle callback raised                   ZERO_THRUST 
 leak                    leak input asserted                         DISARM        latch
 ======================  ==========================================  ============  ========
 
+**Not yet available.** A navigation source that has never delivered a sample (age ``inf``:
+the INS, DVL or depth sensor still starting after boot) is not a failure while the vehicle is
+disarmed: its stale trigger (and the DVL's bottom-lock trigger) returns a :class:`NotYet`
+reason, which :func:`evaluate` turns into a name in :attr:`Decision.waiting` instead of an
+event while ``Health.armed`` is false — and arming is refused while anything waits
+(:func:`uvd.runtime.lifecycle.builtin_checks`, ``failsafe_clear``). Armed, the same reason
+fires as any other; a source heard once and then silent is stale, armed or not.
+
 A new trigger is one more :class:`TriggerDef` in the registry (the ground-station link adds
 operator-heartbeat loss this way, reading ``health.extra["operator_heartbeat_age_s"]``).
 """
@@ -67,7 +75,7 @@ import numpy as np
 
 from uvd.runtime.schema import setting
 
-__all__ = ["Action", "Health", "Thresholds", "TriggerDef", "TriggerState", "ArbiterState",
+__all__ = ["Action", "Health", "NotYet", "Thresholds", "TriggerDef", "TriggerState", "ArbiterState",
            "ActiveTrigger", "FailsafeEvent", "Decision", "builtin_triggers", "evaluate",
            "reset", "arbiter_init", "make_registry", "nonfinite_names", "nav_health"]
 
@@ -135,6 +143,10 @@ class Health:
         Leak input asserted; None when no leak sensor is configured.
     extra : mapping or None
         Signals of plug-in triggers (e.g. ``operator_heartbeat_age_s``).
+    armed : bool
+        The lifecycle is ARMED or FAILSAFE as the cycle starts; while false, a source never
+        heard from is waited for rather than a failsafe (module docstring). The default is the
+        strict reading.
     """
 
     t_ns: int = 0
@@ -157,6 +169,7 @@ class Health:
     cycle_failed: bool = False
     leak: bool | None = None
     extra: Mapping[str, Any] | None = None
+    armed: bool = True
 
 
 BUILTIN_NAMES = ("ins_stale", "ins_rates_degraded", "dvl_stale", "dvl_bottom_lock_lost",
@@ -210,6 +223,13 @@ class Thresholds:
 
 
 Condition = Callable[[Health, Thresholds, Any], tuple[str | None, Any]]
+
+
+class NotYet(str):
+    """A condition's reason that holds only because the source has never been heard from:
+    it fires while armed; while disarmed the trigger waits (:attr:`Decision.waiting`)."""
+
+    __slots__ = ()
 
 
 @dataclass(frozen=True)
@@ -295,6 +315,8 @@ class Decision:
     action: Action
     active: tuple[ActiveTrigger, ...]
     events: tuple[FailsafeEvent, ...]
+    #: triggers waiting for their source's first sample while disarmed (:class:`NotYet`)
+    waiting: tuple[str, ...] = ()
 
     @property
     def freeze_adaptation(self) -> bool:
@@ -332,8 +354,14 @@ def _age(name: str, age: float | None, limit: float) -> str | None:
     return None
 
 
+def _source_age(name: str, age: float, limit: float) -> str | None:
+    """:func:`_age` of a navigation source; never heard from (age inf) is :class:`NotYet`."""
+    reason = _age(name, age, limit)
+    return NotYet(reason) if reason is not None and age == _INF else reason
+
+
 def _ins_stale(h: Health, th: Thresholds, mem: Any) -> tuple[str | None, Any]:
-    return _age("INS", h.ins_age_s, th.ins_stale_s), mem
+    return _source_age("INS", h.ins_age_s, th.ins_stale_s), mem
 
 
 def _ins_degraded(h: Health, th: Thresholds, mem: Any) -> tuple[str | None, Any]:
@@ -341,7 +369,7 @@ def _ins_degraded(h: Health, th: Thresholds, mem: Any) -> tuple[str | None, Any]
 
 
 def _dvl_stale(h: Health, th: Thresholds, mem: Any) -> tuple[str | None, Any]:
-    return _age("DVL", h.dvl_age_s, th.dvl_stale_s), mem
+    return _source_age("DVL", h.dvl_age_s, th.dvl_stale_s), mem
 
 
 def _dvl_lock(h: Health, th: Thresholds, mem: Any) -> tuple[str | None, Any]:
@@ -351,12 +379,13 @@ def _dvl_lock(h: Health, th: Thresholds, mem: Any) -> tuple[str | None, Any]:
     lost_since = h.t_ns if mem is None else mem
     lost_s = (h.t_ns - lost_since) * 1e-9
     if lost_s >= th.dvl_lock_lost_s:
-        return f"DVL bottom lock lost for {lost_s:.3g} s", lost_since
+        reason = f"DVL bottom lock lost for {lost_s:.3g} s"
+        return (NotYet(reason) if h.dvl_age_s == _INF else reason), lost_since
     return None, lost_since
 
 
 def _depth_stale(h: Health, th: Thresholds, mem: Any) -> tuple[str | None, Any]:
-    return _age("depth", h.depth_age_s, th.depth_stale_s), mem
+    return _source_age("depth", h.depth_age_s, th.depth_stale_s), mem
 
 
 def _depth_stuck(h: Health, th: Thresholds, mem: Any) -> tuple[str | None, Any]:
@@ -539,6 +568,7 @@ def evaluate(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState
     new: dict[str, TriggerState] = {}
     events: list[FailsafeEvent] = []
     active: list[ActiveTrigger] = []
+    waiting: list[str] = []
     changed = False
     for d in registry:
         ts = old.get(d.name)
@@ -550,6 +580,9 @@ def evaluate(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState
         except Exception as exc:  # a broken condition is itself a reason to act
             reason, mem = f"condition could not be evaluated ({type(exc).__name__}: {exc})", \
                 ts.memory
+        if isinstance(reason, NotYet) and not health.armed and not ts.active:
+            waiting.append(d.name)  # a source still starting while disarmed: no failsafe
+            reason = None
         if reason is not None:
             if not ts.active:
                 ts = TriggerState(True, t, reason, None, mem)
@@ -580,10 +613,11 @@ def evaluate(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState
                                     action, why))
     prev = state.decision
     if not changed and not events and prev is not None and not prev.events \
-            and len(prev.active) == len(active):
+            and len(prev.active) == len(active) and prev.waiting == tuple(waiting):
         decision = prev  # nothing changed: reuse it (cheap at 1 kHz)
     else:
-        decision = Decision(action=action, active=tuple(active), events=tuple(events))
+        decision = Decision(action=action, active=tuple(active), events=tuple(events),
+                            waiting=tuple(waiting))
     return decision, ArbiterState(triggers=new, action=action, decision=decision)
 
 

@@ -102,7 +102,8 @@ def run_checks(checks: Sequence[ArmingCheck], health: Health,
 
 
 def builtin_checks(th: Thresholds) -> tuple[ArmingCheck, ...]:
-    """INS valid, depth valid, amplifiers ready, parameters valid, no failsafe ≥ HOLD_DEPTH."""
+    """INS valid, depth valid, amplifiers ready, parameters valid, no failsafe ≥ HOLD_DEPTH
+    and no trigger waiting for its source's first sample."""
 
     def ins_valid(h: Health, d: Decision | None) -> tuple[bool, str]:
         ok = h.ins_age_s <= th.ins_stale_s
@@ -140,7 +141,9 @@ def builtin_checks(th: Thresholds) -> tuple[ArmingCheck, ...]:
     def failsafe_clear(h: Health, d: Decision | None) -> tuple[bool, str]:
         if d is not None and d.action >= Action.HOLD_DEPTH:
             return False, f"failsafe {d.action.label} active: {d.causes}"
-        return True, "no failsafe at hold-depth or above"
+        if d is not None and d.waiting:  # a source never heard from would fire once armed
+            return False, f"waiting for a first sample: {', '.join(d.waiting)}"
+        return True, "no failsafe at hold-depth or above, no source waited for"
 
     return (ArmingCheck("ins_valid", ins_valid, "INS sample fresh"),
             ArmingCheck("depth_valid", depth_valid, "depth sample fresh and finite"),
@@ -148,7 +151,8 @@ def builtin_checks(th: Thresholds) -> tuple[ArmingCheck, ...]:
                         "amplifiers enabled, fault-free, feedback fresh, bus not off"),
             ArmingCheck("parameters_valid", parameters_valid,
                         "M̂ positive definite, θ̂ within bounds"),
-            ArmingCheck("failsafe_clear", failsafe_clear, "no failsafe ≥ hold-depth"))
+            ArmingCheck("failsafe_clear", failsafe_clear,
+                        "no failsafe ≥ hold-depth, no source not yet heard from"))
 
 
 @dataclass(frozen=True, slots=True)
