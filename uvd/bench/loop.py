@@ -624,7 +624,7 @@ def _recorded(cycle, directory: str, times: dict[str, list]):
     return recorded, hub
 
 
-def _mavlink_link():
+def _mavlink_link(loop_cpus=()):
     """A MAVLink link on a free loopback port, the sink of a hub, and the cycle that publishes
     one cycle record to that hub (as the daemon's write phase does)."""
     from uvd.runtime.commands import CommandQueue
@@ -635,19 +635,19 @@ def _mavlink_link():
     link = MavlinkLink(MavlinkSection(enabled=True, listen="127.0.0.1:0", params_file=""),
                        CommandQueue(), lambda: config,
                        thresholds={"ins": 0.25, "dvl": 1.0, "depth": 0.5, "feedback": 0.5},
-                       max_thrust_n=[20.0] * 6)
+                       max_thrust_n=[20.0] * 6, loop_cpus=loop_cpus)
     from uvd.telemetry.sink import TelemetryHub
     hub = TelemetryHub([link])
     return link, _published(CYCLES["none"](), hub), hub
 
 
 async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: float,
-                     n_fuzz: int, steal, block_s: float = 2.0) -> dict:
+                     n_fuzz: int, steal, block_s: float = 2.0, loop_cpus=()) -> dict:
     """Our loop running ``cycle`` plus a MAVLink link's cycle record, in blocks of
     ``block_s``, quiet and fuzzed in turn (:func:`_phased`; ``duration`` of each): a second
     process sends the ``n_fuzz`` bad datagrams to the link in the fuzzed blocks only."""
     from uvd.bench.mavlink_fuzz import fuzz_process
-    link, publish, hub = _mavlink_link()
+    link, publish, hub = _mavlink_link(loop_cpus)
 
     def both(t_ns: int, dt: float) -> None:
         cycle(t_ns, dt)
@@ -733,7 +733,8 @@ def _run(args) -> dict:
     fuzz = None
     if args.mavlink_fuzz:
         f = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup,
-                                   args.mavlink_fuzz, lambda: host_steal_s(steal_cpus)))
+                                   args.mavlink_fuzz, lambda: host_steal_s(steal_cpus),
+                                   loop_cpus=args.cpu or ()))
         fuzz = {"datagrams": args.mavlink_fuzz, "link_counters": f["mavlink"],
                 "overruns": f["overruns"], **f["phases"]}
     warm = _back_to_back(cycle, args.rate, 2000) if args.cycle != "none" else None

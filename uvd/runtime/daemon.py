@@ -156,7 +156,8 @@ class Daemon:
                 thresholds={"ins": f.ins_stale_s, "dvl": f.dvl_stale_s,
                             "depth": f.depth_stale_s, "feedback": f.feedback_stale_s},
                 max_thrust_n=self.max_thrust, controller=config.control.controller,
-                step1_s=config.control.step1_duration_s)
+                step1_s=config.control.step1_duration_s,
+                loop_cpus=config.loop.cpu_affinity)
             self.app.hub.add_sink(self.mavlink)
         est = config.estimation
         self._estimate_period_ns = int(est.publish_every_s * 1e9)

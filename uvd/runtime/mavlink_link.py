@@ -146,13 +146,16 @@ class MavlinkLink:
         Per-thruster thrust limit (SERVO_OUTPUT_RAW's scale).
     controller : str
         ``[control] controller``; ``step1_s`` its step-1 length (custom mode).
+    loop_cpus : sequence of int
+        ``[loop] cpu_affinity``: the receiver process keeps off these CPUs when it can.
     """
 
     name = "mavlink"
 
     def __init__(self, cfg: MavlinkSection, commands: CommandQueue, config: Callable[[], Any],
                  *, thresholds: Mapping[str, float], max_thrust_n: Sequence[float],
-                 controller: str = "pdc", step1_s: float = 0.0) -> None:
+                 controller: str = "pdc", step1_s: float = 0.0,
+                 loop_cpus: Sequence[int] = ()) -> None:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink
         self.mavlink = mavlink
         self.cfg = cfg
@@ -162,6 +165,7 @@ class MavlinkLink:
         self.max_thrust_n = np.asarray(max_thrust_n, dtype=float)
         self.controller = controller
         self.step1_s = float(step1_s)
+        self.loop_cpus = tuple(loop_cpus)
         self._out = _Out()
         self.tx = mavlink.MAVLink(self._out, cfg.system_id, cfg.component_id, use_native=False)
         self.tx.WIRE_PROTOCOL_VERSION = "2.0"
@@ -223,7 +227,7 @@ class MavlinkLink:
             raise OSError(f"[mavlink] listen {self.cfg.listen}: {exc.strerror or exc}") from exc
         self._sock = sock
         try:
-            self._receiver, self._pair = spawn_receiver(sock)
+            self._receiver, self._pair = spawn_receiver(sock, self.loop_cpus)
         except OSError as exc:
             sock.close()
             log.error("MAVLink link off: its receiver process: %s", exc)
@@ -300,7 +304,7 @@ class MavlinkLink:
                 now = time.monotonic()
                 if self._pair is None and now >= next_spawn:  # the receiver ended: again
                     next_spawn = now + 1.0
-                    self._receiver, self._pair = spawn_receiver(self._sock)
+                    self._receiver, self._pair = spawn_receiver(self._sock, self.loop_cpus)
                     self.counters["receiver_restarts"] += 1
                 ins = [f for f in (self._pair, self._serial) if f is not None]
                 readable, _, _ = select.select(ins, [], [], 0.02)

@@ -36,6 +36,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from typing import Any
 
 __all__ = ["framed", "decode_datagram", "spawn_receiver", "read_forwarded", "stop_receiver",
@@ -86,15 +87,17 @@ def decode_datagram(rx: Any, data: bytes) -> list | None:
     return msgs
 
 
-def spawn_receiver(sock: socket.socket) -> tuple[subprocess.Popen, socket.socket]:
-    """Start the receiver process on the bound UDP ``sock``; returns it and the daemon's end
-    of the pair (non-blocking) to read with :func:`read_forwarded`."""
+def spawn_receiver(sock: socket.socket, avoid_cpus: Sequence[int] = ()
+                   ) -> tuple[subprocess.Popen, socket.socket]:
+    """Start the receiver process on the bound UDP ``sock``, off ``avoid_cpus`` (the loop's,
+    ``[loop] cpu_affinity``) when the machine has others; returns it and the daemon's end of
+    the pair (non-blocking) to read with :func:`read_forwarded`."""
     ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     try:
         proc = subprocess.Popen(
             [sys.executable, "-m", "uvd.runtime.mavlink_rx", str(sock.fileno()),
-             str(theirs.fileno())], pass_fds=(sock.fileno(), theirs.fileno()),
-            stdin=subprocess.DEVNULL)
+             str(theirs.fileno()), ",".join(str(int(c)) for c in avoid_cpus)],
+            pass_fds=(sock.fileno(), theirs.fileno()), stdin=subprocess.DEVNULL)
     except BaseException:
         ours.close()
         raise
@@ -146,17 +149,24 @@ def stop_receiver(proc: subprocess.Popen, pair: socket.socket, counters: collect
 
 # ----------------------------------------------------------------------------- the process
 
-def _leave_realtime() -> None:
-    """``SCHED_IDLE`` on every CPU this process may use (it may have inherited the loop's
+def _leave_realtime(avoid_cpus: set[int]) -> None:
+    """``SCHED_IDLE``, on every CPU but ``avoid_cpus`` (it may have inherited the loop's
     SCHED_FIFO and CPU set): the kernel preempts an idle-policy task at once for any normal
     one (the loop under normal scheduling too), and it runs whenever a CPU has time to
-    spare. On a machine saturated by other work it gets little (the kernel's weight 3
-    against 1024): datagrams then wait in the socket's buffer, the newest dropped by the
-    kernel when it is full — the ground station's link slows before the loop does."""
+    spare; off the loop's CPUs it does not even cost the loop a context switch (when the
+    loop has CPUs of its own). On a machine saturated by other work it gets little (the
+    kernel's weight 3 against 1024): datagrams then wait in the socket's buffer, the newest
+    dropped by the kernel when it is full — the ground station's link slows before the loop
+    does."""
     with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-    with contextlib.suppress(OSError, AttributeError, ValueError):
-        os.sched_setaffinity(0, range(os.cpu_count() or 1))
+    cpus = set(range(os.cpu_count() or 1))
+    for want in (cpus - avoid_cpus, cpus):
+        try:
+            os.sched_setaffinity(0, want)
+            return
+        except (OSError, AttributeError, ValueError):
+            continue
 
 
 def serve(sock: socket.socket, pair: socket.socket) -> None:
@@ -196,7 +206,7 @@ def serve(sock: socket.socket, pair: socket.socket) -> None:
 
 
 def main(argv: list[str]) -> int:
-    _leave_realtime()
+    _leave_realtime({int(c) for c in argv[2].split(",") if c} if len(argv) > 2 else set())
     sock = socket.socket(fileno=int(argv[0]))
     pair = socket.socket(fileno=int(argv[1]))
     try:
