@@ -444,11 +444,28 @@ async def _phased(settings: LoopSettings, cycle, warmup: float,
 
     def change(x: dict, y: dict) -> float | None:
         return (y["p99"] - x["p99"]) / x["p99"] if x["n"] and y["n"] and x["p99"] else None
+    # each block's own p99, and their median per condition: a burst of the host's that
+    # lands in one or two blocks moves the pooled p99 but not this
+    block_p99 = [float(np.percentile(lat[valid & (k == j)], 99)) * 1e-3
+                 if np.any(valid & (k == j)) else None for j in range(n_blocks)]
+
+    def median_p99(sel) -> float | None:
+        xs = [x for j, x in enumerate(block_p99) if x is not None and sel(j)]
+        return float(np.median(xs)) if xs else None
+    med = {names[0]: median_p99(lambda j: j % 2 == 0), names[1]: median_p99(lambda j: j % 2),
+           "a": median_p99(lambda j: j % 4 == 0), "b": median_p99(lambda j: j % 4 == 2)}
+
+    def med_change(x: str, y: str) -> float | None:
+        return med[y] / med[x] - 1.0 if med[x] and med[y] is not None else None
     out["phases"] = {"blocks": n_blocks, "block_s": block_s, "guard_s": guard_s,
                      **{name: pct[name] for name in names},
                      f"{names[0]}_a": pct["a"], f"{names[0]}_b": pct["b"],
                      "lateness_p99_change": change(pct[names[0]], pct[names[1]]),
-                     "resolution": change(pct["a"], pct["b"])}
+                     "resolution": change(pct["a"], pct["b"]),
+                     "block_p99_us": block_p99,
+                     "median_block_p99_us": {names[0]: med[names[0]], names[1]: med[names[1]]},
+                     "median_block_p99_change": med_change(names[0], names[1]),
+                     "median_block_p99_resolution": med_change("a", "b")}
     return out
 
 
@@ -831,6 +848,11 @@ def _print_phases(what: str, ph: dict, names: tuple[str, str]) -> None:
     print(f"    lateness p99 change, {names[1]} vs {names[0]}: "
           f"{pct(ph['lateness_p99_change'])}  (the {names[0]} blocks against each other, "
           f"the measurement's resolution here: {pct(ph['resolution'])})")
+    m = ph["median_block_p99_us"]
+    if m[names[0]] is not None and m[names[1]] is not None:
+        print(f"    median of the blocks' own p99: {names[0]} {m[names[0]]:.1f} µs, {names[1]} "
+              f"{m[names[1]]:.1f} µs: {pct(ph['median_block_p99_change'])}  (resolution "
+              f"{pct(ph['median_block_p99_resolution'])})")
 
 
 BENCH = Bench(name="loop", summary="Fixed-rate loop deadline precision vs a naive asyncio.sleep "
