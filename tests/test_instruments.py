@@ -210,7 +210,7 @@ def test_lockstep_on_the_ins_frame_hands_same_instant_frames_to_the_next_cycle()
     H0, v0 = start_pose(cfg)
 
     def stamps(ls_cfg):
-        """(cycle time, latest DVL stamp, latest depth stamp) in ms after each cycle."""
+        """{cycle time: (latest DVL stamp, latest depth stamp)} in ms, after each cycle."""
         sim = Lockstep(vehicle, build_core(cfg, vehicle), ls_cfg, H0=H0, v0=v0)
         out = {}
         for k in range(30):
