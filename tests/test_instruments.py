@@ -92,6 +92,9 @@ def test_simulation_instruments_section_is_instrument_config(tmp_path):
     assert (fast.instruments.ins_rate_hz, fast.instruments.dvl_rate_hz,
             fast.instruments.depth_rate_hz, fast.seed, fast.control_rate_hz) == \
         (50.0, 8.0, 10.0, 3, 50.0)
+    # the cycle on the INS frame (trigger = "ins") there, on the fixed schedule in sim.toml
+    assert fast.ins_trigger and not lockstep_config(load_config(root / "config" / "sim.toml")
+                                                    ).ins_trigger
     bad = tmp_path / "bad.toml"
     bad.write_text((root / "config" / "sim.toml").read_text()
                    + "\n[simulation.instruments]\nins_rate_hz = 0\n")
@@ -186,3 +189,43 @@ def test_dvl_resolution_rounds_as_the_pd0_wire_does():
     assert np.allclose(dvl.velocity_body * 1000, np.round(dvl.velocity_body * 1000), atol=1e-9)
     assert np.allclose(wire, dvl.velocity_body, atol=1e-12)
     assert not np.allclose(dvl.velocity_body, v[:3], atol=1e-4)  # the noise is there
+
+
+def test_lockstep_on_the_ins_frame_hands_same_instant_frames_to_the_next_cycle():
+    """``[loop] trigger = "ins"``: the daemon's cycle runs on the INS frame as it arrives, and
+    the DVL's and depth's frames sampled at that plant instant arrive after it (sim-bridge
+    writes each on its own port after the INS frame) — the next cycle has them. The demo's
+    lockstep run models that (``LockstepConfig.ins_trigger``); the experiments' default does
+    not. BlueROV2 at 50 Hz: DVL at 8 Hz (frames at 0, 130, 250, 380, 500 ms on the 10 ms plant
+    grid), depth at 10 Hz."""
+    from dataclasses import replace
+
+    from uvd.experiments.lockstep import Lockstep, LockstepConfig, lockstep_config
+    from uvd.runtime.build import build_core, start_pose
+    from uvd.runtime.config import load_config
+
+    assert LockstepConfig().ins_trigger is False
+    cfg = load_config(Path(__file__).resolve().parents[1] / "config" / "sim-bluerov2.toml")
+    vehicle = cfg.load_vehicle()
+    H0, v0 = start_pose(cfg)
+
+    def stamps(ls_cfg):
+        """{cycle time: (latest DVL stamp, latest depth stamp)} in ms, after each cycle."""
+        sim = Lockstep(vehicle, build_core(cfg, vehicle), ls_cfg, H0=H0, v0=v0)
+        out = {}
+        for k in range(30):
+            sim.cycle()
+            nav = sim.state.nav
+            out[20 * k] = (nav.dvl_t_ns // 1_000_000, nav.depth_t_ns // 1_000_000)
+        return out
+
+    on = lockstep_config(cfg, seed=0)
+    assert on.ins_trigger
+    late, same = stamps(on), stamps(replace(on, ins_trigger=False))
+    # a DVL frame sampled between INS frames (130 ms) reaches the cycle after it in both
+    assert same[120][0] == late[120][0] == 0 and same[140][0] == late[140][0] == 130
+    # one sampled at an INS frame's instant (380 ms) reaches that cycle, or the next one
+    assert same[380][0] == 380 and late[380][0] == 250 and late[400][0] == 380
+    # depth (every 100 ms, always an INS instant) likewise, keeping its own stamp
+    assert same[100][1] == 100 and late[100][1] == 0 and late[120][1] == 100
+    assert [late[t][1] for t in range(120, 600, 100)] == [100, 200, 300, 400, 500]

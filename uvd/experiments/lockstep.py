@@ -48,6 +48,12 @@ class LockstepConfig:
     #: :class:`~sim_bridge.instruments.models.Instruments`, the epoch at the first cycle);
     #: off, the one stream of ``seed`` the thesis experiments (docs/RESULTS.md) draw from
     frame_noise: bool = False
+    #: the cycle runs on the INS frame (``[loop] trigger = "ins"``, the demo's lockstep run of
+    #: such a configuration): a DVL or depth frame sampled at the instant of the INS frame a
+    #: cycle runs on reaches the next cycle, as the daemon receives it after the frame that
+    #: woke it; off, every frame of the period, the cycle's instant included, reaches the
+    #: cycle (the experiments)
+    ins_trigger: bool = False
 
     def __post_init__(self) -> None:
         ratio = self.plant_rate_hz / self.control_rate_hz
@@ -60,7 +66,8 @@ def lockstep_config(cfg, seed: int = 0) -> LockstepConfig:
     """The lockstep run of a daemon configuration (:class:`uvd.runtime.config.Config`): its
     control rate, its ``[simulation.instruments]``, sim-bridge's noise of ``seed`` (frame
     ``f`` after arming carries the noise of the bridge's frame ``f`` after the release) and
-    the DVL's wire resolution (PD0: 1 mm/s)."""
+    the DVL's wire resolution (PD0: 1 mm/s); with ``[loop] trigger = "ins"`` the DVL's and
+    depth's frames of the INS frame's instant reach the next cycle (``ins_trigger``)."""
     from dataclasses import replace
 
     from drivers.pd0 import VELOCITY_RESOLUTION_M_S
@@ -68,7 +75,7 @@ def lockstep_config(cfg, seed: int = 0) -> LockstepConfig:
     inst = replace(instrument_config(cfg.simulation.instruments),
                    dvl_resolution_m_s=VELOCITY_RESOLUTION_M_S)
     return LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=seed, frame_noise=True,
-                          instruments=inst)
+                          instruments=inst, ins_trigger=cfg.loop.trigger == "ins")
 
 
 @dataclass
@@ -124,8 +131,10 @@ class Lockstep:
             supervisor.boot_complete(0, "lockstep")
         self.last_result = None
         self.thrust_cmd = np.zeros(vehicle.n_thrusters)
-        # prime the instruments so the first cycle has every source
+        # prime the instruments so the first cycle has every source (the daemon has them from
+        # standby)
         self._pending = list(self.instruments.sample(0, self.plant.H, self.plant.v))
+        self._deferred = [None, None, None]  # frames held for the cycle after next (ins_trigger)
 
     def command(self, c):
         """Apply an operator command (:mod:`uvd.runtime.commands`) before the next cycle, as
@@ -161,8 +170,27 @@ class Lockstep:
             for i, s in enumerate(got):
                 if s is not None:
                     newest[i] = s
+        if self.cfg.ins_trigger:
+            self._defer_coincident(newest)
         self._pending = newest
         return out
+
+    def _defer_coincident(self, newest: list) -> None:
+        """``ins_trigger``: the next cycle runs on the INS frame of its instant ``t_ns``; a DVL
+        or depth frame sampled at that instant too reaches the daemon after that frame (its
+        own port, written after it) and so the cycle after. Holds those back and hands on the
+        ones held the period before, unless a newer frame came (``newest`` changed in place).
+
+        In sim-bridge this is what the daemon sees: on the BlueROV2 at 50 Hz half the DVL's
+        frames (8 Hz) and every depth frame (10 Hz) share their plant instant with an INS frame,
+        and in a recorded 120 s run 459 of those 479 DVL frames and 1139 of 1198 depth frames
+        reached the cycle of the next INS frame."""
+        held, self._deferred = self._deferred, [None, None, None]
+        for i in (1, 2):
+            s = newest[i]
+            if s is not None and s.t_ns == self.t_ns:
+                self._deferred[i], s = s, None
+            newest[i] = s if s is not None else held[i]
 
 
 def run(sim: Lockstep, duration_s: float, *, progress: Callable[[str], None] | None = None,
