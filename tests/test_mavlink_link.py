@@ -249,5 +249,5 @@ def test_bench_loop_fuzzes_the_link_in_every_other_block(tmp_path):
     f = json.loads(out.read_text())["mavlink_fuzz"]
     assert f["blocks"] == 3 and f["quiet"]["n"] >= 300 and f["fuzzed"]["n"] >= 150
     c = f["link_counters"]
-    assert c["datagrams"] == 600 and c["bad_datagrams"] == 600
+    assert f["sent"] == 600 and c["datagrams"] == 600 and c["bad_datagrams"] == 600
     assert isinstance(f["lateness_p99_change"], float)

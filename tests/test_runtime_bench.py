@@ -124,3 +124,75 @@ def test_fixed_work_control_cycle_does_work():
         cycle(t, 1e-3)
         took.append(time.perf_counter_ns() - t)
     assert np.median(took) > 10_000, took
+
+
+def _alternating(rng, pairs: int, per_block: int, cond_scale: float):
+    """Lateness samples of 2·pairs + 1 alternating blocks (even baseline, odd condition) whose
+    scale drifts from block to block as a host's background does, the condition's tail
+    multiplied by ``cond_scale``."""
+    n_blocks = 2 * pairs + 1
+    drift = np.exp(rng.normal(0.0, 0.4, size=n_blocks // 2 + 1)).repeat(2)[:n_blocks]
+    lat, block = [], []
+    for j in range(n_blocks):
+        x = rng.exponential(2000.0 * drift[j], size=per_block)
+        lat.append(x * (cond_scale if j % 2 else 1.0))
+        block.append(np.full(per_block, j))
+    lat, block = np.concatenate(lat), np.concatenate(block)
+    return lat, block, np.ones(lat.size, dtype=bool), n_blocks
+
+
+def test_p99_change_interval_tells_no_change_from_a_large_one():
+    """The paired block bootstrap of ``uvd bench loop``'s phases: with nothing changed its 95 %
+    interval holds 0 and, with enough pairs, lies inside ±10 %; a condition that raises the
+    tail by 50 % gives an interval around +50 % that excludes ±10 %; a run too short to tell
+    says so (None), never a verdict."""
+    from uvd.bench.loop import p99_change_ci
+    rng = np.random.default_rng(5)
+    same = p99_change_ci(*_alternating(rng, 60, 3000, 1.0), resamples=400)
+    lo, hi = same["ci95"]
+    assert lo < 0.0 < hi and same["within_10pct"] is True
+    more = p99_change_ci(*_alternating(rng, 60, 3000, 1.5), resamples=400)
+    lo, hi = more["ci95"]
+    assert 0.3 < lo < 0.5 < hi < 0.7 and more["within_10pct"] is False
+    short = p99_change_ci(*_alternating(rng, 3, 300, 1.0), resamples=400)
+    assert short["within_10pct"] is None
+    assert p99_change_ci(*_alternating(rng, 1, 300, 1.0))["ci95"] is None
+
+
+def test_peers_start_as_remote_peers_not_as_the_real_time_loop():
+    """A benchmark's peer (Zenoh subscriber, MAVLink fuzz sender) forked by the loop's thread at
+    SCHED_FIFO on its own CPU would inherit both: ``as_remote_peer`` starts it at normal
+    scheduling off the loop's CPUs, and gives the loop's thread its own back."""
+    import os
+    import subprocess
+    import sys
+    import threading
+
+    from uvd.bench.loop import as_remote_peer
+    if (os.cpu_count() or 1) < 2:
+        import pytest
+        pytest.skip("needs two CPUs")
+    seen: dict = {}
+
+    def body() -> None:
+        os.sched_setaffinity(0, {1})
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+            seen["fifo"] = True
+        except PermissionError:
+            seen["fifo"] = False
+        with as_remote_peer([1]):
+            child = subprocess.run(
+                [sys.executable, "-c", "import os; print(sorted(os.sched_getaffinity(0)), "
+                 "os.sched_getscheduler(0))"], capture_output=True, text=True, timeout=60)
+        seen["child"] = child.stdout.split()
+        seen["after"] = (sorted(os.sched_getaffinity(0)), os.sched_getscheduler(0))
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+    t = threading.Thread(target=body)
+    t.start()
+    t.join(60)
+    others = sorted(set(range(os.cpu_count())) - {1})
+    assert " ".join(seen["child"][:-1]) == str(others)
+    assert int(seen["child"][-1]) == os.SCHED_OTHER
+    assert seen["after"] == ([1], os.SCHED_FIFO if seen["fifo"] else os.SCHED_OTHER)

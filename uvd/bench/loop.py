@@ -30,6 +30,7 @@ Per-cycle work (``--cycle``), registered in :data:`CYCLES`:
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import os
 import resource
@@ -373,9 +374,44 @@ def _add(p) -> None:
                    help="with --zenoh-stall: N stops, so 2N + 1 blocks (default 2)")
 
 
+@contextlib.contextmanager
+def as_remote_peer(loop_cpus=()):
+    """Start child processes, within this block, as a *remote peer* runs: normal scheduling,
+    off the loop's CPUs (all CPUs when the loop has none of its own or takes them all).
+
+    The loop's thread starts the benchmarks' peers — the Zenoh subscriber, the MAVLink fuzz
+    sender — and a child inherits its creator's scheduling policy and CPU set at fork. From a
+    loop at ``--sched-fifo`` on ``--cpu``, a peer would become a real-time process on the
+    loop's own CPU at the loop's priority, which it cannot preempt: its Python work would then
+    show in the loop's lateness, as no ground station or fault-detection client on another
+    computer can. So the calling thread steps down to ``SCHED_OTHER`` on the other CPUs for
+    the fork, and takes back its policy and CPU set after. Never raises."""
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+        cpus = os.sched_getaffinity(0)
+    except (OSError, AttributeError):
+        yield
+        return
+    every = set(range(os.cpu_count() or 1))
+    peer = (every - set(loop_cpus)) or every
+    with contextlib.suppress(OSError):
+        os.sched_setaffinity(0, peer)
+    with contextlib.suppress(OSError):
+        if policy != os.SCHED_OTHER:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            if policy != os.SCHED_OTHER:
+                os.sched_setscheduler(0, policy, param)
+        with contextlib.suppress(OSError):
+            os.sched_setaffinity(0, cpus)
+
+
 async def _with_stalled_reader(settings: LoopSettings, cycle, seconds: float, rounds: int,
                                warmup: float, steal: Callable[[], float | None], hub,
-                               endpoint: str) -> dict:
+                               endpoint: str, loop_cpus=()) -> dict:
     """The loop measured in one run of ``2 × rounds + 1`` blocks of ``seconds`` while a Zenoh
     subscriber (a ``uvd-fdc`` process taking every state sample) reads, is stopped (SIGSTOP:
     its socket fills, nothing is read), reads again (SIGCONT), … (:func:`_phased`). Returns
@@ -385,7 +421,8 @@ async def _with_stalled_reader(settings: LoopSettings, cycle, seconds: float, ro
     from uvd.bench.zenoh import FdcProcess
 
     pump = asyncio.get_running_loop().create_task(hub.run())
-    sub = FdcProcess([endpoint])
+    with as_remote_peer(loop_cpus):
+        sub = FdcProcess([endpoint])
     try:
         await sub.subscribed()
         await asyncio.sleep(1.0)  # connected, samples flowing
@@ -457,7 +494,11 @@ async def _phased(settings: LoopSettings, cycle, warmup: float,
 
     def med_change(x: str, y: str) -> float | None:
         return med[y] / med[x] - 1.0 if med[x] and med[y] is not None else None
+    ci = p99_change_ci(lat, k, valid, n_blocks)
     out["phases"] = {"blocks": n_blocks, "block_s": block_s, "guard_s": guard_s,
+                     "lateness_p99_change_ci95": ci["ci95"],
+                     "bootstrap_resamples": ci["resamples"],
+                     "within_10pct": ci["within_10pct"],
                      **{name: pct[name] for name in names},
                      f"{names[0]}_a": pct["a"], f"{names[0]}_b": pct["b"],
                      "lateness_p99_change": change(pct[names[0]], pct[names[1]]),
@@ -467,6 +508,42 @@ async def _phased(settings: LoopSettings, cycle, warmup: float,
                      "median_block_p99_change": med_change(names[0], names[1]),
                      "median_block_p99_resolution": med_change("a", "b")}
     return out
+
+
+def p99_change_ci(lat_ns: np.ndarray, block: np.ndarray, valid: np.ndarray, n_blocks: int,
+                  *, resamples: int = 2000, bound: float = 0.10, seed: int = 0) -> dict:
+    """The pooled lateness p99's relative change, condition vs baseline, with a 95 %
+    confidence interval from a paired block bootstrap — what lets a run say whether the
+    condition changes p99 by less than ``bound``.
+
+    Blocks alternate (even: baseline, odd: condition, :func:`_phased`). The unit resampled is
+    a *pair*: baseline block 2j with the condition block 2j + 1 that follows it (the last
+    baseline block joins the last pair). A host burst or a drift of the machine's background
+    load moves both blocks of a pair alike, so resampling pairs (with replacement, ``seed``
+    fixed) carries exactly the run's own block-to-block variation into the interval, and the
+    statistic of every resample is the one measured: p99 of the pooled baseline samples
+    against p99 of the pooled condition samples. ``within_10pct`` is True when the whole
+    interval lies inside ±``bound`` (the change is shown to be smaller), False when it lies
+    wholly outside (shown to be larger), None when the run cannot tell — then more rounds
+    narrow it (its width falls about as 1/√pairs)."""
+    blocks = [lat_ns[valid & (block == j)] for j in range(n_blocks)]
+    pairs = n_blocks // 2
+    if pairs < 2 or any(b.size == 0 for b in blocks):
+        return {"ci95": None, "resamples": 0, "within_10pct": None}
+    base = [blocks[2 * j] for j in range(pairs)]
+    base[-1] = np.concatenate([base[-1]] + blocks[2 * pairs:])
+    cond = [blocks[2 * j + 1] for j in range(pairs)]
+    rng = np.random.default_rng(seed)
+    change = np.empty(resamples)
+    for r in range(resamples):
+        pick = rng.integers(0, pairs, size=pairs)
+        b = np.percentile(np.concatenate([base[i] for i in pick]), 99)
+        c = np.percentile(np.concatenate([cond[i] for i in pick]), 99)
+        change[r] = c / b - 1.0 if b > 0 else np.nan
+    lo, hi = (float(x) for x in np.nanpercentile(change, [2.5, 97.5]))
+    within = True if -bound < lo and hi < bound else False if lo >= bound or hi <= -bound \
+        else None
+    return {"ci95": [lo, hi], "resamples": resamples, "within_10pct": within}
 
 
 async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float,
@@ -663,7 +740,7 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
     """Our loop running ``cycle`` plus a MAVLink link's cycle record, in blocks of
     ``block_s``, quiet and fuzzed in turn (:func:`_phased`; ``duration`` of each): a second
     process sends the ``n_fuzz`` bad datagrams to the link in the fuzzed blocks only."""
-    from uvd.bench.mavlink_fuzz import fuzz_process
+    from uvd.bench.mavlink_fuzz import fuzz_process, start_fuzz, wait_ready
     link, publish, hub = _mavlink_link(loop_cpus)
 
     def both(t_ns: int, dt: float) -> None:
@@ -677,10 +754,13 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
     pump = asyncio.get_running_loop().create_task(hub.run())
     await asyncio.sleep(0.2)  # the hub opens the link
     n_blocks = 2 * max(1, int(round(duration / block_s))) + 1
-    t0 = time.monotonic() + warmup + 1.0  # the sender builds its datagrams meanwhile
-    sender = fuzz_process(link.port, n_fuzz, [(t0 + k * block_s, t0 + (k + 1) * block_s)
-                                              for k in range(1, n_blocks, 2)])
+    with as_remote_peer(loop_cpus):
+        sender = fuzz_process(link.port, n_fuzz)
     try:
+        await asyncio.to_thread(wait_ready, sender)
+        t0 = time.monotonic() + warmup + 0.5
+        start_fuzz(sender, [(t0 + k * block_s, t0 + (k + 1) * block_s)
+                            for k in range(1, n_blocks, 2)])
         out = await _phased(settings, both, warmup, steal, n_blocks, block_s,
                             ("quiet", "fuzzed"), t0)
     finally:
@@ -691,7 +771,9 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
         await hub.aclose()
         await pump
         sys.setswitchinterval(old_switch)
+    said = sender.stdout.read().split() if sender.stdout else []
     out["mavlink"] = link.stats()
+    out["sent"] = int(said[-1]) if said and said[-1].isdigit() else 0
     return out
 
 
@@ -736,7 +818,7 @@ def _run(args) -> dict:
         stall = asyncio.run(_with_stalled_reader(settings, cycle, args.zenoh_stall,
                                                  args.stall_rounds, args.warmup,
                                                  lambda: host_steal_s(steal_cpus), hub,
-                                                 endpoint))
+                                                 endpoint, loop_cpus=args.cpu or ()))
         ours = stall
     else:
         ours = asyncio.run(_ours(settings, cycle, args.duration, args.warmup,
@@ -752,7 +834,7 @@ def _run(args) -> dict:
         f = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup,
                                    args.mavlink_fuzz, lambda: host_steal_s(steal_cpus),
                                    loop_cpus=args.cpu or ()))
-        fuzz = {"datagrams": args.mavlink_fuzz, "link_counters": f["mavlink"],
+        fuzz = {"datagrams": args.mavlink_fuzz, "sent": f["sent"], "link_counters": f["mavlink"],
                 "overruns": f["overruns"], **f["phases"]}
     warm = _back_to_back(cycle, args.rate, 2000) if args.cycle != "none" else None
     naive = None if args.no_naive else asyncio.run(_naive(args.rate, cycle, args.duration))
@@ -830,8 +912,9 @@ def _run(args) -> dict:
     if fuzz is not None:
         c = fuzz["link_counters"]
         _print_phases("MAVLink link", fuzz, ("quiet", "fuzzed"))
-        print(f"    {fuzz['datagrams']} datagrams sent, {c.get('datagrams', 0)} read, "
-              f"{c.get('bad_datagrams', 0)} bad; overruns {fuzz['overruns']}")
+        print(f"    {fuzz['sent']} of {fuzz['datagrams']} datagrams sent, "
+              f"{c.get('datagrams', 0)} read, {c.get('bad_datagrams', 0)} bad; "
+              f"overruns {fuzz['overruns']}")
     g = ours["gc"]
     print(f"  gc ({g['policy']}): collections {g['collections']}  forced {g['forced']}  "
           f"max µs {[round(x, 1) for x in g['max_us']]}")
@@ -848,6 +931,13 @@ def _print_phases(what: str, ph: dict, names: tuple[str, str]) -> None:
     print(f"    lateness p99 change, {names[1]} vs {names[0]}: "
           f"{pct(ph['lateness_p99_change'])}  (the {names[0]} blocks against each other, "
           f"the measurement's resolution here: {pct(ph['resolution'])})")
+    ci = ph.get("lateness_p99_change_ci95")
+    if ci is not None:
+        verdict = {True: "inside ±10 %: the change is shown to be smaller",
+                   False: "outside ±10 %: the change is shown to be larger",
+                   None: "straddles ±10 %: this run cannot tell"}[ph["within_10pct"]]
+        print(f"    95 % interval of that change (paired block bootstrap, "
+              f"{ph['blocks'] // 2} pairs): {pct(ci[0])} … {pct(ci[1])} — {verdict}")
     m = ph["median_block_p99_us"]
     if m[names[0]] is not None and m[names[1]] is not None:
         print(f"    median of the blocks' own p99: {names[0]} {m[names[0]]:.1f} µs, {names[1]} "

@@ -11,7 +11,7 @@ import sys
 import threading
 import time
 
-__all__ = ["fuzz_datagrams", "FuzzSender", "fuzz_process"]
+__all__ = ["fuzz_datagrams", "FuzzSender", "fuzz_process", "wait_ready", "start_fuzz"]
 
 
 def fuzz_datagrams(n: int, seed: int = 21) -> list[bytes]:
@@ -30,7 +30,7 @@ def fuzz_datagrams(n: int, seed: int = 21) -> list[bytes]:
         enc.set_mode_encode(1, 1, 99), enc.heartbeat_encode(6, 8, 0, 0, 0))]
 
     def noise(k: int) -> bytes:
-        return bytes(rng.getrandbits(8) for _ in range(k))
+        return rng.randbytes(k)
 
     out = []
     for i in range(n):
@@ -95,17 +95,42 @@ class FuzzSender:
         self._thread.join(timeout)
 
 
-def fuzz_process(port: int, n: int, windows: list[tuple[float, float]],
-                 host: str = "127.0.0.1") -> subprocess.Popen:
-    """A second process sending ``n`` fuzz datagrams to ``host:port`` within ``windows``
-    (:class:`FuzzSender`; a sender thread in the measured process would compete with its loop
-    for the interpreter lock)."""
+def fuzz_process(port: int, n: int, host: str = "127.0.0.1") -> subprocess.Popen:
+    """A second process that builds ``n`` fuzz datagrams for ``host:port`` (a sender thread in
+    the measured process would compete with its loop for the interpreter lock). It prints
+    ``ready`` once they are built; :func:`start_fuzz` then gives it the windows to send them
+    in (:class:`FuzzSender`), so no datagram goes late, outside its windows, while it is still
+    building."""
     return subprocess.Popen([sys.executable, "-m", "uvd.bench.mavlink_fuzz", host, str(port),
-                             str(n), json.dumps(windows)])
+                             str(n)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+
+
+def wait_ready(proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
+    """Wait for :func:`fuzz_process`'s ``ready`` line (its datagrams built); raises
+    RuntimeError naming what came instead, or the timeout."""
+    got: list[str] = []
+    reader = threading.Thread(target=lambda: got.append(proc.stdout.readline()), daemon=True)
+    reader.start()
+    reader.join(timeout_s)
+    if not got or got[0].strip() != "ready":
+        proc.kill()
+        raise RuntimeError(f"MAVLink fuzz sender not ready within {timeout_s:g} s "
+                           f"(said {got[0].strip()!r})" if got else
+                           f"MAVLink fuzz sender not ready within {timeout_s:g} s")
+
+
+def start_fuzz(proc: subprocess.Popen, windows: list[tuple[float, float]]) -> None:
+    """Give a ready :func:`fuzz_process` its windows (``time.monotonic`` seconds, a clock every
+    process of the machine shares); it sends and prints how many it sent, then ends."""
+    proc.stdin.write(json.dumps(windows) + "\n")
+    proc.stdin.close()
 
 
 if __name__ == "__main__":
-    h, p, k, w = sys.argv[1:5]
-    s = FuzzSender(fuzz_datagrams(int(k)), h, int(p), [tuple(x) for x in json.loads(w)]).start()
+    h, p, k = sys.argv[1:4]
+    grams = fuzz_datagrams(int(k))
+    print("ready", flush=True)
+    w = json.loads(sys.stdin.readline())
+    s = FuzzSender(grams, h, int(p), [tuple(x) for x in w]).start()
     s.join()
-    print(s.sent)
+    print(s.sent, flush=True)
