@@ -84,6 +84,27 @@ def test_a_slow_wander_below_half_a_fault_never_alarms_and_a_fault_still_does():
     assert [d.kind for d in found] == ["flooding"] and found[0].t_ns * 1e-9 <= 20_005
 
 
+def test_a_change_from_a_baseline_of_zero_has_no_relative_change():
+    """A channel whose baseline is exactly 0 (a daemon that does not estimate g) has no
+    relative change: the detection says null, in strict JSON valid against uvd.fault.v1 — not
+    Infinity, which no JSON parser has to accept."""
+    rng = np.random.default_rng(6)
+    det = VehicleDetector("v", FAST)
+    for k in range(200):
+        assert det.update({**_payload(k * 1.0, rng), "g": 0.0}) == []
+    found = []
+    for k in range(200, 230):
+        found += det.update({**_payload(k * 1.0, rng), "g": 30.0})
+        if found:
+            break
+    assert [(d.kind, d.channel) for d in found] == [("buoyancy", "g")]
+    d = found[0].as_dict()
+    assert d["relative_change"] is None
+    schema = json.loads((Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
+                         / "uvd.fault.v1.json").read_text())
+    jsonschema.Draft202012Validator(schema).validate(json.loads(json.dumps(d, allow_nan=False)))
+
+
 @pytest.mark.parametrize("phi", [0.0, 0.8, 0.95])
 def test_the_autocorrelation_time_of_an_ar1_series(phi):
     """τ = (1 + φ)/(1 − φ) for x_k = φ x_{k−1} + ε_k."""
@@ -145,6 +166,7 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
             while not faults and time.monotonic() < deadline:
                 time.sleep(0.1)
             pub.put(b"not json")  # counted and dropped, never a crash
+            pub.put(b"[1, 2]")  # JSON, not an object: the same
             time.sleep(0.3)
             token.undeclare()
             time.sleep(0.5)
@@ -163,6 +185,7 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     stats = json.loads((tmp_path / "stats.json").read_text())  # --stats: what arrived
     key = "uvd/sub1/estimate/aid6"
     assert stats["received"] == {key: 299} and stats["lost"] == {key: 1}
+    assert stats["dropped"] == {key: 2} and f"dropped 2 malformed samples ({key} 2)" in out
     assert stats["latency_ms"]["n"] == 299 and 0 < stats["latency_ms"]["p50"] < 1000
 
 

@@ -135,6 +135,12 @@ def _run_one(fault: str | None, minutes_before: float, minutes_after: float, see
                                                    "delta": det.delta}}
 
 
+def _pct(x) -> str:
+    """A relative change as a signed percentage; "-" when there is none (no detection, or a
+    baseline of 0 makes it undefined)."""
+    return "-" if x is None else f"{x:+.1%}"
+
+
 def run(opts: ExperimentOptions) -> dict:
     hours = 4.0 if opts.hours is None else opts.hours
     progress = opts.progress
@@ -156,7 +162,7 @@ def run(opts: ExperimentOptions) -> dict:
         lat = "-" if r["latency_s"] is None else f"{r['latency_s']:.0f} s"
         lines.append(f"{name:>14} {label:>26} {str(r['detected']):>9} {str(r['kind']):>13} "
                      f"{str(r['right_kind']):>6} {lat:>9} {first.get('channel', '-'):>12} "
-                     f"{first.get('relative_change', float('nan')):>+8.1%}")
+                     f"{_pct(first.get('relative_change')):>8}")
     ff = runs["fault-free"]
     lines.append(f"fault-free {hours:g} h: {ff['false_alarms']} false alarm(s)")
     lines.append(f"wall {time.perf_counter() - t0:.0f} s")

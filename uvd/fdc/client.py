@@ -27,14 +27,21 @@ from uvd.fdc.detector import CusumSettings, VehicleDetector, thruster_matrix
 
 class LinkStats:
     """Per key: samples received, samples lost (gaps in ``seq``, which the daemon raises by
-    one a sample per key) and end-to-end latencies (receipt − ``wall_time``, seconds)."""
+    one a sample per key), samples dropped as malformed, and end-to-end latencies (receipt −
+    ``wall_time``, seconds)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self.received: dict[str, int] = {}
         self.lost: dict[str, int] = {}
         self.last_seq: dict[str, int] = {}
+        self.dropped: dict[str, int] = {}
         self.latency_s: list[float] = []
+
+    def drop(self, key: str) -> None:
+        """Count a sample of ``key`` dropped as malformed."""
+        with self._lock:
+            self.dropped[key] = self.dropped.get(key, 0) + 1
 
     def take(self, key: str, payload: dict) -> None:
         now = time.time()
@@ -57,7 +64,8 @@ class LinkStats:
                           p99=lat[min(len(lat) - 1, int(0.99 * len(lat)))] * 1e3,
                           max=lat[-1] * 1e3)
             return {"received": dict(self.received), "lost": dict(self.lost),
-                    "last_seq": dict(self.last_seq), "latency_ms": ms}
+                    "dropped": dict(self.dropped), "last_seq": dict(self.last_seq),
+                    "latency_ms": ms}
 
 
 def add_connection_arguments(p: argparse.ArgumentParser) -> None:
@@ -139,12 +147,14 @@ def main(argv: list[str] | None = None) -> int:
                 found = det.update(payload)
             except (KeyError, TypeError, ValueError) as exc:
                 print(f"{sample.key_expr}: malformed estimate ({exc}); dropped", flush=True)
+                link.drop(str(sample.key_expr))
                 return
         report(vehicle, found)
 
     def report(vehicle: str, found) -> None:
         for d in found:
-            say(f"FAULT {vehicle}: {d.kind} ({d.channel} {d.relative_change:+.1%}, "
+            rel = "n/a" if d.relative_change is None else f"{d.relative_change:+.1%}"
+            say(f"FAULT {vehicle}: {d.kind} ({d.channel} {rel}, "
                 f"{d.magnitude:+.1f} σ, confidence {d.confidence:.1f})")
             session.put(f"uvd/{vehicle}/fault/{d.kind}", json.dumps(d.as_dict()),
                         encoding=zenoh.Encoding("application/json;schema=uvd.fault.v1"))
@@ -183,9 +193,11 @@ def main(argv: list[str] | None = None) -> int:
             payload = json.loads(sample.payload.to_bytes())
         except ValueError as exc:
             say(f"{sample.key_expr}: not JSON ({exc}); dropped")
+            link.drop(str(sample.key_expr))
             return None
         if not isinstance(payload, dict):
             say(f"{sample.key_expr}: not a JSON object; dropped")
+            link.drop(str(sample.key_expr))
             return None
         return payload
 
@@ -205,6 +217,7 @@ def main(argv: list[str] | None = None) -> int:
                     found += det.update_state(payload)
                 except (KeyError, TypeError, ValueError) as exc:
                     print(f"{sample.key_expr}: malformed state ({exc}); dropped", flush=True)
+                    link.drop(str(sample.key_expr))
                     return
         report(vehicle, found)
 
@@ -232,6 +245,9 @@ def main(argv: list[str] | None = None) -> int:
                 ask_thrusters(vehicle)
     finally:
         session.close()
+        if link.dropped:
+            say(f"uvd-fdc: dropped {sum(link.dropped.values())} malformed samples "
+                f"({', '.join(f'{k} {n}' for k, n in sorted(link.dropped.items()))})")
         if args.stats:
             with open(args.stats, "w") as f:
                 json.dump(link.summary(), f)

@@ -99,7 +99,7 @@ class Detection:
     t_ns: int
     channel: str
     magnitude: float
-    relative_change: float
+    relative_change: float | None
     confidence: float
     explanation: dict | None = None
 
@@ -258,10 +258,9 @@ class VehicleDetector:
         if best is None:
             return []
         s, k, sign = best
-        rel = (ch[k] - self.mu[k]) / abs(self.mu[k]) if self.mu[k] else math.inf
+        rel = float((ch[k] - self.mu[k]) / abs(self.mu[k])) if self.mu[k] else None  # μ = 0
         det = Detection(self.vehicle, _kind(k, sign), t_ns, k,
-                        float((ch[k] - self.mu[k]) / self.sigma[k]), float(rel),
-                        float(s / st.h))
+                        float((ch[k] - self.mu[k]) / self.sigma[k]), rel, float(s / st.h))
         if self.model is None:
             self.alarmed = True
             return [det]
