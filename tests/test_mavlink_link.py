@@ -251,3 +251,18 @@ def test_bench_loop_fuzzes_the_link_in_every_other_block(tmp_path):
     c = f["link_counters"]
     assert f["sent"] == 600 and c["datagrams"] == 600 and c["bad_datagrams"] == 600
     assert isinstance(f["lateness_p99_change"], float)
+
+
+def test_bench_loop_fuzz_control_sends_to_a_bare_receiver(tmp_path):
+    """``--fuzz-control``: the same datagrams in the same blocks, to a process that only judges
+    them as the link's receiver does — no link in the measured process."""
+    import json
+
+    from uvd.cli import main
+    out = tmp_path / "loop.json"
+    assert main(["bench", "loop", "--rate", "100", "--cycle", "none", "--no-naive",
+                 "--duration", "2", "--warmup", "0", "--mavlink-fuzz", "600",
+                 "--fuzz-control", "--json", str(out)]) == 0
+    f = json.loads(out.read_text())["mavlink_fuzz"]
+    assert f["blocks"] == 3 and f["fuzzed"]["n"] >= 150
+    assert f["sent"] == 600 and f["link_counters"] == {"control": True, "datagrams": 600}

@@ -149,11 +149,15 @@ def test_p99_change_interval_tells_no_change_from_a_large_one():
     from uvd.bench.loop import p99_change_ci
     rng = np.random.default_rng(5)
     same = p99_change_ci(*_alternating(rng, 60, 3000, 1.0), resamples=400)
-    lo, hi = same["ci95"]
-    assert lo < 0.0 < hi and same["within_10pct"] is True
+    for ci, within in (("ci95", "within_10pct"), ("median_block_ci95",
+                                                 "median_block_within_10pct")):
+        lo, hi = same[ci]
+        assert lo < 0.0 < hi and same[within] is True
     more = p99_change_ci(*_alternating(rng, 60, 3000, 1.5), resamples=400)
-    lo, hi = more["ci95"]
-    assert 0.3 < lo < 0.5 < hi < 0.7 and more["within_10pct"] is False
+    for ci, within in (("ci95", "within_10pct"), ("median_block_ci95",
+                                                 "median_block_within_10pct")):
+        lo, hi = more[ci]
+        assert 0.3 < lo < 0.5 < hi < 0.7 and more[within] is False
     short = p99_change_ci(*_alternating(rng, 3, 300, 1.0), resamples=400)
     assert short["within_10pct"] is None
     assert p99_change_ci(*_alternating(rng, 1, 300, 1.0))["ci95"] is None

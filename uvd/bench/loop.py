@@ -34,6 +34,7 @@ import contextlib
 import math
 import os
 import resource
+import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -365,6 +366,10 @@ def _add(p) -> None:
                         "a loopback port, in 2-s blocks, quiet and fuzzed in turn (--duration "
                         "of each): N random and malformed datagrams arrive in the fuzzed ones "
                         "from a second process; prints both lateness figures")
+    p.add_argument("--fuzz-control", action="store_true",
+                   help="with --mavlink-fuzz: no link; the datagrams go to a bare process that "
+                        "judges them as the link's receiver does (off the loop's CPUs) — what "
+                        "the fuzz then changes is the machine's, not the daemon's")
     p.add_argument("--zenoh-stall", type=float, default=0.0, metavar="SECONDS",
                    help="also publish every cycle's state over Zenoh (the daemon's sink) to a "
                         "uvd-fdc process, and measure blocks of SECONDS in turn: it reads, "
@@ -499,6 +504,8 @@ async def _phased(settings: LoopSettings, cycle, warmup: float,
                      "lateness_p99_change_ci95": ci["ci95"],
                      "bootstrap_resamples": ci["resamples"],
                      "within_10pct": ci["within_10pct"],
+                     "median_block_p99_change_ci95": ci["median_block_ci95"],
+                     "median_block_within_10pct": ci["median_block_within_10pct"],
                      **{name: pct[name] for name in names},
                      f"{names[0]}_a": pct["a"], f"{names[0]}_b": pct["b"],
                      "lateness_p99_change": change(pct[names[0]], pct[names[1]]),
@@ -525,25 +532,39 @@ def p99_change_ci(lat_ns: np.ndarray, block: np.ndarray, valid: np.ndarray, n_bl
     against p99 of the pooled condition samples. ``within_10pct`` is True when the whole
     interval lies inside ±``bound`` (the change is shown to be smaller), False when it lies
     wholly outside (shown to be larger), None when the run cannot tell — then more rounds
-    narrow it (its width falls about as 1/√pairs)."""
+    narrow it (its width falls about as 1/√pairs).
+
+    The same resamples give the interval of the change in the *median of the blocks' own
+    p99* (``median_block_ci95``, ``median_block_within_10pct``): the pooled p99 of short
+    blocks is carried by the few blocks a host burst lands in, the median of blocks is not —
+    both are printed, neither is chosen after the fact."""
     blocks = [lat_ns[valid & (block == j)] for j in range(n_blocks)]
     pairs = n_blocks // 2
     if pairs < 2 or any(b.size == 0 for b in blocks):
-        return {"ci95": None, "resamples": 0, "within_10pct": None}
+        return {"ci95": None, "resamples": 0, "within_10pct": None,
+                "median_block_ci95": None, "median_block_within_10pct": None}
     base = [blocks[2 * j] for j in range(pairs)]
     base[-1] = np.concatenate([base[-1]] + blocks[2 * pairs:])
     cond = [blocks[2 * j + 1] for j in range(pairs)]
+    base_p99 = np.array([np.percentile(blocks[2 * j], 99) for j in range(pairs)])
+    cond_p99 = np.array([np.percentile(x, 99) for x in cond])
     rng = np.random.default_rng(seed)
-    change = np.empty(resamples)
+    change, med = np.empty(resamples), np.empty(resamples)
     for r in range(resamples):
         pick = rng.integers(0, pairs, size=pairs)
         b = np.percentile(np.concatenate([base[i] for i in pick]), 99)
         c = np.percentile(np.concatenate([cond[i] for i in pick]), 99)
         change[r] = c / b - 1.0 if b > 0 else np.nan
-    lo, hi = (float(x) for x in np.nanpercentile(change, [2.5, 97.5]))
-    within = True if -bound < lo and hi < bound else False if lo >= bound or hi <= -bound \
-        else None
-    return {"ci95": [lo, hi], "resamples": resamples, "within_10pct": within}
+        mb = np.median(base_p99[pick])
+        med[r] = np.median(cond_p99[pick]) / mb - 1.0 if mb > 0 else np.nan
+
+    def verdict(x: np.ndarray) -> tuple[list[float], bool | None]:
+        lo, hi = (float(v) for v in np.nanpercentile(x, [2.5, 97.5]))
+        return [lo, hi], (True if -bound < lo and hi < bound else
+                          False if lo >= bound or hi <= -bound else None)
+    (ci, within), (mci, mwithin) = verdict(change), verdict(med)
+    return {"ci95": ci, "resamples": resamples, "within_10pct": within,
+            "median_block_ci95": mci, "median_block_within_10pct": mwithin}
 
 
 async def _ours(settings: LoopSettings, cycle, duration: float, warmup: float,
@@ -736,16 +757,30 @@ def _mavlink_link(loop_cpus=()):
 
 
 async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: float,
-                     n_fuzz: int, steal, block_s: float = 2.0, loop_cpus=()) -> dict:
+                     n_fuzz: int, steal, block_s: float = 2.0, loop_cpus=(),
+                     control: bool = False) -> dict:
     """Our loop running ``cycle`` plus a MAVLink link's cycle record, in blocks of
     ``block_s``, quiet and fuzzed in turn (:func:`_phased`; ``duration`` of each): a second
-    process sends the ``n_fuzz`` bad datagrams to the link in the fuzzed blocks only."""
-    from uvd.bench.mavlink_fuzz import fuzz_process, start_fuzz, wait_ready
-    link, publish, hub = _mavlink_link(loop_cpus)
+    process sends the ``n_fuzz`` bad datagrams to the link in the fuzzed blocks only.
 
-    def both(t_ns: int, dt: float) -> None:
-        cycle(t_ns, dt)
-        publish(t_ns, dt)
+    ``control``: no link at all — the datagrams go to a process of their own that judges
+    them as the link's receiver does (:func:`uvd.bench.mavlink_fuzz.receiver_process`, off
+    the loop's CPUs). What the fuzz then changes in the loop is the machine's doing (the
+    kernel's and the parser's work on the other CPUs), with nothing of the daemon on the
+    datagrams' path."""
+    from uvd.bench.mavlink_fuzz import fuzz_process, receiver_process, start_fuzz, wait_ready
+    from uvd.telemetry.sink import TelemetryHub
+    if control:  # forked from this thread, stepped down (a worker thread would not be)
+        with as_remote_peer(loop_cpus):
+            target, port = receiver_process()
+        link, hub, both = None, TelemetryHub([]), cycle
+    else:
+        link, publish, hub = _mavlink_link(loop_cpus)
+        target, port = None, 0  # the link's, once the hub has opened it
+
+        def both(t_ns: int, dt: float) -> None:
+            cycle(t_ns, dt)
+            publish(t_ns, dt)
 
     from uvd.runtime.config import DaemonSection
     # as the daemon runs: another thread holding the interpreter yields it within this
@@ -755,7 +790,7 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
     await asyncio.sleep(0.2)  # the hub opens the link
     n_blocks = 2 * max(1, int(round(duration / block_s))) + 1
     with as_remote_peer(loop_cpus):
-        sender = fuzz_process(link.port, n_fuzz)
+        sender = fuzz_process(port or link.port, n_fuzz)
     try:
         await asyncio.to_thread(wait_ready, sender)
         t0 = time.monotonic() + warmup + 0.5
@@ -771,9 +806,17 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
         await hub.aclose()
         await pump
         sys.setswitchinterval(old_switch)
+        judged = []
+        if target is not None:
+            target.terminate()
+            try:
+                judged = (await asyncio.to_thread(target.communicate, timeout=10))[0].split()
+            except subprocess.TimeoutExpired:
+                target.kill()
     said = sender.stdout.read().split() if sender.stdout else []
-    out["mavlink"] = link.stats()
     out["sent"] = int(said[-1]) if said and said[-1].isdigit() else 0
+    out["mavlink"] = link.stats() if link is not None else {
+        "control": True, "datagrams": int(judged[-1]) if judged and judged[-1].isdigit() else 0}
     return out
 
 
@@ -833,6 +876,7 @@ def _run(args) -> dict:
     if args.mavlink_fuzz:
         f = asyncio.run(_with_fuzz(settings, cycle, args.duration, args.warmup,
                                    args.mavlink_fuzz, lambda: host_steal_s(steal_cpus),
+                                   control=args.fuzz_control,
                                    loop_cpus=args.cpu or ()))
         fuzz = {"datagrams": args.mavlink_fuzz, "sent": f["sent"], "link_counters": f["mavlink"],
                 "overruns": f["overruns"], **f["phases"]}
@@ -911,7 +955,9 @@ def _run(args) -> dict:
           f"{oa['stall_ms_total']:.1f} ms, longest {oa['max_stall_us']:.0f} µs")
     if fuzz is not None:
         c = fuzz["link_counters"]
-        _print_phases("MAVLink link", fuzz, ("quiet", "fuzzed"))
+        _print_phases("MAVLink link" if not c.get("control") else
+                      "MAVLink fuzz CONTROL (no link: a bare receiver process)", fuzz,
+                      ("quiet", "fuzzed"))
         print(f"    {fuzz['sent']} of {fuzz['datagrams']} datagrams sent, "
               f"{c.get('datagrams', 0)} read, {c.get('bad_datagrams', 0)} bad; "
               f"overruns {fuzz['overruns']}")
@@ -931,18 +977,23 @@ def _print_phases(what: str, ph: dict, names: tuple[str, str]) -> None:
     print(f"    lateness p99 change, {names[1]} vs {names[0]}: "
           f"{pct(ph['lateness_p99_change'])}  (the {names[0]} blocks against each other, "
           f"the measurement's resolution here: {pct(ph['resolution'])})")
+    verdicts = {True: "inside ±10 %: the change is shown to be smaller",
+                False: "outside ±10 %: the change is shown to be larger",
+                None: "straddles ±10 %: this run cannot tell"}
     ci = ph.get("lateness_p99_change_ci95")
     if ci is not None:
-        verdict = {True: "inside ±10 %: the change is shown to be smaller",
-                   False: "outside ±10 %: the change is shown to be larger",
-                   None: "straddles ±10 %: this run cannot tell"}[ph["within_10pct"]]
         print(f"    95 % interval of that change (paired block bootstrap, "
-              f"{ph['blocks'] // 2} pairs): {pct(ci[0])} … {pct(ci[1])} — {verdict}")
+              f"{ph['blocks'] // 2} pairs): {pct(ci[0])} … {pct(ci[1])} — "
+              f"{verdicts[ph['within_10pct']]}")
     m = ph["median_block_p99_us"]
     if m[names[0]] is not None and m[names[1]] is not None:
         print(f"    median of the blocks' own p99: {names[0]} {m[names[0]]:.1f} µs, {names[1]} "
               f"{m[names[1]]:.1f} µs: {pct(ph['median_block_p99_change'])}  (resolution "
               f"{pct(ph['median_block_p99_resolution'])})")
+    mci = ph.get("median_block_p99_change_ci95")
+    if mci is not None:
+        print(f"    95 % interval of that change: {pct(mci[0])} … {pct(mci[1])} — "
+              f"{verdicts[ph['median_block_within_10pct']]}")
 
 
 BENCH = Bench(name="loop", summary="Fixed-rate loop deadline precision vs a naive asyncio.sleep "

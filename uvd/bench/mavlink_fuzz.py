@@ -11,7 +11,8 @@ import sys
 import threading
 import time
 
-__all__ = ["fuzz_datagrams", "FuzzSender", "fuzz_process", "wait_ready", "start_fuzz"]
+__all__ = ["fuzz_datagrams", "FuzzSender", "fuzz_process", "wait_ready", "start_fuzz",
+           "receiver_process"]
 
 
 def fuzz_datagrams(n: int, seed: int = 21) -> list[bytes]:
@@ -126,7 +127,45 @@ def start_fuzz(proc: subprocess.Popen, windows: list[tuple[float, float]]) -> No
     proc.stdin.close()
 
 
-if __name__ == "__main__":
+def receiver_process() -> tuple[subprocess.Popen, int]:
+    """The control of ``uvd bench loop --fuzz-control``: a process with no daemon behind it
+    that binds a loopback UDP port and judges every datagram as the link's receiver does
+    (:func:`uvd.runtime.mavlink_rx.decode_datagram`), so the same kernel and parser work
+    happens on the machine with nothing of the daemon on its path. Returns it and its port;
+    it ends on SIGTERM, printing how many datagrams it judged."""
+    proc = subprocess.Popen([sys.executable, "-m", "uvd.bench.mavlink_fuzz", "receive"],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True)
+    line = proc.stdout.readline().split()
+    if not line or not line[-1].isdigit():
+        proc.kill()
+        raise RuntimeError(f"fuzz control receiver did not start (said {line!r})")
+    return proc, int(line[-1])
+
+
+def _receive() -> None:
+    import signal
+
+    from uvd.runtime.mavlink_rx import decode_datagram, new_parser
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(0.2)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    print("port", sock.getsockname()[1], flush=True)
+    rx, judged = new_parser(), 0
+    while not stop.is_set():
+        try:
+            data = sock.recv(65536)
+        except TimeoutError:
+            continue
+        decode_datagram(rx, data)
+        judged += 1
+    print(judged, flush=True)
+
+
+if __name__ == "__main__" and sys.argv[1:2] == ["receive"]:
+    _receive()
+elif __name__ == "__main__":
     h, p, k = sys.argv[1:4]
     grams = fuzz_datagrams(int(k))
     print("ready", flush=True)
