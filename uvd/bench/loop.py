@@ -958,8 +958,9 @@ def _run(args) -> dict:
         _print_phases("MAVLink link" if not c.get("control") else
                       "MAVLink fuzz CONTROL (no link: a bare receiver process)", fuzz,
                       ("quiet", "fuzzed"))
-        print(f"    {fuzz['sent']} of {fuzz['datagrams']} datagrams sent, "
-              f"{c.get('datagrams', 0)} read, {c.get('bad_datagrams', 0)} bad; "
+        judged = (f"{c.get('datagrams', 0)} judged by the bare receiver" if c.get("control")
+                  else f"{c.get('datagrams', 0)} read, {c.get('bad_datagrams', 0)} bad")
+        print(f"    {fuzz['sent']} of {fuzz['datagrams']} datagrams sent, {judged}; "
               f"overruns {fuzz['overruns']}")
     g = ours["gc"]
     print(f"  gc ({g['policy']}): collections {g['collections']}  forced {g['forced']}  "
