@@ -832,6 +832,9 @@ def _run(args) -> dict:
     if args.record and args.zenoh_stall > 0:
         raise SystemExit("uvd bench loop: --record and --zenoh-stall each measure one sink "
                          "against none; give one of them")
+    if args.fuzz_control and not args.mavlink_fuzz:
+        raise SystemExit("uvd bench loop: --fuzz-control is the control of --mavlink-fuzz N; "
+                         "give both")
     if args.record:
         cycle, hub = _recorded(cycle, args.record, rec_times)
     if args.zenoh_stall > 0:
