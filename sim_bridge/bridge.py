@@ -60,7 +60,6 @@ import json
 import logging
 import math
 import os
-import socket
 import threading
 import time
 from collections import deque
@@ -76,6 +75,7 @@ from sim_bridge.instruments.models import instrument_config
 from sim_bridge.instruments.pty_emulators import EmulatorConfig, InstrumentEmulators, PtyPort
 from sim_bridge.plant import Plant, PlantConfig, PlantFault
 from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
+from uvd.netports import free_port
 
 __all__ = ["SimBridge", "SensorFaults", "TRUTH_COLUMNS", "read_truth", "write_local_config",
            "dump_toml", "BridgeProcess", "SENSOR_MODES", "cpu_split"]
@@ -583,13 +583,6 @@ def dump_toml(data: dict, _prefix: str = "") -> str:
     return "\n".join(out)
 
 
-def free_udp_port() -> int:
-    """A UDP port nobody on this machine is bound to right now."""
-    with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
-        s.bind(("::1", 0))
-        return s.getsockname()[1]
-
-
 def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
                        changes: dict | None = None) -> Path:
     """A configuration for one local simulated run, isolated from any other.
@@ -619,7 +612,7 @@ def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
     a, b = (int(x) for x in np.random.default_rng().integers(1, 0xFFFF, 2))
     can = data.setdefault("can", {})
     can.update(interface="udp_multicast", channel=f"ff11::7576:{a:x}:{b:x}",
-               port=free_udp_port(), loopback_only=True)
+               port=free_port("udp", "::1"), loopback_only=True)
     tel = data.setdefault("telemetry", {})
     tel.setdefault("jsonl", {}).update(enabled=True, path=str(run_dir / "telemetry.jsonl"))
     if "mavlink" in data:  # what the link keeps stays with the run

@@ -19,9 +19,10 @@ from hypothesis import strategies as st
 from drivers.can import bus as b
 from drivers.can.amplifier import AmplifierGroup
 from drivers.can.config import AmplifierConfig, CanBusConfig
-from sim_bridge.amplifiers.harness import free_udp_port, local_group
+from sim_bridge.amplifiers.harness import local_group
 from uvd.errors import BusError, TransportError
 from uvd.io.vehicle import load_vehicle
+from uvd.netports import free_port
 
 VEHICLE = load_vehicle("jhu-rov")
 
@@ -129,7 +130,8 @@ def test_unknown_interface_is_a_clear_error():
 
 
 def test_udp_multicast_is_opened_with_hop_limit_zero_and_drops_its_echo():
-    cfg = CanBusConfig(interface="udp_multicast", channel=local_group(), port=free_udp_port())
+    cfg = CanBusConfig(interface="udp_multicast", channel=local_group(),
+                       port=free_port("udp", "::1"))
     with b.CanBus(cfg) as ours:
         assert b.udp_hop_limit(ours.python_can_bus) == 0
         peer = can.Bus(interface="udp_multicast", channel=cfg.channel, port=cfg.port,

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import socket
 import subprocess
 import sys
 import time
@@ -16,6 +15,7 @@ import numpy as np
 import pytest
 
 from uvd.fdc.detector import CusumSettings, VehicleDetector, autocorrelation_time, channels_of
+from uvd.netports import free_port
 
 MU = {"masses": [640, 800, 1050, 96, 146, 108], "drags": [-1250, -1420, -3080, -726, -781, -467],
       "g": 3.6, "b": [1.7, 3.1, 302.0]}
@@ -127,17 +127,11 @@ def test_frozen_estimates_are_ignored_and_reset_learns_again():
     assert not det.ready and det.t0_ns is None
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.slow
 def test_the_client_reports_and_publishes_a_fault(tmp_path):
     import zenoh
 
-    port = _free_port()
+    port = free_port()
     conf = zenoh.Config()
     conf.insert_json5("mode", '"peer"')
     conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
@@ -199,7 +193,7 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path):
 
     from tests.test_fdc_residual import B, _estimate, _simulate
 
-    port = _free_port()
+    port = free_port()
     conf = zenoh.Config()
     conf.insert_json5("mode", '"peer"')
     conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))

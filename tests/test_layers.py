@@ -20,8 +20,8 @@ Layers, top to bottom (a module may import its own layer and any layer below it)
 
 ``sim_bridge`` may import drivers, uvd.model, uvd.io, uvd.control and the utilities; only the
 top two layers may import sim_bridge. The utilities (uvd.errors, uvd.jsonio, uvd.blas,
-uvd._jitcache, the ``uvd`` package itself) are importable from anywhere in uvd and import no
-other layer.
+uvd._jitcache, uvd.progress, uvd.netports, the ``uvd`` package itself) are importable from
+anywhere in uvd and import no other layer.
 """
 
 from __future__ import annotations
@@ -46,7 +46,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("uvd.model",),
     ("drivers",),
 )
-UTILITIES = ("uvd", "uvd.errors", "uvd.jsonio", "uvd.blas", "uvd._jitcache", "uvd.progress")
+UTILITIES = ("uvd", "uvd.errors", "uvd.jsonio", "uvd.blas", "uvd._jitcache", "uvd.progress",
+             "uvd.netports")
 #: drivers never import uvd, except the design card's one error hierarchy (UvdError and the
 #: matching built-ins), which imports nothing itself
 DRIVERS_MAY_IMPORT = ("uvd.errors",)

@@ -22,10 +22,10 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from sim_bridge.bridge import free_udp_port
 from tests.hil_daemon import ListSink, running_bridge, until
 from tests.mavlink_gcs import Station
 from uvd.bench.mavlink_fuzz import fuzz_datagrams
+from uvd.netports import free_port
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.loop import drop_realtime
@@ -70,7 +70,7 @@ def mode_of(hb) -> tuple[int, int]:
 @pytest.fixture(scope="module")
 def bridge(tmp_path_factory):
     run = tmp_path_factory.mktemp("mavlink")
-    port = free_udp_port()
+    port = free_port("udp", "::1")
     key = hashlib.sha256(b"uvd test key").digest()
     key_file = run / "mavlink.key"
     key_file.write_bytes(key)

@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim_bridge.bridge import free_udp_port
 from tests.hil_daemon import run_scenario, running_bridge
 from uvd.cli import main
 from uvd.commands.replay_realtime import (
@@ -29,6 +28,7 @@ from uvd.commands.replay_realtime import (
     load_wire,
     replay_realtime,
 )
+from uvd.netports import free_port
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.loop import drop_realtime
@@ -61,7 +61,7 @@ def test_a_second_daemon_process_commands_what_the_recording_did(recorded, tmp_p
     path, _ = recorded
     out = tmp_path / "rt.json"
     code = main(["replay", str(path), "--realtime", "--can-interface", "udp_multicast",
-                 "--channel", _group(), "--can-port", str(free_udp_port()), "--daemon",
+                 "--channel", _group(), "--can-port", str(free_port("udp", "::1")), "--daemon",
                  "--work", str(tmp_path / "work"), "--json", str(out), "--quiet"])
     res = json.loads(out.read_text())
     pl, c = res["playing"], res["commands"]

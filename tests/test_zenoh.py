@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import socket
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -17,17 +16,12 @@ import pytest
 import zenoh
 
 from tests.hil_daemon import run_scenario, running_bridge
+from uvd.netports import free_port
 from uvd.runtime.config import load_config
 
 pytestmark = pytest.mark.slow
 
 SCHEMAS = Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Watcher:
@@ -80,7 +74,7 @@ class Watcher:
 
 
 def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path):
-    port = _free_port()
+    port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     changes = {"telemetry": {"zenoh": {"enabled": True, "listen": [endpoint], "key": "rov7",
                                        "state_hz": 10.0, "health_hz": 2.0}},

@@ -14,7 +14,6 @@ from __future__ import annotations
 import asyncio
 import json
 import shutil
-import socket
 import subprocess
 import time
 from pathlib import Path
@@ -23,18 +22,13 @@ import pytest
 import zenoh
 
 from sim_bridge.bridge import write_local_config
+from uvd.netports import free_port
 from uvd.runtime.config import load_config
 
 pytestmark = pytest.mark.skipif(shutil.which("openssl") is None,
                                 reason="openssl makes the test's certificates")
 
 EXAMPLES = Path(__file__).parents[1] / "config" / "zenoh"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _certificates(d: Path) -> None:
@@ -80,7 +74,7 @@ def _wait(pred, timeout_s: float = 5.0) -> bool:
 def test_router_tls_auth_and_acl_let_fdc_read_and_refuse_its_control_puts(tmp_path):
     _certificates(tmp_path)
     (tmp_path / "users.txt").write_text("rov:rov-secret\nfdc:fdc-secret\n")
-    endpoint = f"tls/localhost:{_free_port()}"
+    endpoint = f"tls/localhost:{free_port()}"
     router = zenoh.open(_example("router", tmp_path, endpoint, **{
         "transport/link/tls/listen_certificate": "router.pem",
         "transport/link/tls/listen_private_key": "router.key",

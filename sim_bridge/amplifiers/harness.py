@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import socket
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ from drivers.can.config import CanBusConfig, DepthConfig
 from sim_bridge.amplifiers.emulators import CanEmulators
 from sim_bridge.amplifiers.process import EmulatorProcess
 from uvd.io.vehicle import load_vehicle
+from uvd.netports import free_port
 
 KINDS = ("virtual", "udp_multicast")
 
@@ -45,13 +45,6 @@ def realtime_priority(priority: int = 10):
     finally:
         if applied:
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-
-
-def free_udp_port() -> int:
-    """A UDP port nobody on this machine is bound to right now."""
-    with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
-        s.bind(("::1", 0))
-        return s.getsockname()[1]
 
 
 def local_group() -> str:
@@ -100,7 +93,7 @@ def start_rig(kind: str, *, vehicle: str = "jhu-rov", node_ids=(1, 2, 3, 4, 5, 6
                            depth_cfg=DepthConfig()).open()
         return Rig(kind, cfg, emu, tuple(node_ids), pressure_node)
     if kind == "udp_multicast":
-        group, port = local_group(), free_udp_port()
+        group, port = local_group(), free_port("udp", "::1")
         cfg = CanBusConfig(interface="udp_multicast", channel=group, port=port)
         extra = ["--vehicle", vehicle, "--nodes", ",".join(str(n) for n in node_ids),
                  "--depth", str(depth_m)]

@@ -838,7 +838,7 @@ def _run(args) -> dict:
     if args.record:
         cycle, hub = _recorded(cycle, args.record, rec_times)
     if args.zenoh_stall > 0:
-        from uvd.bench.zenoh import free_port
+        from uvd.netports import free_port
         from uvd.telemetry.sink import TelemetryHub
         from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
         endpoint = f"tcp/127.0.0.1:{free_port()}"

@@ -22,7 +22,6 @@ import math
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -32,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from uvd.bench import Bench
+from uvd.netports import free_port
 
 
 def _add(p) -> None:
@@ -41,13 +41,6 @@ def _add(p) -> None:
     p.add_argument("--rate", type=float, default=100.0, help="control cycles a second (100)")
     p.add_argument("--state-hz", type=float, default=20.0, help="state rate (20 Hz)")
     p.add_argument("--estimate-hz", type=float, default=10.0, help="estimate rate (10 Hz)")
-
-
-def free_port() -> int:
-    """A free TCP port on loopback (for a listening endpoint)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class FdcProcess:

@@ -32,8 +32,9 @@ STATE_HZ = 2.0
 def run(opts: ExperimentOptions) -> dict:
     import zenoh
 
-    from uvd.bench.zenoh import FdcProcess, free_port
+    from uvd.bench.zenoh import FdcProcess
     from uvd.experiments.fdc import SimVehicle
+    from uvd.netports import free_port
     from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
 
     hours = 1.0 if opts.hours is None else opts.hours
