@@ -220,6 +220,17 @@ def test_mailbox_keeps_the_newest_untaken_item():
     assert m.stats() == {"puts": 3, "takes": 2, "overwritten": 1}
 
 
+def test_mailbox_take_until_leaves_a_later_item_for_the_next_take():
+    from drivers.samples import DvlSample
+    m: Mailbox[DvlSample] = Mailbox("dvl")
+    assert m.take_until(10) is None
+    late = DvlSample(t_ns=11, velocity_body=np.zeros(3), bottom_lock=True)
+    m.put(late)
+    assert m.take_until(10) is None and m.peek() is late   # stamped after the cut: stays
+    assert m.take_until(11) is late and m.peek() is None   # at the cut: taken
+    assert m.stats() == {"puts": 1, "takes": 1, "overwritten": 0}
+
+
 def test_a_sink_can_take_only_some_record_types():
     cycles_too, estimates = ListSink("all"), ListSink("est")
 

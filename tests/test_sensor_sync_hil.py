@@ -58,3 +58,40 @@ def test_ins_trigger_with_the_real_instruments_and_its_fixed_rate_fallback(tmp_p
     assert len(gaps) >= 3 and np.median(gaps) == pytest.approx(period, rel=0.05)
     ages = [r["ages"][0] for r in cycles if r["t_ns"] < info["t_inj"]][-10:]
     assert max(ages) < 0.5 * period       # a synchronous cycle's INS sample is fresh
+
+
+@pytest.mark.parametrize("trigger", ["ins", "fixed"])
+def test_a_synchronous_cycle_takes_dvl_and_depth_frames_received_up_to_its_ins_frame(
+        tmp_path, trigger):
+    """The cut follows the receive stamps: a frame received after the cycle's INS frame
+    waits for the next cycle (or is taken by a cycle with no INS frame); the fixed schedule
+    takes whatever arrived."""
+    from drivers.samples import DepthSample, DvlSample, InsSample
+    from sim_bridge.bridge import write_local_config
+    from uvd.runtime.daemon import Daemon
+
+    cfg = load_config(write_local_config(tmp_path, changes={
+        "loop": {"trigger": trigger}, "mavlink": {"enabled": False},
+        "telemetry": {"zenoh": {"enabled": False}}}))
+    d = Daemon(cfg)  # not run: no port is opened
+
+    def ins(t):
+        return InsSample(t_ns=t, roll=0.0, pitch=0.0, heading=0.0, omega_body=np.zeros(3))
+
+    before = DvlSample(t_ns=900, velocity_body=np.zeros(3), bottom_lock=True)
+    after = DepthSample(t_ns=1100, depth_m=1.0)
+    d.ins_box.put(ins(1000))
+    d.dvl_box.put(before)
+    d.depth_box.put(after)
+    inp = d.read(1200)
+    assert inp.ins.t_ns == 1000 and inp.dvl is before
+    sync = trigger == "ins"
+    assert (inp.depth is None) if sync else (inp.depth is after)
+    assert d.counters["depth_deferred"] == int(sync) and d.counters["dvl_deferred"] == 0
+    d.ins_box.put(ins(2000))
+    inp = d.read(2100)                    # the next INS frame's cycle takes it
+    assert (inp.depth is after) if sync else (inp.depth is None)
+    d.depth_box.put(DepthSample(t_ns=2500, depth_m=1.1))
+    inp = d.read(3100)                    # no INS frame (the fallback schedule): all is taken
+    assert inp.ins is None and inp.depth.t_ns == 2500
+    assert d.counters["depth_deferred"] == int(sync)

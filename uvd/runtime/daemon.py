@@ -185,7 +185,8 @@ class Daemon:
         self.arm_refusal: str | None = None
         self.last = LastCycle()
         self.counters = {"cycles": 0, "guard_nonfinite": 0, "guard_clamped": 0,
-                         "write_failed": 0, "feedback_invalid": 0}
+                         "write_failed": 0, "feedback_invalid": 0, "dvl_deferred": 0,
+                         "depth_deferred": 0}
         self.commands_max_abs = 0.0
         self._first_write_ns = 0
         what = "compiling the numeric kernels (once after an install or upgrade: up to a " \
@@ -334,8 +335,19 @@ class Daemon:
             hb = self.mavlink.operator_heartbeat_ns
             age = None if hb is None or not self.supervisor.armed else (t_ns - hb) * 1e-9
             extra = {**(extra or {}), OPERATOR_AGE: age}
-        return CycleInputs(t_ns, self.ins_box.take(), self.dvl_box.take(), self.depth_box.take(),
-                           act, loop.overrun_streak, loop.streak_exceeded, leak, extra)
+        ins = self.ins_box.take()
+        if ins is not None and loop.settings.trigger == "ins":
+            # the sensor-synchronous cycle acts on the state as of its INS frame: a DVL or depth
+            # frame received after that frame waits for the next cycle (docs/runtime.md), so
+            # which cycle gets a frame follows the receive stamps, not the order in which the
+            # event loop happened to serve the readers
+            dvl, depth = self.dvl_box.take_until(ins.t_ns), self.depth_box.take_until(ins.t_ns)
+            self.counters["dvl_deferred"] += dvl is None and self.dvl_box.peek() is not None
+            self.counters["depth_deferred"] += depth is None and self.depth_box.peek() is not None
+        else:
+            dvl, depth = self.dvl_box.take(), self.depth_box.take()
+        return CycleInputs(t_ns, ins, dvl, depth, act, loop.overrun_streak,
+                           loop.streak_exceeded, leak, extra)
 
     def write(self, t_ns: int, dt: float, inp: CycleInputs, r: CycleResult) -> None:
         """The command to the amplifiers, the counters, one telemetry record."""

@@ -4,7 +4,8 @@ Sensor callbacks must not run heavy work on the loop's critical path, and the cy
 wait for a sensor. A :class:`Mailbox` decouples them: the producer :meth:`~Mailbox.put`\\ s
 each new sample (O(1), the newest replaces an untaken one, which is counted as overwritten);
 the cycle :meth:`~Mailbox.take`\\ s whatever arrived since its previous take — the newest
-sample, or ``None`` — exactly what :class:`uvd.core.CoreInputs` expects per source. Both run
+sample, or ``None`` — exactly what :class:`uvd.core.CoreInputs` expects per source;
+:meth:`~Mailbox.take_until` takes it only if it was stamped by a given time. Both run
 in the event loop's thread; a producer in another thread is also safe (attribute swaps are
 atomic under the GIL).
 """
@@ -49,6 +50,14 @@ class Mailbox(Generic[T]):
         if item is not None:
             self.takes += 1
         return item
+
+    def take_until(self, t_ns: int) -> T | None:
+        """The newest item if it was stamped (``item.t_ns``) at or before ``t_ns``, else None;
+        a later item stays for the next take."""
+        item = self._item
+        if item is None or item.t_ns > t_ns:
+            return None
+        return self.take()
 
     def peek(self) -> T | None:
         """The untaken item without taking it."""
