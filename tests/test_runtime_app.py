@@ -31,7 +31,7 @@ from pathlib import Path
 from uvd.runtime.app import App, setup_logging
 from uvd.runtime.config import load_config
 
-setup_logging()
+listener = setup_logging()  # stopped before exit, as `uvd run` does: the queue is flushed
 cfg = load_config(sys.argv[1])
 out = Path(sys.argv[2])
 log = []
@@ -61,6 +61,7 @@ out.write_text(json.dumps({"rc": rc, "log": log, "steps": app.shutdown_report["s
                            "duration_s": app.shutdown_report["duration_s"],
                            "telemetry": app.shutdown_report["telemetry"],
                            "cycles": app.loop.cycles}))
+listener.stop()
 sys.exit(rc)
 '''
 
