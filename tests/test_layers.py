@@ -10,7 +10,7 @@ Layers, top to bottom (a module may import its own layer and any layer below it)
 
   0. uvd.cli, uvd.commands, uvd.__main__
   1. uvd.experiments, uvd.bench
-  2. uvd.runtime
+  2. uvd.runtime, uvd.links (the daemon and its faces: one layer)
   3. uvd.telemetry
   4. uvd.io
   5. uvd.core
@@ -38,7 +38,7 @@ PACKAGES = ("uvd", "drivers", "sim_bridge")
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("uvd.cli", "uvd.commands", "uvd.__main__"),
     ("uvd.experiments", "uvd.bench", "uvd.fdc"),
-    ("uvd.runtime",),
+    ("uvd.runtime", "uvd.links"),
     ("uvd.telemetry",),
     ("uvd.io",),
     ("uvd.core",),
@@ -215,7 +215,10 @@ def test_pure_packages_do_no_io_clock_or_logging():
 @pytest.mark.parametrize(("importer", "imported", "broken"), [
     ("uvd.model.lie", "uvd.control.pdc", True),
     ("uvd.control.pdc", "uvd.model.lie", False),
-    ("uvd.telemetry.jsonl", "uvd.runtime.config", True),
+    ("uvd.telemetry.sink", "uvd.runtime.config", True),
+    ("uvd.telemetry.report", "uvd.links.mcap", True),
+    ("uvd.links.mavlink.link", "uvd.runtime.commands", False),
+    ("uvd.runtime.app", "uvd.links", False),
     ("uvd.runtime.app", "uvd.experiments.lockstep", True),
     ("uvd.runtime.app", "sim_bridge.plant", True),
     ("uvd.experiments.lockstep", "sim_bridge.plant", False),

@@ -25,11 +25,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from tests.hil_daemon import ListSink, running_bridge, until
 from tests.mavlink_gcs import Station
 from uvd.bench.mavlink_fuzz import fuzz_datagrams
+from uvd.links.mavlink.signing import SigningState, now_timestamp
 from uvd.netports import free_port
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.loop import drop_realtime
-from uvd.telemetry.mavlink_signing import SigningState, now_timestamp
 
 mav = mavlink
 pytestmark = pytest.mark.slow

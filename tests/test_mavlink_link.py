@@ -12,9 +12,9 @@ import time
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from uvd.links.mavlink.link import MavlinkLink
 from uvd.runtime.commands import CommandQueue, HoldPose, ManualWrench
 from uvd.runtime.config import DEFAULT_CONFIG, MavlinkSection, load_config
-from uvd.runtime.mavlink_link import MavlinkLink
 
 mav = mavlink
 
@@ -195,7 +195,7 @@ def test_serial_line_carries_telemetry_and_commands(tmp_path):
 
 
 def test_the_receiver_process_forwards_only_good_mavlink_and_counts_the_rest():
-    from uvd.runtime.mavlink_rx import read_forwarded, spawn_receiver
+    from uvd.links.mavlink.receiver import read_forwarded, spawn_receiver
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
     proc, pair = spawn_receiver(sock)

@@ -8,16 +8,16 @@ from dataclasses import dataclass
 
 import pytest
 
+from uvd.links.mavlink.link import custom_mode_of
+from uvd.links.mavlink.params import PARAMS, check_value, param_table, write_params_file
+from uvd.links.mavlink.signing import SigningError, load_key
 from uvd.runtime import schema
 from uvd.runtime.config import DEFAULT_CONFIG, load_config
 from uvd.runtime.daemon import kept_params
 from uvd.runtime.failsafe import Action, Health, Thresholds
-from uvd.runtime.mavlink_link import custom_mode_of
-from uvd.runtime.mavlink_params import PARAMS, check_value, param_table, write_params_file
 from uvd.runtime.schema import setting
 from uvd.runtime.supervisor import Supervisor
 from uvd.runtime.triggers import OPERATOR_AGE, operator_loss_trigger, plugin_triggers
-from uvd.telemetry.mavlink_signing import SigningError, load_key
 
 
 def sim_config():
@@ -131,7 +131,7 @@ def test_kept_parameters_apply_at_start_and_a_bad_one_is_skipped(tmp_path, caplo
 def test_docs_mavlink_md_lists_the_parameters_generated_from_the_schema():
     from pathlib import Path
 
-    from uvd.runtime.mavlink_params import refresh_doc
+    from uvd.links.mavlink.params import refresh_doc
     doc = Path(__file__).resolve().parents[1] / "docs" / "mavlink.md"
     text = doc.read_text(encoding="utf-8")
     assert refresh_doc(text) == text, "run: uvd check-config --doc-out docs/config.md"

@@ -30,7 +30,7 @@ from uvd.cli import main
 from uvd.runtime import commands as cmd
 from uvd.runtime.config import load_config
 from uvd.runtime.replay import replay_lockstep
-from uvd.telemetry.mcap_recorder import CHANNELS, RecordingError, read_messages, schema
+from uvd.telemetry.recording import CHANNELS, RecordingError, read_messages, schema
 
 pytestmark = pytest.mark.slow
 
@@ -288,7 +288,7 @@ def test_a_stalled_disk_drops_counts_and_never_delays_the_loop(tmp_path):
     """The worker's writes hang for 2 s (a stalled disk) while a 100 Hz 'loop' publishes:
     publishing and the taps stay instant, memory stays bounded, every record is either in
     the file or counted as dropped, and the file reads back whole after the stall."""
-    from uvd.telemetry.mcap_recorder import McapRecorder
+    from uvd.links.mcap import McapRecorder
     from uvd.telemetry.sink import TelemetryHub
 
     stall = threading.Event()
@@ -340,7 +340,7 @@ def test_files_rotate_by_time_or_size_each_with_the_start_record(tmp_path, how):
     complete MCAP file (summary included)."""
     from mcap.reader import make_reader
 
-    from uvd.telemetry.mcap_recorder import McapRecorder
+    from uvd.links.mcap import McapRecorder
     from uvd.telemetry.sink import TelemetryHub
 
     rotate = {"rotate_s": 0.5} if how == "time" else {"rotate_mb": 0.004}

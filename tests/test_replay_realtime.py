@@ -32,7 +32,7 @@ from uvd.netports import free_port
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.loop import drop_realtime
-from uvd.telemetry.mcap_recorder import RecordingError
+from uvd.telemetry.recording import RecordingError
 
 pytestmark = pytest.mark.slow
 

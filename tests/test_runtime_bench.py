@@ -44,7 +44,7 @@ def test_bench_loop_keys(tmp_path, capsys):
 def test_bench_loop_record_compares_with_and_without_in_one_run(tmp_path):
     """--record: half the measured cycles with the black box, half without, and the file holds
     the recorded half's cycle records and CAN taps."""
-    from uvd.telemetry.mcap_recorder import read_messages
+    from uvd.telemetry.recording import read_messages
 
     out = tmp_path / "loop.json"
     assert main(["bench", "loop", "--rate", "200", "--duration", "0.5", "--warmup", "0",

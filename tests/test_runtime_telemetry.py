@@ -10,8 +10,9 @@ import time
 
 import numpy as np
 
+from uvd.links.jsonl import JsonLinesSink
 from uvd.runtime.mailbox import Mailbox
-from uvd.telemetry import BoundedQueue, JsonLinesSink, TelemetryHub
+from uvd.telemetry import BoundedQueue, TelemetryHub
 from uvd.telemetry._worker import DaemonWorker, run_in_daemon_thread
 
 
@@ -262,7 +263,7 @@ def _estimate(k, theta):
 def test_params_file_sink_keeps_the_newest_estimate(tmp_path):
     from uvd.estimation.aid import INITP_6DOF
     from uvd.io.params import params_from_toml
-    from uvd.telemetry import ParamsFileSink
+    from uvd.links.params_file import ParamsFileSink
 
     path = tmp_path / "state" / "aid.toml"
     now = [0.0]
@@ -298,7 +299,7 @@ def test_params_file_sink_keeps_the_newest_estimate(tmp_path):
 
 def test_params_file_sink_that_cannot_write_is_counted(tmp_path):
     from uvd.estimation.aid import INITP_6DOF
-    from uvd.telemetry import ParamsFileSink
+    from uvd.links.params_file import ParamsFileSink
 
     (tmp_path / "file").write_text("")  # a file where the folder should be
 

@@ -716,7 +716,7 @@ def _recorded(cycle, directory: str, times: dict[str, list]):
     same run, under the same load; the recorder's pump runs between cycles as in the daemon."""
     import can
 
-    from uvd.telemetry.mcap_recorder import McapRecorder
+    from uvd.links.mcap import McapRecorder
     from uvd.telemetry.sink import TelemetryHub
 
     rec = McapRecorder(directory)
@@ -742,9 +742,9 @@ def _recorded(cycle, directory: str, times: dict[str, list]):
 def _mavlink_link(loop_cpus=()):
     """A MAVLink link on a free loopback port, the sink of a hub, and the cycle that publishes
     one cycle record to that hub (as the daemon's write phase does)."""
+    from uvd.links.mavlink.link import MavlinkLink
     from uvd.runtime.commands import CommandQueue
     from uvd.runtime.config import DEFAULT_CONFIG, MavlinkSection, load_config
-    from uvd.runtime.mavlink_link import MavlinkLink
 
     config = load_config(DEFAULT_CONFIG)
     link = MavlinkLink(MavlinkSection(enabled=True, listen="127.0.0.1:0", params_file=""),
@@ -838,9 +838,9 @@ def _run(args) -> dict:
     if args.record:
         cycle, hub = _recorded(cycle, args.record, rec_times)
     if args.zenoh_stall > 0:
+        from uvd.links.zenoh import ZenohSink, zenoh_config
         from uvd.netports import free_port
         from uvd.telemetry.sink import TelemetryHub
-        from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
         endpoint = f"tcp/127.0.0.1:{free_port()}"
         hub = TelemetryHub([ZenohSink("bench", zenoh_config(listen=[endpoint]),
                                       state_hz=args.rate, health_hz=0.0)])

@@ -130,7 +130,7 @@ def start_fuzz(proc: subprocess.Popen, windows: list[tuple[float, float]]) -> No
 def receiver_process() -> tuple[subprocess.Popen, int]:
     """The control of ``uvd bench loop --fuzz-control``: a process with no daemon behind it
     that binds a loopback UDP port and judges every datagram as the link's receiver does
-    (:func:`uvd.runtime.mavlink_rx.decode_datagram`), so the same kernel and parser work
+    (:func:`uvd.links.mavlink.receiver.decode_datagram`), so the same kernel and parser work
     happens on the machine with nothing of the daemon on its path. Returns it and its port;
     it ends on SIGTERM, printing how many datagrams it judged."""
     proc = subprocess.Popen([sys.executable, "-m", "uvd.bench.mavlink_fuzz", "receive"],
@@ -145,7 +145,7 @@ def receiver_process() -> tuple[subprocess.Popen, int]:
 def _receive() -> None:
     import signal
 
-    from uvd.runtime.mavlink_rx import decode_datagram, new_parser
+    from uvd.links.mavlink.receiver import decode_datagram, new_parser
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
     sock.settimeout(0.2)

@@ -1,6 +1,6 @@
 """``uvd bench zenoh --vehicles N --duration S``: a fleet publishing to one ``uvd-fdc``.
 
-N simulated vehicles, each the daemon's own Zenoh sink (:class:`~uvd.telemetry.zenoh_link.
+N simulated vehicles, each the daemon's own Zenoh sink (:class:`~uvd.links.zenoh.
 ZenohSink`, peer mode, listening on a loopback port of its own), fed as the daemon's hub feeds
 it: a cycle record every control cycle (``--rate``, 100 Hz), batched every
 ``flush_interval_s`` (50 ms), state published at ``--state-hz`` (20) and an AID estimate
@@ -167,7 +167,7 @@ def _run(args) -> dict:
     import zenoh  # noqa: F401 - fail here, with its message, if the package is missing
 
     from uvd.io.vehicle import load_vehicle
-    from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
+    from uvd.links.zenoh import ZenohSink, zenoh_config
 
     theta = np.asarray(load_vehicle("jhu-rov").params.theta, dtype=float)
     endpoints = [f"tcp/127.0.0.1:{free_port()}" for _ in range(args.vehicles)]

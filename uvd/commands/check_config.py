@@ -43,7 +43,7 @@ def _run(args) -> int:
         print(f"uvd check-config: wrote {args.doc_out}")
         mav = args.doc_out.with_name("mavlink.md")  # its parameter list, from the same schema
         if mav.is_file():
-            from uvd.runtime.mavlink_params import refresh_doc
+            from uvd.links.mavlink.params import refresh_doc
             mav.write_text(refresh_doc(mav.read_text(encoding="utf-8")), encoding="utf-8")
             print(f"uvd check-config: refreshed the parameter list in {mav}")
     if args.file is None:

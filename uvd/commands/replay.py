@@ -56,7 +56,7 @@ def _run(args) -> int:
     from uvd.jsonio import write_json
     from uvd.progress import Progress
     from uvd.runtime.replay import replay_lockstep
-    from uvd.telemetry.mcap_recorder import RecordingError
+    from uvd.telemetry.recording import RecordingError
 
     t0 = time.monotonic()
     try:
@@ -99,7 +99,7 @@ def _run_realtime(args) -> int:
     from uvd.commands.replay_realtime import default_work_dir, replay_realtime
     from uvd.jsonio import write_json
     from uvd.progress import Progress
-    from uvd.telemetry.mcap_recorder import RecordingError
+    from uvd.telemetry.recording import RecordingError
 
     if not (args.can_interface and args.channel):
         print("uvd replay: --realtime needs --can-interface and --channel", file=sys.stderr)

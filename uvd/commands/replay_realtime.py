@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from uvd.telemetry.mcap_recorder import RecordingError, read_messages
+from uvd.telemetry.recording import RecordingError, read_messages
 
 __all__ = ["WireRecording", "load_wire", "RealtimePlayer", "live_config",
            "compare_commands", "TOLERANCE_PERMILLE", "replay_realtime"]

@@ -24,7 +24,7 @@ def register(sub) -> None:
 def _run(args) -> int:
     from uvd.errors import ConfigError
     from uvd.progress import Progress
-    from uvd.telemetry.mcap_recorder import RecordingError
+    from uvd.telemetry.recording import RecordingError
     from uvd.telemetry.report import write_report
 
     try:

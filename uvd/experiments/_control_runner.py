@@ -135,7 +135,7 @@ class _BlackBox:
 
     def __init__(self, directory: Path, vehicle: Vehicle, label: str, dt: float) -> None:
         from uvd import __version__
-        from uvd.telemetry.mcap_recorder import McapRecorder
+        from uvd.links.mcap import McapRecorder
 
         name = label.strip(": ").replace(" ", "-") or "run"
         self.rec = McapRecorder(Path(directory) / name, rotate_mb=0.0)

@@ -4,7 +4,7 @@ lockstep.
 The demo's configuration (``config/sim.toml``: two-step AMBC tracking RefTraj1 on the
 ``jhu-rov``) with online 6-DOF AID, started from the vehicle's own parameters (a vehicle
 identified before it dives); every 10 simulated seconds the estimate is turned into the Zenoh
-payload a fault-detection client receives (``uvd.telemetry.zenoh_link.estimate_payload``) and
+payload a fault-detection client receives (``uvd.links.zenoh.estimate_payload``) and
 fed to ``uvd-fdc``'s detector (:mod:`uvd.fdc.detector`), and so is every cycle's state payload
 (``state_payload``: velocity, attitude, per-thruster commands) with the vehicle's thruster
 matrix, from which the detector names a weak thruster. Each fault is injected into the plant
@@ -112,7 +112,7 @@ class SimVehicle:
 def _run_one(fault: str | None, minutes_before: float, minutes_after: float, seed: int,
              progress) -> dict:
     from uvd.fdc.detector import VehicleDetector
-    from uvd.telemetry.zenoh_link import estimate_payload, state_payload
+    from uvd.links.zenoh import estimate_payload, state_payload
 
     v = SimVehicle(fault, minutes_before, seed)
     det = VehicleDetector("jhu-rov", B=v.B)

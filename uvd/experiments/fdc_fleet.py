@@ -4,7 +4,7 @@
 One vehicle per fault of :data:`uvd.experiments.fdc.FAULTS` (injected after 30 simulated
 minutes) and one without a fault, each a :class:`~uvd.experiments.fdc.SimVehicle` whose
 estimates (AID's and AMBC's, every 10 simulated seconds) and state (``STATE_HZ``) go through
-the daemon's own Zenoh sink (:class:`~uvd.telemetry.zenoh_link.ZenohSink`, key ``sim<i>``, its
+the daemon's own Zenoh sink (:class:`~uvd.links.zenoh.ZenohSink`, key ``sim<i>``, its
 own loopback port, its ``params`` queryable answering the thruster matrix), stamped with the
 simulated clock — so an hour of a fleet passes in about a minute. A separate
 ``uvd-fdc`` process connects to every vehicle and learns, detects and publishes on
@@ -34,8 +34,8 @@ def run(opts: ExperimentOptions) -> dict:
 
     from uvd.bench.zenoh import FdcProcess
     from uvd.experiments.fdc import SimVehicle
+    from uvd.links.zenoh import ZenohSink, zenoh_config
     from uvd.netports import free_port
-    from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
 
     hours = 1.0 if opts.hours is None else opts.hours
     nominal_min = 30.0  # uvd-fdc's baseline is learned from 5 to 25 min

@@ -61,6 +61,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
+from uvd.links.jsonl import JsonLinesSink
 from uvd.runtime.clock import Clock
 from uvd.runtime.commands import CommandQueue
 from uvd.runtime.config import Config, ConfigValidationError, load_config
@@ -78,7 +79,6 @@ from uvd.runtime.rtthreads import (
 from uvd.runtime.schema import reloadable_changes
 from uvd.runtime.supervisor import Supervisor
 from uvd.telemetry._worker import run_in_daemon_thread
-from uvd.telemetry.jsonl import JsonLinesSink
 from uvd.telemetry.sink import TelemetryHub, TelemetrySink
 
 __all__ = ["App", "Component", "ShutdownStep", "setup_logging", "zenoh_sink"]
@@ -88,8 +88,8 @@ log = logging.getLogger("uvd.runtime")
 
 def zenoh_sink(config: Config, hub: TelemetryHub):
     """The ``[telemetry.zenoh]`` sink of a configuration (docs/zenoh.md)."""
+    from uvd.links.zenoh import ZenohSink, zenoh_config
     from uvd.runtime.schema import as_dict
-    from uvd.telemetry.zenoh_link import ZenohSink, zenoh_config
     z = config.telemetry.zenoh
     base = Path(config.source).parent if config.source else Path.cwd()
     file = str(base / z.config_file) if z.config_file else None

@@ -67,7 +67,7 @@ def kept_params(config: Config, path: str) -> tuple[Config, dict[str, Any]]:
     """``config`` with the parameters a ground station set (``[mavlink] params_file``,
     docs/mavlink.md), and those applied; a value that is no longer valid is named in the log
     and skipped."""
-    from uvd.runtime.mavlink_params import read_params_file
+    from uvd.links.mavlink.params import read_params_file
     try:
         values = read_params_file(path)
     except ValueError as exc:
@@ -118,7 +118,7 @@ class Daemon:
         self.sensors = make_sensors(config, self.ins_box, self.dvl_box, self.depth_box)
         self.recorder = None
         if config.recording.enabled:
-            from uvd.telemetry.mcap_recorder import McapRecorder
+            from uvd.links.mcap import McapRecorder
             r = config.recording
             self.recorder = McapRecorder(r.dir, flush_interval_s=r.flush_interval_s,
                                          rotate_mb=r.rotate_mb, rotate_s=r.rotate_s,
@@ -149,7 +149,7 @@ class Daemon:
         self.app.reload_hooks.append(self._on_reload)
         self.mavlink = None
         if config.mavlink.enabled:
-            from uvd.runtime.mavlink_link import MavlinkLink
+            from uvd.links.mavlink.link import MavlinkLink
             f = config.failsafe
             self.mavlink = MavlinkLink(
                 config.mavlink, self.app.commands, lambda: self.app.config,
@@ -168,7 +168,7 @@ class Daemon:
             self.core_cfg.controller.diagnostics(self.state.ctrl).theta is not None
         if self.core_cfg.estimators:
             if est.save_path:
-                from uvd.telemetry.params_file import RECORD_TYPE, ParamsFileSink
+                from uvd.links.params_file import RECORD_TYPE, ParamsFileSink
                 self.app.hub.add_sink(ParamsFileSink(est.save_path, every_s=est.save_every_s),
                                       types=(RECORD_TYPE,))
             # after the amplifiers are safe, before the sinks close: the newest θ̂ reaches

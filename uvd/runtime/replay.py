@@ -44,7 +44,7 @@ from uvd.runtime.schema import with_values
 from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
 from uvd.runtime.triggers import plugin_triggers
-from uvd.telemetry.mcap_recorder import RecordingError, read_messages
+from uvd.telemetry.recording import RecordingError, read_messages
 from uvd.telemetry.records import tracking_error_norms
 
 __all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport", "tracking"]

@@ -2,14 +2,12 @@
 
 :class:`~uvd.telemetry.sink.TelemetryHub` takes one record per cycle from the loop through
 bounded, non-blocking queues (drop-oldest-and-count) and pumps them to every
-:class:`~uvd.telemetry.sink.TelemetrySink`: the JSON-lines file of
-:mod:`uvd.telemetry.jsonl` and the parameters file of :mod:`uvd.telemetry.params_file` now;
-Zenoh, MAVLink and the black-box recorder later.
+:class:`~uvd.telemetry.sink.TelemetrySink`; the sinks — the daemon's faces: JSON lines, Zenoh,
+MAVLink, the black box, the parameters file — are in :mod:`uvd.links`. Here: the hub and the
+sink base, the record types (:mod:`uvd.telemetry.records`), the black box's channel contract
+and reader (:mod:`uvd.telemetry.recording`) and the JSON Schemas (``schemas/``).
 """
 
-from uvd.telemetry.jsonl import JsonLinesSink
-from uvd.telemetry.params_file import ParamsFileSink
 from uvd.telemetry.sink import BoundedQueue, SinkStats, TelemetryHub, TelemetrySink
 
-__all__ = ["BoundedQueue", "JsonLinesSink", "ParamsFileSink", "SinkStats", "TelemetryHub",
-           "TelemetrySink"]
+__all__ = ["BoundedQueue", "SinkStats", "TelemetryHub", "TelemetrySink"]

@@ -30,7 +30,7 @@ import numpy as np
 from drivers.frames import wrap_pi_array
 from drivers.samples import R_to_euler
 from uvd.io.figures import estimates_figure, mne_figure
-from uvd.telemetry.mcap_recorder import RecordingError, read_messages
+from uvd.telemetry.recording import RecordingError, read_messages
 from uvd.telemetry.records import tracking_error_norms
 
 __all__ = ["write_report"]

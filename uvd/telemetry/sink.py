@@ -11,10 +11,8 @@ sink; a sink that fails is counted and retried with the next batch, never propag
 Records must not be mutated after they are published (the core returns new arrays every cycle,
 so this holds by construction).
 
-A sink implements :class:`TelemetrySink`. Zenoh, MAVLink and the black-box recorder plug in
-as further sinks; provided now: :class:`uvd.telemetry.jsonl.JsonLinesSink` (every record as a
-JSON line) and :class:`uvd.telemetry.params_file.ParamsFileSink` (the newest online estimate
-θ̂ as a parameters file).
+A sink implements :class:`TelemetrySink`; the daemon's sinks — JSON lines, Zenoh, MAVLink,
+the black-box recorder, the parameters file — are the faces of :mod:`uvd.links`.
 """
 
 from __future__ import annotations
@@ -35,7 +33,7 @@ class TelemetrySink(Protocol):
     """Where telemetry records go. Every method runs in the event loop, off the loop's cycle.
 
     ``write`` should not block the event loop for long: encode in small slices and hand file
-    or network I/O to a thread (see :class:`~uvd.telemetry.jsonl.JsonLinesSink`).
+    or network I/O to a thread (see :class:`~uvd.links.jsonl.JsonLinesSink`).
     """
 
     name: str

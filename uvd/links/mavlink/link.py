@@ -4,7 +4,7 @@ command receiver, never on the loop's critical path.
 :class:`MavlinkLink` is a :class:`~uvd.telemetry.sink.TelemetrySink` of the daemon's hub: its
 ``write`` (event loop, off the cycle) only keeps the newest cycle and estimate records and
 queues a STATUSTEXT for each failsafe event, lifecycle transition and refused command. The
-UDP socket at ``listen`` is read by a process of its own (:mod:`uvd.runtime.mavlink_rx`),
+UDP socket at ``listen`` is read by a process of its own (:mod:`uvd.links.mavlink.receiver`),
 which judges every datagram and forwards only good MAVLink, so that a flood of garbage never
 holds this process's interpreter lock against the loop. One daemon thread owns the socket's
 sending side and the pymavlink codecs; it
@@ -41,8 +41,20 @@ from typing import Any
 
 import numpy as np
 
+from uvd.links.mavlink import params as mp
+from uvd.links.mavlink.receiver import (
+    decode_datagram,
+    read_forwarded,
+    spawn_receiver,
+    stop_receiver,
+)
+from uvd.links.mavlink.signing import (
+    SigningState,
+    load_key,
+    load_timestamp,
+    save_timestamp,
+)
 from uvd.model.params import N_DECOUPLED, N_THETA_UV, decoupled_from_theta
-from uvd.runtime import mavlink_params as mp
 from uvd.runtime import schema
 from uvd.runtime.commands import (
     Arm,
@@ -55,18 +67,6 @@ from uvd.runtime.commands import (
     SetParams,
 )
 from uvd.runtime.config import MavlinkSection
-from uvd.runtime.mavlink_rx import (
-    decode_datagram,
-    read_forwarded,
-    spawn_receiver,
-    stop_receiver,
-)
-from uvd.telemetry.mavlink_signing import (
-    SigningState,
-    load_key,
-    load_timestamp,
-    save_timestamp,
-)
 from uvd.telemetry.records import euler_of
 
 __all__ = ["MavlinkLink", "CUSTOM_MODES", "APPLIED_MODES", "custom_mode_of"]
@@ -171,7 +171,7 @@ class MavlinkLink:
         self.tx.WIRE_PROTOCOL_VERSION = "2.0"
         self.rx = mavlink.MAVLink(None, cfg.system_id, cfg.component_id, use_native=False)
         self.rx.robust_parsing = True
-        self._receiver = None  # the receiver process (uvd.runtime.mavlink_rx) and its pair
+        self._receiver = None  # the receiver process (uvd.links.mavlink.receiver) and its pair
         self._pair = None
         self.signing: SigningState | None = None
         if cfg.signing_key_file:
@@ -346,7 +346,7 @@ class MavlinkLink:
 
     def _receive(self) -> None:
         """What the receiver process forwarded: good datagrams only (its counters of the
-        bad ones come with them, uvd.runtime.mavlink_rx)."""
+        bad ones come with them, uvd.links.mavlink.receiver)."""
         try:
             got = read_forwarded(self._pair, self.counters)
         except EOFError:

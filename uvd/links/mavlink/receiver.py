@@ -95,7 +95,7 @@ def spawn_receiver(sock: socket.socket, avoid_cpus: Sequence[int] = ()
     ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "uvd.runtime.mavlink_rx", str(sock.fileno()),
+            [sys.executable, "-m", "uvd.links.mavlink.receiver", str(sock.fileno()),
              str(theirs.fileno()), ",".join(str(int(c)) for c in avoid_cpus)],
             pass_fds=(sock.fileno(), theirs.fileno()), stdin=subprocess.DEVNULL)
     except BaseException:
