@@ -148,7 +148,8 @@ def test_daemon_sends_ready_watchdog_stopping_and_a_stalled_loop_stops_watchdog(
     monkeypatch.setenv("WATCHDOG_USEC", "40000")          # ping every 20 ms
     monkeypatch.delenv("WATCHDOG_PID", raising=False)
     cfg = load_config(ROOT / "config" / "sim.toml")
-    cfg = replace(cfg, loop=replace(cfg.loop, rate_hz=200.0))
+    cfg = replace(cfg, loop=replace(cfg.loop, rate_hz=200.0),
+                  mavlink=replace(cfg.mavlink, enabled=False))  # an App without its link
     clock = StallableClock()
     marks: dict[str, int] = {}
     thread_alive = threading.Event()

@@ -72,7 +72,16 @@ def sim_config_text(tmp_path: Path, **loop) -> str:
     text = text.replace('[telemetry.jsonl]\nenabled = false\npath = "uvd-telemetry.jsonl"',
                         f'[telemetry.jsonl]\nenabled = true\npath = "{tmp_path / "tel.jsonl"}"')
     assert "enabled = true" in text
-    return text
+    return without_mavlink(text)
+
+
+def without_mavlink(text: str) -> str:
+    """sim.toml's text with the MAVLink link off: the App builds every face a configuration
+    enables (uvd.links), and these tests of the App do not test that one (a fixed port, a
+    receiver process)."""
+    link = 'enabled = true\nlisten = "127.0.0.1:14551"'
+    assert link in text
+    return text.replace(link, 'enabled = false\nlisten = "127.0.0.1:14551"')
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
@@ -133,7 +142,8 @@ def test_signal_gives_orderly_shutdown_and_exit_0_within_2_s(tmp_path, sig):
 def fast_config(tmp_path, rate=200.0, **daemon):
     cfg = load_config(ROOT / "config" / "sim.toml")
     return replace(cfg, loop=replace(cfg.loop, rate_hz=rate),
-                   daemon=replace(cfg.daemon, **daemon))
+                   daemon=replace(cfg.daemon, **daemon),
+                   mavlink=replace(cfg.mavlink, enabled=False))  # an App without its link
 
 
 def run_app(app, timeout=20.0):
@@ -162,7 +172,7 @@ class Scripted:
 
 def test_sighup_reloads_what_may_change_and_names_the_rest(tmp_path, monkeypatch):
     path = tmp_path / "uvd.toml"
-    text = (ROOT / "config" / "sim.toml").read_text()
+    text = without_mavlink((ROOT / "config" / "sim.toml").read_text())
     path.write_text(text)
     cfg = load_config(path)
     seen = []

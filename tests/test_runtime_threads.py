@@ -89,7 +89,8 @@ def test_every_thread_of_a_started_app_runs_at_the_configured_policy():
                                     cpu_affinity=(cpus[-1],)),
                   telemetry=replace(cfg.telemetry,
                                     jsonl=replace(cfg.telemetry.jsonl, enabled=False)),
-                  daemon=replace(cfg.daemon, helper_thread_priority=LOOP_PRIO - 1))
+                  daemon=replace(cfg.daemon, helper_thread_priority=LOOP_PRIO - 1),
+                  mavlink=replace(cfg.mavlink, enabled=False))  # an App without its link
     # a thread that exists before the App starts, normally scheduled (the logging listener,
     # an OpenBLAS worker): it inherits nothing
     early_stop = threading.Event()
@@ -150,7 +151,8 @@ def test_every_thread_of_a_started_app_runs_at_the_configured_policy():
 def test_helper_priority_zero_leaves_other_threads_alone_and_the_config_bounds_it():
     cfg = load_config(ROOT / "config" / "sim.toml")
     cfg = replace(cfg, loop=replace(cfg.loop, sched_fifo_priority=LOOP_PRIO),
-                  daemon=replace(cfg.daemon, helper_thread_priority=0))
+                  daemon=replace(cfg.daemon, helper_thread_priority=0),
+                  mavlink=replace(cfg.mavlink, enabled=False))
     app = App(cfg, lambda t, dt: None, realtime=True, notifier=SdNotifier(env={}))
     from uvd.runtime.loop import RealtimeReport
     app.realtime_report = RealtimeReport(sched_fifo_priority=LOOP_PRIO)

@@ -84,7 +84,7 @@ def test_router_tls_auth_and_acl_let_fdc_read_and_refuse_its_control_puts(tmp_pa
                                                         "rov-secret")))
     cfg = load_config(write_local_config(tmp_path, changes={"telemetry": {"zenoh": {
         "enabled": True, "key": "rov7", "config_file": "vehicle.json5"}}}))
-    from uvd.runtime.app import zenoh_sink
+    from uvd.links.zenoh import zenoh_sink
     from uvd.telemetry.sink import TelemetryHub
     sink = zenoh_sink(cfg, TelemetryHub())
     commands, faults, seen = [], [], []

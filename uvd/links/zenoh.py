@@ -34,7 +34,8 @@ import math
 import threading
 import time
 from collections.abc import Mapping, Sequence
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -42,8 +43,12 @@ from drivers.samples import R_to_euler
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
 
-__all__ = ["ZenohSink", "zenoh_config", "estimate_payload", "state_payload", "ENCODINGS",
-           "QUERY_WHAT"]
+if TYPE_CHECKING:
+    from uvd.runtime.config import Config
+    from uvd.telemetry.sink import TelemetryHub
+
+__all__ = ["ZenohSink", "zenoh_config", "zenoh_sink", "estimate_payload", "state_payload",
+           "ENCODINGS", "QUERY_WHAT"]
 
 #: key (relative to uvd/<vehicle>) → the schema named in its samples' encoding
 ENCODINGS = {"state": "uvd.state.v1", "estimate": "uvd.zestimate.v1",
@@ -302,3 +307,25 @@ def _event(kind: str, r: Mapping[str, Any]) -> dict[str, Any]:
         text = f"started (uvd {r.get('version')})"
     rec = {k: v for k, v in r.items() if k != "config_toml"}
     return to_jsonable({"kind": kind, "text": text, "record": rec})
+
+
+def zenoh_sink(config: Config, hub: TelemetryHub, vehicle: Any = None) -> ZenohSink:
+    """The ``[telemetry.zenoh]`` sink of a configuration (docs/zenoh.md); ``vehicle``: the
+    configured one when already loaded."""
+    from uvd.runtime.schema import as_dict
+    z = config.telemetry.zenoh
+    base = Path(config.source).parent if config.source else Path.cwd()
+    file = str(base / z.config_file) if z.config_file else None
+    key = z.key or Path(config.vehicle.name).stem
+    c = config.control
+    configuration = {"vehicle": config.vehicle.name, "controller": c.controller,
+                     "model": c.model, "kp": c.kp, "kd": c.kd, "eps": c.eps,
+                     "reference": c.reference, "rate_hz": config.loop.rate_hz,
+                     "failsafe": as_dict(config.failsafe),
+                     # u = B f: what a client needs to tell a weak thruster (uvd-fdc)
+                     "thruster_matrix": (vehicle or config.load_vehicle()).B.tolist()}
+    return ZenohSink(key, zenoh_config(mode=z.mode, listen=z.listen, connect=z.connect,
+                                       multicast_scouting=z.multicast_scouting,
+                                       config_file=file),
+                     state_hz=z.state_hz, health_hz=z.health_hz, configuration=configuration,
+                     dropped=lambda: sum(s["dropped"] for s in hub.stats().values()))

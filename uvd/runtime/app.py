@@ -7,8 +7,10 @@
   amplifiers), with the systemd watchdog ping as its ``after_cycle`` hook;
 * the :class:`~uvd.runtime.supervisor.Supervisor` (failsafe arbiter + lifecycle), whose events
   and transitions it logs, reports as ``STATUS=`` and publishes as telemetry;
-* the :class:`~uvd.telemetry.sink.TelemetryHub` with the configured sinks;
-* the :class:`Component`\\ s (drivers, estimator workers, the Zenoh/MAVLink links later):
+* the :class:`~uvd.telemetry.sink.TelemetryHub` with the faces the configuration enables,
+  built from the one registry :data:`uvd.links.LINKS` (:attr:`App.links`: the black box, JSON
+  lines, Zenoh, MAVLink, the parameters file);
+* the :class:`Component`\\ s (drivers, estimator workers):
   ``start()`` all (bounded by ``[daemon] start_timeout_s``), then ``run()`` each as a task.
 
 Task structure (``asyncio.TaskGroup``)::
@@ -61,7 +63,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
-from uvd.links.jsonl import JsonLinesSink
+from uvd.links import LINKS, LinkContext
 from uvd.runtime.clock import Clock
 from uvd.runtime.commands import CommandQueue
 from uvd.runtime.config import Config, ConfigValidationError, load_config
@@ -81,31 +83,9 @@ from uvd.runtime.supervisor import Supervisor
 from uvd.telemetry._worker import run_in_daemon_thread
 from uvd.telemetry.sink import TelemetryHub, TelemetrySink
 
-__all__ = ["App", "Component", "ShutdownStep", "setup_logging", "zenoh_sink"]
+__all__ = ["App", "Component", "ShutdownStep", "setup_logging"]
 
 log = logging.getLogger("uvd.runtime")
-
-
-def zenoh_sink(config: Config, hub: TelemetryHub):
-    """The ``[telemetry.zenoh]`` sink of a configuration (docs/zenoh.md)."""
-    from uvd.links.zenoh import ZenohSink, zenoh_config
-    from uvd.runtime.schema import as_dict
-    z = config.telemetry.zenoh
-    base = Path(config.source).parent if config.source else Path.cwd()
-    file = str(base / z.config_file) if z.config_file else None
-    key = z.key or Path(config.vehicle.name).stem
-    c = config.control
-    configuration = {"vehicle": config.vehicle.name, "controller": c.controller,
-                     "model": c.model, "kp": c.kp, "kd": c.kd, "eps": c.eps,
-                     "reference": c.reference, "rate_hz": config.loop.rate_hz,
-                     "failsafe": as_dict(config.failsafe),
-                     # u = B f: what a client needs to tell a weak thruster (uvd-fdc)
-                     "thruster_matrix": config.load_vehicle().B.tolist()}
-    return ZenohSink(key, zenoh_config(mode=z.mode, listen=z.listen, connect=z.connect,
-                                       multicast_scouting=z.multicast_scouting,
-                                       config_file=file),
-                     state_hz=z.state_hz, health_hz=z.health_hz, configuration=configuration,
-                     dropped=lambda: sum(s["dropped"] for s in hub.stats().values()))
 
 
 @runtime_checkable
@@ -171,7 +151,8 @@ class App:
     components : sequence of Component
         Started in order, stopped in reverse order.
     sinks : sequence of TelemetrySink
-        In addition to the JSON-lines sink of ``[telemetry.jsonl]`` when enabled.
+        Fed before the faces the configuration enables (:data:`uvd.links.LINKS`: the black
+        box, JSON lines, Zenoh, MAVLink, the parameters file), which the App builds.
     supervisor : Supervisor, optional
         Built from ``config.failsafe`` by default. Its ``on_event``/``on_transition``
         listeners are kept and called after the App's own (log, STATUS=, telemetry).
@@ -205,10 +186,14 @@ class App:
         tel = config.telemetry
         self.hub = TelemetryHub(sinks, queue_size=tel.queue_size,
                                 flush_interval_s=tel.flush_interval_s)
-        if tel.jsonl.enabled:
-            self.hub.add_sink(JsonLinesSink(tel.jsonl.path), every_n=tel.jsonl.every_n_cycles)
-        if tel.zenoh.enabled:
-            self.hub.add_sink(zenoh_sink(config, self.hub))
+        #: the faces the configuration enables, by name (uvd.links.LINKS, in its order)
+        self.links: dict[str, TelemetrySink] = {}
+        ctx = LinkContext(config, self.hub, self.commands, lambda: self.config)
+        for name, make in LINKS.items():
+            face = make(ctx)
+            if face is not None:
+                self.hub.add_sink(face.sink, every_n=face.every_n, types=face.types)
+                self.links[name] = face.sink
         self.loop = FixedRateLoop(cycle, config.loop, clock=clock, on_error=self._on_cycle_error)
         self.watchdog = WatchdogPinger.from_env(self.notifier)
         if self.watchdog is not None:

@@ -116,17 +116,7 @@ class Daemon:
         self.dvl_box: Mailbox = Mailbox("dvl")
         self.depth_box: Mailbox = Mailbox("depth")
         self.sensors = make_sensors(config, self.ins_box, self.dvl_box, self.depth_box)
-        self.recorder = None
-        if config.recording.enabled:
-            from uvd.links.mcap import McapRecorder
-            r = config.recording
-            self.recorder = McapRecorder(r.dir, flush_interval_s=r.flush_interval_s,
-                                         rotate_mb=r.rotate_mb, rotate_s=r.rotate_s,
-                                         raw_queue_size=r.raw_queue_size)
-            for s in self.sensors:
-                s.reader.tap = self.recorder.tap_serial
-        self.can = CanComponent(config, self.vehicle, self.depth_box,
-                                tap=None if self.recorder is None else self.recorder.tap_can)
+        self.can = CanComponent(config, self.vehicle, self.depth_box)
         self.leak = LeakInput(config.sensors.leak) if config.sensors.leak.enabled else None
         self.supervisor = Supervisor(config.failsafe, extra_triggers=plugin_triggers(config))
         nav = config.navigation
@@ -138,27 +128,21 @@ class Daemon:
         self.app = App(config, self.cycle,
                        components=[*self.sensors, *([self.leak] if self.leak else []),
                                    self.can, GcFreeze()],
-                       sinks=[*sinks, *([self.recorder] if self.recorder else [])],
+                       sinks=sinks,
                        supervisor=self.supervisor, notifier=notifier, clock=clock,
                        realtime=realtime)
         if config.loop.trigger == "ins":   # the sensor-synchronous cycle (docs/runtime.md)
             for s in self.sensors:
                 if s.name == "ins":
                     s.on_sample = self.app.loop.wake
+        # the faces (uvd.links) are the App's; the black box taps every raw input frame
+        self.recorder, self.mavlink = self.app.links.get("mcap"), self.app.links.get("mavlink")
+        if self.recorder is not None:
+            self.can.tap = self.recorder.tap_can
+            for s in self.sensors:
+                s.reader.tap = self.recorder.tap_serial
         self.app.set_amplifier_hooks(zero=self.can.zero, disable=self.can.disable)
         self.app.reload_hooks.append(self._on_reload)
-        self.mavlink = None
-        if config.mavlink.enabled:
-            from uvd.links.mavlink.link import MavlinkLink
-            f = config.failsafe
-            self.mavlink = MavlinkLink(
-                config.mavlink, self.app.commands, lambda: self.app.config,
-                thresholds={"ins": f.ins_stale_s, "dvl": f.dvl_stale_s,
-                            "depth": f.depth_stale_s, "feedback": f.feedback_stale_s},
-                max_thrust_n=self.max_thrust, controller=config.control.controller,
-                step1_s=config.control.step1_duration_s,
-                loop_cpus=config.loop.cpu_affinity)
-            self.app.hub.add_sink(self.mavlink)
         est = config.estimation
         self._estimate_period_ns = int(est.publish_every_s * 1e9)
         self._next_estimate_ns = 0
@@ -167,10 +151,6 @@ class Daemon:
         self._adapts = bool(self.core_cfg.estimators) or \
             self.core_cfg.controller.diagnostics(self.state.ctrl).theta is not None
         if self.core_cfg.estimators:
-            if est.save_path:
-                from uvd.links.params_file import RECORD_TYPE, ParamsFileSink
-                self.app.hub.add_sink(ParamsFileSink(est.save_path, every_s=est.save_every_s),
-                                      types=(RECORD_TYPE,))
             # after the amplifiers are safe, before the sinks close: the newest θ̂ reaches
             # them (and save_path) however long ago the last periodic record went out
             self.app.add_shutdown_step(ShutdownStep("publish the final estimate",
