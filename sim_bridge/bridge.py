@@ -56,7 +56,6 @@ import asyncio
 import contextlib
 import copy
 import dataclasses
-import json
 import logging
 import math
 import os
@@ -69,16 +68,18 @@ from typing import Any
 
 import numpy as np
 
+from drivers.pty import PtyPort
 from drivers.samples import R_to_euler
 from sim_bridge.instruments.faults import SENSOR_MODES, FaultyInstruments, SensorFaults
 from sim_bridge.instruments.models import instrument_config
-from sim_bridge.instruments.pty_emulators import EmulatorConfig, InstrumentEmulators, PtyPort
+from sim_bridge.instruments.pty_emulators import EmulatorConfig, InstrumentEmulators
 from sim_bridge.plant import Plant, PlantConfig, PlantFault
 from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
+from uvd.io.toml import dump_toml
 from uvd.netports import free_port
 
 __all__ = ["SimBridge", "SensorFaults", "TRUTH_COLUMNS", "read_truth", "write_local_config",
-           "dump_toml", "BridgeProcess", "SENSOR_MODES", "cpu_split"]
+           "BridgeProcess", "SENSOR_MODES", "cpu_split"]
 
 log = logging.getLogger("sim_bridge")
 
@@ -548,40 +549,6 @@ def read_truth(path: str | Path) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- local setup
-
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        if isinstance(v, float) and not math.isfinite(v):
-            raise ValueError("TOML has no NaN/inf here")
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {type(v).__name__} to TOML")
-
-
-def dump_toml(data: dict, _prefix: str = "") -> str:
-    """TOML text of nested tables of scalars and arrays (what a uvd configuration holds)."""
-    lines: list[str] = []
-    tables = []
-    for k, v in data.items():
-        if isinstance(v, dict):
-            tables.append((k, v))
-        else:
-            lines.append(f"{k} = {_toml_value(v)}")
-    out = []
-    if lines:
-        if _prefix:
-            out.append(f"[{_prefix}]")
-        out.extend(lines)
-        out.append("")
-    for k, v in tables:
-        out.append(dump_toml(v, f"{_prefix}.{k}" if _prefix else k))
-    return "\n".join(out)
-
 
 def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
                        changes: dict | None = None) -> Path:

@@ -232,7 +232,7 @@ def test_signing_refuses_unsigned_wrong_and_forged_and_params_survive_a_restart(
     cfg = bridge["cfg"]
     data = tomllib.loads(cfg.read_text())
     data["mavlink"]["signing_key_file"] = str(bridge["key_file"])
-    from sim_bridge.bridge import dump_toml
+    from uvd.io.toml import dump_toml
     signed_cfg = cfg.with_name("signed.toml")
     signed_cfg.write_text(dump_toml(data))
     port = bridge["port"]

@@ -139,7 +139,7 @@ def test_docs_mavlink_md_lists_the_parameters_generated_from_the_schema():
 
 
 def test_a_replay_applies_the_parameters_kept_at_start_on_top_of_the_recorded_file(tmp_path):
-    from uvd.runtime.replay import Recording, _config_of
+    from uvd.runtime.replay.lockstep import Recording, _config_of
     text = DEFAULT_CONFIG.read_text(encoding="utf-8")
     rec = Recording(tmp_path / "run.mcap", {"config_toml": text,
                                             "config_path": str(DEFAULT_CONFIG),

@@ -29,7 +29,7 @@ from tests.hil_daemon import run_scenario, running_bridge
 from uvd.cli import main
 from uvd.runtime import commands as cmd
 from uvd.runtime.config import load_config
-from uvd.runtime.replay import replay_lockstep
+from uvd.runtime.replay.lockstep import replay_lockstep
 from uvd.telemetry.recording import CHANNELS, RecordingError, read_messages, schema
 
 pytestmark = pytest.mark.slow

@@ -22,16 +22,16 @@ import pytest
 
 from tests.hil_daemon import run_scenario, running_bridge
 from uvd.cli import main
-from uvd.commands.replay_realtime import (
+from uvd.netports import free_port
+from uvd.runtime.config import load_config
+from uvd.runtime.daemon import Daemon
+from uvd.runtime.loop import drop_realtime
+from uvd.runtime.replay.realtime import (
     TOLERANCE_PERMILLE,
     compare_commands,
     load_wire,
     replay_realtime,
 )
-from uvd.netports import free_port
-from uvd.runtime.config import load_config
-from uvd.runtime.daemon import Daemon
-from uvd.runtime.loop import drop_realtime
 from uvd.telemetry.recording import RecordingError
 
 pytestmark = pytest.mark.slow
@@ -149,7 +149,7 @@ def test_a_daemon_that_stops_costs_one_gate_timeout_not_a_hang():
 
     import can
 
-    from uvd.commands.replay_realtime import RealtimePlayer, WireRecording
+    from uvd.runtime.replay.realtime import RealtimePlayer, WireRecording
 
     fb = [(10_000_000 + k * 2_000_000, can.Message(arbitration_id=0x181, data=b"\0" * 8,
                                                    is_extended_id=False), (0x080, k // 5))

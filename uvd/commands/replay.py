@@ -1,14 +1,14 @@
 """``uvd replay RUN.mcap --lockstep|--realtime … [--config FILE] [--json OUT] [--quiet]``.
 
 Feeds a black-box recording's raw bytes through the daemon's decoders and its one cycle on the
-recorded clock (:mod:`uvd.runtime.replay`) and compares every amplifier command with the
+recorded clock (:mod:`uvd.runtime.replay.lockstep`) and compares every amplifier command with the
 recorded one: bit-identical, or the first mismatch with its cycle, field and both values.
 With ``--config`` (other gains, another controller) it compares tracking instead of bits.
 Exit code 0 when the commands match (or, with ``--config``, when the replay ran to the end),
 1 on a mismatch, 2 on a file that cannot be replayed.
 
 ``--realtime --can-interface IFACE --channel CH`` plays the recorded input onto a live bus and
-pseudo-terminals for a daemon under test (:mod:`uvd.commands.replay_realtime`); exit code 0
+pseudo-terminals for a daemon under test (:mod:`uvd.runtime.replay.realtime`); exit code 0
 when its commands match the recording within the documented tolerance (or, with
 ``--config``, when it ran), 1 otherwise, 2 on a file that cannot be played.
 """
@@ -55,7 +55,7 @@ def _run(args) -> int:
         return _run_realtime(args)
     from uvd.jsonio import write_json
     from uvd.progress import Progress
-    from uvd.runtime.replay import replay_lockstep
+    from uvd.runtime.replay.lockstep import replay_lockstep
     from uvd.telemetry.recording import RecordingError
 
     t0 = time.monotonic()
@@ -96,9 +96,9 @@ def _run(args) -> int:
 
 
 def _run_realtime(args) -> int:
-    from uvd.commands.replay_realtime import default_work_dir, replay_realtime
     from uvd.jsonio import write_json
     from uvd.progress import Progress
+    from uvd.runtime.replay.realtime import default_work_dir, replay_realtime
     from uvd.telemetry.recording import RecordingError
 
     if not (args.can_interface and args.channel):

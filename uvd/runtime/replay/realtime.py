@@ -359,7 +359,7 @@ def live_config(rec_toml: str, work: Path, *, interface: str, channel: str, can_
     instruments on the replay's pseudo-terminals in ``work``, its bus on ``interface`` /
     ``channel``, its own recording in ``work/live`` and no other outputs (Zenoh, JSON lines,
     CAN log). Returns the written path."""
-    from sim_bridge.bridge import dump_toml
+    from uvd.io.toml import dump_toml
 
     data = tomllib.loads(base.read_text(encoding="utf-8") if base else rec_toml)
     vehicle = data.get("vehicle", {}).get("name", "")
@@ -417,8 +417,8 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
     """
     from drivers.can.bus import open_bus
     from drivers.can.config import CanBusConfig
-    from sim_bridge.instruments.pty_emulators import PtyPort
-    from uvd.runtime.replay import tracking
+    from drivers.pty import PtyPort
+    from uvd.runtime.replay.lockstep import tracking
 
     rec = load_wire(path)
     work = Path(work)
