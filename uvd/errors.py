@@ -40,3 +40,9 @@ class BusError(TransportError):
 
 class ExperimentError(UvdError, RuntimeError):
     """An experiment could not be run as asked (unknown name, bad option)."""
+
+
+class LogReadError(ConfigError):
+    """Another system's recording cannot be read as asked: unreadable, truncated or corrupted
+    file, a topic or field the log profile names that is missing, a wrong unit. The message
+    names the file and the topic."""

@@ -15,12 +15,15 @@ import numpy as np
 
 from uvd.errors import ConfigError, ParameterError
 from uvd.io.params import params_from_mapping
-from uvd.model.thrusters import ThrusterSpec
+from uvd.model.thrusters import ThrustCurve, ThrusterSpec
 from uvd.model.vehicle import Vehicle
 
 _THRUSTER_KEYS = {"name", "position_m", "direction", "k_thrust", "max_thrust_n",
-                  "time_constant_s", "stiction_n"}
-_TOP_KEYS = {"name", "description", "parameters", "thruster_defaults", "thrusters"}
+                  "time_constant_s", "stiction_n", "curve"}
+_TOP_KEYS = {"name", "description", "parameters", "thruster_defaults", "thrusters",
+             "thrust_curves"}
+_CURVE_KEYS = {"name", "unit", "neutral", "dead_band", "command", "thrust_n", "source",
+               "supply_voltage_v"}
 
 
 def _builtin_root():
@@ -42,6 +45,39 @@ def vehicle_path(name_or_path: str | Path) -> Path:
         return Path(str(root))
     raise ConfigError(f"unknown vehicle {str(name_or_path)!r}: not a file, and not one of the "
                       f"built-in vehicles {builtin_vehicles()}")
+
+
+def builtin_curves() -> list[str]:
+    """Names of the built-in thrust curves (``uvd/vehicles/curves/*.toml``)."""
+    return sorted(p.name[:-5] for p in (_builtin_root() / "curves").iterdir()
+                  if p.name.endswith(".toml"))
+
+
+def _curve_from_table(table: dict, where: str) -> ThrustCurve:
+    bad = set(table) - _CURVE_KEYS
+    if bad:
+        raise ConfigError(f"{where}: unknown key(s) {sorted(bad)}")
+    missing = {"command", "thrust_n"} - set(table)
+    if missing:
+        raise ConfigError(f"{where}: missing key(s) {sorted(missing)}")
+    try:
+        return ThrustCurve(command=tuple(table["command"]), thrust_n=tuple(table["thrust_n"]),
+                           neutral=float(table.get("neutral", 0.0)),
+                           dead_band=float(table.get("dead_band", 0.0)),
+                           unit=table.get("unit", "normalised"),
+                           source=str(table.get("source", "")))
+    except (TypeError, ValueError, ParameterError) as exc:
+        raise ConfigError(f"{where}: {exc}") from exc
+
+
+def load_curve(name: str) -> ThrustCurve:
+    """A built-in thrust curve by name (e.g. ``t200``, Blue Robotics' T200)."""
+    f = _builtin_root() / "curves" / f"{name}.toml"
+    if not f.is_file():
+        raise ConfigError(f"unknown thrust curve {name!r}: not one of the built-in curves "
+                          f"{builtin_curves()} nor a [thrust_curves.{name}] table of the vehicle")
+    with f.open("rb") as fh:
+        return _curve_from_table(tomllib.load(fh), f"thrust curve {f}")
 
 
 def load_vehicle(name_or_path: str | Path) -> Vehicle:
@@ -66,13 +102,22 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
     bad = set(defaults) - _THRUSTER_KEYS
     if bad:
         raise ConfigError(f"{path}: [thruster_defaults]: unknown key(s) {sorted(bad)}")
+    curves = {name: _curve_from_table(tbl, f"{path}: [thrust_curves.{name}]")
+              for name, tbl in doc.get("thrust_curves", {}).items()}
     specs = []
     for i, t in enumerate(doc.get("thrusters", [])):
         bad = set(t) - _THRUSTER_KEYS
         if bad:
             raise ConfigError(f"{path}: thrusters[{i}]: unknown key(s) {sorted(bad)}")
+        kw = {**defaults, **t}
+        if "curve" in kw:
+            cname = kw["curve"]
+            try:
+                kw["curve"] = curves[cname] if cname in curves else load_curve(cname)
+            except ConfigError as exc:
+                raise ConfigError(f"{path}: thrusters[{i}]: {exc}") from exc
         try:
-            specs.append(ThrusterSpec(**{**defaults, **t}))
+            specs.append(ThrusterSpec(**kw))
         except (TypeError, ParameterError) as exc:
             raise ConfigError(f"{path}: thrusters[{i}]: {exc}") from exc
     if len(specs) < 6:

@@ -25,6 +25,7 @@ class ThrusterSpec:
     max_thrust_n: float = 300.0
     time_constant_s: float = 0.15
     stiction_n: float = 5.0
+    curve: ThrustCurve | None = None
 
     def __post_init__(self) -> None:
         d = np.asarray(self.direction, dtype=float)
@@ -52,6 +53,21 @@ def thruster_matrix(specs: tuple[ThrusterSpec, ...] | list[ThrusterSpec]) -> np.
     return B
 
 
+def thrust_from_commands(specs, commands: np.ndarray) -> np.ndarray:
+    """Thrust (N) of every thruster, (n, N), from recorded commands (n, N) through each
+    thruster's :class:`ThrustCurve`; raises :class:`ParameterError` naming a thruster without
+    one."""
+    commands = np.atleast_2d(np.asarray(commands, dtype=float))
+    if commands.shape[1] != len(specs):
+        raise ParameterError(f"{commands.shape[1]} thruster commands for {len(specs)} thrusters")
+    out = np.empty_like(commands)
+    for j, s in enumerate(specs):
+        if s.curve is None:
+            raise ParameterError(f"thruster {s.name!r}: no thrust curve (command -> thrust)")
+        out[:, j] = s.curve.thrust(commands[:, j])
+    return out
+
+
 def thrust_from_speed(omega: np.ndarray, k: np.ndarray | float) -> np.ndarray:
     """Steady-state thrust f = k ω|ω| (App. A.1); ω in rad/s, f in N."""
     omega = np.asarray(omega, dtype=float)
@@ -62,3 +78,56 @@ def speed_from_thrust(f: np.ndarray, k: np.ndarray | float) -> np.ndarray:
     """Inverse of :func:`thrust_from_speed`: ω = sign(f) √(|f|/k)."""
     f = np.asarray(f, dtype=float)
     return np.sign(f) * np.sqrt(np.abs(f) / k)
+
+
+@dataclass(frozen=True)
+class ThrustCurve:
+    """Steady-state thrust of one thruster as a function of its command: a table with linear
+    interpolation, a dead band and separate forward and reverse branches.
+
+    The command is what the log records: a PWM pulse width (µs) or a normalised command; the
+    table is (command, thrust N) pairs, increasing in command. Within ``dead_band`` of
+    ``neutral`` the thrust is 0; outside the table the end values hold (the ESC clamps). The
+    table itself carries the asymmetry (e.g. T200: +49.95 N at u = +1, −40.08 N at u = −1),
+    so forward and reverse are as measured, not mirrored.
+    """
+
+    command: tuple[float, ...]
+    thrust_n: tuple[float, ...]
+    neutral: float = 0.0
+    dead_band: float = 0.0
+    unit: str = "normalised"
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        c = np.asarray(self.command, dtype=float)
+        f = np.asarray(self.thrust_n, dtype=float)
+        if c.ndim != 1 or c.shape != f.shape or c.size < 2:
+            raise ParameterError("thrust curve: command and thrust_n need the same length >= 2")
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(f))):
+            raise ParameterError("thrust curve: non-finite entries")
+        if not np.all(np.diff(c) > 0):
+            raise ParameterError("thrust curve: command must increase strictly")
+        if not np.all(np.diff(f) >= 0):
+            raise ParameterError("thrust curve: thrust must not decrease with the command")
+        if self.dead_band < 0:
+            raise ParameterError("thrust curve: dead_band must be >= 0")
+        if self.unit not in ("pwm_us", "normalised"):
+            raise ParameterError(f"thrust curve: unit must be 'pwm_us' or 'normalised', "
+                                 f"got {self.unit!r}")
+        object.__setattr__(self, "command", tuple(float(x) for x in c))
+        object.__setattr__(self, "thrust_n", tuple(float(x) for x in f))
+
+    def thrust(self, cmd: np.ndarray) -> np.ndarray:
+        """Thrust (N) of commands ``cmd`` (any shape, the curve's unit)."""
+        cmd = np.asarray(cmd, dtype=float)
+        f = np.interp(cmd, self.command, self.thrust_n)
+        return np.where(np.abs(cmd - self.neutral) <= self.dead_band, 0.0, f)
+
+    @property
+    def max_forward_n(self) -> float:
+        return float(self.thrust_n[-1])
+
+    @property
+    def max_reverse_n(self) -> float:
+        return float(self.thrust_n[0])

@@ -1,0 +1,252 @@
+"""Other systems' recordings: a registry of log formats by name.
+
+Each format reads one kind of file through that ecosystem's own library and yields the same
+thing: ``(topic, t_ns, message)`` in file order, where ``message`` is the decoded message
+(an object whose attributes are its fields) and ``t_ns`` the time stamp the file gives it
+(a bag's receive time, a telemetry log's receive time, a dataflash log's ``TimeUS``).
+
+=================  =====================================  ========================================
+name               files                                  read by
+=================  =====================================  ========================================
+``ros1``           ROS 1 bag (``.bag``)                   rosbags (pure Python), ROS 1 Noetic types
+``ros2``           ROS 2 bag (folder, ``.db3``/``.mcap``) rosbags, ROS 2 Humble types
+``mcap``           MCAP (``.mcap``) of ROS 2 (CDR), ROS 1  mcap's streaming reader; CDR/ROS 1 through
+                   or JSON messages (uvd's black box)     rosbags' type system, JSON with ``json``
+``tlog``           MAVLink telemetry log (``.tlog``)      pymavlink (``mavutil.mavlink_connection``)
+``dataflash``      ArduPilot dataflash log (``.BIN``)     pymavlink's DFReader (same entry point)
+``uvd-telemetry``  ``uvd run``'s JSON lines (``.jsonl``)  ``json``; topic = the record's ``type``
+=================  =====================================  ========================================
+
+:func:`open_log` picks the format from the file (or by ``fmt=``); :func:`count_messages` counts
+per topic. A file that is not readable as its format, truncated or corrupted raises
+:class:`LogReadError` naming the file (and the topic where known); nothing blocks: every reader
+works on the file, never on a stream that could wait.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+from uvd.errors import LogReadError
+
+__all__ = ["LogFormat", "FORMATS", "log_formats", "detect_format", "open_log",
+           "count_messages", "LogReadError"]
+
+
+@dataclass(frozen=True)
+class LogFormat:
+    """One log format: its name, what it reads and the reader."""
+
+    name: str
+    description: str
+    suffixes: tuple[str, ...]
+    read: Callable[[Path, frozenset[str] | None], Iterator[tuple[str, int, object]]]
+
+
+# ---------------------------------------------------------------------------------------------
+# ROS bags through rosbags
+# ---------------------------------------------------------------------------------------------
+def _rosbags_errors():
+    from rosbags.rosbag1 import ReaderError as R1Error
+    from rosbags.rosbag2 import ReaderError as R2Error
+    return (R1Error, R2Error)
+
+
+def _read_rosbag(path: Path, topics: frozenset[str] | None, store: str
+                 ) -> Iterator[tuple[str, int, object]]:
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    errors = _rosbags_errors()
+    topic = "?"
+    try:
+        with AnyReader([path], default_typestore=get_typestore(getattr(Stores, store))) as r:
+            conns = [c for c in r.connections if topics is None or c.topic in topics]
+            for conn, t_ns, raw in r.messages(connections=conns):
+                topic = conn.topic
+                try:
+                    msg = r.deserialize(raw, conn.msgtype)
+                except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds
+                    raise LogReadError(f"{path}: topic {topic}: message at t={t_ns} ns cannot "
+                                       f"be decoded as {conn.msgtype}: {exc}") from exc
+                yield topic, int(t_ns), msg
+    except LogReadError:
+        raise
+    except (*errors, OSError, ValueError, KeyError, IndexError, EOFError) as exc:
+        raise LogReadError(f"{path}: not a readable ROS bag (truncated or corrupted?) "
+                           f"near topic {topic}: {type(exc).__name__}: {exc}") from exc
+
+
+def _read_ros1(path, topics):
+    return _read_rosbag(path, topics, "ROS1_NOETIC")
+
+
+def _read_ros2(path, topics):
+    return _read_rosbag(path, topics, "ROS2_HUMBLE")
+
+
+# ---------------------------------------------------------------------------------------------
+# MCAP through mcap (+ rosbags' type system for CDR / ROS 1 messages)
+# ---------------------------------------------------------------------------------------------
+def _read_mcap(path: Path, topics: frozenset[str] | None) -> Iterator[tuple[str, int, object]]:
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    decoders: dict[int, Callable] = {}
+
+    def decoder(schema, channel):
+        enc = channel.message_encoding
+        if enc == "json":
+            return lambda data: json.loads(data, object_hook=lambda d: SimpleNamespace(**d))
+        if enc in ("cdr", "ros1") and schema is not None:
+            from rosbags.typesys import Stores, get_typestore
+            from rosbags.typesys.msg import get_types_from_msg
+            store = get_typestore(Stores.ROS2_HUMBLE if enc == "cdr" else Stores.ROS1_NOETIC)
+            store.register(get_types_from_msg(schema.data.decode(), schema.name))
+            if enc == "cdr":
+                return lambda data: store.deserialize_cdr(data, schema.name)
+            return lambda data: store.deserialize_ros1(data, schema.name)
+        raise LogReadError(f"{path}: topic {channel.topic}: message encoding {enc!r} is not "
+                           "readable (json, cdr, ros1)")
+
+    topic = "?"
+    try:
+        with path.open("rb") as fh:
+            reader = make_reader(fh)
+            for schema, channel, message in reader.iter_messages(
+                    topics=None if topics is None else sorted(topics), log_time_order=False):
+                topic = channel.topic
+                dec = decoders.get(channel.id)
+                if dec is None:
+                    dec = decoders[channel.id] = decoder(schema, channel)
+                try:
+                    msg = dec(message.data)
+                except Exception as exc:  # noqa: BLE001 - a codec's own errors vary
+                    raise LogReadError(f"{path}: topic {topic}: message at "
+                                       f"t={message.log_time} ns cannot be decoded: "
+                                       f"{exc}") from exc
+                yield topic, int(message.log_time), msg
+    except LogReadError:
+        raise
+    except (McapError, OSError, ValueError, KeyError, EOFError) as exc:
+        raise LogReadError(f"{path}: not a readable MCAP file (truncated or corrupted?) near "
+                           f"topic {topic}: {type(exc).__name__}: {exc}") from exc
+
+
+# ---------------------------------------------------------------------------------------------
+# MAVLink telemetry logs and ArduPilot dataflash logs through pymavlink
+# ---------------------------------------------------------------------------------------------
+def _read_mavlink(path: Path, topics: frozenset[str] | None, *, dataflash: bool
+                  ) -> Iterator[tuple[str, int, object]]:
+    from pymavlink import mavutil
+
+    kind = "ArduPilot dataflash log" if dataflash else "MAVLink telemetry log"
+    try:
+        conn = mavutil.mavlink_connection(str(path), notimestamps=False,
+                                          robust_parsing=True)
+    except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on a bad header
+        raise LogReadError(f"{path}: not a readable {kind}: {type(exc).__name__}: "
+                           f"{exc}") from exc
+    want = None if topics is None else sorted(topics)
+    topic = "?"
+    try:
+        while True:
+            try:
+                msg = conn.recv_match(type=want, blocking=False)
+            except Exception as exc:  # noqa: BLE001
+                raise LogReadError(f"{path}: {kind} unreadable after topic {topic}: "
+                                   f"{type(exc).__name__}: {exc}") from exc
+            if msg is None:
+                break
+            topic = msg.get_type()
+            yield topic, int(round(float(getattr(msg, "_timestamp", 0.0)) * 1e9)), msg
+    finally:
+        conn.close()
+
+
+def _read_tlog(path, topics):
+    return _read_mavlink(path, topics, dataflash=False)
+
+
+def _read_dataflash(path, topics):
+    return _read_mavlink(path, topics, dataflash=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# uvd's own JSON-lines telemetry
+# ---------------------------------------------------------------------------------------------
+def _read_uvd_telemetry(path: Path, topics: frozenset[str] | None
+                        ) -> Iterator[tuple[str, int, object]]:
+    try:
+        with path.open("r", encoding="utf-8") as fh:
+            for lineno, line in enumerate(fh, start=1):
+                try:
+                    rec = json.loads(line)
+                except json.JSONDecodeError as exc:
+                    raise LogReadError(f"{path}: line {lineno}: not JSON (truncated or "
+                                       f"corrupted?): {exc}") from exc
+                if not isinstance(rec, dict):
+                    raise LogReadError(f"{path}: line {lineno}: not a JSON object")
+                topic = str(rec.get("type", "?"))
+                if topics is not None and topic not in topics:
+                    continue
+                yield topic, int(rec.get("t_ns", 0)), SimpleNamespace(**rec)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise LogReadError(f"{path}: cannot read uvd telemetry: {exc}") from exc
+
+
+FORMATS: dict[str, LogFormat] = {f.name: f for f in (
+    LogFormat("ros1", "ROS 1 bag (rosbags, ROS 1 Noetic message types)", (".bag",), _read_ros1),
+    LogFormat("ros2", "ROS 2 bag folder or .db3 (rosbags, ROS 2 Humble message types)",
+              (".db3",), _read_ros2),
+    LogFormat("mcap", "MCAP: ROS 2 (CDR), ROS 1 or JSON messages (mcap, rosbags)", (".mcap",),
+              _read_mcap),
+    LogFormat("tlog", "MAVLink telemetry log as a ground station records it (pymavlink)",
+              (".tlog",), _read_tlog),
+    LogFormat("dataflash", "ArduPilot dataflash log (pymavlink DFReader)", (".bin", ".log"),
+              _read_dataflash),
+    LogFormat("uvd-telemetry", "uvd run's JSON-lines telemetry", (".jsonl",),
+              _read_uvd_telemetry),
+)}
+
+
+def log_formats() -> list[str]:
+    """The registered format names."""
+    return sorted(FORMATS)
+
+
+def detect_format(path: str | Path) -> str:
+    """The format of ``path`` from its name (a folder with ``metadata.yaml`` is a ROS 2 bag)."""
+    path = Path(path)
+    if path.is_dir():
+        if (path / "metadata.yaml").is_file():
+            return "ros2"
+        raise LogReadError(f"{path}: a folder but not a ROS 2 bag (no metadata.yaml)")
+    suffix = path.suffix.lower()
+    for f in FORMATS.values():
+        if suffix in f.suffixes:
+            return f.name
+    raise LogReadError(f"{path}: unknown log format (suffix {path.suffix!r}); give one of "
+                       f"{log_formats()}")
+
+
+def open_log(path: str | Path, fmt: str | None = None, topics=None
+             ) -> Iterator[tuple[str, int, object]]:
+    """``(topic, t_ns, message)`` of ``path`` in file order; only ``topics`` if given."""
+    path = Path(path)
+    if not path.exists():
+        raise LogReadError(f"{path}: no such file")
+    name = fmt or detect_format(path)
+    if name not in FORMATS:
+        raise LogReadError(f"{path}: unknown log format {name!r}; known: {log_formats()}")
+    return FORMATS[name].read(path, None if topics is None else frozenset(topics))
+
+
+def count_messages(path: str | Path, fmt: str | None = None) -> Counter:
+    """Messages per topic of a whole file (reads and decodes every message)."""
+    return Counter(topic for topic, _t, _m in open_log(path, fmt))
