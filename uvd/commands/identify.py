@@ -27,18 +27,29 @@ from uvd.errors import ConfigError, ParameterError
 def register(sub) -> None:
     p = sub.add_parser("identify", help="identify UV parameters from a recorded run (AID or LS)",
                        description="Identify the 241 UV parameters of (2.44) from a recorded run.")
-    p.add_argument("--log", type=Path, required=True, metavar="RUN",
+    p.add_argument("--log", type=Path, required=True, metavar="FILE", nargs="+",
                    help="recorded run: .npz or uvd run's telemetry .jsonl "
-                        "(docs/experiments-identification.md)")
+                        "(docs/experiments-identification.md); with --profile one or more "
+                        "recordings of another system (ROS bag, MCAP, .tlog, .BIN; "
+                        "docs/real-vehicles.md)")
+    p.add_argument("--profile", metavar="NAME",
+                   help="log profile (built-in name or TOML file) mapping the recordings' "
+                        "topics to signals: the recordings are another system's")
+    p.add_argument("--vehicle", metavar="FILE",
+                   help="with --profile: the vehicle file (thrusters, thrust curves, first "
+                        "guess; default: the profile's vehicle)")
     p.add_argument("--method", choices=("aid", "ls", "ls-consistent"), required=True)
     p.add_argument("--out", type=Path, required=True, metavar="PARAMS.toml",
                    help="where to write the identified parameters")
     p.add_argument("--init", type=Path, metavar="PARAMS.toml",
                    help="aid: initial parameters (default INITP of Tables 4.6-4.7)")
     p.add_argument("--gains", metavar="a,g1,g2,g3,g4",
-                   help="aid: gains a, γ1..γ4 (default 10,5000,20000,2000,2000, §4.6)")
-    p.add_argument("--window", type=float, default=2.1, metavar="S",
-                   help="ls: Savitzky-Golay window in seconds (default 2.1)")
+                   help="aid: gains a, γ1..γ4 (default 10,5000,20000,2000,2000, §4.6; with "
+                        "--profile a,γ1,γ2,γ3 of the rotational law, default §4.5's scaled to "
+                        "the vehicle's inertia, uvd.estimation.aid.scaled_aid_gains)")
+    p.add_argument("--window", type=float, default=None, metavar="S",
+                   help="ls: Savitzky-Golay window in seconds (default 2.1; 1.0 with "
+                        "--profile)")
     p.add_argument("--json", type=Path, metavar="OUT", help="also write a summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=_run)
@@ -142,6 +153,14 @@ def _run(args) -> int:
 
     if not args.out.parent.is_dir():  # before minutes of identification, not after
         raise ConfigError(f"--out {args.out}: cannot write: no folder {args.out.parent}")
+    if args.profile:
+        return _run_logs(args)
+    if len(args.log) != 1:
+        raise ConfigError("--log: several recordings need --profile (another system's logs); "
+                          "a uvd run log is identified one at a time")
+    args.log = args.log[0]
+    if args.window is None:
+        args.window = 2.1
     run = load_runlog(args.log)
     if run.stretch_note():
         print(f"{args.log}: {run.stretch_note()}")
@@ -198,4 +217,105 @@ def _run(args) -> int:
     print(f"wrote {args.out}")
     if args.json:
         write_json(args.json, summary)
+    return 0
+
+
+def _run_logs(args) -> int:
+    """``uvd identify --log FILE… --profile NAME``: another system's recordings."""
+    import time
+
+    from uvd.commands.reallogs import (
+        embed_identified,
+        identify_rotational,
+        load_log_runs,
+        parse_gains,
+        refused_dofs,
+        rot_of,
+    )
+    from uvd.estimation.aid import scaled_aid_gains
+    from uvd.io.logprofile import load_profile
+    from uvd.io.params import params_from_toml, save_params
+    from uvd.io.vehicle import load_vehicle
+    from uvd.jsonio import write_json
+    from uvd.progress import Progress
+
+    t_start = time.process_time()
+    profile = load_profile(args.profile)
+    vname = args.vehicle or profile.vehicle
+    if vname is None:
+        raise ConfigError(f"--vehicle: profile {profile.name!r} names no vehicle; give the "
+                          "vehicle file (thrusters and their thrust curves)")
+    vehicle = load_vehicle(vname)
+    runs, reports = load_log_runs(args.log, profile, vehicle, quiet=args.quiet)
+    for rep in reports:
+        print(rep.text())
+    refused = refused_dofs(profile, runs)
+    if any(d in refused for d in ("roll", "pitch", "yaw")):
+        raise ConfigError("the rotational DOFs cannot be identified: " + "; ".join(
+            f"{d}: {r}" for d, r in refused.items() if d in ("roll", "pitch", "yaw")))
+    if "linear_velocity" in profile.signals:
+        print("NOTE: the profile has a linear velocity; this version identifies the rotational "
+              "model (2.40) from real recordings and keeps the vehicle file's translation")
+    first = params_from_toml(args.init) if args.init else vehicle.params
+    theta0 = rot_of(first)
+    if args.method == "aid":
+        gains = (parse_gains(args.gains, 3) if args.gains else
+                 scaled_aid_gains(np.diag(first.M), rotational=True))
+    else:
+        gains = None
+    window = 1.0 if args.window is None else args.window
+    n = sum(len(r) for r in runs)
+    with Progress(args.method, unit="samples" if args.method == "aid" else "runs",
+                  quiet=args.quiet) as pr:
+        try:
+            res = identify_rotational(runs, args.method, theta0=theta0, gains=gains,
+                                      window_s=window, progress=pr.update)
+        except ValueError as exc:
+            raise ConfigError(f"{args.method}: {exc}") from exc
+    rot = res.pop("params")
+    params = embed_identified(vehicle.params, rot)
+    cpu_s = time.process_time() - t_start
+    lam = np.linalg.eigvalsh(np.asarray(rot.I))
+    sym = [np.linalg.eigvalsh(0.5 * (c + c.T)).max() for c in np.asarray(rot.C)]
+    phys = {"inertia_positive": bool(lam[0] > 0), "drag_dissipative": bool(max(sym) < 0),
+            "restoring_b3_positive": bool(rot.b[2] > 0)}
+    names = ", ".join(str(p) for p in args.log)
+    title = (f"{args.method} of the rotational model (2.40) from {len(args.log)} recording(s) "
+             f"({n} samples, profile {profile.name}, vehicle {vehicle.name}); translation = the "
+             f"vehicle file's first guess, NOT identified")
+    extra = ["", "[identified]", f"method = {args.method!r}",
+             f"profile = {profile.name!r}", f"vehicle = {vehicle.name!r}",
+             "logs = [" + ", ".join(repr(str(p)) for p in args.log) + "]",
+             'dofs = ["roll", "pitch", "yaw"]', "", "[refused]"]
+    extra += [f"{d} = {r!r}" for d, r in refused.items()]
+    try:
+        save_params(params, args.out, title=title, extra="\n".join(extra) + "\n")
+    except OSError as exc:
+        raise ConfigError(f"--out {args.out}: cannot write: {exc.strerror or exc}") from exc
+    print(title)
+    print(f"I diag {np.array2string(np.diag(rot.I), precision=4)} kg m2, eigenvalues min "
+          f"{lam[0]:.4g}; quadratic drag diag "
+          f"{np.array2string(np.array([rot.C[i][i, i] for i in range(3)]), precision=4)}; "
+          f"b {np.array2string(np.asarray(rot.b), precision=4)} N m")
+    print("physically meaningful: " + ", ".join(f"{k} {'yes' if v else 'NO'}"
+                                                 for k, v in phys.items()))
+    reasons: dict[str, list[str]] = {}
+    for d, r in refused.items():
+        reasons.setdefault(r, []).append(d)
+    for r, ds in reasons.items():
+        print(f"REFUSED {', '.join(ds)}: {r}")
+    if args.method == "aid":
+        print(f"AID gains a, γ1..γ3 = {res['gains']}; "
+              + (f"FROZEN: {res['freeze_reason']}" if res["frozen"] else
+                 f"rate-estimate RMS error over the last quarter "
+                 f"{100 * res['rate_estimate_error_last_quarter']:.1f} % of the RMS rate"))
+    print(f"read + identified in {cpu_s:.2f} s CPU; wrote {args.out}")
+    if args.json:
+        write_json(args.json, {"logs": [str(p) for p in args.log], "profile": profile.name,
+                               "vehicle": vehicle.name, "method": args.method, "samples": n,
+                               "reports": [r.as_dict() for r in reports], "refused": refused,
+                               "I": np.asarray(rot.I).tolist(), "C": np.asarray(rot.C).tolist(),
+                               "b": np.asarray(rot.b).tolist(), "physical": phys,
+                               "cpu_s": cpu_s, **{k: v for k, v in res.items()
+                                                  if not isinstance(v, np.ndarray)}})
     return 0

@@ -679,3 +679,39 @@ INITP_6DOF = UVParams(M=100.0 * np.eye(6), D=np.stack([-100.0 * np.eye(6)] * 6),
 INITP_ROT = RotParams(I=100.0 * np.eye(3), C=np.stack([-100.0 * np.eye(3)] * 3),
                       b=np.array([0.0, 0.0, 100.0]))
 """INITP of Table 4.2: Î = 100 I, Ĉᵢ = −100 I, b̂ = [0, 0, 100]."""
+
+
+# ---------------------------------------------------------------------------------------------
+# gains scaled to the vehicle
+# ---------------------------------------------------------------------------------------------
+#: the JHU ROV's decoupled masses (Tables 5.4–5.5, uvd/vehicles/jhu-rov.toml): the
+#: vehicle §4.5's and §4.6's gains were chosen for
+JHU_MASSES = np.array([628.0, 791.0, 1043.0, 95.7, 145.3, 110.2])
+
+
+def scaled_aid_gains(masses: np.ndarray, *, rotational: bool = False
+                     ) -> AID6Gains | AID3Gains:
+    """AID's gains for another vehicle: §4.6's (6-DOF) or §4.5's (rotational) γ's scaled by the
+    ratio of the vehicle's mean mass (inertia, for the rotational law) to the JHU ROV's.
+
+    In (4.10)–(4.13) / (4.23)–(4.27) each block's update is γ times a regressor times ∆v, and
+    the observer error is ∆v ≈ M̂⁻¹ 𝒲 θ̃ / a: the parameter error obeys θ̃̇ ≈ −(γ/a) 𝒴ᵀ M̂⁻¹ 𝒲 θ̃.
+    For the same motion (the same regressors) its rate is γ/M, whatever the block — so a
+    vehicle s times lighter than the JHU ROV needs γ s times smaller for the same convergence,
+    and its first estimate is not thrown around by gains meant for 100 times its mass (what
+    §4.6's gains do to a BlueROV2: M̂ ends at 100–133 against a truth of 0.4–32). The observer
+    pole a is kept. A motion of another size changes the rate by the regressor's square
+    (drag ∝ |v|v): ``uvd identify --gains`` takes the user's own.
+    """
+    m = np.asarray(masses, dtype=float)
+    if m.shape != (6,) or np.any(~(m > 0)):
+        raise ValueError("scaled_aid_gains: 6 positive masses (the diagonal of M) needed")
+    sl = slice(3, 6) if rotational else slice(0, 6)
+    s = float(np.mean(m[sl]) / np.mean(JHU_MASSES[sl]))
+    if rotational:
+        g3 = AID3Gains()
+        return AID3Gains(a=g3.a, gamma1=g3.gamma1 * s, gamma2=g3.gamma2 * s,
+                         gamma3=g3.gamma3 * s)
+    g0 = AID6Gains()
+    return AID6Gains(a=g0.a, gamma1=g0.gamma1 * s, gamma2=g0.gamma2 * s, gamma3=g0.gamma3 * s,
+                     gamma4=g0.gamma4 * s)

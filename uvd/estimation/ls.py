@@ -64,7 +64,7 @@ from uvd.model.params import (
 )
 
 __all__ = ["DiffFilter", "LSResult", "differentiate", "regressor_uv_batch",
-           "regressor_uvr_batch", "ls_reduce", "ls_identify", "ls_solve", "project_consistent",
+           "regressor_uvr_batch", "ls_reduce", "ls_reduce_runs", "ls_identify", "ls_solve", "project_consistent",
            "consistency_margins", "active_bounds", "unobserved_drag"]
 
 _UPPER6 = [(i, j) for i in range(6) for j in range(i, 6)]
@@ -226,6 +226,11 @@ class LSResult:
                 "mass_min_eig": self.mass_min_eig, "drag_max_sym_eig": self.drag_max_sym_eig,
                 "active_bounds": list(self.active_bounds), "unobserved": list(self.unobserved),
                 "notes": list(self.notes)}
+
+
+def runs_dt(run) -> float:
+    """The period of a run, or of the first of several."""
+    return run[0].dt if isinstance(run, (list, tuple)) else run.dt
 
 
 # ---------------------------------------------------------------------------------------------
@@ -489,6 +494,39 @@ def ls_reduce(run, model: str = "6dof", filt: DiffFilter = DiffFilter()) -> tupl
     return (model, filt, _reduce(model, run, filt))
 
 
+def ls_reduce_runs(runs, model: str = "6dof", filt: DiffFilter = DiffFilter(),
+                   progress=None) -> tuple:
+    """The reduced problem of several runs at once (e.g. recordings, or the uninterrupted
+    stretches of one): ‖𝒲θ − F‖² summed over the runs is ‖Rθ − z‖² + ρ² with [R z] the
+    triangular factor of the runs' factors stacked. Each run is differentiated on its own (no
+    filter window spans two runs). ``progress(done, total)`` after each run."""
+    if model not in ("6dof", "rot"):
+        raise ValueError(f"model must be '6dof' or 'rot', got {model!r}")
+    runs = list(runs)
+    if not runs:
+        raise ValueError("no runs")
+    parts = []
+    for i, run in enumerate(runs):
+        parts.append(_reduce(model, run, filt))
+        if progress is not None:
+            progress(i + 1, len(runs))
+    if len(parts) == 1:
+        return (model, filt, parts[0])
+    p = parts[0][0].shape[0]
+    stack = np.vstack([np.column_stack([q[0], q[1]]) for q in parts])
+    Rb = scipy.linalg.qr(stack, mode="r", check_finite=False)[0]
+    Rf = np.zeros((p + 1, p + 1))
+    m = min(Rb.shape[0], p + 1)
+    Rf[:m] = Rb[:m]
+    resid2 = float(Rf[p, p] ** 2) + sum(q[2] for q in parts)
+    n = sum(q[3] for q in parts)
+    Phi = np.vstack([q[4] for q in parts])
+    A = np.concatenate([q[5] for q in parts])
+    us = np.vstack([q[8] for q in parts])
+    return (model, filt, (Rf[:p, :p], Rf[:p, p], resid2, n, Phi, A, parts[0][6], parts[0][7],
+                          us))
+
+
 def ls_identify(run, model: str = "6dof", *, filt: DiffFilter = DiffFilter(),
                 consistent: bool = False, eps_mass: float = 1e-3, eps_drag: float = 1e-3,
                 rcond: float = 1e-10, reduced: tuple | None = None) -> LSResult:
@@ -534,7 +572,7 @@ def ls_identify(run, model: str = "6dof", *, filt: DiffFilter = DiffFilter(),
     unobserved = tuple(f"{d_name}{i + 1}" for i in unobserved_drag(model, colnorm))
     return LSResult(model=model, params=params, theta=theta, rank=rank, n_params=theta.size,
                     condition=cond, singular_values=sv, residual_rms=np.sqrt(ss / n),
-                    n_samples=n, filter=filt.describe(run.dt), consistent=consistent,
+                    n_samples=n, filter=filt.describe(runs_dt(run)), consistent=consistent,
                     solver=solver, solver_status=status, projected=projected,
                     mass_min_eig=lam_m, drag_max_sym_eig=lam_d, active_bounds=active,
                     unobserved=unobserved, notes=tuple(notes))

@@ -191,7 +191,7 @@ def read_signals(path: str | Path, profile: LogProfile
         if not ts[name]:
             raise LogReadError(f"{path}: topic {s.topic}: no messages (the profile's signal "
                                f"{name}); check the profile {profile.name!r} against the "
-                               f"file's topics (uvd identify --list-topics)")
+                               f"file's topics")
     return {k: (np.asarray(ts[k], dtype=np.int64), np.vstack(xs[k])) for k in ts}
 
 

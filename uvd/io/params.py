@@ -89,17 +89,18 @@ def params_from_toml(path: str | Path) -> UVParams:
     return params_from_mapping(doc["parameters"], where=f"{path}: [parameters]")
 
 
-def save_params(p: UVParams, path: str | Path, *, title: str = "") -> None:
+def save_params(p: UVParams, path: str | Path, *, title: str = "", extra: str = "") -> None:
     """Write :func:`params_to_toml` to ``path`` atomically.
 
     The text goes to a temporary file in the same folder, is flushed to disk and renamed over
     ``path``: a reader (or a crash mid-write) sees the old file or the new one, never half.
+    ``extra``: further TOML tables after ``[parameters]`` (e.g. what was identified).
     """
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp")
     try:
         with tmp.open("w", encoding="utf-8") as fh:
-            fh.write(params_to_toml(p, title=title))
+            fh.write(params_to_toml(p, title=title) + extra)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
