@@ -14,9 +14,18 @@ def register(sub) -> None:
     p = sub.add_parser("xval", help="cross-validate a parameter set on a recorded run (App. A.2)",
                        description="Simulate PARAMS with the inputs of RUN; MAE per state.")
     p.add_argument("--params", type=Path, required=True, metavar="PARAMS.toml")
-    p.add_argument("--log", type=Path, required=True, metavar="RUN",
+    p.add_argument("--log", type=Path, required=True, metavar="FILE", nargs="+",
                    help="recorded run: .npz or uvd run's telemetry .jsonl "
-                        "(docs/experiments-identification.md)")
+                        "(docs/experiments-identification.md); with --profile one or more "
+                        "recordings of another system (docs/real-vehicles.md)")
+    p.add_argument("--profile", metavar="NAME",
+                   help="log profile of the recordings (built-in name or TOML file): "
+                        "rotational cross-validation over windows")
+    p.add_argument("--vehicle", metavar="FILE",
+                   help="with --profile: vehicle file (default: the profile's)")
+    p.add_argument("--window", type=float, default=2.0, metavar="S",
+                   help="with --profile: restart from the recorded state every S seconds "
+                        "(default 2)")
     p.add_argument("--json", type=Path, metavar="OUT", help="write the MAE to this file")
     p.add_argument("--plots", type=Path, metavar="DIR",
                    help="write figures in the style of Figs. 4.5-4.7 into this folder")
@@ -35,6 +44,11 @@ def _run(args) -> int:
 
     if args.substeps < 1:
         raise ConfigError(f"--substeps must be >= 1, got {args.substeps}")
+    if args.profile:
+        return _run_logs(args)
+    if len(args.log) != 1:
+        raise ConfigError("--log: several recordings need --profile")
+    args.log = args.log[0]
     params = params_from_toml(args.params)
     run = load_runlog(args.log)
     if run.stretch_note():
@@ -53,4 +67,51 @@ def _run(args) -> int:
         write_json(args.json, {"params": str(args.params), "log": str(args.log),
                                "run": run.name, "samples": len(run.t), "mae": res.mae,
                                "diverged_at_s": res.diverged_at_s})
+    return 0
+
+
+def _run_logs(args) -> int:
+    """``uvd xval --params P --log FILE… --profile NAME``: rotational cross-validation of P on
+    another system's recordings, in windows (uvd.estimation.xval.rot_xval_windows)."""
+    import numpy as np
+
+    from uvd.commands.reallogs import load_log_runs, rot_of
+    from uvd.errors import ConfigError
+    from uvd.estimation.xval import STATES_ROT, format_mae_table, rot_xval_windows
+    from uvd.io.figures import write_xval_figures
+    from uvd.io.logprofile import load_profile
+    from uvd.io.params import linear_damping_from_toml, params_from_toml
+    from uvd.io.vehicle import load_vehicle
+    from uvd.jsonio import write_json
+
+    if not args.window > 0:
+        raise ConfigError(f"--window must be > 0, got {args.window}")
+    profile = load_profile(args.profile)
+    vname = args.vehicle or profile.vehicle
+    if vname is None:
+        raise ConfigError(f"--vehicle: profile {profile.name!r} names no vehicle")
+    vehicle = load_vehicle(vname)
+    rot = rot_of(params_from_toml(args.params))
+    d_lin = linear_damping_from_toml(args.params)
+    runs, reports = load_log_runs(args.log, profile, vehicle, quiet=True)
+    name = args.params.stem
+    rows, out = [], []
+    for run in runs:
+        res = rot_xval_windows(rot, run, window_s=args.window, linear_damping=d_lin,
+                               substeps=args.substeps)
+        rows.append((name, run.name, res.mae))
+        out.append({"run": run.name, "samples": len(run), "mae": res.mae,
+                    "windows": res.windows, "diverged_windows": res.diverged_windows})
+        if args.plots:
+            v = np.zeros((len(run), 6))
+            v[:, 3:] = res.w_sim
+            write_xval_figures(args.plots, run, {name: (res.R_sim, v)}, STATES_ROT,
+                               prefix=f"{run.name}-")
+    print(format_mae_table(rows, STATES_ROT,
+                           title=f"MAE of {args.params} over {args.window:g} s windows "
+                                 f"(restarted from the recorded state), profile {profile.name}"
+                                 + (", with its linear damping" if d_lin is not None else "")))
+    if args.json:
+        write_json(args.json, {"params": str(args.params), "profile": profile.name,
+                               "window_s": args.window, "runs": out})
     return 0

@@ -107,3 +107,29 @@ def save_params(p: UVParams, path: str | Path, *, title: str = "", extra: str = 
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def linear_damping_from_toml(path: str | Path):
+    """The optional ``[linear_damping]`` table of a parameter file: ``rotational = [K_p, M_q,
+    N_r]`` (N m s/rad, negative = dissipative) — the linear term of a published model that
+    (2.40) does not have (:func:`uvd.estimation.xval.rot_from_lumped`) — as a 3 × 3 diagonal,
+    or None."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            doc = tomllib.load(fh)
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ParameterError(f"{path}: cannot read: {exc}") from exc
+    tbl = doc.get("linear_damping")
+    if tbl is None:
+        return None
+    bad = set(tbl) - {"rotational"}
+    if bad or "rotational" not in tbl:
+        raise ParameterError(f"{path}: [linear_damping] takes one key, rotational = [K_p, M_q, "
+                             f"N_r]; got {sorted(tbl)}")
+    d = np.asarray(tbl["rotational"], dtype=float)
+    if d.shape != (3,) or not np.all(np.isfinite(d)):
+        raise ParameterError(f"{path}: [linear_damping] rotational must be 3 finite numbers")
+    if np.any(d > 0):
+        raise ParameterError(f"{path}: [linear_damping] rotational must be <= 0 (dissipative)")
+    return np.diag(d)
