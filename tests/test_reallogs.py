@@ -1,0 +1,469 @@
+"""Other systems' recordings: the log-format registry, log profiles, log → runs, thrust curves,
+the published-model conversion and ``uvd identify`` / ``uvd xval`` with ``--profile``.
+
+Real files: ``../shared/data/bluerov-exjobb`` (no licence: never copied into the repo; tests
+skip naming the folder when it is absent) and ``../shared/data/ardusub``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uvd.errors import ConfigError, LogReadError, ParameterError
+from uvd.io.logprofile import builtin_profiles, load_profile, profile_from_mapping
+from uvd.io.logrun import (
+    SignalStats,
+    attitude_to_ned_frd,
+    clean_signal,
+    enu_to_ned,
+    flu_to_frd,
+    runs_from_log,
+)
+from uvd.io.logs import count_messages, detect_format, log_formats, open_log
+from uvd.io.vehicle import load_curve, load_vehicle
+from uvd.model.thrusters import ThrustCurve
+
+REPO = Path(__file__).resolve().parents[1]
+EXJOBB = REPO.parent / "shared" / "data" / "bluerov-exjobb"
+ARDUSUB = REPO.parent / "shared" / "data" / "ardusub"
+
+
+def _need(folder: Path) -> Path:
+    if not folder.is_dir():
+        pytest.skip(f"recordings not present: {folder} (shared data outside the repo)")
+    return folder
+
+
+def _readme_table() -> dict[str, str]:
+    """bag name → its README row (for the durations and thruster use)."""
+    text = (_need(EXJOBB) / "README.md").read_text()
+    return {m.group(1): m.group(0) for m in re.finditer(r"^\| `([^`]+\.bag)` \|.*$", text,
+                                                        re.M)}
+
+
+BAGS = sorted(p.name for p in EXJOBB.glob("*.bag")) if EXJOBB.is_dir() else []
+
+
+# ---------------------------------------------------------------------------------------------
+# every file read with the counts its own library reports
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.skipif(not BAGS, reason=f"recordings not present: {EXJOBB}")
+@pytest.mark.parametrize("name", BAGS)
+def test_bag_counts_match_rosbags(name):
+    """Per topic, uvd reads (and decodes) exactly the messages rosbags' own index counts."""
+    from rosbags.rosbag1 import Reader
+
+    path = EXJOBB / name
+    with Reader(path) as r:
+        own = Counter()
+        for c in r.connections:
+            own[c.topic] += c.msgcount
+    ours = count_messages(path)
+    assert ours == own
+    # the README's facts: its topics, and the thrusters' rate of the April/May files
+    row = _readme_table()[name]
+    assert name in row
+    thr = [k for k in ours if k.lstrip("/") == "rovio/thrusters"]
+    assert len(thr) == 1
+    dur = float(row.split("|")[3])
+    t = np.array([t for _tp, t, _m in open_log(path, topics=thr)]) * 1e-9
+    assert t[-1] - t[0] <= dur + 0.5  # within the README's duration
+    rate = (t.size - 1) / (t[-1] - t[0])  # README: April ≈ 4.8 Hz (one per step), May ≈ 97 Hz
+    assert (4.0 < rate < 6.0) if "-04-" in name else (80 < rate < 110)
+
+
+def test_bag_counts_match_readme_examples():
+    """The README's example first messages of yaw_1 come out of uvd's reader as printed."""
+    path = _need(EXJOBB) / "yaw_1_2016-04-18-13-44-26.bag"
+    first = {}
+    for topic, _t, msg in open_log(path):
+        first.setdefault(topic.lstrip("/"), msg)
+        if len(first) == 5:
+            break
+    assert list(first["rovio/thrusters"].data) == [1500, 1500, 1220, 1780, 1500, 1500]
+    assert first["rovio/imu/data"].data[0] == pytest.approx(3292878)
+    assert first["rovio/water_pressure/data"].data == pytest.approx(19347.76, abs=0.01)
+    assert first["sensor_fusion/states"].data[9] == pytest.approx(1.982, abs=1e-3)
+
+
+def _pymavlink_counts(path: Path) -> Counter:
+    from pymavlink import mavutil
+
+    conn = mavutil.mavlink_connection(str(path))
+    c = Counter()
+    while (m := conn.recv_match()) is not None:
+        c[m.get_type()] += 1
+    return c
+
+
+@pytest.mark.parametrize("name,total,facts", [
+    ("small.tlog", 35916, {"ATTITUDE": 5245, "AHRS2": 5245, "SERVO_OUTPUT_RAW": 528,
+                           "SCALED_PRESSURE2": 635, "LOCAL_POSITION_NED": 792,
+                           "MANUAL_CONTROL": 1450, "HEARTBEAT": 1056}),
+    ("small.BIN", 7510, {"IMU": 594, "BARO": 474, "ATT": 237, "RATE": 237, "RCOU": 237,
+                         "CTUN": 237, "XKF1": 237, "PARM": 876, "FMT": 152}),
+])
+def test_ardusub_counts(name, total, facts):
+    """Both ArduSub logs: uvd's counts = pymavlink's own = the README's."""
+    path = _need(ARDUSUB) / name
+    ours = count_messages(path)
+    assert ours == _pymavlink_counts(path)
+    assert sum(ours.values()) == total
+    for k, v in facts.items():
+        assert ours[k] == v
+
+
+@pytest.mark.parametrize("name,profile", [("small.tlog", "ardusub-tlog"),
+                                          ("small.BIN", "ardusub-bin")])
+def test_ardusub_profiles_read(name, profile):
+    """The built-in ArduSub profiles find every signal of the real logs, in plausible units."""
+    from uvd.io.logrun import read_signals
+
+    sig = read_signals(_need(ARDUSUB) / name, load_profile(profile))
+    t, att = sig["attitude"]
+    assert att.shape[1] == 3 and t.size > 100
+    _t, pwm = sig["thrusters"]
+    assert pwm.shape[1] == 8
+    assert 1000 < np.median(pwm[:, 0]) < 2000
+    _t, dep = sig["depth"]
+    if profile == "ardusub-tlog":
+        assert 900 < np.median(dep) < 1200  # hPa
+    else:
+        assert 9e4 < np.median(dep) < 1.2e5  # Pa
+
+
+# ---------------------------------------------------------------------------------------------
+# named errors: missing topic, wrong unit, truncated or corrupted file; nothing hangs
+# ---------------------------------------------------------------------------------------------
+def _small_bag() -> Path:
+    return _need(EXJOBB) / "all_4_2016-04-18-15-06-06.bag"
+
+
+@pytest.mark.timeout(60)
+def test_missing_topic_named():
+    prof = load_profile("bluerov-exjobb-may")  # no leading slash: wrong for an April file
+    with pytest.raises(LogReadError, match=r"all_4.*topic (sensor_fusion/states|rovio/\S+): "
+                                           r"no messages"):
+        runs_from_log(_small_bag(), prof, load_vehicle("bluerov-exjobb"))
+
+
+@pytest.mark.timeout(60)
+def test_wrong_unit_named():
+    doc = _profile_doc("bluerov-exjobb-april")
+    doc["signals"]["thrusters"]["unit"] = "normalised"  # they are PWM µs
+    prof = profile_from_mapping(doc, where="test")
+    with pytest.raises(LogReadError, match=r"all_4.*topic /rovio/thrusters: signal thrusters "
+                                           r"says unit normalised.*wrong unit"):
+        runs_from_log(_small_bag(), prof, load_vehicle("bluerov-exjobb"))
+    doc = _profile_doc("bluerov-exjobb-april")
+    doc["signals"]["attitude"]["unit"] = "rad"
+    doc["signals"]["attitude"]["index"] = [9, 9, 9]  # depth in m is no angle … mostly
+    doc["signals"]["angular_rate"]["unit"] = "rad/s"
+    doc["signals"]["depth"]["unit"] = "m"
+    doc["signals"]["depth"]["field"] = "data"
+    # a pressure in Pa read as an angular rate in rad/s: far out of any gyro's range
+    doc["signals"]["angular_rate"] = {"topic": "/rovio/water_pressure/data", "fields":
+                                      ["data", "data", "data"], "unit": "rad/s", "frame": "frd"}
+    prof = profile_from_mapping(doc, where="test")
+    with pytest.raises(LogReadError, match=r"topic /rovio/water_pressure/data: signal "
+                                           r"angular_rate says unit rad/s.*wrong unit"):
+        runs_from_log(_small_bag(), prof, load_vehicle("bluerov-exjobb"))
+
+
+def _profile_doc(name: str) -> dict:
+    import tomllib
+    from importlib import resources
+
+    with (resources.files("uvd") / "logprofiles" / f"{name}.toml").open("rb") as fh:
+        return tomllib.load(fh)
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("cut", [0.5, 0.97])
+def test_truncated_bag_named(tmp_path, cut):
+    data = _small_bag().read_bytes()
+    bad = tmp_path / "truncated.bag"
+    bad.write_bytes(data[:int(len(data) * cut)])
+    with pytest.raises(LogReadError, match=r"truncated\.bag"):
+        count_messages(bad)
+
+
+@pytest.mark.timeout(60)
+def test_corrupted_bag_named(tmp_path):
+    data = bytearray(_small_bag().read_bytes())
+    rng = np.random.default_rng(3)
+    for i in rng.integers(4096, len(data) - 4096, 200):
+        data[i] ^= 0xFF
+    bad = tmp_path / "corrupted.bag"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(LogReadError, match=r"corrupted\.bag"):
+        count_messages(bad)
+    (tmp_path / "garbage.bag").write_bytes(b"not a bag at all" * 100)
+    with pytest.raises(LogReadError, match=r"garbage\.bag"):
+        count_messages(tmp_path / "garbage.bag")
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("name,profile", [("small.tlog", "ardusub-tlog"),
+                                          ("small.BIN", "ardusub-bin")])
+def test_truncated_and_corrupted_ardusub(tmp_path, name, profile):
+    """A cut .tlog/.BIN reads to where it was cut (pymavlink's robust parsing; no hang); with a
+    profile topic missing from what is left the error names file and topic."""
+    data = (_need(ARDUSUB) / name).read_bytes()
+    cut = tmp_path / f"cut{Path(name).suffix}"
+    cut.write_bytes(data[:len(data) // 50])
+    counts = count_messages(cut)
+    assert 0 < sum(counts.values()) < sum(count_messages(ARDUSUB / name).values())
+    junk = tmp_path / f"junk{Path(name).suffix}"
+    junk.write_bytes(bytes(np.random.default_rng(1).integers(0, 256, 20000, dtype=np.uint8)))
+    with pytest.raises(LogReadError, match=r"junk\.(tlog|BIN).*topic"):
+        runs_from_log(junk, load_profile(profile), load_vehicle("bluerov-exjobb"))
+
+
+def test_unknown_format_and_missing_file(tmp_path):
+    with pytest.raises(LogReadError, match=r"x\.csv.*unknown log format"):
+        detect_format(tmp_path / "x.csv")
+    with pytest.raises(LogReadError, match=r"nope\.bag: no such file"):
+        open_log(tmp_path / "nope.bag")
+    assert {"ros1", "ros2", "mcap", "tlog", "dataflash", "uvd-telemetry"} <= set(log_formats())
+
+
+def test_mcap_json_messages(tmp_path):
+    """uvd's own MCAP (JSON messages) through the registry: its writer, our reader."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "rec.mcap"
+    with path.open("wb") as fh:
+        w = Writer(fh)
+        w.start()
+        sid = w.register_schema("uvd.cycle", "jsonschema", b"{}")
+        cid = w.register_channel("/uvd/cycle", "json", sid)
+        for k in range(5):
+            w.add_message(cid, log_time=k * 10**8, publish_time=k * 10**8,
+                          data=b'{"type": "cycle", "k": %d}' % k)
+        w.finish()
+    got = list(open_log(path))
+    assert [t for _tp, t, _m in got] == [k * 10**8 for k in range(5)]
+    assert [m.k for _tp, _t, m in got] == list(range(5))
+    assert count_messages(path) == Counter({"/uvd/cycle": 5})
+
+
+# ---------------------------------------------------------------------------------------------
+# profiles
+# ---------------------------------------------------------------------------------------------
+def test_builtin_profiles_valid():
+    names = builtin_profiles()
+    assert {"bluerov-exjobb-april", "bluerov-exjobb-may", "ardusub-tlog",
+            "ardusub-bin"} <= set(names)
+    for n in names:
+        p = load_profile(n)
+        assert p.name == n
+    assert load_profile("bluerov-exjobb-april").signals["thrusters"].topic == "/rovio/thrusters"
+    assert load_profile("bluerov-exjobb-may").signals["thrusters"].topic == "rovio/thrusters"
+
+
+@pytest.mark.parametrize("edit,match", [
+    (lambda d: d.pop("signals"), r"missing \[signals\]"),
+    (lambda d: d.update(bogus=1), r"unknown key\(s\) \['bogus'\]"),
+    (lambda d: d["signals"].pop("thrusters"), r"identification needs \['thrusters'\]"),
+    (lambda d: d["signals"]["angular_rate"].update(unit="rpm"),
+     r"\[signals.angular_rate\]: unit 'rpm' is not one of"),
+    (lambda d: d["signals"]["attitude"].update(frame="xyz"),
+     r"\[signals.attitude\]: frame 'xyz'"),
+    (lambda d: d["signals"]["attitude"].update(index=[0, 1]),
+     r"attitude needs 3 component\(s\)"),
+    (lambda d: d.update(resample="cubic"), r"resample must be 'hold' or 'interpolate'"),
+    (lambda d: d.update(format="csv"), r"format 'csv' is not one of"),
+    (lambda d: d["signals"]["depth"].pop("topic"), r"\[signals.depth\]: missing key 'topic'"),
+])
+def test_profile_errors_named(edit, match):
+    doc = _profile_doc("bluerov-exjobb-april")
+    edit(doc)
+    with pytest.raises(ConfigError, match=r"myprofile: .*" + match):
+        profile_from_mapping(doc, where="myprofile")
+
+
+def test_unknown_profile():
+    with pytest.raises(ConfigError, match="unknown log profile 'nope'"):
+        load_profile("nope")
+
+
+# ---------------------------------------------------------------------------------------------
+# cleaning, one clock, frames
+# ---------------------------------------------------------------------------------------------
+def test_clean_signal_counts():
+    t = np.array([0, 10, 20, 20, 15, 30, 40, 90, 100]) * 10**7  # ns
+    x = np.arange(9.0)[:, None]
+    x[6, 0] = np.nan
+    st = SignalStats(topic="t")
+    tc, xc = clean_signal(t, x, st, max_gap_s=0.3)
+    assert (st.messages, st.non_finite, st.duplicates, st.out_of_order) == (9, 1, 1, 1)
+    assert list(tc) == [0, 10**8, 2 * 10**8, 3 * 10**8, 9 * 10**8, 10**9]
+    assert list(xc[:, 0]) == [0, 1, 2, 5, 7, 8]
+    assert st.gaps == 1 and st.kept == 6
+
+
+def test_onto_grid_never_invents():
+    from uvd.io.logrun import _onto_grid
+
+    t = np.array([0, 100, 200, 900, 1000], dtype=np.int64)
+    x = np.array([[0.0], [1.0], [2.0], [9.0], [10.0]])
+    grid = np.arange(0, 1001, 50, dtype=np.int64)
+    h, ok_h = _onto_grid(t, x, grid, "hold", 300)
+    assert h[grid == 150][0, 0] == 1.0 and h[grid == 500][0, 0] == 2.0
+    assert not ok_h[grid == 550][0] and ok_h[grid == 500][0]
+    i, ok_i = _onto_grid(t, x, grid, "interpolate", 300)
+    assert i[grid == 150][0, 0] == pytest.approx(1.5)
+    assert not ok_i[grid == 300][0]  # between 200 and 900: a 700 ns gap > 300
+    assert ok_i[grid == 950][0] and i[grid == 950][0, 0] == pytest.approx(9.5)
+
+
+def test_frame_flips():
+    assert np.allclose(flu_to_frd([1.0, 2.0, 3.0]), [1.0, -2.0, -3.0])
+    assert np.allclose(enu_to_ned([1.0, 2.0, 3.0]), [2.0, 1.0, -3.0])
+    # a vehicle heading north, level: ENU yaw = +90° (x to north), FLU body
+    R = attitude_to_ned_frd(np.array([[0.0, 0.0, math.pi / 2]]), "enu")[0]
+    assert np.allclose(R, np.eye(3), atol=1e-12)
+    # heading east in ENU (yaw 0) is yaw +90° in NED
+    R = attitude_to_ned_frd(np.array([[0.0, 0.0, 0.0]]), "enu")[0]
+    assert np.allclose(R @ [1, 0, 0], [0, 1, 0]) and np.allclose(R @ [0, 0, 1], [0, 0, 1])
+    # a body rolled to starboard in FRD/NED: its y axis points down-ish
+    R = attitude_to_ned_frd(np.array([[0.3, 0.0, 0.0]]), "ned")[0]
+    assert (R @ [0, 1, 0])[2] == pytest.approx(math.sin(0.3))
+
+
+# ---------------------------------------------------------------------------------------------
+# thrust curves and the vehicle
+# ---------------------------------------------------------------------------------------------
+def test_t200_curve():
+    c = load_curve("t200")
+    assert c.unit == "pwm_us" and "Aili" in c.source
+    f = c.thrust(np.array([1100, 1480, 1500, 1520, 1521, 1580, 1900, 2000, 1000]))
+    assert f[0] == pytest.approx(-40.0788) and f[6] == pytest.approx(49.9531)
+    assert f[1] == f[2] == f[3] == 0.0  # dead band |u| ≤ 0.05
+    assert f[4] > 0 and f[5] == pytest.approx(4.0923)
+    assert f[7] == f[6] and f[8] == f[0]  # the ESC clamps
+    assert c.thrust(1740) == pytest.approx(24.7324)
+    assert c.thrust(1265) == pytest.approx(0.5 * (-21.351 - 19.528))  # interpolated
+    assert abs(c.max_reverse_n) < c.max_forward_n  # forward and reverse differ
+
+
+def test_thrust_curve_validation():
+    with pytest.raises(ParameterError, match="increase strictly"):
+        ThrustCurve(command=(0.0, 0.0), thrust_n=(0.0, 1.0))
+    with pytest.raises(ParameterError, match="must not decrease"):
+        ThrustCurve(command=(0.0, 1.0), thrust_n=(1.0, 0.0))
+
+
+def test_exjobb_vehicle_thrust_matrix():
+    """The thesis's thrust matrix (eq:actuatorGeometry) with l_z6 = 0.11 m."""
+    B = load_vehicle("bluerov-exjobb").B
+    lx1, ly, lx5, lz6 = 0.19, 0.11, 0.17, 0.11
+    T = np.array([[0, 0, 1, 1, 0, 0], [0, 0, 0, 0, 0, -1], [-1, -1, 0, 0, -1, 0],
+                  [ly, -ly, 0, 0, 0, lz6], [lx1, lx1, 0, 0, -lx5, 0], [0, 0, ly, -ly, 0, 0]])
+    assert np.allclose(B, T)
+
+
+def test_vehicle_unknown_curve(tmp_path):
+    src = (REPO / "uvd" / "vehicles" / "bluerov-exjobb.toml").read_text()
+    bad = tmp_path / "v.toml"
+    bad.write_text(src.replace('curve = "t200"', 'curve = "t9000"'))
+    with pytest.raises(ConfigError, match=r"v\.toml: thrusters\[0\]: unknown thrust curve "
+                                          r"'t9000'"):
+        load_vehicle(bad)
+
+
+# ---------------------------------------------------------------------------------------------
+# the published model in θ_UV: conversion, units, signs
+# ---------------------------------------------------------------------------------------------
+def test_rot_from_lumped_equals_the_published_equations():
+    """(2.40) with rot_from_lumped's θ_UVR and D_L gives the thesis's ṗ, q̇, ṙ exactly."""
+    from uvd.estimation.xval import rot_from_lumped
+    from uvd.model.dynamics import rot_accel
+
+    A, B, C = 0.8337, 0.7987, 1.1250
+    Kp, Kpp, Mq, Mqq, Nr, Nrr, zB = -0.8842, -0.6682, -0.8547, -0.3354, -1.0280, -1.0249, -0.042
+    W = 6.621 * 9.82
+    rot, DL = rot_from_lumped(A, B, C, Kp, Kpp, Mq, Mqq, Nr, Nrr, zB, W)
+    assert rot.b[2] == pytest.approx(2.7307, abs=1e-3) and rot.b[2] > 0  # restoring
+    rng = np.random.default_rng(0)
+    from uvd.io.logrun import _euler_R
+    for _ in range(20):
+        phi, th, psi = rng.uniform(-1, 1, 3)
+        p, q, r = rng.uniform(-2, 2, 3)
+        tau = rng.uniform(-3, 3, 3)
+        R = _euler_R(np.array([phi]), np.array([th]), np.array([psi]))[0]
+        w = np.array([p, q, r])
+        ours = rot_accel(rot, w, R, tau + DL @ w)
+        thesis = np.array([
+            (tau[0] + W * zB * math.cos(th) * math.sin(phi) + (Kp + Kpp * abs(p)) * p
+             + (B - C) * q * r) / A,
+            (tau[1] + W * zB * math.sin(th) + (Mq + Mqq * abs(q)) * q - (A - C) * p * r) / B,
+            (tau[2] + (Nr + Nrr * abs(r)) * r + (A - B) * p * q) / C])
+        assert np.allclose(ours, thesis, atol=1e-12)
+
+
+def test_published_params_file_roundtrip(tmp_path):
+    from uvd.commands.reallogs import rot_of
+    from uvd.experiments.real_vehicles import published_toml
+    from uvd.io.params import linear_damping_from_toml, params_from_toml
+
+    text, rot, DL = published_toml("published-final", load_vehicle("bluerov-exjobb").params)
+    f = tmp_path / "pub.toml"
+    f.write_text(text)
+    back = rot_of(params_from_toml(f))
+    assert np.allclose(back.I, rot.I) and np.allclose(back.C, rot.C)
+    assert np.allclose(back.b, rot.b)
+    assert np.allclose(linear_damping_from_toml(f), DL)
+    f.write_text(text.replace("rotational = [-0.8842", "rotational = [0.8842"))
+    with pytest.raises(ParameterError, match="dissipative"):
+        linear_damping_from_toml(f)
+
+
+# ---------------------------------------------------------------------------------------------
+# the commands on real data
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.timeout(240)
+def test_identify_and_xval_on_real_bags(tmp_path, capsys):
+    """ls-consistent from all_3: inertia positive, drag dissipative, b₃ restoring; the
+    translational DOFs refused with the reason; xval on all_4 prints finite MAE."""
+    import json
+
+    from uvd.cli import main
+
+    _need(EXJOBB)
+    out = tmp_path / "p.toml"
+    rc = main(["identify", "--log", str(EXJOBB / "all_3_2016-04-18-15-04-50.bag"),
+               "--profile", "bluerov-exjobb-april", "--method", "ls-consistent",
+               "--out", str(out), "--json", str(tmp_path / "s.json"), "--quiet"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert re.search(r"REFUSED surge, sway, heave: no linear-velocity sensor", text)
+    s = json.loads((tmp_path / "s.json").read_text())
+    assert s["physical"] == {"inertia_positive": True, "drag_dissipative": True,
+                             "restoring_b3_positive": True}
+    assert set(s["refused"]) == {"surge", "sway", "heave"}
+    assert s["reports"][0]["signals"]["thrusters"]["messages"] == 57
+    assert "[refused]" in out.read_text()
+    rc = main(["xval", "--params", str(out), "--log",
+               str(EXJOBB / "all_4_2016-04-18-15-06-06.bag"), "--profile",
+               "bluerov-exjobb-april", "--json", str(tmp_path / "x.json")])
+    assert rc == 0
+    x = json.loads((tmp_path / "x.json").read_text())
+    assert all(math.isfinite(v) for v in x["runs"][0]["mae"].values())
+
+
+def test_identify_refuses_without_vehicle(tmp_path, capsys):
+    from uvd.cli import main
+
+    _need(ARDUSUB)
+    rc = main(["identify", "--log", str(ARDUSUB / "small.BIN"), "--profile", "ardusub-bin",
+               "--method", "ls", "--out", str(tmp_path / "p.toml")])
+    assert rc == 2
+    assert "profile 'ardusub-bin' names no vehicle" in capsys.readouterr().err
