@@ -279,7 +279,6 @@ def _run_logs(args) -> int:
     sym = [np.linalg.eigvalsh(0.5 * (c + c.T)).max() for c in np.asarray(rot.C)]
     phys = {"inertia_positive": bool(lam[0] > 0), "drag_dissipative": bool(max(sym) < 0),
             "restoring_b3_positive": bool(rot.b[2] > 0)}
-    names = ", ".join(str(p) for p in args.log)
     title = (f"{args.method} of the rotational model (2.40) from {len(args.log)} recording(s) "
              f"({n} samples, profile {profile.name}, vehicle {vehicle.name}); translation = the "
              f"vehicle file's first guess, NOT identified")

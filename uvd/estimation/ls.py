@@ -64,8 +64,8 @@ from uvd.model.params import (
 )
 
 __all__ = ["DiffFilter", "LSResult", "differentiate", "regressor_uv_batch",
-           "regressor_uvr_batch", "ls_reduce", "ls_reduce_runs", "ls_identify", "ls_solve", "project_consistent",
-           "consistency_margins", "active_bounds", "unobserved_drag"]
+           "regressor_uvr_batch", "ls_reduce", "ls_reduce_runs", "ls_identify", "ls_solve",
+           "project_consistent", "consistency_margins", "active_bounds", "unobserved_drag"]
 
 _UPPER6 = [(i, j) for i in range(6) for j in range(i, 6)]
 _UPPER3 = [(i, j) for i in range(3) for j in range(i, 3)]

@@ -178,8 +178,8 @@ def run(data: Path, out: Path) -> dict:
 
 def tables_md(r: dict) -> str:
     names = list(r["params"])
-    lines = ["| estimate | A_p | B_q | C_r | K_p\\|p\\| | M_q\\|q\\| | N_r\\|r\\| | K_p | M_q | N_r "
-             "| b₁ | b₂ | b₃ | λ_min(I) | max eig sym(Cᵢ) |", "|---" * 15 + "|"]
+    lines = ["| estimate | A_p | B_q | C_r | K_p\\|p\\| | M_q\\|q\\| | N_r\\|r\\| | K_p | M_q "
+             "| N_r | b₁ | b₂ | b₃ | λ_min(I) | max eig sym(Cᵢ) |", "|---" * 15 + "|"]
     for n in names:
         p = r["params"][n]
         cells = p["I_diag"] + p["quad_drag_diag"] + p["lin_drag_diag"] + p["b"]

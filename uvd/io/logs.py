@@ -10,8 +10,8 @@ name               files                                  read by
 =================  =====================================  ========================================
 ``ros1``           ROS 1 bag (``.bag``)                   rosbags (pure Python), ROS 1 Noetic types
 ``ros2``           ROS 2 bag (folder, ``.db3``/``.mcap``) rosbags, ROS 2 Humble types
-``mcap``           MCAP (``.mcap``) of ROS 2 (CDR), ROS 1  mcap's streaming reader; CDR/ROS 1 through
-                   or JSON messages (uvd's black box)     rosbags' type system, JSON with ``json``
+``mcap``           MCAP (``.mcap``) of ROS 2 (CDR), ROS 1  mcap's streaming reader; CDR/ROS 1
+                   or JSON messages (uvd's black box)     by rosbags' type system, JSON by ``json``
 ``tlog``           MAVLink telemetry log (``.tlog``)      pymavlink (``mavutil.mavlink_connection``)
 ``dataflash``      ArduPilot dataflash log (``.BIN``)     pymavlink's DFReader (same entry point)
 ``uvd-telemetry``  ``uvd run``'s JSON lines (``.jsonl``)  ``json``; topic = the record's ``type``
