@@ -689,8 +689,8 @@ INITP_ROT = RotParams(I=100.0 * np.eye(3), C=np.stack([-100.0 * np.eye(3)] * 3),
 JHU_MASSES = np.array([628.0, 791.0, 1043.0, 95.7, 145.3, 110.2])
 
 
-def scaled_aid_gains(masses: np.ndarray, *, rotational: bool = False
-                     ) -> AID6Gains | AID3Gains:
+def scaled_aid_gains(masses: np.ndarray, *, rotational: bool = False,
+                     base: AID6Gains | AID3Gains | None = None) -> AID6Gains | AID3Gains:
     """AID's gains for another vehicle: §4.6's (6-DOF) or §4.5's (rotational) γ's scaled by the
     ratio of the vehicle's mean mass (inertia, for the rotational law) to the JHU ROV's.
 
@@ -701,7 +701,8 @@ def scaled_aid_gains(masses: np.ndarray, *, rotational: bool = False
     and its first estimate is not thrown around by gains meant for 100 times its mass (what
     §4.6's gains do to a BlueROV2: M̂ ends at 100–133 against a truth of 0.4–32). The observer
     pole a is kept. A motion of another size changes the rate by the regressor's square
-    (drag ∝ |v|v): ``uvd identify --gains`` takes the user's own.
+    (drag ∝ |v|v): ``uvd identify --gains`` takes the user's own. ``base``: the gains to scale
+    (default §4.6's / §4.5's, tuned on the JHU ROV).
     """
     m = np.asarray(masses, dtype=float)
     if m.shape != (6,) or np.any(~(m > 0)):
@@ -709,9 +710,25 @@ def scaled_aid_gains(masses: np.ndarray, *, rotational: bool = False
     sl = slice(3, 6) if rotational else slice(0, 6)
     s = float(np.mean(m[sl]) / np.mean(JHU_MASSES[sl]))
     if rotational:
-        g3 = AID3Gains()
+        g3 = base or AID3Gains()
         return AID3Gains(a=g3.a, gamma1=g3.gamma1 * s, gamma2=g3.gamma2 * s,
                          gamma3=g3.gamma3 * s)
-    g0 = AID6Gains()
+    g0 = base or AID6Gains()
     return AID6Gains(a=g0.a, gamma1=g0.gamma1 * s, gamma2=g0.gamma2 * s, gamma3=g0.gamma3 * s,
                      gamma4=g0.gamma4 * s)
+
+
+def scaled_initp(masses: np.ndarray) -> UVParams:
+    """INITP of Tables 4.6–4.7 (M̂ = 100 I, D̂ᵢ = −100 I, ĝ = 0, b̂ = [0, 0, 100]) scaled to
+    another vehicle: the translational entries by the ratio of its mean mass to the JHU ROV's,
+    the rotational ones (inertia, rotational drag, b̂₃) by the ratio of its mean inertia to
+    the JHU ROV's. On the JHU ROV itself both ratios are 1: INITP exactly. A first guess of the
+    right order, not the vehicle file's values (which a simulation's plant shares)."""
+    m = np.asarray(masses, dtype=float)
+    if m.shape != (6,) or np.any(~(m > 0)):
+        raise ValueError("scaled_initp: 6 positive masses (the diagonal of M) needed")
+    st = float(np.mean(m[:3]) / np.mean(JHU_MASSES[:3]))
+    sr = float(np.mean(m[3:]) / np.mean(JHU_MASSES[3:]))
+    scale = np.array([st] * 3 + [sr] * 3)
+    D = np.stack([np.diag(-100.0 * scale)] * 6)
+    return UVParams(M=np.diag(100.0 * scale), D=D, g=0.0, b=np.array([0.0, 0.0, 100.0 * sr]))

@@ -126,18 +126,25 @@ def build_core(cfg: Config, vehicle=None, estimators: tuple | None = None
         estimators = ()
         if cfg.estimation.aid:
             from uvd.estimation.aid import aid6_estimator
-            estimators = (aid6_estimator(aid_theta0(cfg), cfg.estimation.aid_params()),)
+            estimators = (aid6_estimator(aid_theta0(cfg, vehicle),
+                                         cfg.estimation.aid_params(vehicle)),)
     return core.CoreConfig(nav=nav_config(cfg), controller=make_controller(cfg, vehicle, alloc),
                            reference=traj, allocator=alloc, k_thrust=vehicle.k_thrust,
                            estimators=estimators, lag_compensation=cfg.control.lag_compensation,
                            pd=pd_gains(cfg))
 
 
-def aid_theta0(cfg: Config) -> np.ndarray | None:
+def aid_theta0(cfg: Config, vehicle=None) -> np.ndarray | None:
     """θ̂(0) of online AID: the last run's ``save_path`` file (``resume``), else
-    ``[estimation] initial_params``, else None (INITP of §4.6)."""
+    ``[estimation] initial_params``, else INITP of §4.6 — scaled to ``vehicle``'s masses with
+    ``[estimation] scale_to_vehicle`` (:func:`uvd.estimation.aid.scaled_initp`; INITP itself
+    on the JHU ROV), or None (INITP)."""
     base = Path(cfg.source).parent if cfg.source else Path.cwd()
     path = cfg.estimation.start_path(base)
+    if path is None and vehicle is not None and cfg.estimation.scale_to_vehicle:
+        from uvd.estimation.aid import scaled_initp
+        log.info("AID starts from INITP (§4.6) scaled to %s's masses", vehicle.name)
+        return scaled_initp(np.diag(vehicle.params.M)).theta
     log.info("AID starts from %s", path or "INITP (§4.6, Tables 4.6-4.7)")
     if path is None:
         return None

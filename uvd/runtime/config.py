@@ -222,7 +222,14 @@ class EstimationSection:
         (10.0, 5000.0, 20000.0, 2000.0, 2000.0),
         doc="AID gains [a, γ₁, γ₂, γ₃, γ₄] of Theorem 4.3.1, each > 0: a (1/s) pulls v̂ "
             "toward v (4.23); γ₁, γ₂, γ₃, γ₄ scale the adaptation rates of M̂, D̂ᵢ, ĝ, b̂ "
-            "(4.24)-(4.27) (larger = faster); default §4.6's")
+            "(4.24)-(4.27) (larger = faster); default §4.6's, chosen for the JHU ROV: with "
+            "scale_to_vehicle the γ's are multiplied by the vehicle's mean mass over the JHU "
+            "ROV's")
+    scale_to_vehicle: bool = setting(
+        True, doc="scale AID to the vehicle: the γ's of gains and INITP (when no "
+                  "initial_params) by the ratio of the vehicle's masses to the JHU ROV's "
+                  "(uvd.estimation.aid.scaled_aid_gains, scaled_initp; 1 on the JHU ROV). Off: "
+                  "§4.6's gains and INITP as they are, whatever the vehicle")
     publish_every_s: float = setting(
         1.0, unit="s", min=0.01, max=3600.0, reload=True,
         doc="how often the estimate goes to the telemetry sinks as an \"estimate\" record "
@@ -258,10 +265,16 @@ class EstimationSection:
         :meth:`initial_params_path` (None: INITP)."""
         return self.resume_path() or self.initial_params_path(base_dir)
 
-    def aid_params(self):
-        """The :class:`uvd.estimation.aid.AID6Params` of these settings."""
-        from uvd.estimation.aid import AID6Gains, AID6Params
-        return AID6Params(gains=AID6Gains(*self.gains))
+    def aid_params(self, vehicle=None):
+        """The :class:`uvd.estimation.aid.AID6Params` of these settings (gains scaled to
+        ``vehicle`` with ``scale_to_vehicle``)."""
+        import numpy as np
+
+        from uvd.estimation.aid import AID6Gains, AID6Params, scaled_aid_gains
+        gains = AID6Gains(*self.gains)
+        if vehicle is not None and self.scale_to_vehicle:
+            gains = scaled_aid_gains(np.diag(vehicle.params.M), base=gains)
+        return AID6Params(gains=gains)
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
         try:
