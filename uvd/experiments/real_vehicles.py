@@ -294,10 +294,6 @@ def main(argv=None) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
-
-
 def aid_bluerov2_demo(out: Path, duration_s: float = 120.0) -> dict:
     """The demo's lockstep run of ``config/sim-bluerov2.toml`` with ``[estimation] aid = true``
     (defaults otherwise), once with AID scaled to the vehicle (``scale_to_vehicle``, the
@@ -383,3 +379,7 @@ def aid_bluerov2_demo(out: Path, duration_s: float = 120.0) -> dict:
         fig.savefig(d / "aid-bluerov2.png", dpi=100)
         plt.close(fig)
     return result
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
