@@ -467,3 +467,58 @@ def test_identify_refuses_without_vehicle(tmp_path, capsys):
                "--method", "ls", "--out", str(tmp_path / "p.toml")])
     assert rc == 2
     assert "profile 'ardusub-bin' names no vehicle" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------
+# AID scaled to the vehicle
+# ---------------------------------------------------------------------------------------------
+def test_aid_scaling_is_identity_on_the_jhu_rov_and_scales_the_bluerov2():
+    from uvd.estimation.aid import (
+        INITP_6DOF,
+        AID3Gains,
+        AID6Gains,
+        scaled_aid_gains,
+        scaled_initp,
+    )
+
+    jhu = np.diag(load_vehicle("jhu-rov").params.M)
+    assert scaled_aid_gains(jhu) == AID6Gains()
+    g3 = scaled_aid_gains(jhu, rotational=True)
+    assert np.allclose([g3.a, g3.gamma1, g3.gamma2, g3.gamma3], [10, 5000, 10000, 1000])
+    assert np.allclose(scaled_initp(jhu).theta, INITP_6DOF.theta)
+    blue = np.diag(load_vehicle("bluerov2-heavy").params.M)
+    s = np.mean(blue) / np.mean(jhu)
+    g = scaled_aid_gains(blue)
+    assert g.a == 10.0 and g.gamma1 == pytest.approx(5000 * s) and g.gamma4 == pytest.approx(
+        2000 * s)
+    p = scaled_initp(blue)
+    assert np.allclose(np.diag(p.M)[:3], 100 * np.mean(blue[:3]) / np.mean(jhu[:3]))
+    assert np.allclose(np.diag(p.M)[3:], 100 * np.mean(blue[3:]) / np.mean(jhu[3:]))
+    assert p.b[2] == pytest.approx(100 * np.mean(blue[3:]) / np.mean(jhu[3:])) and p.g == 0.0
+    p.validate(where="scaled INITP")
+    custom = scaled_aid_gains(blue, base=AID6Gains(5.0, 1.0, 2.0, 3.0, 4.0))
+    assert custom.a == 5.0 and custom.gamma3 == pytest.approx(3.0 * s)
+    with pytest.raises(ValueError, match="positive masses"):
+        scaled_aid_gains(np.array([1.0, 1, 1, 1, 1, 0]))
+    assert AID3Gains() == scaled_aid_gains(jhu, rotational=True, base=AID3Gains())
+
+
+def test_runtime_aid_starts_scaled_unless_switched_off():
+    import tomllib
+
+    from uvd.estimation.aid import INITP_6DOF, scaled_initp
+    from uvd.runtime.build import aid_theta0
+    from uvd.runtime.config import parse_config
+
+    src = REPO / "config" / "sim-bluerov2.toml"
+    doc = tomllib.loads(src.read_text())
+    doc.setdefault("estimation", {})["aid"] = True
+    cfg = parse_config(doc, source=src)
+    v = cfg.load_vehicle()
+    assert np.allclose(aid_theta0(cfg, v), scaled_initp(np.diag(v.params.M)).theta)
+    assert cfg.estimation.aid_params(v).gains.gamma1 < 200  # 5000 × 0.026
+    doc["estimation"]["scale_to_vehicle"] = False
+    cfg = parse_config(doc, source=src)
+    assert aid_theta0(cfg, v) is None  # INITP
+    assert cfg.estimation.aid_params(v).gains.gamma1 == 5000.0
+    assert INITP_6DOF.M[0, 0] == 100.0
