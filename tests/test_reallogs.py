@@ -410,7 +410,7 @@ def test_rot_from_lumped_equals_the_published_equations():
 
 
 def test_published_params_file_roundtrip(tmp_path):
-    from uvd.commands.reallogs import rot_of
+    from uvd.estimation.realdata import rot_of
     from uvd.experiments.real_vehicles import published_toml
     from uvd.io.params import linear_damping_from_toml, params_from_toml
 

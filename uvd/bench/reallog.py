@@ -32,10 +32,11 @@ def _add(p) -> None:
 def _run(args) -> dict:
     import numpy as np
 
-    from uvd.commands.reallogs import identify_rotational, load_log_runs, rot_of
     from uvd.errors import ExperimentError
     from uvd.estimation.aid import scaled_aid_gains
+    from uvd.estimation.realdata import identify_rotational, rot_of
     from uvd.io.logprofile import load_profile
+    from uvd.io.logrun import load_log_runs
     from uvd.io.vehicle import load_vehicle
 
     if not Path(args.log).exists():
@@ -48,7 +49,7 @@ def _run(args) -> dict:
     def once():
         c0, w0 = time.process_time(), time.perf_counter()
         runs, _reps = load_log_runs([args.log], profile, vehicle, quiet=True)
-        c1, w1 = time.process_time(), time.perf_counter()
+        c1 = time.process_time()
         identify_rotational(runs, args.method, theta0=theta0, gains=gains, window_s=1.0)
         c2, w2 = time.process_time(), time.perf_counter()
         return runs, (c1 - c0, c2 - c1, c2 - c0, w2 - w0)

@@ -224,16 +224,16 @@ def _run_logs(args) -> int:
     """``uvd identify --log FILE… --profile NAME``: another system's recordings."""
     import time
 
-    from uvd.commands.reallogs import (
+    from uvd.commands.reallogs import parse_gains
+    from uvd.estimation.aid import scaled_aid_gains
+    from uvd.estimation.realdata import (
         embed_identified,
         identify_rotational,
-        load_log_runs,
-        parse_gains,
         refused_dofs,
         rot_of,
     )
-    from uvd.estimation.aid import scaled_aid_gains
     from uvd.io.logprofile import load_profile
+    from uvd.io.logrun import load_log_runs
     from uvd.io.params import params_from_toml, save_params
     from uvd.io.vehicle import load_vehicle
     from uvd.jsonio import write_json
@@ -249,7 +249,8 @@ def _run_logs(args) -> int:
     runs, reports = load_log_runs(args.log, profile, vehicle, quiet=args.quiet)
     for rep in reports:
         print(rep.text())
-    refused = refused_dofs(profile, runs)
+    refused = refused_dofs("linear_velocity" in profile.signals, runs,
+                           f"profile {profile.name!r}")
     if any(d in refused for d in ("roll", "pitch", "yaw")):
         raise ConfigError("the rotational DOFs cannot be identified: " + "; ".join(
             f"{d}: {r}" for d, r in refused.items() if d in ("roll", "pitch", "yaw")))

@@ -1,55 +1,9 @@
-"""Identification and cross-validation on other systems' recordings (``uvd identify`` and
-``uvd xval`` with ``--profile``): the shared steps.
-
-* :func:`load_log_runs` — every file through its log profile onto one clock
-  (:func:`uvd.io.logrun.runs_from_log`), with progress and the per-file reports;
-* :func:`refused_dofs` — the DOFs the data cannot identify, each with its reason;
-* :func:`identify_rotational` — AID (Theorem 4.2.1), LS or physically consistent LS (§4.4) of
-  the rotational model (2.40) over several runs at once;
-* :func:`embed_identified` — the identified rotational part inside the vehicle file's θ_UV
-  (translation left at the vehicle file's first guess, and said so in the parameter file).
-"""
+"""``--gains`` of ``uvd identify --profile`` (the rotational law's four gains or the 6-DOF
+law's five)."""
 
 from __future__ import annotations
 
-import numpy as np
-
 from uvd.errors import ConfigError
-
-ROT_DOFS = ("roll", "pitch", "yaw")
-TRANS_DOFS = ("surge", "sway", "heave")
-
-
-def load_log_runs(paths, profile, vehicle, *, quiet: bool = False):
-    """(runs, reports) of every file; progress per file on long inputs."""
-    from uvd.io.logrun import runs_from_log
-    from uvd.progress import Progress
-
-    runs, reports = [], []
-    with Progress("reading logs", unit="files", quiet=quiet) as pr:
-        for i, path in enumerate(paths):
-            r, rep = runs_from_log(path, profile, vehicle)
-            runs.extend(r)
-            reports.append(rep)
-            pr.update(i + 1, len(paths))
-    return runs, reports
-
-
-def refused_dofs(profile, runs) -> dict[str, str]:
-    """DOF → the reason the data cannot identify it (empty: all six identifiable)."""
-    out = {}
-    if "linear_velocity" not in profile.signals:
-        for d in TRANS_DOFS:
-            out[d] = (f"no linear-velocity sensor in profile {profile.name!r} (no DVL, no "
-                      "position fix): the mass and drag of surge, sway and heave act on "
-                      "velocities the recording does not contain; an accelerometer or a "
-                      "pressure depth alone does not give them without integrating noise "
-                      "and bias into invented velocities")
-    v = np.vstack([r.v for r in runs])
-    for i, d in enumerate(ROT_DOFS):
-        if not np.any(np.abs(v[:, 3 + i]) > 1e-6):
-            out[d] = f"the {d} rate stayed 0 throughout: nothing to identify"
-    return out
 
 
 def parse_gains(text, n: int):
@@ -69,71 +23,3 @@ def parse_gains(text, n: int):
     except ValueError as exc:
         raise ConfigError(f"--gains: {exc}") from exc
 
-
-def aid_rotational(runs, theta0, gains, progress=None):
-    """Rotational AID (Theorem 4.2.1) over the runs one after another, θ̂ carried across and the
-    observer re-synchronised (ω̂ = ω) at each run's start; returns (state, ∆ω per sample)."""
-    from uvd.control.types import VehicleState
-    from uvd.estimation.aid import AID3Params, aid3_init, aid3_step
-
-    st = aid3_init(theta0)
-    total = sum(len(r) for r in runs)
-    dws, done = [], 0
-    for run in runs:
-        prm = AID3Params(gains=gains, input_interp=run.input_interp)
-        H = run.H
-        dw = np.empty((len(run), 3))
-        for k in range(len(run)):
-            st = aid3_step(VehicleState(H=H[k], v=run.v[k]), run.u[k], prm, st,
-                           0.0 if k == 0 else run.dt)
-            dw[k] = st.dv
-            done += 1
-            if progress is not None and done % 1000 == 0:
-                progress(done, total)
-        dws.append(dw)
-    return st, np.vstack(dws)
-
-
-def identify_rotational(runs, method: str, *, theta0=None, gains=None, window_s: float = 1.0,
-                        progress=None) -> dict:
-    """θ_UVR (2.41) from the runs by ``method`` (aid, ls, ls-consistent); returns a dict with
-    ``params`` (RotParams) and the method's figures."""
-    from uvd.estimation.aid import aid3_params
-    from uvd.estimation.ls import DiffFilter, ls_identify, ls_reduce_runs
-
-    if method == "aid":
-        st, dw = aid_rotational(runs, theta0, gains, progress)
-        w = np.vstack([r.v[:, 3:] for r in runs])
-        tail = slice(max(0, len(dw) - len(dw) // 4), len(dw))
-        rel = float(np.sqrt(np.mean(np.sum(dw[tail] ** 2, 1)) / np.mean(np.sum(w[tail] ** 2, 1))))
-        return {"params": aid3_params(st), "frozen": st.frozen,
-                "freeze_reason": st.freeze_reason, "steps": st.steps,
-                "rate_estimate_error_last_quarter": rel,
-                "gains": [gains.a, gains.gamma1, gains.gamma2, gains.gamma3]}
-    filt = DiffFilter(window_s=window_s)
-    red = ls_reduce_runs(runs, "rot", filt, progress)
-    res = ls_identify(runs, "rot", filt=filt, consistent=method == "ls-consistent",
-                      reduced=red)
-    return {"params": res.params, **res.summary()}
-
-
-def embed_identified(vehicle_params, rot):
-    """θ_UV with the rotational block of M, the rotational drag blocks and b from ``rot``
-    (RotParams) and everything else from ``vehicle_params`` (the vehicle file)."""
-    from uvd.model.params import UVParams
-
-    M = np.array(vehicle_params.M, dtype=float)
-    M[3:, :3] = 0.0
-    M[:3, 3:] = 0.0
-    M[3:, 3:] = 0.5 * (np.asarray(rot.I) + np.asarray(rot.I).T)
-    D = np.array(vehicle_params.D, dtype=float)
-    for c in range(3):
-        D[3 + c, 3:, 3:] = np.asarray(rot.C)[c]
-    return UVParams(M=M, D=D, g=float(vehicle_params.g), b=np.asarray(rot.b, dtype=float))
-
-
-def rot_of(params):
-    """The rotational view (2.41) of a θ_UV parameter set."""
-    from uvd.model.params import RotParams, theta_uvr_from_theta
-
-    return RotParams.from_theta(theta_uvr_from_theta(params.theta))

@@ -75,11 +75,12 @@ def _run_logs(args) -> int:
     another system's recordings, in windows (uvd.estimation.xval.rot_xval_windows)."""
     import numpy as np
 
-    from uvd.commands.reallogs import load_log_runs, rot_of
     from uvd.errors import ConfigError
+    from uvd.estimation.realdata import rot_of
     from uvd.estimation.xval import STATES_ROT, format_mae_table, rot_xval_windows
     from uvd.io.figures import write_xval_figures
     from uvd.io.logprofile import load_profile
+    from uvd.io.logrun import load_log_runs
     from uvd.io.params import linear_damping_from_toml, params_from_toml
     from uvd.io.vehicle import load_vehicle
     from uvd.jsonio import write_json

@@ -59,7 +59,7 @@ def _bag(data: Path, stem: str) -> Path:
 
 def published_toml(key: str, vehicle_params) -> tuple[str, object, np.ndarray]:
     """(TOML text, RotParams, D_L) of a published column inside the vehicle's θ_UV."""
-    from uvd.commands.reallogs import embed_identified
+    from uvd.estimation.realdata import embed_identified
     from uvd.estimation.xval import rot_from_lumped
     from uvd.io.params import params_to_toml
 
@@ -90,15 +90,11 @@ def _vehicle_lz6(lz6: float):
 
 
 def run(data: Path, out: Path) -> dict:
-    from uvd.commands.reallogs import (
-        embed_identified,
-        identify_rotational,
-        load_log_runs,
-        rot_of,
-    )
     from uvd.estimation.aid import AID3Gains, scaled_aid_gains
+    from uvd.estimation.realdata import embed_identified, identify_rotational, rot_of
     from uvd.estimation.xval import rot_xval_windows
     from uvd.io.logprofile import load_profile
+    from uvd.io.logrun import load_log_runs
     from uvd.io.params import params_to_toml
     from uvd.io.vehicle import load_vehicle
 

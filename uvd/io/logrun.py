@@ -38,7 +38,7 @@ from uvd.io.logprofile import LogProfile, SignalSpec
 from uvd.io.logs import open_log
 
 __all__ = ["LogReport", "SignalStats", "read_signals", "runs_from_log", "flu_to_frd",
-           "enu_to_ned", "attitude_to_ned_frd", "clean_signal"]
+           "enu_to_ned", "attitude_to_ned_frd", "clean_signal", "load_log_runs"]
 
 _TIME_SCALE = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}
 # plausible magnitude of a value in each unit (a gyro's 2000 °/s range, angles, PWM 500–2500 µs)
@@ -378,3 +378,17 @@ def runs_from_log(path: str | Path, profile: LogProfile, vehicle, *,
         raise LogReadError(f"{path}: no stretch of at least {min_stretch_s:g} s where every "
                            f"signal has a sample within max_gap_s = {profile.max_gap_s:g} s")
     return runs, rep
+
+def load_log_runs(paths, profile, vehicle, *, quiet: bool = False):
+    """(runs, reports) of every file; progress per file on long inputs."""
+    from uvd.progress import Progress
+
+    runs, reports = [], []
+    with Progress("reading logs", unit="files", quiet=quiet) as pr:
+        for i, path in enumerate(paths):
+            r, rep = runs_from_log(path, profile, vehicle)
+            runs.extend(r)
+            reports.append(rep)
+            pr.update(i + 1, len(paths))
+    return runs, reports
+
