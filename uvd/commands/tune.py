@@ -9,7 +9,8 @@ stiffness b₃ in roll and pitch and the quadratic drag linearised at the refere
 The suggestion is k_p = m ω², k_d = 2ζωm with one bandwidth ω and damping ratio ζ for every
 axis (default ω: the delay-limited bandwidth, ζ = 0.8), printed as the ``[control]`` lines to
 paste — with the AMBC adaptation gains and mass floor scaled from the thesis's on the JHU ROV
-(:func:`uvd.control.tuning.scaled_adaptation_gains`).
+(:func:`uvd.control.tuning.scaled_adaptation_gains`) and AID's gains scaled likewise
+(:func:`uvd.estimation.aid.scaled_aid_gains`).
 """
 
 from __future__ import annotations
@@ -76,12 +77,15 @@ def tune_figures(cfg, omega=None, zeta=DEFAULT_ZETA) -> dict:
     from uvd.io.vehicle import load_vehicle
     ref = load_vehicle("jhu-rov").params
     adapt = scaled_adaptation_gains(m, d, np.diag(ref.M), [ref.D[i][i, i] for i in range(6)])
+    from uvd.estimation.aid import scaled_aid_gains
+    aid = scaled_aid_gains(m)
     return {"vehicle": vehicle.name, "rate_hz": cfg.loop.rate_hz, "lag_s": lag,
             "delay_cycles": delay, "peak_speed": speed.tolist(),
             "bandwidth": np.broadcast_to(w, (6,)).tolist(),
             "damping_ratio": np.broadcast_to(zeta, (6,)).tolist(),
             "configured": configured, "suggested": suggested,
             "adaptation": {k: v.tolist() for k, v in adapt.items()},
+            "aid_gains": [aid.a, aid.gamma1, aid.gamma2, aid.gamma3, aid.gamma4],
             "stable": all(r["pole_radius"] < 1.0 for r in configured)}
 
 
@@ -133,6 +137,11 @@ def _run(args) -> int:
           "m_i and |d_i|")
     for k, v in f["adaptation"].items():
         print(f"{k} = {_toml_list(v)}")
+    print("[estimation]")
+    print("# AID: §4.6's gains on the JHU ROV scaled by the vehicle's mean mass over the JHU "
+          "ROV's (what scale_to_vehicle = true applies to the configured gains; paste with "
+          "scale_to_vehicle = false)")
+    print(f"gains = {_toml_list(f['aid_gains'])}")
     if args.json is not None:
         write_json(args.json, f)
     return 0
