@@ -522,3 +522,28 @@ def test_runtime_aid_starts_scaled_unless_switched_off():
     assert aid_theta0(cfg, v) is None  # INITP
     assert cfg.estimation.aid_params(v).gains.gamma1 == 5000.0
     assert INITP_6DOF.M[0, 0] == 100.0
+
+
+@pytest.mark.parametrize("storage", ["SQLITE3", "MCAP"])
+def test_ros2_bag_and_cdr_mcap(tmp_path, storage):
+    """A ROS 2 bag written by rosbags (sqlite3 or MCAP storage) reads through the registry, as
+    a bag folder and, for MCAP, as the bare .mcap file (CDR decoded from its own schema)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    F = ts.types["std_msgs/msg/Float64MultiArray"]
+    L = ts.types["std_msgs/msg/MultiArrayLayout"]
+    bag = tmp_path / "bag"
+    with Writer(bag, version=8, storage_plugin=getattr(StoragePlugin, storage)) as w:
+        c = w.add_connection("/x", F.__msgtype__, typestore=ts)
+        for k in range(10):
+            msg = F(layout=L(dim=[], data_offset=0), data=np.array([k, 1.0, 2.0]))
+            w.write(c, k * 10**8, ts.serialize_cdr(msg, F.__msgtype__))
+    assert detect_format(bag) == "ros2"
+    assert count_messages(bag) == Counter({"/x": 10})
+    got = [(t, list(m.data)) for _tp, t, m in open_log(bag)]
+    assert got[3] == (3 * 10**8, [3.0, 1.0, 2.0])
+    if storage == "MCAP":
+        f = next(bag.glob("*.mcap"))
+        assert [(t, list(m.data)) for _tp, t, m in open_log(f)] == got
