@@ -547,3 +547,29 @@ def test_ros2_bag_and_cdr_mcap(tmp_path, storage):
     if storage == "MCAP":
         f = next(bag.glob("*.mcap"))
         assert [(t, list(m.data)) for _tp, t, m in open_log(f)] == got
+
+
+@pytest.mark.timeout(240)
+def test_identify_ardusub_bin_end_to_end(tmp_path, capsys):
+    """The idle ArduSub dataflash log through ardusub-bin and the BlueROV2 vehicle file: BARO
+    instance 1 only (match), the translation refused, and the warning that the constraint, not
+    the data, set the estimate (a log with PWM 1492-1508 excites nothing)."""
+    from uvd.cli import main
+
+    _need(ARDUSUB)
+    rc = main(["identify", "--log", str(ARDUSUB / "small.BIN"), "--profile", "ardusub-bin",
+               "--vehicle", "bluerov2-heavy", "--method", "ls-consistent", "--quiet",
+               "--out", str(tmp_path / "p.toml")])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert re.search(r"depth\s+BARO\s+237 msgs.* 0 duplicates", out)
+    assert "REFUSED surge, sway, heave" in out
+    assert "WARNING: the fit rests on its consistency bound for I" in out
+
+
+def test_profile_match_validated():
+    doc = _profile_doc("ardusub-bin")
+    assert load_profile("ardusub-bin").signals["depth"].match == (("I", 1),)
+    doc["signals"]["depth"]["match"] = [1]
+    with pytest.raises(ConfigError, match=r"\[signals.depth\]: match must be a table"):
+        profile_from_mapping(doc, where="p")

@@ -299,6 +299,10 @@ def _run_logs(args) -> int:
           f"b {np.array2string(np.asarray(rot.b), precision=4)} N m")
     print("physically meaningful: " + ", ".join(f"{k} {'yes' if v else 'NO'}"
                                                  for k, v in phys.items()))
+    bound = [b for b in res.get("active_bounds", []) if b not in res.get("unobserved", [])]
+    if bound:
+        print(_bounds_note(tuple(bound), n * runs[0].dt).replace(
+            "smallest mass eigenvalue", "smallest inertia eigenvalue"))
     reasons: dict[str, list[str]] = {}
     for d, r in refused.items():
         reasons.setdefault(r, []).append(d)

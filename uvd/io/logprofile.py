@@ -20,7 +20,9 @@ plus ``index`` (the elements of an array field) or ``fields`` (one attribute per
 e.g. ``["rollspeed", "pitchspeed", "yawspeed"]``); ``unit``; ``frame`` — ``frd`` (x forward,
 y starboard, z down: ours, ArduPilot's body frame) or ``flu`` (ROS REP 103 body frame) for
 body signals, ``ned`` (ours, ArduPilot's) or ``enu`` (ROS) for world ones; ``scale`` and
-``offset`` (after the unit) for pressure (``reference_pa``, ``density_kg_m3``, ``gravity_m_s2``).
+``offset`` (after the unit) for pressure (``reference_pa``, ``density_kg_m3``, ``gravity_m_s2``);
+``match`` — only messages whose fields have these values (``{I = 1}``: one sensor instance of
+several on the same message type).
 
 Top level: ``name``, ``description``, ``format`` (a :mod:`uvd.io.logs` name), ``time``
 (``"receive"`` — the recorder's stamp — or ``"field:<name>"`` with ``time_unit``), ``rate_hz``
@@ -49,7 +51,7 @@ UNITS = {"angular_rate": ("rad/s", "deg/s"), "attitude": ("rad", "deg"),
 FRAMES = {"angular_rate": ("frd", "flu"), "attitude": ("ned", "enu"), "depth": ("down", "up"),
           "linear_velocity": ("frd", "flu", "ned", "enu"), "thrusters": ("vehicle",)}
 _SIGNAL_KEYS = {"topic", "field", "index", "fields", "unit", "frame", "scale", "offset",
-                "reference_pa", "density_kg_m3", "gravity_m_s2"}
+                "reference_pa", "density_kg_m3", "gravity_m_s2", "match"}
 _TOP_KEYS = {"name", "description", "format", "time", "time_unit", "rate_hz", "resample",
              "max_gap_s", "span", "vehicle", "signals"}
 _REQUIRED = ("angular_rate", "attitude", "thrusters")
@@ -71,6 +73,7 @@ class SignalSpec:
     reference_pa: float = 0.0
     density_kg_m3: float = 1000.0
     gravity_m_s2: float = 9.81
+    match: tuple = ()
 
     @property
     def width(self) -> int:
@@ -109,6 +112,13 @@ def builtin_profiles() -> list[str]:
     return sorted(p.name[:-5] for p in _builtin_root().iterdir() if p.name.endswith(".toml"))
 
 
+def _match(m, where: str) -> tuple:
+    if not isinstance(m, dict) or not all(isinstance(v, (int, float, str, bool))
+                                          for v in m.values()):
+        raise ConfigError(f"{where}: match must be a table of field = value (e.g. {{I = 1}})")
+    return tuple(sorted(m.items()))
+
+
 def _signal(name: str, t: dict, where: str) -> SignalSpec:
     if not isinstance(t, dict):
         raise ConfigError(f"{where}: must be a table")
@@ -137,7 +147,8 @@ def _signal(name: str, t: dict, where: str) -> SignalSpec:
                       scale=float(t.get("scale", 1.0)), offset=float(t.get("offset", 0.0)),
                       reference_pa=float(t.get("reference_pa", 0.0)),
                       density_kg_m3=float(t.get("density_kg_m3", 1000.0)),
-                      gravity_m_s2=float(t.get("gravity_m_s2", 9.81)))
+                      gravity_m_s2=float(t.get("gravity_m_s2", 9.81)),
+                      match=_match(t.get("match", {}), where))
     want = {"angular_rate": 3, "attitude": 3, "depth": 1, "linear_velocity": 3}.get(name)
     if want is not None and spec.width != want:
         raise ConfigError(f"{where}: {name} needs {want} component(s), the profile gives "

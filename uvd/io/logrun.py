@@ -185,6 +185,8 @@ def read_signals(path: str | Path, profile: LogProfile
                 raise LogReadError(f"{path}: topic {topic}: no time field {field_time!r}")
             t_ns = int(round(float(getattr(msg, field_time)) * tscale))
         for s in by_topic.get(topic, ()):
+            if s.match and any(getattr(msg, k, None) != v for k, v in s.match):
+                continue
             ts[s.name].append(t_ns)
             xs[s.name].append(_value(msg, s, path))
     for name, s in profile.signals.items():
