@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +26,7 @@ import numpy as np
 from drivers.frames import wrap_pi_array
 from sim_bridge.instruments.models import InstrumentConfig
 from sim_bridge.plant import PlantConfig
+from sim_bridge.tank import TankEffects, attach
 from sim_bridge.thrusters import ThrusterEffects
 from uvd import core
 from uvd.control import _kernels
@@ -172,7 +173,9 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
                 on_theta: Callable[[float, np.ndarray], None] | None = None,
                 lag_compensation: bool = False, ff_preview_s: float = 0.0,
                 record: Path | None = None,
-                advance: Callable[[float, float, str], None] | None = None) -> ControlRun:
+                advance: Callable[[float, float, str], None] | None = None,
+                tank: TankEffects | None = None,
+                instruments: InstrumentConfig | None = None) -> ControlRun:
     """Run ``duration_s`` simulated seconds of ``controller`` tracking ``reference``.
 
     The plant starts on the reference (zero initial error) unless H0/v0 are given. Thruster
@@ -182,6 +185,8 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     ``ff_preview_s`` > 0 the feed-forward preview (``CoreConfig.ff_preview_s``).
     ``record`` (a folder): every cycle and θ̂ to MCAP as the daemon records them (``_BlackBox``).
     ``advance(done_s, total_s, label)`` is called every 100 cycles (a progress bar).
+    ``tank`` switches on effects of the real vehicle the plant lacks (:mod:`sim_bridge.tank`;
+    None: none); ``instruments`` replaces Table A.1's rates (its ``noise`` is ``noise``'s).
     """
     thrusters = ThrusterEffects() if thrusters is None else thrusters
     cfg = make_core(vehicle, controller, reference, lag_compensation=lag_compensation,
@@ -193,7 +198,9 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     sim = Lockstep(vehicle, cfg, LockstepConfig(
         plant_rate_hz=plant_rate_hz, control_rate_hz=control_rate_hz,
         plant=PlantConfig(rate_hz=plant_rate_hz, thrusters=thrusters),
-        instruments=InstrumentConfig(noise=noise), seed=seed), H0=H0, v0=v0)
+        instruments=InstrumentConfig(noise=noise) if instruments is None else
+        replace(instruments, noise=noise), seed=seed), H0=H0, v0=v0)
+    attach(sim, tank)
     n = int(round(duration_s * control_rate_hz))
     nthr = vehicle.n_thrusters
     rec = {k: np.empty((n, 6)) for k in ("eta_true", "eta_nav", "eta_ref", "v_true", "dpsi_true",
