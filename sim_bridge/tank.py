@@ -41,9 +41,12 @@ import math
 from collections import deque
 from dataclasses import dataclass, fields, replace
 
+import numba
 import numpy as np
 
 from drivers.samples import InsSample, R_to_euler, euler_to_R
+from sim_bridge.thrusters import _thruster_step
+from uvd.model.integrate import _rkmk4
 
 
 def _finite(*xs: float) -> bool:
@@ -135,33 +138,92 @@ def advance_speeds(positions: np.ndarray, directions: np.ndarray, v: np.ndarray)
     return np.einsum("ij,ij->i", vel, directions)
 
 
+@numba.njit(cache=True)
+def _shape(c, last_sign, hold, running, hold_steps, on_n, off_n):
+    """The command-side options in place: hysteretic dead band, then the reversal hold."""
+    for i in range(c.shape[0]):
+        x = c[i]
+        if not np.isfinite(x):
+            x = 0.0
+        if on_n > 0.0:
+            running[i] = abs(x) >= (off_n if running[i] else on_n)
+            if not running[i]:
+                x = 0.0
+        if hold_steps > 0:
+            s = np.sign(x)
+            if s != 0.0 and last_sign[i] != 0.0 and s != last_sign[i]:
+                hold[i] = hold_steps
+            if s != 0.0:
+                last_sign[i] = s
+            if hold[i] > 0:
+                x = 0.0
+                hold[i] -= 1
+        c[i] = x
+
+
 class CommandShaper:
     """The command-side options: the reversal hold and the hysteretic dead band (per thruster,
     applied to the command before the thruster bank)."""
 
     def __init__(self, effects: TankEffects, n: int, dt: float) -> None:
         self.hold_steps = int(round(effects.reversal_hold_s / dt))
-        self.on_n, self.off_n = effects.hysteresis_n
+        self.on_n, self.off_n = (float(x) for x in effects.hysteresis_n)
         self.last_sign = np.zeros(n)
-        self.hold = np.zeros(n, dtype=int)
-        self.running = np.zeros(n, dtype=bool)
+        self.hold = np.zeros(n, dtype=np.int64)
+        self.running = np.zeros(n, dtype=np.bool_)
 
     def __call__(self, command: np.ndarray) -> np.ndarray:
         c = np.array(command, dtype=float)
-        c[~np.isfinite(c)] = 0.0
-        if self.on_n > 0:
-            a = np.abs(c)
-            self.running = np.where(self.running, a >= self.off_n, a >= self.on_n)
-            c[~self.running] = 0.0
-        if self.hold_steps > 0:
-            s = np.sign(c)
-            flip = (s != 0) & (self.last_sign != 0) & (s != self.last_sign)
-            self.hold[flip] = self.hold_steps
-            self.last_sign[s != 0] = s[s != 0]
-            held = self.hold > 0
-            c[held] = 0.0
-            self.hold[held] -= 1
+        _shape(c, self.last_sign, self.hold, self.running, self.hold_steps, self.on_n,
+               self.off_n)
         return c
+
+
+@numba.njit(cache=True)
+def _tank_step(thr_args, omega, health, pos, dirs, ka, B, M, M_inv, D_flat, g, b, H, v, dt,
+               u, H_out, v_out, tether_n, anchor, attach_pt, kappa, z0, r_b):
+    """One plant step with the plant-side options, compiled: thrusters, the advance-speed loss,
+    u = B f + tether + buoyancy lost with depth, then RKMK4 (2.44) — as the functions above."""
+    _thruster_step(*thr_args)
+    f = thr_args[-1].copy()
+    if ka > 0.0:
+        for i in range(f.shape[0]):
+            r0, r1, r2 = pos[i, 0], pos[i, 1], pos[i, 2]
+            w0, w1, w2 = v[3], v[4], v[5]
+            ua = ((v[0] + w1 * r2 - w2 * r1) * dirs[i, 0] + (v[1] + w2 * r0 - w0 * r2) * dirs[i, 1]
+                  + (v[2] + w0 * r1 - w1 * r0) * dirs[i, 2])
+            f[i] -= ka * abs(omega[i]) * ua * health[i]
+    for i in range(6):
+        acc = 0.0
+        for j in range(f.shape[0]):
+            acc += B[i, j] * f[j]
+        u[i] = acc
+    if tether_n > 0.0:
+        d = np.empty(3)
+        for i in range(3):
+            d[i] = anchor[i] - H[i, 3] - (H[i, 0] * attach_pt[0] + H[i, 1] * attach_pt[1]
+                                          + H[i, 2] * attach_pt[2])
+        n = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+        if n > 0.0:
+            fb = np.empty(3)
+            for i in range(3):
+                fb[i] = tether_n * (H[0, i] * d[0] + H[1, i] * d[1] + H[2, i] * d[2]) / n
+            u[0] += fb[0]
+            u[1] += fb[1]
+            u[2] += fb[2]
+            u[3] += attach_pt[1] * fb[2] - attach_pt[2] * fb[1]
+            u[4] += attach_pt[2] * fb[0] - attach_pt[0] * fb[2]
+            u[5] += attach_pt[0] * fb[1] - attach_pt[1] * fb[0]
+    if kappa != 0.0:
+        dg = kappa * (H[2, 3] - z0)
+        e0, e1, e2 = H[2, 0], H[2, 1], H[2, 2]
+        u[0] += dg * e0
+        u[1] += dg * e1
+        u[2] += dg * e2
+        u[3] += dg * (r_b[1] * e2 - r_b[2] * e1)
+        u[4] += dg * (r_b[2] * e0 - r_b[0] * e2)
+        u[5] += dg * (r_b[0] * e1 - r_b[1] * e0)
+    _rkmk4(M, M_inv, D_flat, g, b, H, v, u, dt, H_out, v_out)
 
 
 class TankPlant:
@@ -178,6 +240,9 @@ class TankPlant:
         self.directions = np.array([s.direction for s in specs], dtype=float)
         plant.thrusters.stiction = plant.thrusters.stiction * effects.reversal_band_scale
         self.shaper = CommandShaper(effects, len(specs), plant.dt)
+        self._anchor = self.origin + np.asarray(effects.tether_anchor_m, dtype=float)
+        self._attach = np.asarray(effects.tether_attach_m, dtype=float)
+        self._r_b = np.asarray(effects.buoyancy_centre_m, dtype=float)
 
     def __getattr__(self, name):  # H, v, u, t, thrusters, vehicle, … of the wrapped plant
         return getattr(self.plant, name)
@@ -185,17 +250,17 @@ class TankPlant:
     def step(self, thrust_command_n: np.ndarray) -> None:
         """One plant step: shaped command → thrusters (minus the advance-speed loss) → u = B f
         plus the tether's and the depth-dependent buoyancy's wrench → (2.44)."""
-        p, e = self.plant, self.effects
-        f = p.thrusters.step(self.shaper(thrust_command_n), p.dt).copy()
-        if e.advance_loss > 0:
-            ua = advance_speeds(self.positions, self.directions, p.v)
-            f -= e.advance_loss * np.abs(p.thrusters.omega) * ua * p.thrusters.health
-        u = p.B @ f
-        if e.tether_n > 0:
-            u += tether_wrench(e, p.H, self.origin)
-        if e.buoyancy_n_per_m != 0:
-            u += buoyancy_wrench(e, p.H, self.z0)
-        p.step_wrench(u)
+        p, e, m = self.plant, self.effects, self.plant.model
+        bank = p.thrusters
+        _tank_step(bank.kernel_args(self.shaper(thrust_command_n), p.dt), bank.omega,
+                   bank.health, self.positions, self.directions, float(e.advance_loss), p.B,
+                   m.M, m.M_inv, m.D_flat, m.g, m.b, p.H, p.v, p.dt, p.u, p._H_next,
+                   p._v_next, float(e.tether_n), self._anchor, self._attach,
+                   float(e.buoyancy_n_per_m), self.z0, self._r_b)
+        p.H, p._H_next = p._H_next, p.H
+        p.v, p._v_next = p._v_next, p.v
+        p.steps += 1
+        p.t = p.steps * p.dt
 
 
 def mounted(ins: InsSample, R_b: np.ndarray) -> InsSample:

@@ -170,3 +170,17 @@ def test_options_off_leave_a_lockstep_run_bit_identical():
 def test_bad_options_are_refused_by_name(bad):
     with pytest.raises(ValueError, match="TankEffects"):
         TankEffects(**bad)
+
+
+def test_compiled_step_applies_the_tether_and_buoyancy_wrenches_of_the_reference_functions():
+    e = TankEffects(tether_n=10.0, buoyancy_n_per_m=20.0)
+    a = Plant(VEH)
+    b = TankPlant(Plant(VEH), e)
+    H = _pose(0.1, -0.15, 0.4, p=(0.3, -0.2, 0.7))
+    a.H, b.plant.H = H.copy(), H.copy()
+    cmd = np.array([20.0, -20.0, 10.0, 30.0, -30.0, 30.0])
+    a.step(cmd)
+    b.step(cmd)
+    want = tether_wrench(e, H, np.zeros(3)) + buoyancy_wrench(e, H, 0.0)
+    np.testing.assert_allclose(b.u - a.u, want, atol=1e-9)
+    assert not np.array_equal(a.H, b.H)

@@ -470,7 +470,8 @@ def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label
                   thrusters: ThrusterEffects | None = None,
                   lag_compensation: bool = LAG_COMPENSATION,
                   ff_preview: bool | None = None, kd2: float = KD_STEP2,
-                  vehicle: str = "jhu-rov", eps2: float = EPS_STEP2) -> tuple[ControlRun, dict]:
+                  vehicle: str = "jhu-rov", eps2: float = EPS_STEP2,
+                  tank=None, instruments=None) -> tuple[ControlRun, dict]:
     veh = _vehicle(vehicle)
     ff_preview = FF_PREVIEW if ff_preview is None else ff_preview
     alloc = Allocator.from_vehicle(veh)
@@ -491,7 +492,8 @@ def _two_step_run(opts: ExperimentOptions, step1_s: float, step2_s: float, label
                       record=opts.record, advance=opts.advance, progress=opts.progress,
                       label=f"{label}: ", on_theta=grab, thrusters=thrusters,
                       lag_compensation=lag_compensation,
-                      ff_preview_s=_preview_s(veh, ff_preview, lag_compensation, thrusters))
+                      ff_preview_s=_preview_s(veh, ff_preview, lag_compensation, thrusters),
+                      tank=tank, instruments=instruments)
     return run, captured
 
 
