@@ -699,100 +699,140 @@ def _table_5_6_beside(pdc: dict, win: list[dict], scale: float) -> tuple[dict, l
     return {k: {"ours": v, "thesis": THESIS_TABLE_5_6[k]} for k, v in ours.items()}, lines
 
 
-def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
-    """§5.3.5.1, Fig. 5.4 and Table 5.6: PDC vs converged two-step AMBC, like for like first."""
-    total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
-    scale = total_h * 3600.0 / (STEP1_DURATION_S + STEP2_DURATION_S)
-    step1_s, step2_s = STEP1_DURATION_S * scale, STEP2_DURATION_S * scale
-    win_s = min(900.0, step2_s)
-    pdc_s = min(PDC_MINUTES * 60.0, max(60.0, step2_s))
-    rows: dict[str, dict] = {}
-    lines = [f"pdc-vs-ambc (Fig. 5.4, Table 5.6): RefTraj1, k_p={KP:g}; PDC {pdc_s / 60:.0f} min, "
-             f"two-step AMBC (step 1 {step1_s / 60:.0f} min k_d={KD:g} eps={EPS_STEP1:g}, step 2 "
-             f"{step2_s / 3600:.2f} h) last {win_s / 60:.0f} min of step 2; "
-             "errors measured (navigation vs reference), true state in parentheses",
-             "thesis (Fig. 5.4, §5.3.5.1): position_ratio 0.70, velocity_ratio 1.08",
-             ""]
-    for spec in PDC_VS_AMBC_ROWS:
-        veh = _vehicle(spec["vehicle"])
-        run, _ = _two_step_run(opts, step1_s, step2_s, f"pdc-vs-ambc {spec['name']}",
-                               lag_compensation=spec["lag_compensation"],
-                               ff_preview=spec["ff_preview"], kd2=spec["kd"],
-                               vehicle=spec["vehicle"], eps2=spec.get("eps2", EPS_STEP2))
-        win = windows(run, win_s, start_s=step1_s)
-        ambc = tracking_stats(run, step1_s + step2_s - win_s)  # last window: converged
-        opts.progress(f"[pdc-vs-ambc {spec['name']}] PDC on RefTraj1, {pdc_s / 60:.0f} min")
-        prun = _pdc_run(veh, reftraj1(), pdc_s, opts.seed, opts.progress, kd=spec["kd"],
-                        lag_compensation=spec["lag_compensation"])
-        pdc = tracking_stats(prun, 0.0)
-        preview_s = _preview_s(veh, spec["ff_preview"], spec["lag_compensation"])
-        th = run.theta[-1]
-        row = {"title": spec["title"], "vehicle": veh.name,
-               "gains": {"kp": KP, "kd": spec["kd"], "kd_step1": KD, "eps_step1": EPS_STEP1,
-                         "eps_step2": spec.get("eps2", EPS_STEP2)},
-               "lag_compensation": spec["lag_compensation"], "ff_preview_s": preview_s,
-               "ambc_window_s": [step1_s + step2_s - win_s, step1_s + step2_s],
-               "pdc_duration_s": pdc_s, **_ratio_block(pdc, ambc),
-               "ambc_windows": [{"start_min": w["start_min"], "position_mne": w["position_mne"],
-                                 "velocity_mne": w["velocity_mne"],
-                                 "table_5_6": table_5_6_row(w)} for w in win],
-               "pdc_table_5_6": table_5_6_row(pdc),
-               # what sets PDC's heading error: the yaw torque it must apply, k_p Δψ_z ≈ τ_z
-               "pdc_mean_abs_yaw_torque_nm": float(np.mean(np.abs(prun.u_applied[:, 5]))),
-               "pdc_mean_abs_yaw_torque_over_kp_rad": float(
-                   np.mean(np.abs(prun.u_applied[:, 5])) / KP),
-               "final_theta": th.tolist(),
-               "saturated_fraction": float(run.saturated.mean())}
-        rows[spec["name"]] = row
-        lines += [
-            "",
-            f"[{spec['name']}] {spec['title']}",
-            f"  vehicle {veh.name}; k_p={KP:g}, k_d={spec['kd']:g} (PDC and step 2), "
-            f"eps={spec.get('eps2', EPS_STEP2):g} (step 2), "
-            f"lag compensation {'on' if spec['lag_compensation'] else 'off'}, feed-forward "
-            f"preview " + (f"{1e3 * preview_s:.1f} ms" if preview_s else "off"),
-            f"{'':>10} {'pos MNE':>9} {'vel MNE':>9}",
-            f"{'PDC':>10} {pdc['position_mne']:9.4f} {pdc['velocity_mne']:9.4f}   "
-            f"({pdc['true']['position_mne']:.4f}, {pdc['true']['velocity_mne']:.4f})",
-            f"{'AMBC':>10} {ambc['position_mne']:9.4f} {ambc['velocity_mne']:9.4f}   "
-            f"({ambc['true']['position_mne']:.4f}, {ambc['true']['velocity_mne']:.4f})",
-            f"  position_ratio {row['position_ratio']:.3f} (thesis 0.70), velocity_ratio "
-            f"{row['velocity_ratio']:.3f} (thesis 1.08); final m1..m6 "
-            + " ".join(f"{v:.4g}" for v in th[:6]),
-        ]
-        lines.append(f"  PDC heading: mean |yaw torque applied| "
-                     f"{row['pdc_mean_abs_yaw_torque_nm']:.1f} N m = k_p x "
-                     f"{row['pdc_mean_abs_yaw_torque_over_kp_rad']:.3f} rad "
-                     f"(heading MAE {pdc['position_mae']['heading']:.3f} rad; thesis 0.028 rad "
-                     f"would leave k_p x 0.028 = {KP * 0.028:.1f} N m)")
-        if spec["name"] == PDC_VS_AMBC_IDEALISED:
-            lines.append(format_windows(win, "  Table 5.6 layout, this row (AMBC 15-minute "
-                                              "windows of step 2, PDC 10 min):", pdc=pdc))
-            diag = row["pdc_heading_diagnostic"] = pdc_heading_diagnostic(veh, pdc_s, opts.seed,
-                                                                          kd=spec["kd"])
-            lines.append(
-                f"  PDC heading, measured cause: the plant's model needs mean |yaw torque| "
-                f"{diag['reference_mean_abs_yaw_torque_nm']:.1f} N m to follow RefTraj1 exactly "
-                f"(inverse dynamics, = k_p x {diag['over_kp_rad']:.3f} rad); heading MAE with "
-                "the unmodelled effects off in turn: " + ", ".join(
-                    f"{k} {c['heading_mae_rad']:.4f} rad" for k, c in diag["cases"].items()))
-        beside, table = _table_5_6_beside(pdc, win, scale)
-        lines += table
-        row["table_5_6_beside_thesis"] = beside
+def _pdc_vs_ambc_row(spec: dict, opts: ExperimentOptions, step1_s: float, step2_s: float,
+                     win_s: float, pdc_s: float, scale: float) -> dict:
+    """One row of pdc-vs-ambc: its two-step run and its PDC run (the expensive part)."""
+    veh = _vehicle(spec["vehicle"])
+    run, _ = _two_step_run(opts, step1_s, step2_s, f"pdc-vs-ambc {spec['name']}",
+                           lag_compensation=spec["lag_compensation"],
+                           ff_preview=spec["ff_preview"], kd2=spec["kd"],
+                           vehicle=spec["vehicle"], eps2=spec.get("eps2", EPS_STEP2))
+    win = windows(run, win_s, start_s=step1_s)
+    ambc = tracking_stats(run, step1_s + step2_s - win_s)  # last window: converged
+    opts.progress(f"[pdc-vs-ambc {spec['name']}] PDC on RefTraj1, {pdc_s / 60:.0f} min")
+    prun = _pdc_run(veh, reftraj1(), pdc_s, opts.seed, opts.progress, kd=spec["kd"],
+                    lag_compensation=spec["lag_compensation"])
+    pdc = tracking_stats(prun, 0.0)
+    row = {"title": spec["title"], "vehicle": veh.name,
+           "gains": {"kp": KP, "kd": spec["kd"], "kd_step1": KD, "eps_step1": EPS_STEP1,
+                     "eps_step2": spec.get("eps2", EPS_STEP2)},
+           "lag_compensation": spec["lag_compensation"],
+           "ff_preview_s": _preview_s(veh, spec["ff_preview"], spec["lag_compensation"]),
+           "ambc_window_s": [step1_s + step2_s - win_s, step1_s + step2_s],
+           "pdc_duration_s": pdc_s, **_ratio_block(pdc, ambc),
+           "ambc_windows": [{"start_min": w["start_min"], "position_mne": w["position_mne"],
+                             "velocity_mne": w["velocity_mne"],
+                             "table_5_6": table_5_6_row(w)} for w in win],
+           "pdc_table_5_6": table_5_6_row(pdc),
+           # what sets PDC's heading error: the yaw torque it must apply, k_p Δψ_z ≈ τ_z
+           "pdc_mean_abs_yaw_torque_nm": float(np.mean(np.abs(prun.u_applied[:, 5]))),
+           "pdc_mean_abs_yaw_torque_over_kp_rad": float(
+               np.mean(np.abs(prun.u_applied[:, 5])) / KP),
+           "final_theta": run.theta[-1].tolist(),
+           "saturated_fraction": float(run.saturated.mean()),
+           "table_5_6_beside_thesis": _table_5_6_beside(pdc, win, scale)[0]}
+    if spec["name"] == PDC_VS_AMBC_IDEALISED:
+        row["pdc_heading_diagnostic"] = pdc_heading_diagnostic(veh, pdc_s, opts.seed,
+                                                               kd=spec["kd"])
+    return row
+
+
+def _windows_lines(row: dict) -> list[str]:
+    """Table 5.6's layout of a row: PDC, then every 15-minute window of step 2."""
+    lines = ["  Table 5.6 layout, this row (AMBC 15-minute windows of step 2, PDC 10 min):",
+             f"{'block (min)':>12} " + " ".join(f"{c:>8}" for c in TABLE_5_6_COLS)
+             + f" {'MNE psi':>8} {'MNE v':>8}",
+             f"{'PDC':>12} " + " ".join(f"{v:8.4f}" for v in row["pdc_table_5_6"])
+             + f" {row['pdc']['position_mne']:8.4f} {row['pdc']['velocity_mne']:8.4f}"]
+    width = (row["ambc_window_s"][1] - row["ambc_window_s"][0]) / 60.0
+    for w in row["ambc_windows"]:
+        lines.append(f"{w['start_min']:.0f}-{w['start_min'] + width - 1:.0f}".rjust(12) + " "
+                     + " ".join(f"{v:8.4f}" for v in w["table_5_6"])
+                     + f" {w['position_mne']:8.4f} {w['velocity_mne']:8.4f}")
+    return lines
+
+
+def _beside_lines(beside: dict) -> list[str]:
+    lines = ["  Table 5.6 beside ours: ours/thesis per column (* = off by more than 2x)",
+             f"{'block':>10} " + " ".join(f"{c:>8}" for c in TABLE_5_6_COLS)]
+    for key, tv in THESIS_TABLE_5_6.items():
+        if key not in beside:
+            continue
+        ours = beside[key]["ours"]
+        lines.append(f"{key + ' th':>10} " + " ".join(f"{v:8.4f}" for v in tv))
+        lines.append(f"{key + ' us':>10} " + " ".join(f"{v:8.4f}" for v in ours))
+        lines.append(f"{'ratio':>10} " + " ".join(f"{_ratio_text(o, t):>8}"
+                                                 for o, t in zip(ours, tv, strict=True)))
+    return lines
+
+
+def _row_lines(name: str, row: dict) -> list[str]:
+    pdc, ambc, th = row["pdc"], row["ambc"], row["final_theta"]
+    g = row["gains"]
+    lines = [
+        "",
+        f"[{name}] {row['title']}",
+        f"  vehicle {row['vehicle']}; k_p={KP:g}, k_d={g['kd']:g} (PDC and step 2), "
+        f"eps={g['eps_step2']:g} (step 2), "
+        f"lag compensation {'on' if row['lag_compensation'] else 'off'}, feed-forward "
+        f"preview " + (f"{1e3 * row['ff_preview_s']:.1f} ms" if row["ff_preview_s"] else "off"),
+        f"{'':>10} {'pos MNE':>9} {'vel MNE':>9}",
+        f"{'PDC':>10} {pdc['position_mne']:9.4f} {pdc['velocity_mne']:9.4f}   "
+        f"({pdc['true']['position_mne']:.4f}, {pdc['true']['velocity_mne']:.4f})",
+        f"{'AMBC':>10} {ambc['position_mne']:9.4f} {ambc['velocity_mne']:9.4f}   "
+        f"({ambc['true']['position_mne']:.4f}, {ambc['true']['velocity_mne']:.4f})",
+        f"  position_ratio {row['position_ratio']:.3f} (thesis 0.70), velocity_ratio "
+        f"{row['velocity_ratio']:.3f} (thesis 1.08); final m1..m6 "
+        + " ".join(f"{v:.4g}" for v in th[:6]),
+        f"  PDC heading: mean |yaw torque applied| {row['pdc_mean_abs_yaw_torque_nm']:.1f} N m "
+        f"= k_p x {row['pdc_mean_abs_yaw_torque_over_kp_rad']:.3f} rad (heading MAE "
+        f"{pdc['position_mae']['heading']:.3f} rad; thesis 0.028 rad would leave k_p x 0.028 = "
+        f"{KP * 0.028:.1f} N m)",
+    ]
+    if name == PDC_VS_AMBC_IDEALISED:
+        lines += _windows_lines(row)
+        diag = row["pdc_heading_diagnostic"]
+        lines.append(
+            f"  PDC heading, measured: the plant's model needs mean |yaw torque| "
+            f"{diag['reference_mean_abs_yaw_torque_nm']:.1f} N m to follow RefTraj1 exactly "
+            f"(inverse dynamics, = k_p x {diag['over_kp_rad']:.3f} rad); heading MAE with "
+            "the unmodelled effects off in turn: " + ", ".join(
+                f"{k} {c['heading_mae_rad']:.4f} rad" for k, c in diag["cases"].items()))
+    return lines + _beside_lines(row["table_5_6_beside_thesis"])
+
+
+def pdc_vs_ambc_result(rows: dict[str, dict]) -> dict:
+    """pdc-vs-ambc's result from its rows (:func:`_pdc_vs_ambc_row`): the headline's keys at
+    the top, Table 5.6 with the headline and idealised rows, the heading account, the rows."""
     head = rows[PDC_VS_AMBC_HEADLINE]
+    total_s = head["ambc_window_s"][1]  # step 1 + step 2, in the thesis's proportion
+    step1_s = total_s * STEP1_DURATION_S / (STEP1_DURATION_S + STEP2_DURATION_S)
+    step2_s = total_s - step1_s
+    win_s = head["ambc_window_s"][1] - head["ambc_window_s"][0]
     account = heading_account(_vehicle(), KD)
-    fit = account["yaw_gain_fit"]
-    lines[2:2] = table_5_6_side_by_side(rows) + [
+    fit, one = account["yaw_gain_fit"], account["one_axis_at_kp"]
+    lines = [f"pdc-vs-ambc (Fig. 5.4, Table 5.6): RefTraj1, k_p={KP:g}; PDC "
+             f"{head['pdc_duration_s'] / 60:.0f} min, two-step AMBC (step 1 {step1_s / 60:.0f} "
+             f"min k_d={KD:g} eps={EPS_STEP1:g}, step 2 {step2_s / 3600:.2f} h) last "
+             f"{win_s / 60:.0f} min of step 2; errors measured (navigation vs reference), true "
+             "state in parentheses",
+             "thesis (Fig. 5.4, §5.3.5.1): position_ratio 0.70, velocity_ratio 1.08; headline "
+             f"(coupled plant) {head['position_ratio']:.3f}, {head['velocity_ratio']:.3f}; "
+             f"idealised (decoupled plant) {rows[PDC_VS_AMBC_IDEALISED]['position_ratio']:.3f}, "
+             f"{rows[PDC_VS_AMBC_IDEALISED]['velocity_ratio']:.3f}",
+             ""]
+    lines += table_5_6_side_by_side(rows)
+    lines.append(
         f"PDC heading on one axis (decoupled model, Table 5.5's m6, d6; no thrusters, no "
         f"noise): k_p={KP:g}, k_d={KD:g} give heading/yaw-rate MAE "
-        f"{account['one_axis_at_kp']['heading']['position_mae']:.4f} rad / "
-        f"{account['one_axis_at_kp']['heading']['velocity_mae']:.4f} rad/s "
-        f"(thesis {THESIS_TABLE_5_6['PDC'][3]:.3f} / {THESIS_TABLE_5_6['PDC'][11]:.4f}); "
+        f"{one['heading']['position_mae']:.4f} rad / {one['heading']['velocity_mae']:.4f} "
+        f"rad/s (thesis {THESIS_TABLE_5_6['PDC'][3]:.3f} / {THESIS_TABLE_5_6['PDC'][11]:.4f}); "
         f"the thesis's pair is reproduced at a yaw k_p of {fit['kp']:.0f} (k_d {KD:g}: "
         f"{fit['position_mae']:.4f} / {fit['velocity_mae']:.4f}); x, y, z, roll, pitch at "
         f"k_p={KP:g}: position MAE ratios to Table 5.6 " + ", ".join(
-            f"{a} {account['one_axis_at_kp'][a]['ratio'][0]:.2f}"
-            for a in ("x", "y", "z", "roll", "pitch"))]
+            f"{a} {one[a]['ratio'][0]:.2f}" for a in ("x", "y", "z", "roll", "pitch")))
+    for name, row in rows.items():
+        lines += _row_lines(name, row)
     out = {"vehicle": head["vehicle"], "headline": PDC_VS_AMBC_HEADLINE,
            "idealised": PDC_VS_AMBC_IDEALISED, "heading_account": account, "rows": rows,
            **{k: head[k] for k in ("gains", "lag_compensation", "ff_preview_s",
@@ -803,12 +843,26 @@ def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
                       "table_5_6": THESIS_TABLE_5_6}}
     out["acceptance"] = {"position_ratio_le_0.70": out["position_ratio"] <= 0.70,
                          "velocity_ratio_le_1.08": out["velocity_ratio"] <= 1.08}
+    out["summary"] = "\n".join(lines)
+    return out
+
+
+def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
+    """§5.3.5.1, Fig. 5.4 and Table 5.6: PDC vs converged two-step AMBC; the thesis's settings
+    on the coupled plant first (headline), then on the decoupled plant, then our changes."""
+    total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
+    scale = total_h * 3600.0 / (STEP1_DURATION_S + STEP2_DURATION_S)
+    step1_s, step2_s = STEP1_DURATION_S * scale, STEP2_DURATION_S * scale
+    win_s = min(900.0, step2_s)
+    pdc_s = min(PDC_MINUTES * 60.0, max(60.0, step2_s))
+    rows = {spec["name"]: _pdc_vs_ambc_row(spec, opts, step1_s, step2_s, win_s, pdc_s, scale)
+            for spec in PDC_VS_AMBC_ROWS}
+    out = pdc_vs_ambc_result(rows)
     if opts.plots is not None:
-        ws = head["ambc_windows"]
+        ws = out["ambc_windows"]
         write_mne(opts.plots, "pdc-vs-ambc-mne", [w["start_min"] for w in ws], win_s / 60.0,
                   [w["position_mne"] for w in ws], [w["velocity_mne"] for w in ws],
-                  (head["pdc"]["position_mne"], head["pdc"]["velocity_mne"]), label="ambc")
-    out["summary"] = "\n".join(lines)
+                  (out["pdc"]["position_mne"], out["pdc"]["velocity_mne"]), label="ambc")
     return out
 
 
