@@ -287,7 +287,7 @@ def _single_step(opts: ExperimentOptions, *, robust: bool, default_h: float, nam
     return out
 
 
-# §5.3.2's divergence: the thruster effect that reproduces Table 5.2's drift of g and b3.
+# §5.3.2's divergence: the thruster effect that moves g and b3 in Table 5.2's direction.
 # Scanned on 15-30 min runs (then 2 h and 6 h), seed 0: dead band 10 and 25 N, reverse_ratio
 # 0.6, 0.8, 1.25, 1.35, 1.5, with and without lag. Only reverse thrust stronger than forward
 # (vertical thrusters weaker pushing keel-down) moves g and b3 the thesis's way (g 3.6 -> -5.7,

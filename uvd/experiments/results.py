@@ -29,8 +29,9 @@ from uvd.progress import Progress
 # one-line summary; an experiment may also say it in its result under "thesis_reference")
 THESIS = {
     "ambc-6dof-unstable": "§5.3.2 — Tables 5.2 and 5.3 (initial and final parameters) and "
-                          "Fig. 5.1 (m₄, m₅ drifting negative) — single-step AMBC diverging "
-                          "under unmodelled thruster dynamics.",
+                          "Fig. 5.1 (m₄, m₅ drifting negative) — single-step AMBC diverging, "
+                          "which the thesis goes on to examine as unmodelled thruster "
+                          "dynamics.",
     "pitch-reversal": "§5.3.4 — Figs. 5.2 and 5.3: pitch-only AMBC with and without thrust "
                       "reversals; large negative spikes of ṁ₅ after each reversal.",
     "two-step": "§5.3.5 — Table 5.4 (g, b after the quasi-static step 1), Table 5.5 (masses and "
@@ -66,7 +67,8 @@ SETUP = {
                           "(not reported by the thesis); started from the plant's own values, "
                           "not Table 5.2/5.3's. Second block: the same plant with asymmetric "
                           "thrusters (reverse_ratio 1.35, docs/experiments.md), the thruster "
-                          "effect that reproduces Table 5.2's g and b3 drift; then robust "
+                          "effect that moves g and b3 in Table 5.2's direction (its g, b3 "
+                          "line says how far); then robust "
                           "single-step AMBC (beyond the thesis) and two-step AMBC (§5.3.5 gains, "
                           "k_d = 1000 in step 2, ε = 2) on that plant.",
     "pdc-vs-ambc": "the headline row `thesis-coupled-plant` runs the thesis's settings on the "
@@ -289,6 +291,8 @@ def _note_ambc_6dof_unstable(result: dict) -> str | None:
         theirs = ((th["final"][i_m5] - th["initial"][i_m5])
                   / (th["final"][i_b3] - th["initial"][i_b3]))
         robust = asym["robust"]["min_mass_eigenvalue"]
+        i_m6 = result["parameters"].index("m6")
+        m6 = (result["initial"][i_m6], result["final"][i_m6], max(result["series"]["m6"]))
         two = asym["two_step"]
     except (KeyError, TypeError, ValueError, ZeroDivisionError):
         return None
@@ -296,13 +300,16 @@ def _note_ambc_6dof_unstable(result: dict) -> str | None:
         return None  # reproduced: the figures above say so
     return ("*Fig. 5.1 not reproduced (measured):* m₄ and m₅ stay positive — minimum m₄, m₅ "
             "over 2 h: " + "; ".join(f"{k} {a:.1f}, {b:.1f}" for k, (a, b) in mins.items())
-            + ". So the propeller lag is not what holds them up. The thesis's pitch mass fell "
+            + ". Without the propeller lag they stay positive too. The thesis's pitch mass fell "
             f"with b₃ (Tables 5.2/5.3: Δm₅/Δb₃ = {theirs:.2f}, near 1/0.6² = 2.78 for "
             "RefTraj1's pitch at 0.6 rad/s, the direction a single-frequency reference leaves "
-            f"unidentified); ours moves Δm₅/Δb₃ = {ours:.2f} on the asymmetric plant. The "
-            "§5.3.4 mechanism is present (`pitch-reversal`: a negative ṁ₅ spike after each "
-            "reversal) but does not outweigh the rest of the update in our plant. On the same "
-            f"plant robust adaptation keeps M̂ positive definite (min eigenvalue "
+            f"unidentified); ours moves Δm₅/Δb₃ = {ours:.2f} on the asymmetric plant. "
+            f"**m₆ rises** on the default plant, {m6[0]:.1f} → {m6[1]:.1f} (max {m6[2]:.1f}), "
+            "where the thesis's fell 106.4 → 41 (Table 5.3). §5.3.4's mechanism (negative ṁ₅ "
+            "spikes after thrust reversals) does not show as a fall of m₅ in our plant: in "
+            "`pitch-reversal` m₅ ends higher with reversals than without (its last column). "
+            "The causes tried beyond the thruster effects are in `fig51-hunt`. On the "
+            f"asymmetric plant robust adaptation keeps M̂ positive definite (min eigenvalue "
             f"{robust['min']:.1f}) and so does two-step AMBC ({two['min_mass_eigenvalue']:.1f} "
             "over the second half of step 2).")
 
