@@ -445,7 +445,8 @@ def with_theta(ctrl: AMBCState, theta: np.ndarray) -> AMBCState:
 __all__ = [
     "AMBCParams", "AMBCState", "MBCParams", "MBCState", "RobustAdaptation",
     "ROBUST_DAEMON_DEFAULT", "adaptation_gains", "ambc_init", "ambc_params", "ambc_step",
-    "C_APPENDIX_B2", "epsilon_bound", "gravity_index", "lyapunov_V1", "lyapunov_V2", "mass_index", "drag_index",
+    "C_APPENDIX_B2", "epsilon_bound",
+    "gravity_index", "lyapunov_V1", "lyapunov_V2", "mass_index", "drag_index",
     "mbc_step", "params_of", "theta_of", "with_theta",
 ]
 

@@ -69,8 +69,12 @@ def one_axis_pd(params, axis: str, kp, kd: float, seconds: float = 600.0) -> np.
                      float(seconds))
 
 
+#: the k_p searched by :func:`fit_gain`: 100 to 10 000, 121 steps of 3.9 %
+KP_GRID = np.geomspace(100.0, 10000.0, 121)
+
+
 def fit_gain(params, axis: str, target: tuple[float, float], kd: float,
-             kp_grid=np.geomspace(100.0, 10000.0, 121), seconds: float = 600.0) -> dict:
+             kp_grid: np.ndarray = KP_GRID, seconds: float = 600.0) -> dict:
     """The k_p of ``kp_grid`` whose (position, velocity) MAE pair is nearest ``target`` in
     log-ratio (Σ log²(ours/target)); with the pair it gives."""
     mae = one_axis_pd(params, axis, kp_grid, kd, seconds)

@@ -18,7 +18,6 @@ When one does, robust single-step AMBC and two-step AMBC run on that plant.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np

@@ -137,8 +137,8 @@ SETUP = {
                  "24 frequencies; gains a = 10, γ₁ = 10⁴, γ₂ = 10⁵, γ₃ = 2000, γ₄ = 5000 (ours).",
 }
 
-ORDER = ("ambc-6dof-unstable", "fig51-hunt", "pitch-reversal", "two-step", "two-step-no-lag", "pdc-vs-ambc",
-         "xval-two-step", "ambc-robust", "ambc-full")
+ORDER = ("ambc-6dof-unstable", "fig51-hunt", "pitch-reversal", "two-step", "two-step-no-lag",
+         "pdc-vs-ambc", "xval-two-step", "ambc-robust", "ambc-full")
 
 
 def _note_aid_6dof(result: dict) -> str | None:
