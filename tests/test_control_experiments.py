@@ -20,7 +20,10 @@ KEYS = {
     "two-step": ["final", "true", "step1", "windows", "masses_drags_within_10pct",
                  "g_b_within_5pct", "theta_after_s"],
     "two-step-no-lag": ["final", "true", "step1", "windows", "thruster_effects"],
-    "pdc-vs-ambc": ["pdc", "ambc", "position_ratio", "velocity_ratio"],
+    "pdc-vs-ambc": ["pdc", "ambc", "position_ratio", "velocity_ratio", "headline", "idealised",
+                    "heading_account"],
+    "fig51-hunt": ["attempts", "causes", "selective_drift_reproduced", "thesis_like_rate",
+                   "epsilon_bound"],
     "xval-two-step": ["models", "states", "adaptation_times_s"],
     "ambc-robust": ["min_mass_eigenvalue", "final", "masses_drags_within_25pct"],
     "ambc-full": ["pdc", "ambc", "position_ratio", "velocity_ratio",
@@ -51,6 +54,14 @@ def test_experiment_runs_shortened(name):
         assert none["reversals"] < rev["reversals"]
     if name == "xval-two-step":
         assert set(res["models"]) == {"250s", "1000s", "5000s", "true"}
+    if name == "pdc-vs-ambc":
+        assert res["vehicle"] == "jhu-rov-coupled"  # the headline: the coupled plant
+        assert res["rows"][res["idealised"]]["vehicle"] == "jhu-rov"
+    if name == "fig51-hunt":  # every cause alone, from the plant's and Table 5.2's values
+        from uvd.experiments.fig51_hunt import CAUSES
+        for cause, _, _ in CAUSES:
+            inits = {a["init"] for a in res["attempts"] if a["cause"] == cause}
+            assert inits == {"plant", "table-5.2"}, cause
 
 
 def test_experiment_command_writes_json(tmp_path, capsys):
