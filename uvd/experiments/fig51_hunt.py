@@ -295,12 +295,12 @@ def write_m4_m5_figure(result: dict, path: Path) -> Path | None:
     for col, init in enumerate(INITS):
         for row, (nm, k) in enumerate((("m4", 3), ("m5", 4))):
             ax = axes[row, col]
-            for a in result["attempts"]:
-                if a["init"] != init:
-                    continue
+            mine = [a for a in result["attempts"] if a["init"] == init]
+            colours = plt.get_cmap("tab20")(np.linspace(0.0, 1.0, max(len(mine), 2)))
+            for a, colour in zip(mine, colours, strict=False):
                 s = a["series"]
-                lbl = a["cause"] + (f" eps {a['eps']:g}" if a["eps"] != EPS else "")
-                ax.plot(s["t"], s[nm], lw=1.0, label=lbl)
+                lbl = a["cause"] + (f" eps {a['eps']:.3g}" if a["eps"] != EPS else "")
+                ax.plot(s["t"], s[nm], lw=1.0, label=lbl, color=colour)
             if init == "table-5.2":
                 ax.plot([0, 7200], [th["initial"][k], th["final"][k]], "k--", lw=2,
                         label="thesis: ends of Tables 5.2/5.3")

@@ -252,6 +252,7 @@ def _note_fig51_hunt(result: dict) -> str | None:
     m5 = min(a["m5_min"] for a in att)
     low = min(att, key=lambda a: min(a["m4_min"], a["m5_min"]))
     m6_up = sum(a["m6_final"] > a["initial"][5] for a in att)
+    falling = [a for a in att if min(a["rate_per_h"]["m4"], a["rate_per_h"]["m5"]) < 0]
     fig = ("![m4, m5 over time, every attempt](figures/fig51-hunt-m4-m5.png)\n\n"
            "*Figure:* m₄(t), m₅(t) of every attempt (left: from the plant's values; right: from "
            "Table 5.2's, with the thesis's ends as a dashed line — Fig. 5.1 itself is a plot of "
@@ -272,11 +273,16 @@ def _note_fig51_hunt(result: dict) -> str | None:
         + "; none makes them fall at even half the thesis's rate ("
         f"{rate['m4']:.1f}, {rate['m5']:.1f} kg m²/h) with the others bounded"
         + ("" if not like else " — except " + ", ".join(like))
+        + ". m₄ or m₅ falls at all (a negative change per hour) only in: "
+        + (", ".join(f"{a['cause']} from {a['init']} (ε {a['eps']:.3g}: m₄ "
+                     f"{a['rate_per_h']['m4']:.1f}, m₅ {a['rate_per_h']['m5']:.1f} /h)"
+                     for a in falling) or "none")
         + f". m₆ ends above its start in {m6_up} of {len(att)} attempts; the thesis's fell "
         "106.4 → 41. The table is the answer to the hunt: none of these causes, at these "
-        "sizes, is what the real vehicle had. What is left untried: larger or combined sizes "
-        "of these effects, thruster interaction and a second-order thruster model (§5.3.3), "
-        "the tank's walls, and the real vehicle's couplings other than Tables 4.8/4.9's.")
+        "sizes and in 30 minutes, produces the thesis's selective drift. Not tried: larger "
+        "sizes of these effects, runs of the thesis's full 2 h, thruster interaction and a "
+        "second-order thruster model (§5.3.3), the tank's walls, and couplings of the real "
+        "vehicle other than Tables 4.8/4.9's.")
 
 
 def _note_ambc_6dof_unstable(result: dict) -> str | None:
