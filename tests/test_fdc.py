@@ -183,12 +183,38 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     assert stats["latency_ms"]["n"] == 299 and 0 < stats["latency_ms"]["p50"] < 1000
 
 
+@pytest.fixture
+def busy_machine():
+    """Two processes spinning beside the test, as other work shares a vehicle's computer (or
+    this machine); each ends by itself after 120 s and is stopped when the test ends."""
+    spin = "import time\nend = time.monotonic() + 120\nwhile time.monotonic() < end: pass"
+    procs = [subprocess.Popen([sys.executable, "-c", spin]) for _ in range(2)]
+    yield
+    for p in procs:
+        p.kill()
+        p.wait()
+
+
+def _lines_of(proc) -> list[str]:
+    """The lines ``proc`` prints, collected by a thread as they come."""
+    import threading
+    lines: list[str] = []
+    threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")),
+                     daemon=True).start()
+    return lines
+
+
 @pytest.mark.slow
-def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path):
+def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path, busy_machine):
     """A vehicle written from the schemas alone (a second Zenoh session: estimates, state and
     a params queryable answering its thruster matrix) loses half of thruster 4; AID-like
     estimates move b₁ (what AID does, docs/zenoh.md); uvd-fdc reports kind thruster, naming
-    thruster 4 at η ≈ 0.5, with the residual's explanation, valid against uvd.fault.v1."""
+    thruster 4 at η ≈ 0.5, with the residual's explanation, valid against uvd.fault.v1.
+
+    Beside two busy processes: the client's two subscriptions then deliver their samples far
+    apart (the state stream was measured 26 s of sample time behind the estimates), and the
+    verdict must not depend on it (uvd.fdc.align). b₁ is constant over the baseline: its σ is
+    its resolution, so the report's σ is finite and meaningful."""
     import zenoh
 
     from tests.test_fdc_residual import B, _estimate, _simulate
@@ -210,16 +236,25 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path):
     with zenoh.open(conf) as s:
         token = s.liveliness().declare_token("uvd/sub2/alive")
         s.declare_queryable("uvd/sub2/params", on_params)
-        est = s.declare_publisher("uvd/sub2/estimate/aid6")
-        state = s.declare_publisher("uvd/sub2/state")
+        # BLOCK: this vehicle runs 20× faster than real time, and what is tested is the
+        # client's verdict on every sample, however late (the daemon's DROP loses none at
+        # its real rate, docs/zenoh.md)
+        block = zenoh.CongestionControl.BLOCK
+        est = s.declare_publisher("uvd/sub2/estimate/aid6", congestion_control=block)
+        state = s.declare_publisher("uvd/sub2/state", congestion_control=block)
         s.declare_subscriber("uvd/*/fault/*", lambda x: faults.append(
             (str(x.key_expr), json.loads(x.payload.to_bytes()))))
         proc = subprocess.Popen(
             [sys.executable, "-m", "uvd.fdc.client", "--connect", f"tcp/127.0.0.1:{port}",
-             "--warmup-s", "10", "--baseline-s", "150", "--seconds", "40"],
+             "--warmup-s", "10", "--baseline-s", "150", "--seconds", "90",
+             "--stats", str(tmp_path / "stats.json")],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        try:
-            time.sleep(3.0)  # the client connects and subscribes
+        lines = _lines_of(proc)
+        try:  # the client has subscribed to both streams (its line, and our publishers see it)
+            deadline = time.monotonic() + 60.0
+            while not (any("watching" in x for x in lines) and est.matching_status.matching
+                       and state.matching_status.matching) and time.monotonic() < deadline:
+                time.sleep(0.05)
             next_est, seq = 0.0, 0
             for i, (t, v, R, f) in enumerate(samples):
                 if t >= next_est:
@@ -237,14 +272,19 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path):
                                       "R": R.tolist(), "thrust": f.tolist()}))
                 if i % 20 == 0:
                     time.sleep(0.01)
-            deadline = time.monotonic() + 10.0
+            deadline = time.monotonic() + 60.0
             while not faults and time.monotonic() < deadline:
                 time.sleep(0.1)
             token.undeclare()
         finally:
             proc.terminate()
-            out, _ = proc.communicate(timeout=10)
+            proc.wait(timeout=10)
+    time.sleep(0.2)  # the reader thread takes the last lines
+    out = "".join(lines)
     print(out)
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    print(stats)
+    assert stats["received"] == {"uvd/sub2/estimate/aid6": 261, "uvd/sub2/state": 2601}
     assert asked and "what=configuration" in asked[0]
     assert len(faults) == 1, faults
     key, d = faults[0]
@@ -255,6 +295,7 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path):
                          / "uvd.fault.v1.json").read_text())
     jsonschema.Draft202012Validator(schema).validate(d)
     assert "FAULT sub2: thruster (thruster4" in out
+    assert "e+" not in out.split("FAULT sub2")[1].split("\n")[0]  # no 10¹³ σ
 
 
 @pytest.mark.parametrize("B", [[[1.0, 2.0]], np.full((6, 6), np.nan), np.zeros((6, 0))])

@@ -21,8 +21,13 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
 
+from uvd.fdc.align import STREAMS, Aligned
 from uvd.fdc.detector import CusumSettings, VehicleDetector, thruster_matrix
+
+#: state samples of a vehicle kept until its first estimate (10 minutes at 100 Hz)
+EARLY_STATES = 60_000
 
 
 class LinkStats:
@@ -120,6 +125,11 @@ def main(argv: list[str] | None = None) -> int:
     detectors: dict[tuple[str, str], VehicleDetector] = {}
     thrusters: dict[str, object] = {}  # vehicle → its thruster matrix B (None: not known)
     asked: set[str] = set()  # vehicles whose params were asked for B (again when they return)
+    settled: set[str] = set()  # vehicles whose question for B is answered
+    # each detector's two streams merged by time stamp (uvd.fdc.align: the verdict must not
+    # depend on how the two subscriptions' samples interleave or how late they arrive)
+    aligned: dict[tuple[str, str], Aligned] = {}
+    early: dict[str, deque] = {}  # vehicle → state samples before its first estimate
     session = zenoh.open(conf)
 
     def say(text: str) -> None:
@@ -138,18 +148,45 @@ def main(argv: list[str] | None = None) -> int:
             link.take(str(sample.key_expr), payload)
         if payload.get("source") == "controller":
             return  # an adaptive controller's θ̂ moves by design (AMBC's step 1 → 2)
+        t_ns = _stamp(sample, payload)
+        if t_ns is None:
+            return
+        now = time.monotonic()
         with lock:
-            det = detectors.get((vehicle, estimator))
-            if det is None:
-                det = detectors[vehicle, estimator] = VehicleDetector(
+            al = aligned.get((vehicle, estimator))
+            if al is None:
+                detectors[vehicle, estimator] = VehicleDetector(
                     vehicle, settings, B=thrusters.setdefault(vehicle, None))
-            try:
-                found = det.update(payload)
-            except (KeyError, TypeError, ValueError) as exc:
-                print(f"{sample.key_expr}: malformed estimate ({exc}); dropped", flush=True)
-                link.drop(str(sample.key_expr))
-                return
+                al = aligned[vehicle, estimator] = Aligned(now)
+                al.paused = vehicle not in settled  # the detector starts with its B (or none)
+                for t_state, item in early.pop(vehicle, ()):
+                    al.push("state", t_state, item, now)
+            found = feed(vehicle, estimator,
+                         al.push("estimate", t_ns, (str(sample.key_expr), payload), now))
         report(vehicle, found)
+
+    def feed(vehicle: str, estimator: str, released) -> list:
+        """Give the detector of (vehicle, estimator) the samples its aligner released (lock
+        held); a malformed one is counted and dropped."""
+        det, found = detectors[vehicle, estimator], []
+        for stream, (key, payload) in released:
+            try:
+                found += det.update(payload) if stream == "estimate" else \
+                    det.update_state(payload)
+            except (KeyError, TypeError, ValueError) as exc:
+                print(f"{key}: malformed {stream} ({exc}); dropped", flush=True)
+                link.drop(key)
+        return found
+
+    def release(vehicle: str | None = None) -> None:
+        """What the aligners (of ``vehicle``; None: all) release as time passes."""
+        now, found = time.monotonic(), {}
+        with lock:
+            for (v, e), al in aligned.items():
+                if vehicle is None or v == vehicle:
+                    found.setdefault(v, []).extend(feed(v, e, al.pop(now)))
+        for v, f in found.items():
+            report(v, f)
 
     def report(vehicle: str, found) -> None:
         for d in found:
@@ -168,13 +205,24 @@ def main(argv: list[str] | None = None) -> int:
             except (AttributeError, KeyError, TypeError, ValueError) as exc:
                 say(f"uvd/{vehicle}/params: no usable thruster matrix ({exc!r}); faults are "
                     "reported with the kind of the estimates' channel")
-                return
+                break
             with lock:
                 thrusters[vehicle] = B
                 for (v, _), det in detectors.items():
                     if v == vehicle:
                         det.set_thrusters(B)
-            return
+            break
+        settle(vehicle)
+
+    def settle(vehicle: str) -> None:
+        """The question of ``vehicle``'s B is answered (B, or none usable, or no reply): its
+        samples flow to the detectors."""
+        with lock:
+            settled.add(vehicle)
+            for (v, _), al in aligned.items():
+                if v == vehicle:
+                    al.paused = False
+        release(vehicle)
 
     def on_alive(sample) -> None:
         vehicle = str(sample.key_expr).split("/")[1]
@@ -183,9 +231,11 @@ def main(argv: list[str] | None = None) -> int:
             return
         with lock:
             for key in [k for k in detectors if k[0] == vehicle]:
-                del detectors[key]
+                del detectors[key], aligned[key]
             thrusters.pop(vehicle, None)
             asked.discard(vehicle)
+            settled.discard(vehicle)
+            early.pop(vehicle, None)
         say(f"{vehicle}: gone (its baseline is forgotten)")
 
     def _json_object(sample) -> dict | None:
@@ -201,24 +251,33 @@ def main(argv: list[str] | None = None) -> int:
             return None
         return payload
 
+    def _stamp(sample, payload: dict) -> int | None:
+        """The sample's ``t_ns`` (an integer), else counted and dropped."""
+        t_ns = payload.get("t_ns")
+        if isinstance(t_ns, int) and not isinstance(t_ns, bool):
+            return t_ns
+        say(f"{sample.key_expr}: no integer t_ns ({t_ns!r}); dropped")
+        link.drop(str(sample.key_expr))
+        return None
+
     def on_state(sample) -> None:
         payload = _json_object(sample)
         if payload is None:
             return
         if args.stats:
             link.take(str(sample.key_expr), payload)
-        vehicle = str(sample.key_expr).split("/")[1]
-        found = []
+        t_ns = _stamp(sample, payload)
+        if t_ns is None:
+            return
+        vehicle, key = str(sample.key_expr).split("/")[1], str(sample.key_expr)
+        now, found = time.monotonic(), []
         with lock:
-            for (v, _), det in detectors.items():
-                if v != vehicle:
-                    continue
-                try:
-                    found += det.update_state(payload)
-                except (KeyError, TypeError, ValueError) as exc:
-                    print(f"{sample.key_expr}: malformed state ({exc}); dropped", flush=True)
-                    link.drop(str(sample.key_expr))
-                    return
+            mine = [(e, al) for (v, e), al in aligned.items() if v == vehicle]
+            if not mine:  # no estimate yet: kept for the detectors to come
+                early.setdefault(vehicle, deque(maxlen=EARLY_STATES)).append(
+                    (t_ns, (key, payload)))
+            for estimator, al in mine:
+                found += feed(vehicle, estimator, al.push("state", t_ns, (key, payload), now))
         report(vehicle, found)
 
     try:
@@ -243,14 +302,20 @@ def main(argv: list[str] | None = None) -> int:
             for vehicle in unknown:
                 asked.add(vehicle)
                 ask_thrusters(vehicle)
+            release()  # a stream gone quiet stops holding the other
     finally:
         session.close()
         if link.dropped:
             say(f"uvd-fdc: dropped {sum(link.dropped.values())} malformed samples "
                 f"({', '.join(f'{k} {n}' for k, n in sorted(link.dropped.items()))})")
+        late = {s: sum(al.late[s] for al in aligned.values()) for s in STREAMS}
+        forced = sum(al.forced for al in aligned.values())
+        if any(late.values()) or forced:
+            say(f"uvd-fdc: samples late behind the other stream: {late} (late state samples "
+                f"dropped); released unaligned (too many held): {forced}")
         if args.stats:
             with open(args.stats, "w") as f:
-                json.dump(link.summary(), f)
+                json.dump({**link.summary(), "late": late, "forced": forced}, f)
     return 0
 
 

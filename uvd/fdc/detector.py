@@ -31,7 +31,14 @@ long mission wants a fresh baseline (:meth:`VehicleDetector.reset`) now and then
 ones, τ = 1 + 2 Σ ρₗ the integrated autocorrelation time (Sokal's window: the sum stops at the
 first lag L ≥ 5τ); the sums use σ² = τ·s², s² the baseline's variance — the long-run variance
 of the estimate, with which a sum of n deviations has its true spread. Baseline: median μ and
-that σ over the first ``baseline_s`` after ``warmup_s``.
+that σ over the first ``baseline_s`` after ``warmup_s``. σ is never below the quantity's
+resolution in its own units (``*_resolution``: 1 g of mass, 1 mN of g, 1 mN·m of b, 10⁻³ of a
+drag's unit): an estimate constant over the baseline (b₁ of a vehicle without a lateral
+centre-of-gravity offset, a parameter the estimator does not excite) has no spread of its own,
+and a deviation is then counted in steps of what the vehicle's instruments cannot tell apart —
+not in units of floating-point rounding (a floor of 10⁻¹² once reported a b₁ of 20 N·m as
+"+2·10¹³ σ"). The floor sets only the σ of a deviation's report and the CUSUM's scale for such
+a channel; δ, and with it what is a fault, stays in physical units.
 
 Which fault. The estimates alone cannot tell a weak thruster from a buoyancy change (AID puts
 the missing thrust into b and the masses). With the state stream (velocity, attitude and the
@@ -84,6 +91,16 @@ class CusumSettings:
     segment_s: float = 10.0
     window: int = 12
     confirm_s: float = 30.0
+    mass_resolution_kg: float = 1e-3
+    drag_resolution: float = 1e-3
+    g_resolution_n: float = 1e-3
+    b_resolution_nm: float = 1e-3
+
+    def resolution(self, channel: str) -> float:
+        """The smallest σ of ``channel`` in its own units (module docstring, "σ")."""
+        return (self.mass_resolution_kg if channel.startswith("mass") else
+                self.drag_resolution if channel.startswith("drag") else
+                self.g_resolution_n if channel == "g" else self.b_resolution_nm)
 
 
 @dataclass(frozen=True)
@@ -282,7 +299,8 @@ class VehicleDetector:
                 continue
             a = np.asarray(xs)
             self.mu[k] = float(np.median(a))
-            self.sigma[k] = max(float(np.std(a)) * math.sqrt(autocorrelation_time(a)), 1e-12)
+            self.sigma[k] = max(float(np.std(a)) * math.sqrt(autocorrelation_time(a)),
+                                st.resolution(k))
         b_norm = math.sqrt(sum(self.mu.get(f"b{i}", 0.0) ** 2 for i in (1, 2, 3)))
         for k, mu in self.mu.items():
             self.delta[k] = (st.mass_change * abs(mu) if k.startswith("mass") else
