@@ -42,23 +42,29 @@ def test_any_interleaving_gives_the_time_stamp_order(case):
     out = []
     for stream, t in order:
         out += al.push(stream, t, (stream, t), now=0.0)
-    out += al.pop(now=10.0)  # both streams quiet: the rest flows
-    assert [item for _, item in out] == _canonical(est, state)
+    out += al.push("estimate", 1000, "end", now=0.0)  # both streams move on past them
+    out += al.push("state", 1000, "end", now=0.0)
+    assert [item for _, item in out] == _canonical(est, state) + ["end", "end"]
     assert al.late == {"estimate": 0, "state": 0} and al.forced == 0
 
 
-def test_a_quiet_stream_stops_holding_the_other():
-    al = Aligned(now=0.0, quiet_s=5.0)
-    assert al.push("estimate", 10, "e10", now=0.0) == []  # no state yet: held
+def test_a_stream_never_heard_or_far_behind_stops_holding_the_other():
+    al = Aligned(now=0.0, quiet_s=5.0, lag_s=60.0)
+    s = int(1e9)
+    assert al.push("estimate", 10 * s, "e10", now=0.0) == []  # no state yet: held
     assert al.pop(now=4.9) == []
-    assert al.pop(now=5.1) == [("estimate", "e10")]
-    # states start with older stamps: late, dropped (the residual integrates in time order)
-    assert al.push("state", 5, "s5", now=5.5) == []
+    assert al.pop(now=5.1) == [("estimate", "e10")]  # none came in 5 s: no state stream
+    # states begin with older stamps: late, dropped (the residual integrates in time order)
+    assert al.push("state", 5 * s, "s5", now=5.5) == []
     assert al.late["state"] == 1
-    # the estimates, quiet since 0, hold nothing; once heard again they hold the states
-    assert al.push("state", 11, "s11", now=5.5) == [("state", "s11")]
-    assert al.push("estimate", 12, "e12", now=6.0) == []
-    assert al.push("state", 13, "s13", now=6.1) == [("estimate", "e12")]
+    # heard now: it holds the estimates however long the receiver waits ...
+    assert al.push("estimate", 20 * s, "e20", now=6.0) == []
+    assert al.push("state", 11 * s, "s11", now=6.0) == [("state", "s11")]
+    assert al.pop(now=1e6) == []
+    # ... until it is more than lag_s of sample time behind them (a stream that stopped)
+    assert al.push("estimate", 71 * s, "e71", now=7.0) == []  # 60 s ahead of s11, not more
+    assert al.push("estimate", 72 * s, "e72", now=7.0) == [
+        ("estimate", "e20"), ("estimate", "e71"), ("estimate", "e72")]
 
 
 def test_a_paused_aligner_holds_everything_and_a_bound_forces_release():

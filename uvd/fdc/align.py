@@ -12,13 +12,18 @@ estimate computed from the cycle whose state follows it), a sample only once the
 has reached its time stamp. So any interleaving of the two arrivals, and any lateness of
 one behind the other, gives the detector the same sequence.
 
-A stream that goes quiet must not hold the other back for ever (an estimator that stopped,
-a daemon that publishes no state): a stream not heard for ``quiet_s`` of the receiver's clock
-(monotonic seconds passed in: nothing here reads a clock) no longer holds the other. A sample
-that arrives after samples later than it were released is late; it is passed on only if the
-detector can take it out of order (an estimate), else counted and dropped (a state sample: the
-residual integrates them in time order). Each stream's own samples are expected in order
-(Zenoh keeps a publisher's order on one key).
+A stream that stops must not hold the other for ever (an estimator that stopped, a daemon
+that publishes no state). Once a stream has been heard, it stops holding the other when it is
+more than ``lag_s`` of *sample time* behind it; a stream never heard stops holding the other
+after ``quiet_s`` of the receiver's clock (monotonic seconds passed in: nothing here reads a
+clock). Not the receiver's clock for a stream that was heard: a receiver starved of the CPU
+for seconds (measured: a client at nice 5 beside two busy processes, samples 6.4 s late) wakes
+with both streams' samples queued, and whichever subscription it serves first would find the
+other "quiet" — 249 state samples were released out of order that way. A sample that arrives
+after samples later than it were released is late; it is passed on if the detector can take
+it out of order (an estimate), else counted and dropped (a state sample: the residual
+integrates in time order). Each stream's own samples are expected in order (Zenoh keeps a
+publisher's order on one key).
 """
 
 from __future__ import annotations
@@ -37,19 +42,23 @@ class Aligned:
 
     Parameters
     ----------
-    now : the receiver's monotonic clock (s) at creation: a stream not yet heard counts as
-        heard then, so it holds the other for ``quiet_s`` at most.
-    quiet_s : after this long without a sample, a stream no longer holds the other (s).
+    now : the receiver's monotonic clock (s) at creation: a stream not yet heard holds the
+        other for ``quiet_s`` after it.
+    quiet_s : a stream never heard holds the other this long (receiver's clock, s).
+    lag_s : a stream more than this far behind the other in sample time no longer holds it
+        (s of ``t_ns``).
     max_held : at most this many samples held per stream; beyond it the oldest is released
         whatever the other stream's time (a bound on memory, counted in ``forced``).
     """
 
-    def __init__(self, now: float, quiet_s: float = 5.0, max_held: int = 200_000) -> None:
+    def __init__(self, now: float, quiet_s: float = 5.0, lag_s: float = 120.0,
+                 max_held: int = 200_000) -> None:
         self.quiet_s = float(quiet_s)
+        self.lag_ns = float(lag_s) * 1e9
+        self.born = float(now)
         self.max_held = int(max_held)
         self.held: dict[str, deque] = {s: deque() for s in STREAMS}
         self.newest: dict[str, int] = {s: -math.inf for s in STREAMS}  # newest t_ns received
-        self.heard: dict[str, float] = dict.fromkeys(STREAMS, float(now))
         self.released_t = -math.inf  # t_ns of the last sample released
         self.late = {s: 0 for s in STREAMS}
         self.forced = 0
@@ -61,20 +70,19 @@ class Aligned:
         stamps goes to the stream first in :data:`STREAMS`."""
         if stream not in self.held:
             raise ValueError(f"stream must be one of {STREAMS}, got {stream!r}")
-        self.heard[stream] = float(now)
         out: list[tuple[str, object]] = []
+        self.newest[stream] = max(self.newest[stream], t_ns)
         if t_ns < self.released_t:
             self.late[stream] += 1
             if stream == "estimate":
                 out.append((stream, item))  # the detector takes an estimate out of order
             return out + self.pop(now)
-        self.newest[stream] = max(self.newest[stream], t_ns)
         self.held[stream].append((t_ns, item))
         return out + self.pop(now)
 
     def pop(self, now: float) -> list[tuple[str, object]]:
-        """The samples that may be released at ``now`` (call it now and then: a quiet stream
-        stops holding the other only as time passes)."""
+        """The samples that may be released at ``now`` (call it now and then: a stream never
+        heard stops holding the other only as time passes)."""
         out: list[tuple[str, object]] = []
         while not self.paused:
             heads = [(q[0][0], i, s) for i, (s, q) in enumerate(self.held.items()) if q]
@@ -83,7 +91,10 @@ class Aligned:
             t_ns, _, stream = min(heads)
             other = STREAMS[1 - STREAMS.index(stream)]
             reached = self.newest[other] >= t_ns  # its later samples come after this one
-            quiet = now - self.heard[other] > self.quiet_s
+            if self.newest[other] == -math.inf:  # never heard
+                quiet = now - self.born > self.quiet_s
+            else:  # heard: judged in sample time, not by when this receiver ran
+                quiet = self.newest[stream] - self.newest[other] > self.lag_ns
             full = len(self.held[stream]) > self.max_held
             if not (reached or quiet or full):
                 return out
