@@ -7,8 +7,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from uvd.control.allocation import (
+    DEFAULT_DOF_PRIORITY,
+    DOF_NAMES,
     Allocator,
+    accommodate,
     allocate,
+    allocate_kernel,
     applied_wrench,
     speed_command,
     thrust_from_measured_speed,
@@ -82,3 +86,107 @@ def test_thrust_speed_round_trip_and_applied_wrench():
     assert np.all(np.sign(w) == np.sign(f))
     np.testing.assert_allclose(thrust_from_measured_speed(ALLOC, w), f, atol=1e-12)
     np.testing.assert_allclose(applied_wrench(ALLOC, w), ALLOC.B @ f, atol=1e-9)
+
+
+# --- thruster effectiveness η (accommodate) ---------------------------------------------------
+
+BLUE = Allocator.from_vehicle(load_vehicle("bluerov2-heavy"))
+
+
+@st.composite
+def _eta(draw, n):
+    """η per thruster: healthy, weak or dead."""
+    return np.array(draw(st.lists(st.one_of(st.just(1.0), st.just(0.0), st.floats(0.05, 1.0)),
+                                  min_size=n, max_size=n)))
+
+
+@settings(max_examples=40, deadline=None)
+@given(w=st.lists(st.floats(0.2, 5.0), min_size=8, max_size=8))
+def test_healthy_effectiveness_is_the_allocators_own_inverse(w):
+    for alloc in (ALLOC, BLUE, Allocator.from_vehicle(load_vehicle("bluerov2-heavy"),
+                                                      np.array(w))):
+        acc = accommodate(alloc, np.ones(alloc.n_thrusters))
+        np.testing.assert_allclose(acc.B_pinv, alloc.B_pinv, atol=1e-9)
+        assert acc.actuated.all() and acc.given_up == ()
+
+
+@settings(max_examples=80, deadline=None)
+@given(data=st.data(), u=wrench, which=st.sampled_from(["jhu", "blue"]))
+def test_effectiveness_allocation_meets_the_kept_dofs_and_never_uses_a_dead_thruster(
+        data, u, which):
+    alloc = ALLOC if which == "jhu" else BLUE
+    n = alloc.n_thrusters
+    eta = data.draw(_eta(n))
+    acc = accommodate(alloc, eta)
+    B_eta = alloc.B * eta[None, :]
+    f = acc.B_pinv @ u
+    a = acc.actuated
+    # the kept DOFs exactly, with the thrust each thruster really gives (η f)
+    np.testing.assert_allclose((B_eta @ f)[a], u[a], atol=1e-8 * (1 + np.abs(u).max()))
+    assert np.all(f[eta <= 1e-6] == 0.0)  # a dead thruster is not used
+    assert a.sum() <= np.linalg.matrix_rank(B_eta)
+    assert set(acc.given_up) == {DOF_NAMES[i] for i in range(6) if not a[i]}
+    # priority: each DOF given up has less authority with the higher-priority ones kept than
+    # the floor (σ_min of those rows < 0.2 σ_min of the healthy B)
+    floor = 0.2 * np.linalg.svd(alloc.B, compute_uv=False)[-1]
+    order = [DOF_NAMES.index(x) for x in DEFAULT_DOF_PRIORITY]
+    for d in acc.given_up:
+        i = DOF_NAMES.index(d)
+        above = [j for j in order[:order.index(i)] if a[j]]
+        rows = B_eta[above + [i]][:, eta > 1e-6]
+        assert rows.shape[1] <= len(above) or \
+            np.linalg.svd(rows, compute_uv=False)[-1] < floor
+    # saturation: limits on the command respected, the kept DOFs' wrench in direction
+    f, sat, scale = allocate_kernel(acc.B_pinv, alloc.max_thrust_n, u)
+    assert np.all(np.abs(f) <= alloc.max_thrust_n)
+    np.testing.assert_allclose((B_eta @ f)[a], scale * u[a],
+                               atol=1e-8 * (1 + np.abs(u).max()))
+
+
+def test_a_bluerov2_losing_any_one_thruster_keeps_every_dof():
+    for k in range(BLUE.n_thrusters):
+        eta = np.ones(BLUE.n_thrusters)
+        eta[k] = 0.0
+        assert accommodate(BLUE, eta).given_up == ()
+
+
+@pytest.mark.parametrize("dead, given_up", [
+    (0, ("surge",)), (1, ("surge",)),  # an aft thruster: yaw kept, surge given up
+    (2, ("sway",)),  # the lateral thruster
+    (3, ("pitch",)), (4, ("pitch",)), (5, ("pitch",)),  # a vertical: depth and roll kept
+])
+def test_the_jhu_rov_losing_one_of_six_gives_up_the_dof_of_lowest_priority(dead, given_up):
+    """Six thrusters for six DOFs: one lost leaves five. Depth comes first; with a vertical
+    thruster lost, the two left keep heave and roll, and pitch is what the default priority
+    gives up (the lateral thruster's 5 cm lever is no authority in roll)."""
+    eta = np.ones(6)
+    eta[dead] = 0.0
+    acc = accommodate(ALLOC, eta)
+    assert acc.given_up == given_up
+    assert acc.actuated[DOF_NAMES.index("heave")]
+    # another priority gives up another DOF: sway first when the operator says so
+    if dead >= 4:  # an aft vertical (the bow one lost, pitch is heave's: none kept)
+        prio = ("heave", "pitch", "roll", "yaw", "surge", "sway")
+        assert accommodate(ALLOC, eta, prio).given_up == ("roll",)
+
+
+def test_a_weak_thruster_is_commanded_more_and_saturation_shows_it():
+    eta = np.ones(6)
+    eta[3] = 0.5
+    acc = accommodate(ALLOC, eta)
+    u = np.array([0.0, 0.0, 100.0, 0.0, 0.0, 0.0])
+    f_h, f_w = ALLOC.B_pinv @ u, acc.B_pinv @ u
+    np.testing.assert_allclose((ALLOC.B * eta) @ f_w, u, atol=1e-9)
+    assert acc.given_up == () and abs(f_w[3]) > abs(f_h[3])
+
+
+@pytest.mark.parametrize("eta", [[1.0] * 5, [1, 1, 1, 1, 1, 1.5], [1, 1, 1, -0.1, 1, 1],
+                                 [1, 1, 1, float("nan"), 1, 1]])
+def test_effectiveness_out_of_range_is_refused_by_name(eta):
+    with pytest.raises(ValueError, match="eta must be 6 numbers in"):
+        accommodate(ALLOC, eta)
+
+
+def test_a_priority_that_is_not_the_six_dofs_is_refused():
+    with pytest.raises(ValueError, match="DOF priority must name each"):
+        accommodate(ALLOC, np.ones(6), ("heave", "roll", "pitch", "yaw", "surge", "surge"))

@@ -10,6 +10,10 @@ and the thruster law both ways (App. A.1).
   ω* = sign(f)√(|f|/k) of the steady-state law f = k ω|ω| (App. A.1).
 * The inverse, which the thesis uses as the applied input: thrust estimated from measured
   propeller speed, f = k ω|ω|, and the wrench u = B f it produces.
+* Thruster effectiveness η ∈ [0, 1] per thruster (:func:`accommodate`): thruster i delivers
+  ηᵢ of the thrust it is commanded, so allocation inverts B diag(η) — a weak thruster's column
+  scaled, a dead one (η = 0) removed — and, when the thrusters left no longer span every DOF,
+  keeps the DOFs of highest priority and says which it gave up.
 * Optional compensation of the propeller lag (:func:`lag_compensate`): with the measured
   propeller speeds and each thruster's declared time constant τ, the command that brings every
   propeller to its allocated thrust by the end of the control period.
@@ -101,6 +105,100 @@ def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarra
         raise ValueError(f"weights must be {B.shape[1]} finite positive numbers")
     Wi = np.diag(1.0 / w)
     return np.ascontiguousarray(Wi @ B.T @ np.linalg.inv(B @ Wi @ B.T))
+
+
+#: the body DOFs in the order of u = [f; τ] (thesis App. A: x bow, y starboard, z keel)
+DOF_NAMES = ("surge", "sway", "heave", "roll", "pitch", "yaw")
+
+#: default priority of the DOFs, highest first: depth and attitude before the horizontal
+#: translation (the vehicle neither sinks nor rolls over; it may drift)
+DEFAULT_DOF_PRIORITY = ("heave", "roll", "pitch", "yaw", "surge", "sway")
+
+#: an η at or below this is a dead thruster (removed, not scaled)
+ETA_DEAD = 1e-6
+
+
+@dataclass(frozen=True)
+class Accommodation:
+    """Allocation with per-thruster effectiveness (:func:`accommodate`).
+
+    Attributes
+    ----------
+    eta : (N,) effectiveness ηᵢ ∈ [0, 1] it was built for.
+    B_pinv : (N, 6) the inverse to use in place of B⁺: f = B_pinv u gives
+        B diag(η) f = u on the actuated DOFs (exactly, unsaturated); rows of dead thrusters and
+        columns of given-up DOFs are zero.
+    actuated : (6,) bool, the DOFs (:data:`DOF_NAMES` order) still reached.
+    given_up : names of the DOFs no longer actuated, in priority order.
+    """
+
+    eta: np.ndarray
+    B_pinv: np.ndarray
+    actuated: np.ndarray
+    given_up: tuple[str, ...]
+
+
+def dof_priority_indices(priority) -> tuple[int, ...]:
+    """The DOF indices (0–5 of u) of ``priority`` — a permutation of :data:`DOF_NAMES` —
+    highest first; anything else is refused with a ValueError naming it."""
+    names = tuple(priority)
+    if sorted(names) != sorted(DOF_NAMES):
+        raise ValueError(f"DOF priority must name each of {DOF_NAMES} once, got {names}")
+    return tuple(DOF_NAMES.index(n) for n in names)
+
+
+def accommodate(alloc: Allocator, eta, priority=DEFAULT_DOF_PRIORITY,
+                min_authority: float = 0.2) -> Accommodation:
+    """The allocation for thruster effectiveness η (a thruster commanded fᵢ delivers ηᵢ fᵢ).
+
+    B_η = B diag(η) with the dead thrusters' columns (η ≤ :data:`ETA_DEAD`) dropped. The DOFs
+    kept are chosen greedily in ``priority`` order: a DOF is kept when the rows kept with it
+    still have authority — the smallest singular value of B_η,S W^{-1/2} at least
+    ``min_authority`` times that of the healthy B W^{-1/2} (the wrench per unit of weighted
+    thrust in the healthy vehicle's weakest direction). Merely independent rows are not enough:
+    the JHU ROV without an aft vertical thruster could still reach pitch through the lateral
+    thruster's 5 cm lever in roll, at 300 N of sway for 15 N m. So the kept set has at most
+    rank(B_η) DOFs, and each DOF given up is one the higher-priority ones leave too little
+    authority for. f = W^{-1/2} (B_η,S W^{-1/2})⁺ u_S
+    (S: kept rows, W: the allocator's weights) meets the kept DOFs exactly with the least
+    weighted thrust; what it produces on a given-up DOF is a side effect (none is asked).
+    Saturation stays :func:`allocate_kernel`'s: limits are on the command, which a weak
+    thruster still obeys.
+
+    With η all 1 this is the allocator's own B_W⁺ (to rounding).
+
+    Parameters
+    ----------
+    alloc : the vehicle's allocator (B, weights).
+    eta : (N,) effectiveness, each in [0, 1] (a non-finite or out-of-range value is refused).
+    priority : the six DOF names, highest priority first.
+    """
+    n = alloc.n_thrusters
+    e = np.asarray(eta, dtype=float).reshape(-1)
+    if e.shape != (n,) or not np.all(np.isfinite(e)) or np.any(e < 0.0) or np.any(e > 1.0):
+        raise ValueError(f"eta must be {n} numbers in [0, 1], got {np.asarray(eta).tolist()}")
+    order = dof_priority_indices(priority)
+    live = e > ETA_DEAD
+    w = np.ones(n) if alloc.weights is None else alloc.weights
+    s = 1.0 / np.sqrt(w[live])
+    Bl = alloc.B[:, live] * e[live][None, :] * s[None, :]  # B_η W^{-1/2} on the live ones
+    healthy = np.linalg.svd(alloc.B / np.sqrt(w)[None, :], compute_uv=False)[-1]
+    floor = max(float(min_authority), 1e-9) * float(healthy)
+    kept: list[int] = []
+    for d in order:
+        rows = Bl[kept + [d], :]
+        if rows.shape[1] > len(kept):  # as many live thrusters as DOFs, at least
+            if np.linalg.svd(rows, compute_uv=False)[-1] >= floor:
+                kept.append(d)
+    S = sorted(kept)
+    pinv = np.zeros((n, 6))
+    if S:
+        pinv[np.ix_(live, S)] = s[:, None] * np.linalg.pinv(Bl[S, :])
+    actuated = np.zeros(6, dtype=bool)
+    actuated[S] = True
+    given_up = tuple(DOF_NAMES[d] for d in order if not actuated[d])
+    return Accommodation(eta=e.copy(), B_pinv=np.ascontiguousarray(pinv), actuated=actuated,
+                         given_up=given_up)
 
 
 @numba.njit(cache=True)
