@@ -22,9 +22,15 @@ the amplifiers get.
 ``ZERO``        zero thrust; the controller is not stepped
 ==============  ===============================================================================
 
-Disarmed, every mode commands zero. ``CoreInputs.thruster_mask`` restricts allocation to a
-subset of thrusters in every mode (a dead thruster). The estimators (AID) run in every mode:
-they identify the vehicle whatever drives it.
+Disarmed, every mode commands zero. ``CoreInputs.thruster_eta`` — each thruster's
+effectiveness η ∈ [0, 1] (1 healthy, 0.5 half thrust, 0 dead) — shapes allocation in every mode
+(:func:`uvd.control.allocation.accommodate`): a weak thruster's column scaled, a dead one
+removed; when the thrusters left cannot reach every DOF, those of lowest priority
+(``CoreConfig.dof_priority``) are given up (``CoreOutputs.given_up``), taken out of the
+reference's closed loop — so the controller neither commands nor adapts on them (AMBC's update
+is masked by the closed loop, (5.28)) — and the wrench the estimators see is B diag(η) f, what
+the thrusters really give. The estimators (AID) run in every mode: they identify the vehicle
+whatever drives it.
 
 navigation → reference → control → estimation → allocation (docs/architecture.md). Pure and
 deterministic: no I/O, no clock (time arrives in ``inputs.t_ns``), no logging. Safety is
@@ -64,7 +70,15 @@ import numba
 import numpy as np
 
 from drivers.samples import DepthSample, DvlSample, InsSample, euler_to_R
-from uvd.control.allocation import Allocator, allocate_kernel, lag_compensate
+from uvd.control.allocation import (
+    DEFAULT_DOF_PRIORITY,
+    Accommodation,
+    Allocator,
+    accommodate,
+    allocate_kernel,
+    dof_priority_indices,
+    lag_compensate,
+)
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.types import ControllerSpec, EstimatorSpec, Reference, VehicleState
 from uvd.estimation.navigation import NavConfig, NavMemory, NavState, nav_init, nav_step
@@ -104,10 +118,13 @@ class CoreConfig:
     lag_compensation: bool = False  # lead set-points from measured propeller speeds
     ff_preview_s: float = 0.0  # δ of the feed-forward preview (s); 0: off
     pd: PDGains = field(default_factory=PDGains)  # gains of the PDC and HOLD_DEPTH modes
+    #: DOFs, highest priority first, kept when the thrusters' effectiveness cannot reach all
+    dof_priority: tuple[str, ...] = DEFAULT_DOF_PRIORITY
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.ff_preview_s) and self.ff_preview_s >= 0.0):
             raise ValueError(f"ff_preview_s must be finite and >= 0, got {self.ff_preview_s}")
+        dof_priority_indices(self.dof_priority)  # a permutation of the six DOFs, or refused
         # constants of the compiled glue, prepared once (not fields): contiguous float64 B,
         # B⁺, thrust limits and per-thruster k of f = k ω|ω|
         alloc = self.allocator
@@ -119,6 +136,7 @@ class CoreConfig:
             np.ascontiguousarray(alloc.max_thrust_n, dtype=np.float64), k, n))
         object.__setattr__(self, "_vertical", alloc.vertical())
         object.__setattr__(self, "_restricted", {})  # mask bytes → contiguous B⁺ of the subset
+        object.__setattr__(self, "_accommodated", {})  # η bytes → (Accommodation, B diag(η))
 
     def pinv_for(self, mask: np.ndarray | None) -> np.ndarray:
         """B⁺ of the thrusters in ``mask`` (all: None), computed once per mask."""
@@ -130,6 +148,34 @@ class CoreConfig:
             p = np.ascontiguousarray(self.allocator.restricted(mask).B_pinv, dtype=np.float64)
             self._restricted[key] = p
         return p
+
+
+    def accommodation_for(self, eta: np.ndarray) -> tuple[Accommodation, np.ndarray]:
+        """The allocation for effectiveness ``eta`` ((N,) float64 in [0, 1]) and B diag(η),
+        computed once per η (a fault changes η rarely; each value is kept)."""
+        key = eta.tobytes()
+        got = self._accommodated.get(key)
+        if got is None:
+            acc = accommodate(self.allocator, eta, self.dof_priority)
+            got = (acc, np.ascontiguousarray(self._glue[0] * eta[None, :]))
+            self._accommodated[key] = got
+        return got
+
+
+def _eta_of(eta, n: int) -> np.ndarray | None:
+    """``CoreInputs.thruster_eta`` as a float64 (n,) array in [0, 1], or None when every
+    thruster is healthy (the allocator's own B⁺, bit for bit as without η). Anything else — a
+    wrong length, a non-finite or out-of-range entry — is no thruster: all η = 0, zero thrust
+    (doubt ends in zero thrust)."""
+    if eta is None:
+        return None
+    try:
+        e = np.array(eta, dtype=np.float64, order="C").reshape(-1)
+    except (TypeError, ValueError):
+        return np.zeros(n)
+    if e.shape != (n,) or not np.isfinite(e).all() or (e < 0.0).any() or (e > 1.0).any():
+        return np.zeros(n)
+    return None if (e == 1.0).all() else e
 
 
 class CoreInputs(NamedTuple):
@@ -145,7 +191,7 @@ class CoreInputs(NamedTuple):
     armed: bool = True
     mode: Mode = Mode.CONTROL
     manual_wrench: np.ndarray | None = None  # (6,) body [f; τ] for Mode.MANUAL (N, N m)
-    thruster_mask: np.ndarray | None = None  # (n,) bool: thrusters allocation may use
+    thruster_eta: np.ndarray | None = None  # (n,) effectiveness η ∈ [0, 1]; None: all 1
 
 
 @dataclass
@@ -176,6 +222,7 @@ class CoreOutputs(NamedTuple):
     lead_fraction: float = float("nan")  # lag compensation's common fraction s (nan: not used)
     mode: str = Mode.CONTROL  # the mode applied (a Mode, a str; "disarmed" when not armed)
     guard: int = 0  # the output guard acted: 1 clamped to ±max thrust, 2 non-finite → zero
+    given_up: tuple[str, ...] = ()  # DOFs the thrusters' effectiveness no longer reaches
 
 
 class Sensed(NamedTuple):
@@ -330,6 +377,9 @@ def _guard(f, f_max):
 def sense(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float) -> Sensed:
     """Navigation, the applied wrench and the estimators of one cycle (pure)."""
     B, _, _, k_thr, n_thr = cfg._glue
+    eta = _eta_of(inputs.thruster_eta, n_thr)
+    if eta is not None:
+        B = cfg.accommodation_for(eta)[1]  # the wrench a thrust f really gives: B diag(η) f
     nav, nav_mem = nav_step(cfg.nav, state.nav, inputs.t_ns, inputs.ins, inputs.dvl, inputs.depth)
     nav_ok = nav.valid and _finite_hv(nav.H, nav.v)
 
@@ -399,13 +449,15 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
 
     armed = inputs.armed
     mode = inputs.mode if armed else _ZERO_MODE
-    mask = inputs.thruster_mask
-    if mask is not None:
-        mask = np.asarray(mask, dtype=bool)
-        if mask.shape != (n_thr,):
-            mask = np.zeros(n_thr, dtype=bool)  # not a mask of these thrusters: use none
-        elif mask.all():
-            mask = None
+    eta = _eta_of(inputs.thruster_eta, n_thr)
+    given_up: tuple[str, ...] = ()
+    if eta is not None:
+        acc, B = cfg.accommodation_for(eta)
+        B_pinv, given_up = acc.B_pinv, acc.given_up
+        if given_up:  # no feedback and no adaptation on a DOF no thruster reaches
+            cl = acc.actuated if ref.closed_loop is None else (acc.actuated & ref.closed_loop)
+            ref = replace(ref, closed_loop=cl)
+    mask = None  # HOLD_DEPTH's vertical thrusters
     hold = None
 
     status = "ok"
@@ -440,12 +492,18 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
         hold = state.hold if state.hold is not None else _hold_pose(nav)
         if nav.ins_valid and nav.depth_valid and _finite_hv(nav.H, nav.v):
             u_ctrl = _hold_depth(cfg, nav, hold, dt)
-            mask = cfg._vertical if mask is None else (cfg._vertical & mask)
+            mask = cfg._vertical
         else:
             status = "nav-invalid"
 
     thrust, saturated, u_cmd = np.empty(n_thr), np.empty(n_thr, dtype=np.bool_), np.empty(6)
-    pinv = B_pinv if mask is None else cfg.pinv_for(mask)
+    if mask is None:
+        pinv = B_pinv
+    elif eta is None:
+        pinv = cfg.pinv_for(mask)
+    else:  # the vertical thrusters at their effectiveness
+        acc, B = cfg.accommodation_for(np.where(mask, eta, 0.0))
+        pinv = acc.B_pinv
     code = _command(B, pinv, f_max, u_ctrl, ol, ol is not _ZERO6, thrust, saturated, u_cmd)
     if ctrl_new is not None:
         if code == _OK:
@@ -455,7 +513,8 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     elif code != _OK:
         status = "non-finite"
     lead = math.nan
-    if cfg.lag_compensation and status == "ok" and mode is _CONTROL and mask is None:
+    if (cfg.lag_compensation and status == "ok" and mode is _CONTROL and mask is None
+            and eta is None):
         # lead set-points from the speeds measured at the start of the cycle; u_cmd stays the
         # wrench of the allocated thrusts, which the propellers reach by the cycle's end
         f_cmd, s = lag_compensate(cfg.allocator, thrust, sensed.speeds, dt)
@@ -470,7 +529,7 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
             status = "non-finite"
     label = mode if armed else "disarmed"
     out = CoreOutputs(thrust, u_cmd, sensed.u_applied, nav, ref, saturated, status, lead, label,
-                      guard)
+                      guard, given_up)
     return out, CoreState(sensed.nav_mem, ctrl, sensed.est, t0, sensed.est_t_ns,
                           state.cycles + 1, u_cmd, hold,
                           inputs.t_ns if ctrl is not state.ctrl else state.ctrl_t_ns)

@@ -114,6 +114,9 @@ class Lockstep:
                                              frame_seed=cfg.seed if cfg.frame_noise else None)
         #: amplifier faults the cycle sees (names, e.g. ``("node 3: overcurrent",)``)
         self.amplifier_faults: tuple[str, ...] = ()
+        #: the thrusters' effectiveness η the cycle is told (None: all healthy); the plant's
+        #: own is ``plant.thrusters.health``
+        self.thruster_eta: np.ndarray | None = None
         #: signals of plug-in failsafe triggers the cycle sees, as the daemon's read phase
         #: gathers them (``{"operator_heartbeat_age_s": 6.0}``, uvd/runtime/triggers.py)
         self.extra: dict | None = None
@@ -159,7 +162,8 @@ class Lockstep:
             self.state = self.runner.state
         else:
             inputs = core.CoreInputs(t_ns=self.t_ns, ins=ins, dvl=dvl, depth=depth,
-                                     propeller_speed_rad_s=omega, armed=armed)
+                                     propeller_speed_rad_s=omega, armed=armed,
+                                     thruster_eta=self.thruster_eta)
             out, self.state = core.step(self.core_cfg, inputs, self.state, self.dt_control)
         self.thrust_cmd = out.thrust_n
         newest = [None, None, None]
