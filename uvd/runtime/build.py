@@ -131,7 +131,7 @@ def build_core(cfg: Config, vehicle=None, estimators: tuple | None = None
     return core.CoreConfig(nav=nav_config(cfg), controller=make_controller(cfg, vehicle, alloc),
                            reference=traj, allocator=alloc, k_thrust=vehicle.k_thrust,
                            estimators=estimators, lag_compensation=cfg.control.lag_compensation,
-                           pd=pd_gains(cfg))
+                           pd=pd_gains(cfg), dof_priority=cfg.control.dof_priority)
 
 
 def aid_theta0(cfg: Config, vehicle=None) -> np.ndarray | None:

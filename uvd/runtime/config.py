@@ -181,8 +181,20 @@ class ControlSection:
                    "amplifiers' measured speed and the vehicle file's time_constant_s "
                    "(uvd.control.allocation.lag_compensate); cycles without finite speeds use "
                    "plain allocation")
+    dof_priority: tuple[str, ...] = setting(
+        ("heave", "roll", "pitch", "yaw", "surge", "sway"),
+        doc="the six DOFs, highest priority first: when the thrusters' effectiveness (a weak "
+            "or dead thruster) no longer reaches every DOF, allocation keeps these in order "
+            "and gives up the last ones, which the controller then neither commands nor "
+            "adapts on (uvd.control.allocation.accommodate); depth and attitude first by "
+            "default")
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        from uvd.control.allocation import dof_priority_indices
+        try:
+            dof_priority_indices(self.dof_priority)
+        except ValueError as exc:
+            return [("dof_priority", str(exc))]
         if self.model == "full":
             return [(k, f"six values need model = \"decoupled\" (the full model's {what} "
                         f"are not per DOF); give one number")
