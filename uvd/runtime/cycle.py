@@ -194,7 +194,8 @@ class Cycle:
         self.supervisor = supervisor
         self.hold_on_arm = hold_on_arm
         self.operator_mode = "auto"
-        self.thruster_mask: np.ndarray | None = None
+        #: each thruster's effectiveness η the cycle allocates with (None: all healthy)
+        self.thruster_eta: np.ndarray | None = None
         self.armed_at_ns: int | None = None
         self._manual: np.ndarray | None = None
         self._manual_until_ns = 0
@@ -268,7 +269,8 @@ class Cycle:
         st = self.state
         a = inp.actuators
         omega = a.omega_rad_s if a is not None else None
-        ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega)
+        ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega,
+                             thruster_eta=self.thruster_eta)
         sensed = core.sense(cfg, ci, st, dt)
         nav = sensed.nav
 
@@ -305,7 +307,7 @@ class Cycle:
         mode = mode_for(d.action, self.operator_mode)
         manual = self._manual_wrench(inp.t_ns) if mode is Mode.MANUAL else None
         ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega, armed, mode, manual,
-                             self.thruster_mask)
+                             self.thruster_eta)
         out, self.state = core.act(cfg, sensed, ci, st, dt)
         self._nonfinite_out = ("command",) if out.status == "non-finite" else ()
         return CycleResult(out, h, d, sup.state, self.operator_mode)
