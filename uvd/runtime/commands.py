@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 __all__ = ["CommandResult", "command_from_record", "Arm", "Disarm", "SetMode", "ManualWrench",
-           "HoldPose", "ResetFailsafe", "SetParams", "Command", "CommandQueue", "OPERATOR_MODES"]
+           "HoldPose", "ResetFailsafe", "SetParams", "SetThrusterEta", "Command", "CommandQueue",
+           "OPERATOR_MODES"]
 
 #: the operator's modes: ``auto`` runs the configured controller (PDC, AMBC, two-step AMBC);
 #: ``pdc`` PD control with adaptation frozen; ``hold-depth`` depth, roll and pitch only;
@@ -109,9 +110,22 @@ class SetParams:
     source: str = ""
 
 
-Command = Arm | Disarm | SetMode | ManualWrench | HoldPose | ResetFailsafe | SetParams
+@dataclass(frozen=True)
+class SetThrusterEta:
+    """Set thruster ``thruster``'s (1-based, the vehicle's order) effectiveness η ∈ [0, 1]
+    (1 healthy — clears it —, 0.5 half its thrust, 0 dead): from the next cycle allocation
+    uses it (:func:`uvd.control.allocation.accommodate`); the result names the DOFs then
+    given up. The operator's source of η (issue 33); recorded and replayed as every command."""
+
+    thruster: int
+    eta: float
+    source: str = ""
+
+
+Command = (Arm | Disarm | SetMode | ManualWrench | HoldPose | ResetFailsafe | SetParams
+           | SetThrusterEta)
 _BY_NAME = {c.__name__: c for c in (Arm, Disarm, SetMode, ManualWrench, HoldPose, ResetFailsafe,
-                                    SetParams)}
+                                    SetParams, SetThrusterEta)}
 
 
 def command_from_record(rec: Mapping[str, Any]) -> Any:

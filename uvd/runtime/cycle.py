@@ -245,7 +245,28 @@ class Cycle:
             self._pending_hold = setpoint((c.north_m, c.east_m, c.down_m, 0.0, 0.0,
                                            c.heading_rad))
             return CommandResult(True)
+        if isinstance(c, cmd.SetThrusterEta):
+            return self._set_eta(c)
         return CommandResult(False, f"{type(c).__name__} is not supported by the cycle")
+
+    def _set_eta(self, c: cmd.SetThrusterEta) -> CommandResult:
+        """One thruster's effectiveness η (the operator's source); the result says which DOFs
+        the cycle gives up with it."""
+        n = self.core_cfg.allocator.n_thrusters
+        try:
+            i, e = int(c.thruster), float(c.eta)
+        except (TypeError, ValueError):
+            return CommandResult(False, "thruster must be an integer and eta a number")
+        if not 1 <= i <= n:
+            return CommandResult(False, f"thruster {i} is not one of 1…{n}")
+        if not 0.0 <= e <= 1.0:  # NaN fails too
+            return CommandResult(False, f"eta {c.eta!r} is not in [0, 1]")
+        eta = np.ones(n) if self.thruster_eta is None else self.thruster_eta.copy()
+        eta[i - 1] = e
+        self.thruster_eta = None if (eta == 1.0).all() else eta
+        given_up = self.core_cfg.accommodation_for(eta)[0].given_up
+        return CommandResult(True, f"thruster {i} η {e:g} ({c.source or 'operator'}); "
+                                   f"given up: {', '.join(given_up) or 'none'}")
 
     def request_arm(self, t_ns: int, cause: str = "operator request"):
         """Run the arming checks on the latest health and arm (the lifecycle's step)."""
