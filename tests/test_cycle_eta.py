@@ -41,7 +41,7 @@ def test_the_operator_kills_and_restores_a_thruster_through_the_cycle():
         sim = _sim()
         before = _run(sim, 2.0)
         res = sim.command(cmd.SetThrusterEta(4, 0.0, source="test"))
-        assert res.ok and res.reason == "thruster 4 η 0 (test); given up: pitch"
+        assert res.ok and res.reason == "thruster 4 eta 0 (test); given up: pitch"
         during = _run(sim, 3.0)
         assert sim.command(cmd.SetThrusterEta(4, 1.0)).ok
         after = _run(sim, 1.0)

@@ -121,6 +121,18 @@ def test_a_station_and_mavproxy_see_arm_switch_tune_and_drive_the_submarine(brid
             assert manual and abs(manual[-1]["u_cmd"][0] - 0.8 * 50.0) < 1e-9
             assert abs(manual[-1]["u_cmd"][1]) < 1e-9
 
+            # the operator kills thruster 4 and restores it (MAV_CMD_USER_1): a WARNING names
+            # the thruster, η, the source and the DOF given up; the clearing too
+            assert s.command(31010, 4, 0).result == mav.MAV_RESULT_ACCEPTED
+            st = s.wait("STATUSTEXT", lambda m: m.text.startswith("thruster 4 eta 0 (mavlink"))
+            assert st.severity == mav.MAV_SEVERITY_WARNING
+            s.wait("STATUSTEXT", lambda m: "given up: pitch" in m.text)  # its second chunk
+            assert d.control.thruster_eta.tolist() == [1, 1, 1, 0, 1, 1]
+            assert s.command(31010, 4, 1).result == mav.MAV_RESULT_ACCEPTED
+            s.wait("STATUSTEXT", lambda m: m.text.startswith("thruster 4 eta 1 (mavlink"))
+            assert d.control.thruster_eta is None
+            assert s.command(31010, 9, 0).result == mav.MAV_RESULT_DENIED  # no thruster 9
+
             params = s.params()
             assert params["CTL_KP_1"] == params["CTL_KP_6"] == 300.0
             assert params["FS_INS_STALE_S"] == 0.5

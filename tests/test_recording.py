@@ -56,6 +56,11 @@ def recorded(tmp_path_factory):
             res = await asyncio.wrap_future(d.app.commands.put(cmd.SetMode("auto")))
             assert res.ok
             await asyncio.sleep(1.0)
+            # a thruster dead and restored by the operator: a reallocation to replay
+            for eta in (0.0, 1.0):
+                res = await asyncio.wrap_future(d.app.commands.put(cmd.SetThrusterEta(4, eta)))
+                assert res.ok, res
+                await asyncio.sleep(1.0)
 
         d, cycles = run_scenario(cfg, scenario)
     files = sorted((run_dir / "rec").glob("*.mcap"))
@@ -101,9 +106,12 @@ def test_lockstep_replay_is_bit_identical(recorded, tmp_path):
                                "operator_commands")})
     assert rep["cycles"] == len(cycles) and rep["commands_compared"] == len(cycles) > 40
     assert rep["mismatches"] == 0 and rep["first_mismatch"] is None
-    assert rep["missing_samples"] == 0 and rep["operator_commands"] >= 3  # arm + two modes
+    # arm, two modes, a thruster dead and restored
+    assert rep["missing_samples"] == 0 and rep["operator_commands"] >= 5
     modes = {r["mode"] for r in cycles}
     assert {"pdc-fallback", "zero", "control"} <= modes  # the replay went through them all
+    # … and through the reallocation: thruster 4 at exactly zero while controlling
+    assert any(r["mode"] == "control" and r["thrust"][3] == 0.0 for r in cycles), cycles[-1]
 
 
 def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = None,

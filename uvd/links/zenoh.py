@@ -299,7 +299,8 @@ def _event(kind: str, r: Mapping[str, Any]) -> dict[str, Any]:
         text = f"{r['from']} → {r['to']} ({r['event']}: {r['cause']})"
     elif kind == "command":
         text = f"{r['command']} from {r.get('source') or '?'}: " + (
-            "ok" if r["ok"] else f"refused ({r['reason']})")
+            ("ok" + (f" — {r['reason']}" if r.get("reason") else "")) if r["ok"]
+            else f"refused ({r['reason']})")  # an ok's reason: what it did (SetThrusterEta)
     elif kind == "reload":
         text = "reload: " + ("applied " + ", ".join(r.get("applied") or ()) if r.get("ok")
                              else f"refused ({r.get('error')})")

@@ -265,7 +265,7 @@ class Cycle:
         eta[i - 1] = e
         self.thruster_eta = None if (eta == 1.0).all() else eta
         given_up = self.core_cfg.accommodation_for(eta)[0].given_up
-        return CommandResult(True, f"thruster {i} η {e:g} ({c.source or 'operator'}); "
+        return CommandResult(True, f"thruster {i} eta {e:g} ({c.source or 'operator'}); "
                                    f"given up: {', '.join(given_up) or 'none'}")
 
     def request_arm(self, t_ns: int, cause: str = "operator request"):

@@ -3,7 +3,8 @@ command receiver, never on the loop's critical path.
 
 :class:`MavlinkLink` is a :class:`~uvd.telemetry.sink.TelemetrySink` of the daemon's hub: its
 ``write`` (event loop, off the cycle) only keeps the newest cycle and estimate records and
-queues a STATUSTEXT for each failsafe event, lifecycle transition and refused command. The
+queues a STATUSTEXT for each failsafe event, lifecycle transition and refused command, and a
+WARNING for each thruster effectiveness set or cleared (thruster, η, source, DOFs given up). The
 UDP socket at ``listen`` is read by a process of its own (:mod:`uvd.links.mavlink.receiver`),
 which judges every datagram and forwards only good MAVLink, so that a flood of garbage never
 holds this process's interpreter lock against the loop. One daemon thread owns the socket's
@@ -65,6 +66,7 @@ from uvd.runtime.commands import (
     ManualWrench,
     SetMode,
     SetParams,
+    SetThrusterEta,
 )
 from uvd.runtime.config import MavlinkSection
 from uvd.telemetry.records import euler_of
@@ -127,6 +129,12 @@ class _Out:
 
     def write(self, b: bytes) -> None:
         self.buf = bytes(b)
+
+
+#: COMMAND_LONG that sets a thruster's effectiveness: param1 the thruster (1-based, the
+#: vehicle's order), param2 η ∈ [0, 1] (1 clears it) — MAV_CMD_USER_1, as no standard command
+#: carries it (docs/mavlink.md)
+MAV_CMD_THRUSTER_ETA = 31010
 
 
 class MavlinkLink:
@@ -267,6 +275,8 @@ class MavlinkLink:
                 self._text(("notice", f"{r['from']} -> {r['to']}: {r['cause']}"))
             elif kind == "command" and not r.get("ok"):
                 self._text(("warning", f"{r['command']} refused: {r['reason']}"))
+            elif kind == "command" and r.get("command") == "SetThrusterEta":
+                self._text(("warning", str(r.get("reason"))))  # thruster, η, source, given up
 
     async def flush(self) -> None:
         pass
@@ -458,6 +468,13 @@ class MavlinkLink:
             if c is None:
                 self._ack(m, mav.MAV_RESULT_DENIED)
                 return
+        elif m.command == MAV_CMD_THRUSTER_ETA:
+            if not (math.isfinite(m.param1) and m.param1 == int(m.param1)):
+                self._text(("warning", f"thruster effectiveness refused: thruster "
+                                       f"{m.param1!r} is not a thruster number"))
+                self._ack(m, mav.MAV_RESULT_DENIED)
+                return
+            c = SetThrusterEta(int(m.param1), float(m.param2), source=source)
         else:
             self.counters["unsupported_commands"] += 1
             self._ack(m, mav.MAV_RESULT_UNSUPPORTED)
