@@ -5,10 +5,12 @@ reach, no failsafe follows, clearing restores the healthy allocation; refusals n
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from uvd.control.ambc import drag_index, mass_index
 from uvd.experiments.lockstep import Lockstep, LockstepConfig
 from uvd.runtime import commands as cmd
 from uvd.runtime.build import build_core, start_pose
@@ -16,8 +18,10 @@ from uvd.runtime.config import DEFAULT_CONFIG, load_config
 from uvd.runtime.supervisor import Supervisor
 
 
-def _sim():
+def _sim(**control):
     cfg = load_config(DEFAULT_CONFIG)  # the JHU ROV, six thrusters
+    if control:
+        cfg = replace(cfg, control=replace(cfg.control, **control))
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
     sim = Lockstep(vehicle, build_core(cfg, vehicle),
@@ -74,3 +78,20 @@ def test_the_command_round_trips_through_its_record():
     rec = {"command": "SetThrusterEta", "args": {"thruster": 3, "eta": 0.5,
                                                  "source": "mavlink"}}
     assert cmd.command_from_record(rec) == c
+
+
+def test_an_adaptive_controller_does_not_adapt_on_the_dof_given_up():
+    """AMBC (single step, from the vehicle file's values) with the bow vertical thruster dead:
+    pitch is given up, out of the closed loop — its mass m₅ and drag d₅ stay where they were
+    while the other DOFs' parameters keep adapting."""
+    sim = _sim(controller="ambc", theta0="vehicle")
+    _run(sim, 3.0)
+    pitch = [mass_index("decoupled")[4], drag_index("decoupled")[4]]
+    others = [mass_index("decoupled")[i] for i in (0, 1, 2, 3, 5)]
+    th0 = np.array(sim.state.ctrl.theta)
+    assert sim.command(cmd.SetThrusterEta(4, 0.0)).ok
+    during = _run(sim, 5.0)
+    th1 = np.array(sim.state.ctrl.theta)
+    assert all(o.given_up == ("pitch",) for o, _ in during)
+    np.testing.assert_array_equal(th1[pitch], th0[pitch])
+    assert np.any(th1[others] != th0[others])

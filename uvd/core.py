@@ -27,10 +27,11 @@ effectiveness η ∈ [0, 1] (1 healthy, 0.5 half thrust, 0 dead) — shapes allo
 (:func:`uvd.control.allocation.accommodate`): a weak thruster's column scaled, a dead one
 removed; when the thrusters left cannot reach every DOF, those of lowest priority
 (``CoreConfig.dof_priority``) are given up (``CoreOutputs.given_up``), taken out of the
-reference's closed loop — so the controller neither commands nor adapts on them (AMBC's update
-is masked by the closed loop, (5.28)) — and the wrench the estimators see is B diag(η) f, what
-the thrusters really give. The estimators (AID) run in every mode: they identify the vehicle
-whatever drives it.
+reference's closed loop — so the controller neither commands nor adapts on them (AMBC's error
+is masked by the closed loop in (5.28), and its spec's ``hold_dofs`` keeps those DOFs'
+parameters, which other rows' Coriolis terms would still move) — and the wrench the
+estimators see is B diag(η) f, what the thrusters really give. The estimators (AID) run in
+every mode: they identify the vehicle whatever drives it.
 
 navigation → reference → control → estimation → allocation (docs/architecture.md). Pure and
 deterministic: no I/O, no clock (time arrives in ``inputs.t_ns``), no logging. Safety is
@@ -451,9 +452,11 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     mode = inputs.mode if armed else _ZERO_MODE
     eta = _eta_of(inputs.thruster_eta, n_thr)
     given_up: tuple[str, ...] = ()
+    actuated = None
     if eta is not None:
         acc, B = cfg.accommodation_for(eta)
         B_pinv, given_up = acc.B_pinv, acc.given_up
+        actuated = acc.actuated
         if given_up:  # no feedback and no adaptation on a DOF no thruster reaches
             cl = acc.actuated if ref.closed_loop is None else (acc.actuated & ref.closed_loop)
             ref = replace(ref, closed_loop=cl)
@@ -470,6 +473,9 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
             if mode is _CONTROL:
                 u_new, ctrl_new = cfg.controller.step(sensed.vs, ref, cfg.controller.params,
                                                       state.ctrl, dt)
+                if given_up and cfg.controller.hold_dofs is not None:
+                    # the parameters of a DOF no thruster reaches stay where they were
+                    ctrl_new = cfg.controller.hold_dofs(ctrl_new, state.ctrl, actuated)
             else:
                 u_new = pdc_step(sensed.vs, ref, cfg.pd, PDState(), dt)[0]
             u_ctrl = _as_vec(u_new, 6)

@@ -444,10 +444,10 @@ def with_theta(ctrl: AMBCState, theta: np.ndarray) -> AMBCState:
 
 __all__ = [
     "AMBCParams", "AMBCState", "MBCParams", "MBCState", "RobustAdaptation",
-    "ROBUST_DAEMON_DEFAULT", "adaptation_gains", "ambc_init", "ambc_params", "ambc_step",
-    "C_APPENDIX_B2", "epsilon_bound",
-    "gravity_index", "lyapunov_V1", "lyapunov_V2", "mass_index", "drag_index",
-    "mbc_step", "params_of", "theta_of", "with_theta",
+    "ROBUST_DAEMON_DEFAULT", "adaptation_gains", "ambc_hold_dofs", "ambc_init", "ambc_params",
+    "ambc_step", "C_APPENDIX_B2", "epsilon_bound", "gravity_index", "hold_theta_dofs",
+    "lyapunov_V1", "lyapunov_V2", "mass_index", "drag_index", "mbc_step", "params_of",
+    "theta_of", "with_theta",
 ]
 
 
@@ -466,6 +466,34 @@ def ambc_diagnostics(ctrl: AMBCState) -> Diagnostics:
     return Diagnostics(theta=theta, m_min_eig=m_hat_min_eig(theta), frozen=bool(ctrl.frozen))
 
 
+def hold_theta_dofs(new: np.ndarray, old: np.ndarray, actuated: np.ndarray) -> np.ndarray:
+    """θ̂ ``new`` with the parameters of the DOFs not ``actuated`` kept at ``old``.
+
+    Decoupled (16: m₁…m₆, d₁…d₆, g, b): mᵢ and dᵢ of each such DOF i — they appear in the
+    other DOFs' rows too (the Coriolis terms of (2.40): (m₅ − m₆) q r in roll), so masking the
+    DOF's error in (5.28) alone does not stop them. g and b are kept as well when heave, roll
+    or pitch is given up (the rows they enter). Full (241): every entry kept (M and the drags
+    couple every DOF)."""
+    keep = ~np.asarray(actuated, dtype=bool)
+    if not keep.any():
+        return new
+    if new.shape[0] != 16:
+        return old
+    out = np.array(new, dtype=float)
+    idx = np.concatenate([_DEC_M[keep], _DEC_D[keep]])
+    if keep[2:5].any():
+        idx = np.concatenate([idx, _DEC_GB])
+    out[idx] = old[idx]
+    return out
+
+
+def ambc_hold_dofs(new: AMBCState, old: AMBCState, actuated: np.ndarray) -> AMBCState:
+    """AMBC's ``hold_dofs`` hook (:class:`~uvd.control.types.ControllerSpec`)."""
+    theta = hold_theta_dofs(new.theta, old.theta, actuated)
+    return new if theta is new.theta else replace(new, theta=theta)
+
+
 def ambc_spec(params: AMBCParams, theta0: np.ndarray, name: str = "ambc") -> ControllerSpec:
     """AMBC (Theorem 5.2.2) as the core runs it, starting from θ̂(t₀) = ``theta0``."""
-    return ControllerSpec(name, ambc_step, params, ambc_init(params, theta0), ambc_diagnostics)
+    return ControllerSpec(name, ambc_step, params, ambc_init(params, theta0), ambc_diagnostics,
+                          ambc_hold_dofs)

@@ -25,6 +25,7 @@ from uvd.control.ambc import (
     AMBCState,
     RobustAdaptation,
     adaptation_gains,
+    ambc_hold_dofs,
     ambc_init,
     ambc_params,
     ambc_step,
@@ -175,4 +176,13 @@ def two_step_diagnostics(ctrl: TwoStepState) -> Diagnostics:
 def two_step_spec(params: TwoStepParams, name: str = "two-step-ambc") -> ControllerSpec:
     """Two-step AMBC (§5.2.6) as the core runs it."""
     return ControllerSpec(name, two_step_step, params, two_step_init(params),
-                          two_step_diagnostics)
+                          two_step_diagnostics, two_step_hold_dofs)
+
+
+def two_step_hold_dofs(new: TwoStepState, old: TwoStepState, actuated) -> TwoStepState:
+    """``hold_dofs`` of two-step AMBC: its inner AMBC's (:func:`ambc_hold_dofs`); across the
+    switch to step 2 (a new θ̂) nothing is held."""
+    if new.phase != old.phase:
+        return new
+    inner = ambc_hold_dofs(new.ambc, old.ambc, actuated)
+    return new if inner is new.ambc else replace(new, ambc=inner)

@@ -83,14 +83,18 @@ def no_diagnostics(state) -> Diagnostics:
 @dataclass(frozen=True)
 class ControllerSpec:
     """A controller as the core runs it: ``step(VehicleState, Reference, params, state, dt)
-    -> (u, state)``, its constant ``params``, its initial state and its ``diagnostics(state)``
-    hook."""
+    -> (u, state)``, its constant ``params``, its initial state, its ``diagnostics(state)``
+    hook and, for an adaptive one, ``hold_dofs(new, old, actuated) -> state``: the new state
+    with the parameters of the DOFs not ``actuated`` ((6,) bool) kept at the old state's
+    (the core calls it when a thruster's effectiveness leaves DOFs unreached; None: nothing
+    adapts)."""
 
     name: str
     step: Callable[..., tuple[np.ndarray, Any]]
     params: Any
     init_state: Any
     diagnostics: Callable[[Any], Diagnostics] = no_diagnostics
+    hold_dofs: Callable[[Any, Any, np.ndarray], Any] | None = None
 
 
 @dataclass(frozen=True)
