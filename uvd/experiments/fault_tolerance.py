@@ -36,8 +36,10 @@ import numpy as np
 
 from uvd.experiments import Experiment, ExperimentOptions
 
-#: (label, configuration file, thruster k (1-based)) of each vehicle
-VEHICLES = (("bluerov2-heavy", "sim-bluerov2.toml", 4), ("jhu-rov", "sim.toml", 4))
+#: (label, configuration file, thruster k (1-based)) of each case: the JHU ROV losing a
+#: vertical thruster (pitch given up) and a horizontal one (surge given up)
+VEHICLES = (("bluerov2-heavy", "sim-bluerov2.toml", 4), ("jhu-rov", "sim.toml", 4),
+            ("jhu-rov aft-port", "sim.toml", 1))
 ETAS = (0.5, 0.0)
 T_FAULT_S = 60.0
 DURATION_S = 180.0
@@ -127,7 +129,8 @@ def _run(opts: ExperimentOptions) -> dict[str, Any]:
 THESIS_REFERENCE = (
     "beyond the thesis (§6.2 proposes detecting faults from the estimates; issue 33 closes "
     "the loop): thruster 4 of the BlueROV2-heavy (eight thrusters, `config/sim-bluerov2.toml`) "
-    "and of the JHU ROV (six, `config/sim.toml`: the bow vertical) at η 0.5 and 0 from 60 s of "
+    "and of the JHU ROV (six, `config/sim.toml`: the bow vertical), and the JHU ROV's thruster "
+    "1 (aft-port, horizontal), at η 0.5 and 0 from 60 s of "
     "RefTraj1 in lockstep; each arm's per-DOF position MAE from 70 s to the end divided by the "
     "fault-free run's over the same span. `amplifier`: the cycle is told η at the fault "
     "(`CoreInputs.thruster_eta`), reallocation inside that update. The arm from uvd-fdc's "
