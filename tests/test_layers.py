@@ -9,7 +9,7 @@ and ``from … import`` (relative ones resolved; also those inside functions and
 Layers, top to bottom (a module may import its own layer and any layer below it):
 
   0. uvd.cli, uvd.commands, uvd.__main__
-  1. uvd.experiments, uvd.bench
+  1. uvd.experiments, uvd.bench, uvd.fdc, uvd.campaign
   2. uvd.runtime, uvd.links (the daemon and its faces: one layer)
   3. uvd.telemetry
   4. uvd.io
@@ -37,7 +37,7 @@ PACKAGES = ("uvd", "drivers", "sim_bridge")
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("uvd.cli", "uvd.commands", "uvd.__main__"),
-    ("uvd.experiments", "uvd.bench", "uvd.fdc"),
+    ("uvd.experiments", "uvd.bench", "uvd.fdc", "uvd.campaign"),
     ("uvd.runtime", "uvd.links"),
     ("uvd.telemetry",),
     ("uvd.io",),

@@ -34,21 +34,35 @@ class SimVehicle:
     vehicle's own parameters), ``fault`` (a key of :data:`FAULTS`, or None) injected into its
     plant after ``minutes_before``; :meth:`next_estimates` advances it to its next estimate."""
 
-    def __init__(self, fault: str | None, minutes_before: float, seed: int) -> None:
+    def __init__(self, fault: str | None, minutes_before: float, seed: int, *,
+                 config=None, fault_args: dict | None = None, expected_kind: str | None = None,
+                 instruments=None) -> None:
+        """``config`` a configuration file (the demo's, ``config/sim.toml``, by default);
+        ``fault_args`` and ``expected_kind`` a fault other than :data:`FAULTS`' (then
+        ``fault`` is only its label); ``instruments`` an
+        :class:`~sim_bridge.instruments.models.InstrumentConfig` (Table A.1 by default)."""
+        from sim_bridge.instruments.models import InstrumentConfig
         from uvd.estimation.aid import aid6_estimator
         from uvd.experiments.lockstep import Lockstep, LockstepConfig
         from uvd.runtime.build import build_core, start_pose
         from uvd.runtime.config import DEFAULT_CONFIG, load_config
 
-        cfg = load_config(DEFAULT_CONFIG)
+        cfg = load_config(DEFAULT_CONFIG if config is None else config)
         vehicle = cfg.load_vehicle()
         core_cfg = build_core(cfg, vehicle, estimators=(
             aid6_estimator(vehicle.params.theta, cfg.estimation.aid_params()),))
         H0, v0 = start_pose(cfg)
         self.sim = Lockstep(vehicle, core_cfg, LockstepConfig(
-            control_rate_hz=cfg.loop.rate_hz, seed=seed), H0=H0, v0=v0)
+            control_rate_hz=cfg.loop.rate_hz, seed=seed,
+            instruments=InstrumentConfig() if instruments is None else instruments),
+            H0=H0, v0=v0)
         self.rate = cfg.loop.rate_hz
+        self.vehicle_name = vehicle.name
         self.fault = fault
+        if fault is not None and fault_args is None:
+            fault_args, expected_kind = FAULTS[fault][1], FAULTS[fault][2]
+        self.fault_args = fault_args
+        self.expected_kind = expected_kind
         self.k = 0
         self.k_fault = int(round(minutes_before * 60.0 * self.rate)) if fault else None
         self.every = int(round(EVERY_S * self.rate))
@@ -76,7 +90,7 @@ class SimVehicle:
         while True:
             if self.k == self.k_fault:
                 self.t_fault_ns = sim.t_ns
-                args = FAULTS[self.fault][1]
+                args = self.fault_args
                 if "health" in args:
                     i, h = args["health"]
                     sim.plant.thrusters.health[i] = h
@@ -95,7 +109,7 @@ class SimVehicle:
         out = {"fault": self.fault, "injected_at_s": None if t_fault is None
                else t_fault * 1e-9, "detections": detections}
         if self.fault is not None:
-            want = FAULTS[self.fault][2]
+            want = self.expected_kind
             out["expected_kind"] = want
             out["detected"] = first is not None and t_fault is not None \
                 and first["t_ns"] >= t_fault
@@ -111,12 +125,19 @@ class SimVehicle:
 
 def _run_one(fault: str | None, minutes_before: float, minutes_after: float, seed: int,
              progress) -> dict:
+    return watch(SimVehicle(fault, minutes_before, seed), minutes_before + minutes_after,
+                 progress)
+
+
+def watch(v: SimVehicle, minutes: float, progress=None) -> dict:
+    """Run ``v`` for ``minutes`` simulated minutes under uvd-fdc's detector (every state
+    payload, AID's estimates); its :meth:`SimVehicle.outcome` and the detector's baseline."""
     from uvd.fdc.detector import VehicleDetector
     from uvd.links.zenoh import estimate_payload, state_payload
 
-    v = SimVehicle(fault, minutes_before, seed)
-    det = VehicleDetector("jhu-rov", B=v.B)
-    n = int(round((minutes_before + minutes_after) * 60.0 * v.rate))
+    fault = v.fault
+    det = VehicleDetector(v.vehicle_name, B=v.B)
+    n = int(round(minutes * 60.0 * v.rate))
     detections = []
     report = int(1800 * v.rate)
     while v.next_k < n:

@@ -1,0 +1,101 @@
+"""Run a campaign on Dask — the only scheduler: a ``LocalCluster`` of worker processes (one
+thread each: a lockstep run holds the GIL) or the scheduler of a lab's cluster
+(``tcp://HOST:PORT``, e.g. one that dask-jobqueue started on an HPC queue). Each run not yet in
+the :class:`~uvd.campaign.store.RowStore` is one task; its row is written as soon as it
+completes, so Ctrl-C, a lost worker or a crash loses at most the runs under way.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from uvd.campaign.spec import CampaignSpec
+from uvd.campaign.store import RowStore, code_version, make_row, run_key
+
+
+@dataclass
+class CampaignOutcome:
+    """What one invocation did: runs in the campaign, found done, run now (of which failed),
+    the wall time and the table written."""
+
+    total: int
+    skipped: int
+    ran: int
+    failed: int
+    wall_s: float
+    table: Path | None
+    workers: int
+
+
+def default_workers() -> int:
+    """The machine's cores (those this process may run on)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def _client(workers: int, scheduler: str | None):
+    from dask.distributed import Client, LocalCluster
+    if scheduler is not None:
+        return Client(scheduler), None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=40)
+    return Client(cluster), cluster
+
+
+def run_campaign(spec: CampaignSpec, directory: str | Path, *, workers: int | None = None,
+                 scheduler: str | None = None,
+                 on_row: Callable[[dict, int, int], None] | None = None,
+                 limit: int | None = None) -> CampaignOutcome:
+    """Run every run of ``spec`` not already stored in ``directory``; ``on_row(row, done,
+    todo)`` after each row is written (progress); ``limit`` runs at most that many now (a
+    test's partial campaign). Returns what was done; ``directory/runs.parquet`` holds the whole
+    table when every run is done."""
+    from dask.distributed import as_completed
+
+    from uvd.campaign.runs import execute
+
+    t0 = time.perf_counter()
+    store = RowStore(directory)
+    version = code_version()
+    keys = [run_key(spec.kind, inputs, version) for inputs in spec.runs]
+    done = store.done()
+    todo = [i for i, k in enumerate(keys) if k not in done]
+    if limit is not None:
+        todo = todo[:limit]
+    skipped = sum(1 for k in keys if k in done)
+    ran = failed = 0
+    n_workers = 0
+    if todo:
+        client, cluster = _client(workers or default_workers(), scheduler)
+        try:
+            n_workers = len(client.scheduler_info()["workers"])
+            futures = {client.submit(execute, spec.kind, spec.runs[i], key=f"run-{keys[i]}",
+                                     pure=False): i for i in todo}
+            for fut in as_completed(futures):
+                i = futures[fut]
+                try:
+                    result = fut.result()
+                except Exception as exc:  # the task itself was lost (a worker died)
+                    result = {"figures": {}, "error": f"{type(exc).__name__}: {exc}",
+                              "wall_s": float("nan"), "worker": "lost"}
+                row = make_row(spec.name, spec.kind, i, keys[i], version, spec.runs[i], result)
+                store.write(row)
+                ran += 1
+                failed += row["error"] is not None
+                if on_row is not None:
+                    on_row(row, ran, len(todo))
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    table = None
+    if all(k in store.done() for k in keys):
+        table = store.write_table(keys)
+    return CampaignOutcome(total=len(keys), skipped=skipped, ran=ran, failed=failed,
+                           wall_s=time.perf_counter() - t0, table=table, workers=n_workers)
