@@ -13,6 +13,7 @@
     vehicle = ["jhu-rov", "bluerov2-heavy"]        # a list: a grid axis, or a uniform choice
     seed = {integers = [0, 1000000]}               # random only: an integer in [a, b)
     onset_min = {uniform = [30.0, 50.0]}           # random only: a float in [a, b)
+    delta = {uniform = [5.0, 40.0], signed = true} # ± a magnitude in [a, b)
     after_min = 20.0                               # a constant
     fault = ["thruster", "drag", "mass", "buoyancy"]
     fault_size = {by = "fault", thruster = {uniform = [0.0, 0.8]}, drag = 1.5, ...}
@@ -102,9 +103,11 @@ def _parse_values(kind_axes, name: str, raw: Any, sampling: str, where: str):
     if isinstance(raw, dict):
         keys = set(raw)
         draw = keys & set(DRAWS)
-        if len(draw) != 1 or len(keys) != 1:
+        signed = raw.get("signed", False)
+        if len(draw) != 1 or keys - draw - {"signed"} or not isinstance(signed, bool):
             raise CampaignError(f"{where}: a table must be {{uniform = [a, b]}} or "
-                                f"{{integers = [a, b]}} (got keys {sorted(keys)})")
+                                f"{{integers = [a, b]}}, optionally with signed = true "
+                                f"(got {raw!r})")
         how = draw.pop()
         if sampling != "random":
             raise CampaignError(f"{where}: {how} draws need sampling = \"random\" (a grid "
@@ -121,7 +124,9 @@ def _parse_values(kind_axes, name: str, raw: Any, sampling: str, where: str):
                 for i, v in enumerate(ab))
         if not a < b:
             raise CampaignError(f"{where}.{how}: need a < b (got {a}, {b})")
-        return (how, (a, b))
+        if signed and not (how == "uniform" and a >= 0):
+            raise CampaignError(f"{where}.signed: needs a uniform draw of a magnitude (a ≥ 0)")
+        return ("signed" if signed else how, (a, b))
     return ("const", _check_value(kind_axes, name, raw, where))
 
 
@@ -133,7 +138,10 @@ def _draw(parsed, rng: np.random.Generator):
         return v[int(rng.integers(len(v)))]
     if how == "integers":
         return int(rng.integers(v[0], v[1]))
-    return float(rng.uniform(v[0], v[1]))
+    x = float(rng.uniform(v[0], v[1]))
+    if how == "signed":
+        x = x if rng.integers(2) else -x
+    return x
 
 
 def parse(data: dict, kinds: dict[str, dict[str, Axis]], source: str = "") -> CampaignSpec:

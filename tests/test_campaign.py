@@ -1,0 +1,183 @@
+"""uvd campaign: the campaign file's checks, the draws, the intervals, and small campaigns of
+real lockstep runs on real Dask clusters (a LocalCluster the test starts; 1 vs 2 workers; a
+campaign killed mid-run and started again)."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from uvd.campaign import builtin
+from uvd.campaign.execute import run_campaign
+from uvd.campaign.runs import kind_axes
+from uvd.campaign.spec import CampaignError, parse
+from uvd.campaign.store import RUN_ENVIRONMENT, RowStore
+from uvd.campaign.summary import median_ci, poisson_rate, proportion
+
+ROOT = Path(__file__).resolve().parents[1]
+# a few simulated seconds of PDC: a run takes well under a second once the kernels are cached
+TINY = {"controller": "pdc", "duration_h": 0.005, "window_min": 0.1}
+
+
+def _spec(axes: dict, **head):
+    return parse({"campaign": {"name": "t", "kind": "control", **head}, "axes": axes},
+                 kind_axes(), source="t.toml")
+
+
+# ------------------------------------------------------------------------------ the file
+@pytest.mark.parametrize("data, words", [
+    ({"campaign": {"name": "t", "kind": "nope"}}, ["campaign.kind", "'nope'", "fdc"]),
+    ({"campaign": {"name": "t", "kind": "control"}, "axes": {"gain": [1.0]}},
+     ["axes.gain", "unknown axis", "kp"]),
+    ({"campaign": {"name": "t", "kind": "control"}, "axes": {"seed": {"integers": [0, 9]}}},
+     ["axes.seed", "random"]),
+    ({"campaign": {"name": "t", "kind": "control"}, "axes": {"controller": ["pid"]}},
+     ["axes.controller[0]", "'pid'", "two-step"]),
+    ({"campaign": {"name": "t", "kind": "control"}, "axes": {"kp": "high"}},
+     ["axes.kp", "not a number"]),
+    ({"campaign": {"name": "t", "kind": "control", "sampling": "random"}},
+     ["campaign.runs", "positive"]),
+    ({"campaign": {"name": "t", "kind": "control", "sampling": "random", "runs": 2},
+      "axes": {"kp": {"uniform": [5.0, 1.0]}}}, ["axes.kp.uniform", "a < b"]),
+    ({"campaign": {"name": "t", "kind": "control"}, "extra": {}}, ["extra", "unknown table"]),
+    ({"campaign": {"name": "t", "kind": "fdc"}, "axes": {"fault_size": {"by": "fault"}}},
+     ["axes.fault_size.by", "'fault'"]),
+])
+def test_a_bad_campaign_file_is_refused_by_name(data, words):
+    with pytest.raises(CampaignError) as err:
+        parse(data, kind_axes(), source="bad.toml")
+    assert str(err.value).startswith("bad.toml: ")
+    for w in words:
+        assert w in str(err.value)
+
+
+def test_a_grid_is_the_product_of_its_lists_with_the_kinds_defaults():
+    spec = _spec({"controller": ["pdc", "two-step"], "seed": [0, 1, 2], "kp": 200})
+    assert len(spec.runs) == 6
+    assert {(r["controller"], r["seed"]) for r in spec.runs} == {
+        (c, s) for c in ("pdc", "two-step") for s in (0, 1, 2)}
+    assert all(r["kp"] == 200.0 and r["kd"] == 100.0 and r["mass_error"] == 0.0
+               for r in spec.runs)
+
+
+def test_random_draws_are_seeded_per_run_and_conditional_axes_follow_their_axis():
+    axes = {"fault": ["thruster", "drag"], "seed": {"integers": [0, 1000]},
+            "fault_size": {"by": "fault", "thruster": {"uniform": [0.0, 0.8]},
+                           "drag": {"uniform": [1.2, 2.0]}}}
+
+    def spec(n, seed=3):
+        return parse({"campaign": {"name": "r", "kind": "fdc", "sampling": "random",
+                                   "runs": n, "seed": seed}, "axes": axes}, kind_axes())
+    a, b = spec(20), spec(40)
+    assert a.runs == b.runs[:20]  # more runs keep the first ones
+    assert spec(20, seed=4).runs != a.runs
+    for r in b.runs:
+        lo, hi = (0.0, 0.8) if r["fault"] == "thruster" else (1.2, 2.0)
+        assert lo <= r["fault_size"] < hi and 0 <= r["seed"] < 1000
+    assert {r["fault"] for r in b.runs} == {"thruster", "drag"}
+
+
+def test_every_builtin_campaign_is_valid():
+    found = builtin.campaigns()
+    assert {"fdc-false-alarms", "fdc-detection", "control-model-error"} <= set(found)
+    fa = found["fdc-false-alarms"]
+    assert all(r["fault"] == "none" for r in fa.runs)
+    assert {r["vehicle"] for r in fa.runs} == {"jhu-rov", "bluerov2-heavy"}
+    det = found["fdc-detection"]
+    assert len(det.runs) >= 300
+    assert {r["fault"] for r in det.runs} == {"thruster", "drag", "mass", "buoyancy"}
+
+
+# ------------------------------------------------------------------------------ intervals
+def test_intervals_match_their_closed_forms():
+    # no event in T hours: the one-sided 95 % upper bound is −ln(0.05)/T (the "rule of three")
+    r = poisson_rate(0, 500.0)
+    assert r["rate"] == 0.0 and r["low"] == 0.0
+    assert r["upper_one_sided"] == pytest.approx(-math.log(0.05) / 500.0, rel=1e-9)
+    # 0 of n: Clopper–Pearson's upper limit is 1 − (α/2)^(1/n)
+    p = proportion(0, 10)
+    assert p["low"] == 0.0 and p["high"] == pytest.approx(1 - 0.025 ** 0.1, rel=1e-9)
+    # n of n: the lower limit is (α/2)^(1/n)
+    p = proportion(10, 10)
+    assert p["low"] == pytest.approx(0.025 ** 0.1, rel=1e-9) and p["high"] == 1.0
+    m = median_ci(list(range(1, 102)))
+    assert m["median"] == 51.0 and m["low"] < 51.0 < m["high"]
+    assert median_ci(list(range(1, 102))) == m  # seeded: the same every time
+
+
+# ------------------------------------------------------------------------------ on Dask
+def _comparable(rows):
+    return {r["key"]: {k: v for k, v in r.items() if k not in RUN_ENVIRONMENT + ("index",)}
+            for r in rows}
+
+
+def test_two_runs_on_a_local_cluster_the_test_starts_one_raising(tmp_path):
+    from dask.distributed import LocalCluster
+
+    # mass_error −1 makes the plant's mass 0: PlantFault refuses it, inside the run
+    spec = _spec({**TINY, "mass_error": [0.0, -1.0]})
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster:
+        out = run_campaign(spec, tmp_path, scheduler=cluster.scheduler_address)
+    assert (out.total, out.ran, out.failed, out.skipped) == (2, 2, 1, 0)
+    rows = RowStore(tmp_path).rows()
+    assert [r["index"] for r in rows] == [0, 1]
+    good, bad = rows
+    assert good["error"] is None and math.isfinite(good["out_position_mne"])
+    assert good["out_position_mne"] > 0 and good["in_mass_error"] == 0.0
+    assert bad["error"].startswith("ValueError: PlantFault: scales must be finite and > 0")
+    assert not any(k.startswith("out_") for k in bad)  # no figures, only its error
+    import pyarrow.parquet as pq
+    table = pq.read_table(out.table)
+    assert table.num_rows == 2 and table.column("error").to_pylist()[0] is None
+    assert table.column("out_position_mne").to_pylist() == [good["out_position_mne"], None]
+
+
+def test_rows_are_bit_identical_whatever_the_worker_count_or_order(tmp_path):
+    spec = _spec({**TINY, "seed": [0, 1, 2], "kp": [250.0, 300.0]})
+    backwards = spec.__class__(**{**spec.__dict__, "runs": tuple(reversed(spec.runs))})
+    one = run_campaign(spec, tmp_path / "one", workers=1)
+    two = run_campaign(backwards, tmp_path / "two", workers=2)
+    assert (one.workers, two.workers) == (1, 2) and one.failed == two.failed == 0
+    a = _comparable(RowStore(tmp_path / "one").rows())
+    b = _comparable(RowStore(tmp_path / "two").rows())
+    assert len(a) == 6 and a == b  # == on floats: bit for bit
+    assert len({r["out_position_mne"] for r in a.values()}) == 6
+
+
+def test_a_campaign_killed_mid_run_resumes_without_redoing_a_finished_run(tmp_path):
+    spec_file = tmp_path / "c.toml"
+    spec_file.write_text('[campaign]\nname = "kill"\nkind = "control"\n[axes]\n'
+                         'controller = "pdc"\nduration_h = 0.01\nwindow_min = 0.5\n'
+                         'seed = [0, 1, 2, 3, 4, 5]\n')
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "uvd", "campaign", str(spec_file), "--out",
+                             str(out), "--workers", "1", "--quiet"], cwd=ROOT,
+                            start_new_session=True, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    rows_dir = out / "rows"
+    try:
+        deadline = time.monotonic() + 240
+        while not list(rows_dir.glob("*.parquet")):
+            assert proc.poll() is None, "the campaign ended before its first row"
+            assert time.monotonic() < deadline, "no row within 240 s"
+            time.sleep(0.05)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the campaign, its cluster and its workers
+        proc.wait(timeout=30)
+    before = {p.name: p.stat().st_mtime_ns for p in rows_dir.glob("*.parquet")}
+    assert 1 <= len(before) < 6, f"the kill came too late to test anything: {len(before)} rows"
+    spec = builtin.resolve(spec_file)
+    res = run_campaign(spec, out, workers=1)
+    assert res.skipped == len(before) and res.ran == 6 - len(before) and res.failed == 0
+    after = {p.name: p.stat().st_mtime_ns for p in rows_dir.glob("*.parquet")}
+    assert len(after) == 6 and all(after[n] == t for n, t in before.items())
+    assert not list(rows_dir.glob("*.tmp*"))
+    assert res.table is not None and res.table.exists()
