@@ -23,19 +23,32 @@ RUN_ENVIRONMENT = ("wall_s", "worker")
 _PACKAGES = ("uvd", "sim_bridge", "drivers")
 
 
+#: sources no run executes (the command line, benchmarks, the campaign's own bookkeeping,
+#: summary and figures, the results page): editing them keeps the finished rows valid
+_NOT_RUN = ("uvd/commands/", "uvd/bench/", "uvd/experiments/results.py", "uvd/campaign/builtin/",
+            "uvd/campaign/execute.py", "uvd/campaign/store.py", "uvd/campaign/summary.py",
+            "uvd/campaign/report.py")
+
+
 @cache
 def code_version() -> str:
-    """SHA-256 (16 hex digits) of every Python source of uvd, sim_bridge and drivers and the
-    shipped vehicle files: a change to any of them is a new code version (its runs are
-    new runs), whether or not the checkout is a git repository."""
+    """SHA-256 (16 hex digits) of every Python source of uvd, sim_bridge and drivers that a
+    run may execute, and the shipped vehicle and configuration files: a change to any of them
+    is a new code version (its runs are new runs), whether or not the checkout is a git
+    repository."""
     import uvd
     root = Path(uvd.__file__).resolve().parents[1]
     h = hashlib.sha256()
     for pkg in _PACKAGES:
         for f in sorted((root / pkg).rglob("*")):
-            if f.suffix in (".py", ".toml") and "__pycache__" not in f.parts:
-                h.update(str(f.relative_to(root)).encode())
+            rel = f.relative_to(root).as_posix()
+            if f.suffix in (".py", ".toml") and "__pycache__" not in f.parts \
+                    and not rel.startswith(_NOT_RUN):
+                h.update(rel.encode())
                 h.update(f.read_bytes())
+    for f in sorted((root / "config").glob("*.toml")):  # the demo configurations fdc runs take
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
 

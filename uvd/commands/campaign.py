@@ -1,5 +1,5 @@
 """``uvd campaign SPEC.toml|NAME [--out DIR] [--workers N | --scheduler tcp://HOST:PORT]
-[--report] [--json SUMMARY] [--quiet]``: many lockstep experiments as one study on Dask
+[--limit N] [--report] [--json SUMMARY] [--quiet]``: many lockstep experiments as one study on Dask
 (:mod:`uvd.campaign`); ``uvd campaign list`` names the built-in campaigns."""
 
 from __future__ import annotations
@@ -29,6 +29,9 @@ def register(sub) -> None:
     p.add_argument("--report", action="store_true",
                    help="run nothing: summarise the stored rows and draw figures in "
                         "OUT/figures")
+    p.add_argument("--limit", type=int, metavar="N",
+                   help="run at most N of the runs not yet done, in run order (a first look, "
+                        "or a campaign in instalments: the rest follows on the next call)")
     p.add_argument("--json", type=Path, metavar="SUMMARY",
                    help="write the summary (with intervals) to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress")
@@ -62,7 +65,7 @@ def _run(args) -> int:
             n_done = sum(1 for i in spec.runs if run_key(spec.kind, i, code_version()) in done)
             p.note(f"campaign {spec.name}: {len(spec.runs)} runs, {n_done} already in {out}")
             res = run_campaign(spec, out, workers=args.workers, scheduler=args.scheduler,
-                               on_row=on_row)
+                               on_row=on_row, limit=args.limit)
         print(f"campaign {spec.name}: ran {res.ran} ({res.failed} failed) on {res.workers} "
               f"worker(s) in {res.wall_s:.1f} s; {res.skipped} were done before")
     store = RowStore(out)
