@@ -54,8 +54,8 @@ def run_campaign(spec: CampaignSpec, directory: str | Path, *, workers: int | No
                  limit: int | None = None) -> CampaignOutcome:
     """Run every run of ``spec`` not already stored in ``directory``; ``on_row(row, done,
     todo)`` after each row is written (progress); ``limit`` runs at most that many now (a
-    test's partial campaign). Returns what was done; ``directory/runs.parquet`` holds the whole
-    table when every run is done."""
+    test's partial campaign). Returns what was done; ``directory/runs.parquet`` holds the rows
+    of the campaign stored so far, in run order."""
     from dask.distributed import as_completed
 
     from uvd.campaign.runs import execute
@@ -94,8 +94,7 @@ def run_campaign(spec: CampaignSpec, directory: str | Path, *, workers: int | No
             client.close()
             if cluster is not None:
                 cluster.close()
-    table = None
-    if all(k in store.done() for k in keys):
-        table = store.write_table(keys)
+    have = store.done()
+    table = store.write_table([k for k in keys if k in have]) if have else None
     return CampaignOutcome(total=len(keys), skipped=skipped, ran=ran, failed=failed,
                            wall_s=time.perf_counter() - t0, table=table, workers=n_workers)

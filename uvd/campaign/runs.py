@@ -137,9 +137,9 @@ def run_control(inputs: dict) -> dict:
     from sim_bridge.plant import PlantFault
     from uvd import core
     from uvd.control.allocation import Allocator
+    from uvd.control.ambc import theta_of
     from uvd.control.pdc import PDGains, PDState, pdc_step
     from uvd.control.trajectory import reftraj1
-    from uvd.control.ambc import theta_of
     from uvd.control.twostep import (
         two_step_init,
         two_step_params,

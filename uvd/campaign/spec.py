@@ -118,8 +118,8 @@ def _parse_values(kind_axes, name: str, raw: Any, sampling: str, where: str):
         want = int if how == "integers" else float
         if kind_axes[name].type not in (want, float) or (how == "uniform"
                                                          and kind_axes[name].type is not float):
-            raise CampaignError(f"{where}: {how} draws do not fit this {kind_axes[name].type.__name__}"
-                                " axis")
+            raise CampaignError(f"{where}: {how} draws do not fit this "
+                                f"{kind_axes[name].type.__name__} axis")
         a, b = (_check_value({name: Axis(want, None)}, name, v, f"{where}.{how}[{i}]")
                 for i, v in enumerate(ab))
         if not a < b:

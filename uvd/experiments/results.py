@@ -11,6 +11,11 @@ with the command that produced it. Long: the Chapter 5 experiments alone simulat
 Options: ``--only NAME …`` runs a subset, ``--reuse`` takes the JSON already in
 ``docs/results/`` instead of running (regenerates the page only), ``--out DIR`` moves
 everything (default: ``docs``).
+
+Then the built-in campaigns of :data:`uvd.campaign.publish.PUBLISHED` (``uvd campaign``, on
+Dask): each runs, or resumes, in ``campaigns/NAME/`` and publishes its rows, summary and
+figures as ``docs/results/campaign-NAME.*`` and a section of the page (``--campaigns`` picks
+some, ``--campaign-limit N`` runs them in instalments, ``--workers N``).
 """
 
 from __future__ import annotations
@@ -353,6 +358,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("docs"), help="output folder (docs)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quiet", action="store_true", help="no progress")
+    ap.add_argument("--campaigns", nargs="*", metavar="NAME",
+                    help="run only these built-in campaigns (default: every published one, "
+                         "uvd.campaign.publish.PUBLISHED; none with --only unless named here)")
+    ap.add_argument("--campaign-limit", type=int, metavar="N",
+                    help="run at most N more runs of each campaign now (instalments)")
+    ap.add_argument("--workers", type=int, metavar="N",
+                    help="Dask workers of the campaigns (default: the machine's cores)")
     args = ap.parse_args(argv)
     progress = Progress("results", quiet=args.quiet)
     _progress = progress.note
@@ -401,7 +413,17 @@ def main(argv: list[str] | None = None) -> int:
     for name, draw in FIGURES.items():
         if name in results and "error" not in results[name]:
             draw(results[name], args.out / "figures")
+    from uvd.campaign import publish
+    campaigns = args.campaigns if args.campaigns is not None else (
+        () if args.only else publish.PUBLISHED)
+    unknown = set(campaigns) - set(publish.PUBLISHED)
+    if unknown:
+        ap.error(f"unknown campaign(s) {sorted(unknown)}; published: {publish.PUBLISHED}")
+    if campaigns and not args.reuse:
+        publish.run_published(res_dir, workers=args.workers, limit=args.campaign_limit,
+                              names=tuple(campaigns), progress=_progress)
     page = render({n: results[n] for n in all_names if n in results}, reg)
+    page += "\n".join(publish.render(publish.load_published(res_dir)))
     (args.out / "RESULTS.md").write_text(page)
     _progress(f"[results] wrote {args.out / 'RESULTS.md'} ({time.perf_counter() - t_all:.0f} s)")
     return 0
