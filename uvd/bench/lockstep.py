@@ -1,0 +1,107 @@
+"""``uvd bench lockstep``: this checkout's lockstep speed against a previous version, side by
+side on this machine in one run — the figure that travels between machines is the ratio
+(docs/architecture.md: timings are ratios).
+
+The previous version is a git revision (``--old-ref``, default the commit before the campaign
+work, 88767d0), checked out with ``git worktree add`` into a temporary folder (or ``--old-path``,
+a checkout already there). Each side runs ``uvd experiment EXPERIMENT --hours H --json …`` in its
+own Python process, the same interpreter and virtual environment, only ``PYTHONPATH`` telling
+which sources; the sides alternate (old, new, new, old, …) so that a change of the machine's
+load falls on both alike. Figures: each side's wall seconds (median of ``--repeats``), the ratio
+old/new (> 1: this checkout is faster), the load average, and whether the two sides' results are
+bit for bit the same (the JSON minus its wall times).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from uvd.bench import Bench
+
+ROOT = Path(__file__).resolve().parents[2]
+#: the last commit before the campaign work (issue 31): "today's code" of the issue
+DEFAULT_OLD_REF = "88767d0"
+#: keys whose values are timings, left out of the bit-for-bit comparison
+_TIMING_KEYS = {"wall_seconds", "sim_wall_s", "wall_s", "summary"}
+
+
+def _add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--experiment", default="two-step",
+                   help="the lockstep experiment timed (default two-step)")
+    p.add_argument("--hours", type=float, default=0.5,
+                   help="simulated hours per run (default 0.5; the experiment's own: 6)")
+    p.add_argument("--repeats", type=int, default=2, help="runs of each side (default 2)")
+    p.add_argument("--old-ref", default=DEFAULT_OLD_REF,
+                   help=f"git revision of the previous version (default {DEFAULT_OLD_REF})")
+    p.add_argument("--old-path", type=Path,
+                   help="a checkout of the previous version (instead of --old-ref)")
+
+
+def _strip(x):
+    if isinstance(x, dict):
+        return {k: _strip(v) for k, v in x.items() if k not in _TIMING_KEYS}
+    if isinstance(x, list):
+        return [_strip(v) for v in x]
+    return x
+
+
+def _one(src: Path, experiment: str, hours: float, out: Path) -> float:
+    env = {**os.environ, "PYTHONPATH": str(src)}
+    cmd = [sys.executable, "-c", "import sys; from uvd.cli import main; sys.exit(main())",
+           "experiment", experiment, "--hours", str(hours), "--json", str(out), "--quiet"]
+    t0 = time.perf_counter()
+    subprocess.run(cmd, cwd=src, env=env, check=True, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def run(args: argparse.Namespace) -> dict:
+    with tempfile.TemporaryDirectory(prefix="uvd-bench-lockstep-") as tmp:
+        tmp = Path(tmp)
+        old = args.old_path
+        made = False
+        if old is None:
+            old = tmp / "old"
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(old),
+                            args.old_ref], check=True, capture_output=True)
+            made = True
+        try:
+            sides = {"old": old.resolve(), "new": ROOT}
+            # a warm-up run of each side: numba compiles (or loads) its kernels
+            for name, src in sides.items():
+                _one(src, args.experiment, 0.01, tmp / f"warm-{name}.json")
+            walls: dict[str, list[float]] = {"old": [], "new": []}
+            order = []
+            for i in range(args.repeats):
+                order += ["old", "new"] if i % 2 == 0 else ["new", "old"]
+            load0 = os.getloadavg()
+            for j, name in enumerate(order):
+                walls[name].append(_one(sides[name], args.experiment, args.hours,
+                                        tmp / f"{name}-{j}.json"))
+            load1 = os.getloadavg()
+            res = {n: _strip(json.loads((tmp / f"{n}-{order.index(n)}.json").read_text()))
+                   for n in ("old", "new")}
+        finally:
+            if made:
+                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
+                                str(old)], capture_output=True)
+    med = {n: statistics.median(w) for n, w in walls.items()}
+    return {"experiment": args.experiment, "simulated_hours": args.hours,
+            "old": {"source": args.old_ref if args.old_path is None else str(args.old_path),
+                    "wall_s": walls["old"], "median_s": med["old"]},
+            "new": {"wall_s": walls["new"], "median_s": med["new"]},
+            "speed_ratio_old_over_new": med["old"] / med["new"],
+            "results_bit_identical": res["old"] == res["new"],
+            "load_average": {"before": list(load0), "after": list(load1)}}
+
+
+BENCH = Bench("lockstep", "lockstep speed of this checkout vs a previous version, side by side "
+                          "(uvd experiment two-step, ratio old/new; results compared bit for "
+                          "bit)", run, _add_arguments)
