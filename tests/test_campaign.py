@@ -181,3 +181,37 @@ def test_a_campaign_killed_mid_run_resumes_without_redoing_a_finished_run(tmp_pa
     assert len(after) == 6 and all(after[n] == t for n, t in before.items())
     assert not list(rows_dir.glob("*.tmp*"))
     assert res.table is not None and res.table.exists()
+
+
+def test_fdc_summary_counts_hours_at_risk_and_keeps_false_alarms_apart():
+    from uvd.campaign.publish import render
+    from uvd.campaign.summary import format_summary, summarize_fdc
+
+    def row(fault, **out):
+        base = {"error": None, "in_vehicle": "jhu-rov", "in_fault": fault,
+                "in_fault_size": out.pop("size", 0.0), "out_simulated_h": 1.0}
+        return {**base, **{f"out_{k}": v for k, v in out.items()}}
+    rows = [row("none", false_alarms=0, monitored_h=3.5),
+            row("none", false_alarms=1, monitored_h=1.25),
+            row("drag", size=1.5, false_alarms=0, monitored_h=0.5, detected=True,
+                right_kind=True, delay_s=20.0),
+            row("drag", size=1.9, false_alarms=0, monitored_h=0.5, detected=True,
+                right_kind=False, delay_s=40.0),
+            row("drag", size=1.2, false_alarms=1, monitored_h=0.2, detected=False,
+                right_kind=False, delay_s=None),
+            {"error": "ValueError: x", "in_vehicle": "jhu-rov", "in_fault": "none"}]
+    s = summarize_fdc(rows)
+    fa = s["false_alarms_per_vehicle_hour"]
+    assert (fa["count"], fa["exposure"]) == (2, 3.5 + 1.25 + 0.5 + 0.5 + 0.2)
+    assert s["failed"] == 1 and s["runs"] == 6
+    drag = s["faults"]["drag"]
+    assert drag["false_alarm_before_fault"] == 1
+    assert drag["detected"]["k"] == 2 and drag["detected"]["n"] == 2
+    assert drag["right_kind"]["k"] == 1 and drag["delay_s"]["median"] == 30.0
+    text = format_summary("fdc", s)
+    assert "false alarms: 2 in 6.0 vehicle-hours" in text and "drag: detected 100%" in text
+    page = "\n".join(render({"fdc-x": {
+        "description": "d", "runs_summarised": 6, "runs_in_campaign": 10, "ran_now": 6,
+        "workers": 2, "wall_seconds": 1.0, "load_average_before": [1.0],
+        "load_average_after": [2.0], "summary_text": text, "figures": ["a.png"]}}))
+    assert "6 of 10 runs (**partial**" in page and "![a.png](results/campaign-fdc-x/a.png)" in page
