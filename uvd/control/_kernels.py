@@ -327,26 +327,73 @@ def ff_increment(model, theta, H_d, v_d, vdot_d, H_p, v_p, vdot_p):
     return out
 
 
+#: layout of the AMBC's packed parameters (:func:`pack_ambc_params`): scalars first, then
+#: the gains (k_p, k_d, mass floor, drag ceiling: 4 × 6), K_θ (n), B⁺ (N × 6) and f_max (N)
+P_MODEL, P_EPS, P_ADAPT, P_ROBUST, P_DEAD_ZONE, P_FREEZE_SAT, P_HOLD_S, P_BAND, P_N, P_NTHR = \
+    range(10)
+P_GAINS = 10
+P_K = P_GAINS + 24
+
+
+def pack_ambc_params(model, K, kp, kd, mass_floor, drag_ceiling, eps, robust, dead_zone,
+                     freeze_on_saturation, hold_s, band, B_pinv, f_max):
+    """The constant parameters of :func:`ambc_cycle` as one float64 vector (its packed
+    structure: one array crosses into the kernel instead of fourteen values). ``adapt`` is
+    K ≠ 0; flags are 1.0 / 0.0; gains are (6,) each; B_pinv (N × 6), f_max (N,)."""
+    K = np.ascontiguousarray(K, dtype=np.float64).reshape(-1)
+    B_pinv = np.ascontiguousarray(B_pinv, dtype=np.float64).reshape(-1, 6)
+    f_max = np.ascontiguousarray(f_max, dtype=np.float64).reshape(-1)
+    head = np.array([model, eps, bool(np.any(K > 0)), bool(robust), dead_zone,
+                     bool(freeze_on_saturation), hold_s, band, K.shape[0], B_pinv.shape[0]],
+                    dtype=np.float64)
+    gains = np.concatenate([np.broadcast_to(np.asarray(g, dtype=np.float64), (6,))
+                            for g in (kp, kd, mass_floor, drag_ceiling)])
+    return np.ascontiguousarray(np.concatenate([head, gains, K, B_pinv.reshape(-1), f_max]))
+
+
 @_jit
-def ambc_cycle(model, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, K, kp, kd, eps,
-               adapt, dt, t,
-               robust, dead_zone, mass_floor, drag_ceiling, B_pinv, f_max, freeze_on_saturation,
-               hold_s, band, last_f, hold_until, err, theta_out, rate_out, f_out):
+def ambc_cycle(P, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, dt, t, last_f,
+               hold_until, out):
     """One AMBC cycle: the control law (5.27) with θ̂_k and the Euler step of the update law
     (5.28), θ̂_{k+1} = θ̂_k + dt θ̂̇ with θ̂̇ = −K_θ W_MBCᵀ(εΔψ + Δv).
+
+    ``P``: the constant parameters packed by :func:`pack_ambc_params` (model, ε, k_p, k_d,
+    K_θ, the robust adaptation's settings, B⁺, f_max). The rest is this cycle's: actual and
+    desired state, the DOF mask, the preview increment, θ̂_k, dt, the controller's clock t,
+    the last per-thruster command and the reversal hold.
 
     With ``use_ff`` the feed-forward preview increment ``ff`` (:func:`ff_increment`) is added
     to the command (before the mask); the update law keeps the regressor at t.
 
-    With ``robust``: θ̂̇ is scaled by the dead zone max(0, 1 − δ/‖εΔψ + Δv‖) (δ > 0), zeroed
-    while the command saturates a thruster (``freeze_on_saturation``) and until ``hold_until``
-    (set to t + dt + hold_s whenever a thruster command changes sign or lies in the stiction
-    band, when hold_s > 0); θ̂_{k+1} is then projected (:func:`project`).
+    With robust adaptation: θ̂̇ is scaled by the dead zone max(0, 1 − δ/‖εΔψ + Δv‖) (δ > 0),
+    zeroed while the command saturates a thruster (freeze on saturation) and until
+    ``hold_until`` (set to t + dt + hold_s whenever a thruster command changes sign or lies in
+    the stiction band, when hold_s > 0); θ̂_{k+1} is then projected (:func:`project`).
 
-    Outputs: ``err`` (5 × 6, :func:`error_state`), ``theta_out`` = θ̂_{k+1}, ``rate_out`` = θ̂̇,
-    ``f_out`` = B⁺u (when B_pinv has rows). Returns (u, saturated, frozen, projected,
-    hold_until).
+    Output: ``out`` = [u (6), err (5 × 6, :func:`error_state`), θ̂_{k+1} (n), θ̂̇ (n),
+    f = B⁺u (N)]. Returns (saturated, frozen, projected, hold_until).
     """
+    model = int(P[P_MODEL])
+    eps = P[P_EPS]
+    adapt = P[P_ADAPT] != 0.0
+    robust = P[P_ROBUST] != 0.0
+    dead_zone = P[P_DEAD_ZONE]
+    freeze_on_saturation = P[P_FREEZE_SAT] != 0.0
+    hold_s = P[P_HOLD_S]
+    band = P[P_BAND]
+    n = int(P[P_N])
+    nthr = int(P[P_NTHR])
+    kp = P[P_GAINS:P_GAINS + 6]
+    kd = P[P_GAINS + 6:P_GAINS + 12]
+    mass_floor = P[P_GAINS + 12:P_GAINS + 18]
+    drag_ceiling = P[P_GAINS + 18:P_GAINS + 24]
+    K = P[P_K:P_K + n]
+    B_pinv = P[P_K + n:P_K + n + 6 * nthr].reshape((nthr, 6))
+    f_max = P[P_K + n + 6 * nthr:P_K + n + 7 * nthr]
+    err = out[6:36].reshape((5, 6))
+    theta_out = out[36:36 + n]
+    rate_out = out[36 + n:36 + 2 * n]
+    f_out = out[36 + 2 * n:]
     error_state(H_a, v_a, H_d, v_d, vdot_d, err)
     dpsi = err[0].copy()
     dv = err[1].copy()
@@ -355,22 +402,20 @@ def ambc_cycle(model, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, K, kp
     r[0], r[1], r[2] = H_a[2, 0], H_a[2, 1], H_a[2, 2]
     fb = pd_term(dpsi, dv, kp, kd)
     wt = w_theta(model, theta, v_a, alpha, r)
-    u = np.empty(6)
     for i in range(6):
         x = wt[i] - fb[i]
         if use_ff:
             x += ff[i]
-        u[i] = x * mask[i]
-    n = theta.shape[0]
+        out[i] = x * mask[i]
     for i in range(n):
         theta_out[i] = theta[i]
         rate_out[i] = 0.0
     saturated = False
     reversal = False
-    for j in range(B_pinv.shape[0]):
+    for j in range(nthr):
         f = 0.0
         for i in range(6):
-            f += B_pinv[j, i] * u[i]
+            f += B_pinv[j, i] * out[i]
         f_out[j] = f
         if abs(f) > f_max[j]:
             saturated = True
@@ -379,9 +424,9 @@ def ambc_cycle(model, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, K, kp
     if robust and hold_s > 0.0 and reversal:
         hold_until = t + dt + hold_s
     if not adapt:
-        return u, saturated, False, False, hold_until
+        return saturated, False, False, hold_until
     if robust and ((saturated and freeze_on_saturation) or t < hold_until):
-        return u, saturated, True, False, hold_until
+        return saturated, True, False, hold_until
     s = np.empty(6)
     ns = 0.0
     for i in range(6):
@@ -391,7 +436,7 @@ def ambc_cycle(model, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, K, kp
     if robust and dead_zone > 0.0:
         ns = np.sqrt(ns)
         if ns <= dead_zone:
-            return u, saturated, True, False, hold_until
+            return saturated, True, False, hold_until
         scale = 1.0 - dead_zone / ns
     g = wT_s(model, n, v_a, alpha, r, s)
     for i in range(n):
@@ -400,24 +445,4 @@ def ambc_cycle(model, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, K, kp
     projected = False
     if robust:
         projected = project(model, theta_out, mass_floor, drag_ceiling) > 0
-    return u, saturated, False, projected, hold_until
-
-
-@_jit
-def ambc_cycle_buf(model, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, K, gains, eps,
-                   adapt, dt, t, robust, dead_zone, B_pinv, f_max, freeze_on_saturation, hold_s,
-                   band, last_f, hold_until, out):
-    """:func:`ambc_cycle` with fewer arrays crossing into the kernel (each costs the caller
-    ~0.1 µs of dispatch): ``gains`` = [k_p; k_d; mass_floor; drag_ceiling] (4 × 6) and every
-    output in one buffer ``out`` = [u (6), err (5 × 6), θ̂⁺ (n), θ̂̇ (n), f (N)]. Same
-    arithmetic. Returns (saturated, frozen, projected, hold_until)."""
-    n = theta.shape[0]
-    err = out[6:36].reshape((5, 6))
-    u, saturated, frozen, projected, hold_until = ambc_cycle(
-        model, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, K, gains[0], gains[1], eps,
-        adapt, dt, t, robust, dead_zone, gains[2], gains[3], B_pinv, f_max,
-        freeze_on_saturation, hold_s, band, last_f, hold_until, err, out[36:36 + n],
-        out[36 + n:36 + 2 * n], out[36 + 2 * n:])
-    for i in range(6):
-        out[i] = u[i]
-    return saturated, frozen, projected, hold_until
+    return saturated, False, projected, hold_until

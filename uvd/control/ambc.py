@@ -209,14 +209,15 @@ class AMBCParams:
         kp, kd = gain_vector(self.kp, "kp"), gain_vector(self.kd, "kd")
         object.__setattr__(self, "_c", (_MODEL_CODE[self.model], kp, kd, mf, dc,
                                         bool(np.any(K > 0))))
-        # the same constants as ambc_step hands them to the kernel, converted once
+        # the kernel's packed parameters (_kernels.pack_ambc_params), packed once; its output
+        # buffer's length; the last thruster commands before the first cycle
         object.__setattr__(self, "_hot", (
-            _MODEL_CODE[self.model], np.ascontiguousarray(np.stack([kp, kd, mf, dc]),
-                                                          dtype=np.float64),
-            float(self.eps), bool(np.any(K > 0)), bool(rb.enabled), float(rb.dead_zone),
-            bool(rb.freeze_on_saturation), float(rb.reversal_hold_s),
-            float(rb.stiction_band_n), 36 + 2 * K.shape[0] + B_pinv.shape[0],
-            np.zeros(B_pinv.shape[0])))
+            _MODEL_CODE[self.model],
+            _kernels.pack_ambc_params(_MODEL_CODE[self.model], K, kp, kd, mf, dc,
+                                      float(self.eps), rb.enabled, float(rb.dead_zone),
+                                      rb.freeze_on_saturation, float(rb.reversal_hold_s),
+                                      float(rb.stiction_band_n), B_pinv, f_max),
+            36 + 2 * K.shape[0] + B_pinv.shape[0], np.zeros(B_pinv.shape[0])))
 
     @property
     def n(self) -> int:
@@ -319,17 +320,14 @@ def ambc_step(state: VehicleState, reference: Reference, params: AMBCParams, ctr
     -------
     u : (6,) body wrench [f; τ] (N, N m). ctrl : the next :class:`AMBCState`.
     """
-    code, gains, eps, adapt, robust, dead_zone, freeze_sat, hold_s, band, n_out, f0 = \
-        params._hot
+    code, P, n_out, f0 = params._hot
     n = params.K.shape[0]
     out = np.empty(n_out)  # [u, err, θ̂⁺, θ̂̇, f]: the new state's arrays are views of it
     last_f = ctrl.last_f if ctrl.last_f is not None else f0
     ff, use_ff = _ff(code, ctrl.theta, reference)
-    saturated, frozen, projected, hold_until = _kernels.ambc_cycle_buf(
-        code, state.H, state.v, reference.H, reference.v, reference.vdot, _mask(reference),
-        ff, use_ff, ctrl.theta, params.K, gains, eps, adapt, float(dt), float(ctrl.t), robust,
-        dead_zone, params.B_pinv, params.f_max, freeze_sat, hold_s, band, last_f,
-        float(ctrl.hold_until), out)
+    saturated, frozen, projected, hold_until = _kernels.ambc_cycle(
+        P, state.H, state.v, reference.H, reference.v, reference.vdot, _mask(reference), ff,
+        use_ff, ctrl.theta, float(dt), float(ctrl.t), last_f, float(ctrl.hold_until), out)
     # positional, in the field order of AMBCState (a frozen dataclass's keyword __init__ costs
     # twice as much, on every cycle)
     return out[0:6], AMBCState(out[36:36 + n], out[36 + n:36 + 2 * n], ctrl.t + dt, out[6:12],
@@ -391,19 +389,15 @@ def mbc_step(state: VehicleState, reference: Reference, params: MBCParams, ctrl:
              dt: float) -> tuple[np.ndarray, MBCState]:
     """One MBC cycle, (5.11): u = −(k_p A⁻ᵀ(Δψ)Δψ + k_d Δv) + W_MBC θ_UV (5.12), with the
     feed-forward preview of :func:`ambc_step` when ``reference.preview`` is set."""
-    a = params._ambc
-    code, kp, kd, mf, dc, _ = a._c
-    n = a.n
-    err = np.empty((5, 6))
+    code, P, n_out, f0 = params._ambc._hot  # K_θ = 0: no adaptation
+    out = np.empty(n_out)
     ff, use_ff = _ff(code, params.theta, reference)
-    u, _, _, _, _ = _kernels.ambc_cycle(
-        code, state.H, state.v, reference.H, reference.v, reference.vdot, _mask(reference),
-        ff, use_ff, params.theta, a.K, kp, kd, 0.0, False, float(dt), 0.0, False, 0.0, mf, dc,
-        a.B_pinv, a.f_max, False, 0.0, 0.0, _EMPTY, -1.0, err, np.empty(n), np.empty(n), _EMPTY)
-    return u, MBCState(dpsi=err[0], dv=err[1])
+    _kernels.ambc_cycle(P, state.H, state.v, reference.H, reference.v, reference.vdot,
+                        _mask(reference), ff, use_ff, params.theta, float(dt), 0.0, f0, -1.0,
+                        out)
+    return out[0:6], MBCState(dpsi=out[6:12], dv=out[12:18])
 
 
-_EMPTY = np.zeros(0)
 _ZERO6 = np.zeros(6)
 
 
