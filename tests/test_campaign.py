@@ -113,11 +113,27 @@ def test_intervals_match_their_closed_forms():
 
 
 # ------------------------------------------------------------------------------ on Dask
+# The first lockstep run after a change to a kernel's source compiles every numba kernel (the
+# cache is keyed on the sources, uvd/_jitcache.py): ~30 s on a quiet machine, minutes on a
+# loaded one. It is done once, here in the test process (the workers share the cache), and
+# these tests get room for it beside the default 300 s.
+@pytest.fixture(scope="module")
+def kernels_compiled():
+    from uvd.campaign.runs import execute
+    r = execute("control", {**_spec(TINY).runs[0]})
+    assert r["error"] is None
+
+
+DASK = [pytest.mark.timeout(900), pytest.mark.usefixtures("kernels_compiled")]
+
+
 def _comparable(rows):
     return {r["key"]: {k: v for k, v in r.items() if k not in RUN_ENVIRONMENT + ("index",)}
             for r in rows}
 
 
+@DASK[0]
+@DASK[1]
 def test_two_runs_on_a_local_cluster_the_test_starts_one_raising(tmp_path):
     from dask.distributed import LocalCluster
 
@@ -140,6 +156,8 @@ def test_two_runs_on_a_local_cluster_the_test_starts_one_raising(tmp_path):
     assert table.column("out_position_mne").to_pylist() == [good["out_position_mne"], None]
 
 
+@DASK[0]
+@DASK[1]
 def test_rows_are_bit_identical_whatever_the_worker_count_or_order(tmp_path):
     spec = _spec({**TINY, "seed": [0, 1, 2], "kp": [250.0, 300.0]})
     backwards = spec.__class__(**{**spec.__dict__, "runs": tuple(reversed(spec.runs))})
@@ -152,6 +170,8 @@ def test_rows_are_bit_identical_whatever_the_worker_count_or_order(tmp_path):
     assert len({r["out_position_mne"] for r in a.values()}) == 6
 
 
+@DASK[0]
+@DASK[1]
 def test_a_campaign_killed_mid_run_resumes_without_redoing_a_finished_run(tmp_path):
     spec_file = tmp_path / "c.toml"
     spec_file.write_text('[campaign]\nname = "kill"\nkind = "control"\n[axes]\n'
