@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from tests.hil_daemon import run_scenario, running_bridge
-from uvd.experiments.lockstep import Lockstep, LockstepConfig
+from uvd.lockstep import Lockstep, LockstepConfig
 from uvd.runtime import commands as cmd
 from uvd.runtime.build import build_core, start_pose
 from uvd.runtime.config import load_config

@@ -9,7 +9,7 @@ from dataclasses import replace
 import pytest
 
 from sim_bridge.instruments.models import InstrumentConfig
-from uvd.experiments.lockstep import Lockstep, LockstepConfig, run, tracking_errors
+from uvd.lockstep import Lockstep, LockstepConfig, run, tracking_errors
 from uvd.runtime.build import build_core, start_pose
 from uvd.runtime.config import load_config
 

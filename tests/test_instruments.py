@@ -78,7 +78,7 @@ def test_simulation_instruments_section_is_instrument_config(tmp_path):
     import dataclasses
 
     from sim_bridge.instruments.models import InstrumentConfig, instrument_config
-    from uvd.experiments.lockstep import lockstep_config
+    from uvd.lockstep import lockstep_config
     from uvd.runtime.config import ConfigValidationError, SimInstrumentsSection, load_config
 
     root = Path(__file__).resolve().parents[1]
@@ -200,7 +200,7 @@ def test_lockstep_on_the_ins_frame_hands_same_instant_frames_to_the_next_cycle()
     grid), depth at 10 Hz."""
     from dataclasses import replace
 
-    from uvd.experiments.lockstep import Lockstep, LockstepConfig, lockstep_config
+    from uvd.lockstep import Lockstep, LockstepConfig, lockstep_config
     from uvd.runtime.build import build_core, start_pose
     from uvd.runtime.config import load_config
 

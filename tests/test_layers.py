@@ -9,7 +9,7 @@ and ``from … import`` (relative ones resolved; also those inside functions and
 Layers, top to bottom (a module may import its own layer and any layer below it):
 
   0. uvd.cli, uvd.commands, uvd.__main__
-  1. uvd.experiments, uvd.bench, uvd.fdc, uvd.campaign
+  1. uvd.lockstep, uvd.experiments, uvd.bench, uvd.fdc, uvd.campaign
   2. uvd.runtime, uvd.links (the daemon and its faces: one layer)
   3. uvd.telemetry
   4. uvd.io
@@ -37,7 +37,7 @@ PACKAGES = ("uvd", "drivers", "sim_bridge")
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("uvd.cli", "uvd.commands", "uvd.__main__"),
-    ("uvd.experiments", "uvd.bench", "uvd.fdc", "uvd.campaign"),
+    ("uvd.lockstep", "uvd.experiments", "uvd.bench", "uvd.fdc", "uvd.campaign"),
     ("uvd.runtime", "uvd.links"),
     ("uvd.telemetry",),
     ("uvd.io",),
@@ -56,7 +56,7 @@ DRIVERS_MAY_IMPORT = ("uvd.errors",)
 #: the contract between the two processes) and the thread-scheduling helpers
 SIM_BRIDGE_MAY_IMPORT = ("sim_bridge", "drivers", "uvd.model", "uvd.io", "uvd.control",
                          "uvd.runtime.config", "uvd.runtime.rtthreads")
-#: the layers that may import sim_bridge (the lockstep runners, benchmarks, `uvd demo`)
+#: the layers that may import sim_bridge (lockstep, its experiments, benchmarks, `uvd demo`)
 SIM_BRIDGE_IMPORTED_BY = (0, 1)
 
 #: What a module of uvd/model, uvd/control, uvd/estimation may import besides the project's
@@ -219,9 +219,9 @@ def test_pure_packages_do_no_io_clock_or_logging():
     ("uvd.telemetry.report", "uvd.links.mcap", True),
     ("uvd.links.mavlink.link", "uvd.runtime.commands", False),
     ("uvd.runtime.app", "uvd.links", False),
-    ("uvd.runtime.app", "uvd.experiments.lockstep", True),
+    ("uvd.runtime.app", "uvd.lockstep", True),
     ("uvd.runtime.app", "sim_bridge.plant", True),
-    ("uvd.experiments.lockstep", "sim_bridge.plant", False),
+    ("uvd.lockstep", "sim_bridge.plant", False),
     ("sim_bridge.plant", "uvd.model.dynamics", False),
     ("sim_bridge.bridge", "uvd.core", True),
     ("sim_bridge.bridge", "uvd.runtime.daemon", True),

@@ -155,7 +155,7 @@ def test_operator_loss_in_lockstep_holds_depth_through_the_one_cycle():
     """The same plug-in trigger and cycle in lockstep: the station heard until 1 s after
     arming, then silent; with the sim's 5 s timeout the cycle holds depth from the first cycle
     past 6 s (no surge, sway or yaw thrust), and the event says why."""
-    from uvd.experiments.lockstep import Lockstep, LockstepConfig
+    from uvd.lockstep import Lockstep, LockstepConfig
     from uvd.runtime import commands as cmd
     from uvd.runtime.build import build_core, start_pose
     cfg = sim_config()

@@ -83,10 +83,10 @@ def _rss_mb(pid: int | None) -> tuple[float, float]:
 def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
     """Tracking error of the armed cycles: the true state (truth log, interpolated at each
     cycle's time) against the reference the daemon used — the same measures as
-    :func:`uvd.experiments.lockstep.tracking_errors`."""
+    :func:`uvd.lockstep.tracking_errors`."""
     from drivers.samples import euler_to_R
     from uvd.control.errors import error_coordinates
-    from uvd.experiments.lockstep import DOF_NAMES, VEL_NAMES
+    from uvd.lockstep import DOF_NAMES, VEL_NAMES
     from uvd.telemetry.records import CycleRecord
 
     t, ref_eta, ref_v = [], [], []
@@ -142,7 +142,7 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
 
 def lockstep_run(cfg, duration_s: float, seed: int):
     """The same configuration (same core, same controller) in lockstep simulation; the log."""
-    from uvd.experiments.lockstep import Lockstep, lockstep_config, run
+    from uvd.lockstep import Lockstep, lockstep_config, run
     from uvd.runtime.build import build_core, start_pose
 
     vehicle = cfg.load_vehicle()
@@ -153,7 +153,7 @@ def lockstep_run(cfg, duration_s: float, seed: int):
 
 def lockstep_tracking(log, end_s: float | None = None) -> dict[str, Any]:
     """Tracking errors of a lockstep log over [0, end_s) (the HIL run's armed span)."""
-    from uvd.experiments.lockstep import tracking_errors
+    from uvd.lockstep import tracking_errors
     out = tracking_errors(log, 0.0, end_s)
     out["wall_s"] = log.wall_s
     out["cycles_not_ok"] = int(sum(s != "ok" for s in log.status))
@@ -213,7 +213,7 @@ class _LineTail:
 # ----------------------------------------------------------------------------- the demo
 
 def _fmt_table(hil: dict, lock: dict) -> str:
-    from uvd.experiments.lockstep import DOF_NAMES, VEL_NAMES
+    from uvd.lockstep import DOF_NAMES, VEL_NAMES
     lines = [f"{'DOF':>8} {'position MAE':>14} {'lockstep':>12} {'ratio':>6}   "
              f"{'velocity MAE':>14}"]
     for i, (pn, vn) in enumerate(zip(DOF_NAMES, VEL_NAMES, strict=True)):

@@ -4,7 +4,7 @@ This is the interface between recordings and :mod:`uvd.estimation.ls` /
 :mod:`uvd.estimation.xval` / ``uvd identify`` / ``uvd xval``. Until the black-box recorder
 exists, runs come from the lockstep experiments (``uvd experiment aid-6dof --plots DIR`` writes
 ``DIR/<dataset>-run.npz``), from :meth:`RunLog.from_lockstep` on a
-:class:`uvd.experiments.lockstep.LockstepLog`, or from the JSON-lines telemetry of ``uvd run``
+:class:`uvd.lockstep.LockstepLog`, or from the JSON-lines telemetry of ``uvd run``
 on a vehicle or ``sim-bridge``. The files are read and written by :mod:`uvd.io.runlog`
 (:func:`~uvd.io.runlog.save_runlog`, :func:`~uvd.io.runlog.load_runlog`, which tells the two
 file kinds apart, :func:`~uvd.io.runlog.runlog_from_telemetry`); this module does no I/O.

@@ -1,6 +1,6 @@
 """Shared machinery of the control experiments (``uvd/experiments/control.py``).
 
-:func:`run_control` drives :class:`uvd.experiments.lockstep.Lockstep` (plant + instruments +
+:func:`run_control` drives :class:`uvd.lockstep.Lockstep` (plant + instruments +
 the one core) for a duration and records, every control cycle, the true state and the measured
 (navigation) state against the reference, the commands and the applied wrench, and, every
 ``theta_every_s``, the controller's parameter estimate. Two kinds of tracking error are kept:
@@ -32,7 +32,7 @@ from uvd import core
 from uvd.control import _kernels
 from uvd.control.allocation import Allocator
 from uvd.estimation.navigation import NavConfig
-from uvd.experiments.lockstep import DOF_NAMES, VEL_NAMES, Lockstep, LockstepConfig
+from uvd.lockstep import DOF_NAMES, VEL_NAMES, Lockstep, LockstepConfig
 from uvd.model.vehicle import Vehicle
 
 

@@ -2,7 +2,7 @@
 cross-validation, robust and full AMBC (``uvd experiment NAME``; JSON keys in
 ``docs/experiments.md``).
 
-All run on the lockstep simulator (:mod:`uvd.experiments.lockstep`): the ``jhu-rov`` plant
+All run on the lockstep simulator (:mod:`uvd.lockstep`): the ``jhu-rov`` plant
 (decoupled model of Tables 5.4/5.5) unless said otherwise, the control cycle at 10 Hz (§5.3.1),
 the plant at 100 Hz, thruster lag, reversal stiction (§5.3.4) and saturation on, Table A.1 sensor
 noise on, the plant started on the reference.

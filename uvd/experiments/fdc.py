@@ -43,7 +43,7 @@ class SimVehicle:
         :class:`~sim_bridge.instruments.models.InstrumentConfig` (Table A.1 by default)."""
         from sim_bridge.instruments.models import InstrumentConfig
         from uvd.estimation.aid import aid6_estimator
-        from uvd.experiments.lockstep import Lockstep, LockstepConfig
+        from uvd.lockstep import Lockstep, LockstepConfig
         from uvd.runtime.build import build_core, start_pose
         from uvd.runtime.config import DEFAULT_CONFIG, load_config
 

@@ -64,7 +64,7 @@ from uvd.estimation.xval import (
     format_mae_table,
 )
 from uvd.experiments import Experiment, ExperimentOptions
-from uvd.experiments.lockstep import Lockstep, LockstepConfig
+from uvd.lockstep import Lockstep, LockstepConfig
 from uvd.io.figures import write_xval_figures
 from uvd.io.runlog import save_runlog
 from uvd.io.vehicle import load_vehicle

@@ -297,7 +297,7 @@ def aid_bluerov2_demo(out: Path, duration_s: float = 120.0) -> dict:
     the plant's truth. Writes ``aid-bluerov2.json`` and ``aid-bluerov2.png``."""
     import tomllib
 
-    from uvd.experiments.lockstep import Lockstep, lockstep_config
+    from uvd.lockstep import Lockstep, lockstep_config
     from uvd.model.params import params_from_theta
     from uvd.runtime.build import build_core, start_pose
     from uvd.runtime.config import parse_config
