@@ -188,6 +188,22 @@ class FrameReader:
             await asyncio.wait({task}, timeout=2.0)
         self.connected = False
 
+    @property
+    def source_open(self) -> bool:
+        """The byte source is open (a graceful :meth:`close` may still be finishing)."""
+        return self._transport is not None
+
+    def force_close(self) -> None:
+        """Close the port under the transport if a graceful close never completed (a serial
+        port's exclusive lock is released); never raises."""
+        tr = self._transport
+        ser = getattr(tr, "serial", None) if tr is not None else None
+        if ser is not None:
+            try:
+                ser.close()
+            except OSError:
+                pass
+
     async def __aenter__(self) -> FrameReader:
         self.start()
         return self

@@ -129,8 +129,8 @@ def test_a_frozen_estimate_is_published_and_logged_once(tmp_path, caplog):
     st = d.state.est[0]
     d.state.est = (replace(st, frozen=True, freeze_reason="M̂ not positive definite at t = 9 s"),)
     with caplog.at_level("WARNING", logger="uvd.daemon"):
-        d._publish_estimates(123)
-        d._publish_estimates(456)
+        d.estimates.publish(123)
+        d.estimates.publish(456)
     recs = [r for r in lane.queue.drain()  # not the start record nor the controller's
             if r["type"] == "estimate" and r["source"] == "estimator"]
     assert [r["t_ns"] for r in recs] == [123, 456]
@@ -139,7 +139,7 @@ def test_a_frozen_estimate_is_published_and_logged_once(tmp_path, caplog):
     assert recs[0]["theta"] is not st.theta  # a copy: the record never changes afterwards
     # age_s: the time since the estimator last stepped, not a constant
     d.state.est_t_ns = 10**9
-    d._publish_estimates(int(3.5e9))
+    d.estimates.publish(int(3.5e9))
     (rec,) = [r for r in lane.queue.drain() if r["type"] == "estimate" and
               r["source"] == "estimator"]
     assert rec["age_s"] == pytest.approx(2.5)

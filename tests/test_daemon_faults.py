@@ -408,8 +408,8 @@ class StallingDaemon(Daemon):
     stall_s = 0.0
     stalled: list[int]
 
-    def cycle(self, t_ns: int, dt: float) -> None:
-        super().cycle(t_ns, dt)
+    def tick(self, t_ns: int, dt: float) -> None:
+        super().tick(t_ns, dt)
         if self.stall_s:
             self.stalled.append(t_ns)
             time.sleep(self.stall_s)

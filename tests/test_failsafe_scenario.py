@@ -20,10 +20,9 @@ import pytest
 from tests.hil_daemon import run_scenario, running_bridge
 from uvd.lockstep import Lockstep, LockstepConfig
 from uvd.runtime import commands as cmd
-from uvd.runtime.build import build_core, start_pose
+from uvd.runtime.build import make_cycle, start_pose
 from uvd.runtime.config import load_config
 from uvd.runtime.leak import leak_sensor_fault_trigger
-from uvd.runtime.supervisor import Supervisor
 
 pytestmark = pytest.mark.slow
 
@@ -52,11 +51,10 @@ def run_lockstep(cfg) -> list[tuple[str, str, np.ndarray, tuple]]:
     """The scenario in lockstep: (action, mode, thrust, events) per cycle from arming on."""
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
-    sup = Supervisor(cfg.failsafe, extra_triggers=[leak_sensor_fault_trigger()])
-    sim = Lockstep(vehicle, build_core(cfg, vehicle),
-                   LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
-                   supervisor=sup)
-    sim.cycle()  # one cycle in standby: the arming checks need a health snapshot
+    cycle = replace(make_cycle(cfg, vehicle), extra_triggers=(leak_sensor_fault_trigger(),))
+    sim = Lockstep(vehicle, cycle, LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0),
+                   H0=H0, v0=v0, armed=False)
+    sim.advance()  # one cycle in standby: the arming checks need a health snapshot
     assert sim.command(cmd.Arm()).ok
     dt = sim.dt_control
     todo = sorted((round(t / dt), what) for t, what in SCENARIO)
@@ -70,7 +68,7 @@ def run_lockstep(cfg) -> list[tuple[str, str, np.ndarray, tuple]]:
                 assert sim.command(cmd.ResetFailsafe((what[1],))).ok
             else:
                 sim.amplifier_faults = (f"node {what[1]}: overcurrent",)
-        out = sim.cycle()
+        out = sim.advance()
         r = sim.last_result
         rows.append((r.decision.action.label, out.mode, out.thrust_n.copy(),
                      tuple((e.kind, e.trigger) for e in r.decision.events)))

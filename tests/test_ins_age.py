@@ -12,6 +12,7 @@ from sim_bridge.instruments.models import InstrumentConfig
 from uvd.lockstep import Lockstep, LockstepConfig, run, tracking_errors
 from uvd.runtime.build import build_core, start_pose
 from uvd.runtime.config import load_config
+from uvd.runtime.cycle import unsupervised
 
 DURATION_S = 120.0
 
@@ -20,7 +21,7 @@ def _heading_mae(cfg, ins_offset_s: float, propagate: bool) -> float:
     cfg = replace(cfg, navigation=replace(cfg.navigation, propagate_ins=propagate))
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, build_core(cfg, vehicle),
+    sim = Lockstep(vehicle, unsupervised(build_core(cfg, vehicle)),
                    LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0,
                                   instruments=InstrumentConfig(ins_offset_s=ins_offset_s)),
                    H0=H0, v0=v0)

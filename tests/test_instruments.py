@@ -203,6 +203,7 @@ def test_lockstep_on_the_ins_frame_hands_same_instant_frames_to_the_next_cycle()
     from uvd.lockstep import Lockstep, LockstepConfig, lockstep_config
     from uvd.runtime.build import build_core, start_pose
     from uvd.runtime.config import load_config
+    from uvd.runtime.cycle import unsupervised
 
     assert LockstepConfig().ins_trigger is False
     cfg = load_config(Path(__file__).resolve().parents[1] / "config" / "sim-bluerov2.toml")
@@ -211,10 +212,10 @@ def test_lockstep_on_the_ins_frame_hands_same_instant_frames_to_the_next_cycle()
 
     def stamps(ls_cfg):
         """{cycle time: (latest DVL stamp, latest depth stamp)} in ms, after each cycle."""
-        sim = Lockstep(vehicle, build_core(cfg, vehicle), ls_cfg, H0=H0, v0=v0)
+        sim = Lockstep(vehicle, unsupervised(build_core(cfg, vehicle)), ls_cfg, H0=H0, v0=v0)
         out = {}
         for k in range(30):
-            sim.cycle()
+            sim.advance()
             nav = sim.state.nav
             out[20 * k] = (nav.dvl_t_ns // 1_000_000, nav.depth_t_ns // 1_000_000)
         return out

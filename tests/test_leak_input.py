@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from uvd.runtime.config import ConfigValidationError, parse_config
+from uvd.runtime.cycle import CycleConfig
 from uvd.runtime.failsafe import Action, Health
 from uvd.runtime.leak import LeakInput, LeakSection, leak_sensor_fault_trigger, read_level
 from uvd.runtime.supervisor import Supervisor
@@ -89,7 +90,7 @@ def test_start_fails_naming_the_path_and_polls_in_its_own_thread(tmp_path):
 
 
 def test_the_leak_disarms_and_latches_and_the_sensor_fault_warns():
-    sup = Supervisor(extra_triggers=[leak_sensor_fault_trigger()])
+    sup = Supervisor(CycleConfig(None, extra_triggers=(leak_sensor_fault_trigger(),)))
     ok = dict(ins_age_s=0.01, dvl_age_s=0.01, depth_age_s=0.01, bottom_lock=True,
               amplifiers_enabled=True, feedback_age_s=0.01)
     d = sup.step(Health(t_ns=S, depth_m=1.0, leak=False,

@@ -13,6 +13,7 @@ from uvd.links.mavlink.params import PARAMS, check_value, param_table, write_par
 from uvd.links.mavlink.signing import SigningError, load_key
 from uvd.runtime import schema
 from uvd.runtime.config import DEFAULT_CONFIG, load_config
+from uvd.runtime.cycle import CycleConfig
 from uvd.runtime.daemon import kept_params
 from uvd.runtime.failsafe import Action, Health, Thresholds
 from uvd.runtime.schema import setting
@@ -66,8 +67,8 @@ def test_parameters_come_from_the_schema_and_a_vector_becomes_per_axis_names():
 
 
 def test_operator_loss_fires_after_the_timeout_with_the_configured_action_and_clears():
-    sup = Supervisor(Thresholds(clear_after_s=1.0),
-                     extra_triggers=[operator_loss_trigger(5.0, "hold-depth")])
+    sup = Supervisor(CycleConfig(None, Thresholds(clear_after_s=1.0),
+                                 extra_triggers=(operator_loss_trigger(5.0, "hold-depth"),)))
 
     def step(t_s, age):
         d = sup.step(Health(t_ns=int(t_s * 1e9), extra={OPERATOR_AGE: age}))
@@ -157,21 +158,21 @@ def test_operator_loss_in_lockstep_holds_depth_through_the_one_cycle():
     past 6 s (no surge, sway or yaw thrust), and the event says why."""
     from uvd.lockstep import Lockstep, LockstepConfig
     from uvd.runtime import commands as cmd
-    from uvd.runtime.build import build_core, start_pose
+    from uvd.runtime.build import make_cycle, start_pose
     cfg = sim_config()
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, build_core(cfg, vehicle),
+    sim = Lockstep(vehicle, make_cycle(cfg, vehicle),
                    LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
-                   supervisor=Supervisor(cfg.failsafe, extra_triggers=plugin_triggers(cfg)))
-    sim.cycle()
+                   armed=False)
+    sim.advance()
     assert sim.command(cmd.Arm()).ok
     t_arm = sim.t_ns
     fired = None
     for _ in range(80):  # 8 s at 10 Hz
         t = (sim.t_ns - t_arm) * 1e-9
         sim.extra = {OPERATOR_AGE: max(0.0, t - 1.0), "leak_sensor_fault": False}
-        out = sim.cycle()
+        out = sim.advance()
         ev = [e for e in sim.last_result.decision.events if e.trigger == "operator_heartbeat_lost"]
         if ev and fired is None:
             fired = (t, ev[0].kind, out.mode)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from uvd.runtime.cycle import CycleConfig
 from uvd.runtime.failsafe import Action, ActiveTrigger, Decision, Health, Thresholds
 from uvd.runtime.lifecycle import (
     ArmingCheck,
@@ -154,7 +155,7 @@ def test_status_text():
 
 def test_supervisor_steps_arbiter_and_lifecycle_with_records():
     events, transitions = [], []
-    sup = Supervisor(Thresholds(), on_event=events.append,
+    sup = Supervisor(CycleConfig(None, Thresholds()), on_event=events.append,
                      on_transition=lambda tr, d: transitions.append(tr))
     sup.boot_complete(0)
     t = 0
@@ -182,7 +183,8 @@ def test_supervisor_reset_and_listener_failures():
     def bad_listener(*a):
         raise RuntimeError("listener")
 
-    sup = Supervisor(Thresholds(), on_event=bad_listener, on_transition=bad_listener)
+    sup = Supervisor(CycleConfig(None, Thresholds()), on_event=bad_listener,
+                     on_transition=bad_listener)
     sup.boot_complete(0)
     sup.step(good(NS, leak=True))
     assert sup.listener_errors >= 2
@@ -192,7 +194,7 @@ def test_supervisor_reset_and_listener_failures():
     assert sup.reset_failsafe(2 * NS + 1, ["leak"]) == ()
     assert not sup.step(good(3 * NS)).active
     sup.set_thresholds(Thresholds(disabled=("leak",)))
-    assert "leak" not in {d.name for d in sup.registry}
+    assert "leak" not in {d.name for d in sup.config.registry}
     assert not sup.step(good(4 * NS, leak=True)).active
 
 
@@ -202,13 +204,12 @@ def test_the_cycle_waits_for_a_dvl_still_starting_at_boot_and_fires_on_its_silen
     refused until the DVL is heard, then at once; armed, the DVL's silence is stale as before."""
     from drivers.samples import DepthSample, DvlSample, InsSample
     from uvd.runtime import commands as cmd
-    from uvd.runtime.build import build_core
+    from uvd.runtime.build import make_cycle
     from uvd.runtime.config import load_config
-    from uvd.runtime.cycle import ActuatorStatus, Cycle, CycleInputs
+    from uvd.runtime.cycle import ActuatorStatus, CycleInputs
 
     cfg = load_config("config/sim-bluerov2.toml")
-    sup = Supervisor(cfg.failsafe)
-    cyc = Cycle(build_core(cfg, cfg.load_vehicle()), sup, north_m=0.5, east_m=0.5)
+    sup = Supervisor(make_cycle(cfg, cfg.load_vehicle()), north_m=0.5, east_m=0.5)
     sup.boot_complete(0, "test")
     dt_ns = 20_000_000  # 50 Hz
 
@@ -218,17 +219,17 @@ def test_the_cycle_waits_for_a_dvl_still_starting_at_boot_and_fires_on_its_silen
                           DvlSample(t, np.zeros(3), True, 2.0) if dvl else None,
                           DepthSample(t, 1.8 + 1e-4 * (k % 3)),
                           ActuatorStatus(np.zeros(8), True, (), t))
-        return cyc.update(inp, 0.02), t
+        return sup.update(inp, 0.02), t
 
     for k in range(10):  # 0.2 s of a DVL still starting
         r, t = step(k, dvl=False)
         assert r.decision.waiting == ("dvl_stale", "dvl_bottom_lock_lost")
         assert r.decision.action == Action.NONE
-    res = cyc.apply(cmd.Arm(), t)
+    res = sup.apply(cmd.Arm(), t)
     assert not res.ok and "failsafe_clear: waiting for a first sample: dvl_stale" in res.reason
     r, t = step(10, dvl=True)  # the DVL's first frame
     assert r.decision.waiting == ()
-    assert cyc.apply(cmd.Arm(), t).ok  # no clear_after_s to sit out: nothing had fired
+    assert sup.apply(cmd.Arm(), t).ok  # no clear_after_s to sit out: nothing had fired
     assert not [e for e in sup.failsafe_events() if e["type"] == "failsafe"]
     fired = None
     for k in range(11, 11 + 60):  # armed, the DVL silent for 1.2 s > dvl_stale_s = 1 s

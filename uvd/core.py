@@ -108,11 +108,11 @@ HOLD_DEPTH_MASK = np.array([False, False, True, True, True, False])
 
 @dataclass(frozen=True)
 class CoreConfig:
-    """Everything constant about the cycle."""
+    """Everything constant about the cycle (Pinocchio's model; :class:`CoreState` is its data)."""
 
     nav: NavConfig
     controller: ControllerSpec
-    reference: Any  # object with .at(t_s) -> Reference
+    reference: Any  # object with .at(t_s) -> Reference: the one a run starts with (core_init)
     allocator: Allocator
     k_thrust: np.ndarray
     estimators: tuple[EstimatorSpec, ...] = ()
@@ -197,6 +197,8 @@ class CoreInputs(NamedTuple):
 
 @dataclass
 class CoreState:
+    """What the core carries from one cycle to the next (a new one each cycle)."""
+
     nav: NavMemory
     ctrl: Any
     est: tuple
@@ -206,6 +208,9 @@ class CoreState:
     u_last: np.ndarray = field(default_factory=lambda: np.zeros(6))
     hold: Reference | None = None  # the pose HOLD_DEPTH holds, taken when the mode was entered
     ctrl_t_ns: int | None = None  # when the controller last stepped its state (AMBC's θ̂)
+    #: the running reference (``.at(t_s) -> Reference``, t_s from ``t0_ns``): the configured
+    #: one from :func:`core_init`; the supervised cycle replaces it (a pose to hold)
+    reference: Any = None
 
 
 class CoreOutputs(NamedTuple):
@@ -243,7 +248,7 @@ class Sensed(NamedTuple):
 def core_init(cfg: CoreConfig, *, north_m: float = 0.0, east_m: float = 0.0) -> CoreState:
     return CoreState(nav=nav_init(cfg.nav, north_m=north_m, east_m=east_m),
                      ctrl=cfg.controller.init_state,
-                     est=tuple(e.init_state for e in cfg.estimators))
+                     est=tuple(e.init_state for e in cfg.estimators), reference=cfg.reference)
 
 
 def _finite(a: np.ndarray) -> bool:
@@ -444,9 +449,10 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     nav = sensed.nav
     t0 = state.t0_ns if state.t0_ns is not None else inputs.t_ns
     t_s = (inputs.t_ns - t0) * 1e-9
-    ref = cfg.reference.at(t_s)
+    reference = state.reference
+    ref = reference.at(t_s)
     if cfg.ff_preview_s > 0.0:
-        ref = replace(ref, preview=cfg.reference.at(t_s + cfg.ff_preview_s))
+        ref = replace(ref, preview=reference.at(t_s + cfg.ff_preview_s))
 
     armed = inputs.armed
     mode = inputs.mode if armed else _ZERO_MODE
@@ -538,7 +544,7 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
                       guard, given_up)
     return out, CoreState(sensed.nav_mem, ctrl, sensed.est, t0, sensed.est_t_ns,
                           state.cycles + 1, u_cmd, hold,
-                          inputs.t_ns if ctrl is not state.ctrl else state.ctrl_t_ns)
+                          inputs.t_ns if ctrl is not state.ctrl else state.ctrl_t_ns, reference)
 
 
 def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float

@@ -1,18 +1,21 @@
-"""Lockstep simulation: the plant, its instruments and the core advance together on a simulated
-clock — no I/O, no sleeping (docs/architecture.md, "the three ways of running the one cycle").
+"""Lockstep simulation, one of the three ways of running the cycle: the plant, its instruments
+and the cycle advance together on a simulated clock — no I/O, no sleeping
+(docs/architecture.md, "the three ways of running the one cycle").
 
 Each control period the plant takes ``plant_rate_hz / control_rate_hz`` RKMK4 steps with the
 thrust command held (zero-order hold, as the thesis's 100 ms cycle, §5.3.1); the instruments
 sample the true state at their own rates (Table A.1); the samples that arrived during the
-period, and the propeller speeds, are the next cycle's :class:`uvd.core.CoreInputs`.
+period, and the propeller speeds, are the next cycle's :class:`uvd.runtime.cycle.CycleInputs`.
 
-With a ``supervisor`` the cycle is the daemon's very update (:class:`uvd.runtime.cycle.Cycle`):
-health, the failsafe arbiter, the lifecycle and the operator's commands
-(:meth:`Lockstep.command`), every failsafe mode included. Instrument faults
-(:attr:`Lockstep.faults`, :mod:`sim_bridge.instruments.faults`) and amplifier faults
-(:attr:`Lockstep.amplifier_faults`) are injected on the simulated clock — the same faulty
-samples the real-time bridge produces. Without one (the thesis experiments, which ran no
-failsafes) the core is stepped directly, always armed in the configured controller's mode.
+The cycle is always the daemon's very update (:func:`uvd.runtime.cycle.update`): health, the
+failsafe arbiter, the lifecycle and the operator's commands (:meth:`Lockstep.command`), every
+failsafe mode included. Instrument faults (:attr:`Lockstep.faults`,
+:mod:`sim_bridge.instruments.faults`) and amplifier faults (:attr:`Lockstep.amplifier_faults`)
+are injected on the simulated clock — the same faulty samples the real-time bridge produces.
+What a run supervises is its cycle's configuration: ``uvd demo``'s reference run takes the
+daemon's (:func:`uvd.runtime.build.make_cycle`), the thesis's experiments, which ran no
+failsafes, :func:`uvd.runtime.cycle.unsupervised` — armed from the start in the configured
+controller's mode.
 """
 
 from __future__ import annotations
@@ -32,6 +35,8 @@ from sim_bridge.plant import Plant, PlantConfig
 from uvd import core
 from uvd.control.errors import error_coordinates
 from uvd.model.vehicle import Vehicle
+from uvd.runtime.cycle import ActuatorStatus, CycleConfig, CycleInputs, CycleResult
+from uvd.runtime.supervisor import Supervisor
 
 DOF_NAMES = ("x", "y", "z", "roll", "pitch", "heading")
 VEL_NAMES = ("u", "v", "w", "p", "q", "r")
@@ -94,16 +99,36 @@ class LockstepLog:
     saturated: np.ndarray
     status: list
     wall_s: float = 0.0
+    #: the supervisor's failsafe events and lifecycle transitions (plain dicts), when kept
+    failsafe_events: list = field(default_factory=list)
 
 
 class Lockstep:
-    """A plant + instruments + core, stepped one control cycle at a time."""
+    """A plant + instruments + the cycle, advanced one control period at a time.
 
-    def __init__(self, vehicle: Vehicle, core_cfg: core.CoreConfig, cfg: LockstepConfig, *,
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The plant's vehicle.
+    cycle : CycleConfig
+        The cycle to run (:func:`uvd.runtime.build.make_cycle`,
+        :func:`uvd.runtime.cycle.unsupervised`).
+    cfg : LockstepConfig
+    H0, v0 : ndarray, optional
+        The plant's initial pose and velocity; navigation starts at its position.
+    armed : bool
+        The lifecycle starts ARMED (else in STANDBY: arm with :meth:`command`).
+    supervisor_args
+        For the :class:`~uvd.runtime.supervisor.Supervisor` (listeners, history).
+    """
+
+    def __init__(self, vehicle: Vehicle, cycle: CycleConfig, cfg: LockstepConfig, *,
                  H0: np.ndarray | None = None, v0: np.ndarray | None = None,
-                 supervisor=None, hold_on_arm: bool = False) -> None:
+                 armed: bool = True, **supervisor_args) -> None:
+        if not isinstance(cycle, CycleConfig):
+            raise TypeError("Lockstep runs a cycle (uvd.runtime.build.make_cycle or "
+                            f"uvd.runtime.cycle.unsupervised), not a {type(cycle).__name__}")
         self.cfg = cfg
-        self.core_cfg = core_cfg
         self.plant = Plant(vehicle, PlantConfig(rate_hz=cfg.plant_rate_hz,
                                                 thrusters=cfg.plant.thrusters), H0=H0, v0=v0)
         self.rng = np.random.default_rng(cfg.seed)
@@ -114,9 +139,6 @@ class Lockstep:
                                              frame_seed=cfg.seed if cfg.frame_noise else None)
         #: amplifier faults the cycle sees (names, e.g. ``("node 3: overcurrent",)``)
         self.amplifier_faults: tuple[str, ...] = ()
-        #: the thrusters' effectiveness η the cycle is told (None: all healthy); the plant's
-        #: own is ``plant.thrusters.health``
-        self.thruster_eta: np.ndarray | None = None
         #: signals of plug-in failsafe triggers the cycle sees, as the daemon's read phase
         #: gathers them (``{"operator_heartbeat_age_s": 6.0}``, uvd/runtime/triggers.py)
         self.extra: dict | None = None
@@ -125,46 +147,41 @@ class Lockstep:
         self.plant_dt_ns = int(round(1e9 / cfg.plant_rate_hz))
         north, east = self.plant.H[0, 3], self.plant.H[1, 3]
         self.instruments.dr_north, self.instruments.dr_east = north, east
-        self.state = core.core_init(core_cfg, north_m=north, east_m=east)
-        self.runner = None
-        if supervisor is not None:
-            from uvd.runtime.cycle import Cycle
-            self.runner = Cycle(core_cfg, supervisor, hold_on_arm=hold_on_arm, north_m=north,
-                                east_m=east)
-            supervisor.boot_complete(0, "lockstep")
-        self.last_result = None
+        #: the running cycle: its configuration and its state (``supervisor.data``)
+        self.supervisor = Supervisor(cycle, armed=armed, north_m=north, east_m=east,
+                                     **supervisor_args)
+        if not armed:
+            self.supervisor.boot_complete(0, "lockstep")
+        self.last_result: CycleResult | None = None
         self.thrust_cmd = np.zeros(vehicle.n_thrusters)
         # prime the instruments so the first cycle has every source (the daemon has them from
         # standby)
         self._pending = list(self.instruments.sample(0, self.plant.H, self.plant.v))
         self._deferred = [None, None, None]  # frames held for the cycle after next (ins_trigger)
 
+    @property
+    def core_cfg(self) -> core.CoreConfig:
+        return self.supervisor.config.core
+
+    @property
+    def state(self) -> core.CoreState:
+        """The core's part of the cycle's state."""
+        return self.supervisor.data.core
+
     def command(self, c):
         """Apply an operator command (:mod:`uvd.runtime.commands`) before the next cycle, as
-        the daemon applies a queued one; returns its result. Needs a supervisor."""
-        if self.runner is None:
-            raise RuntimeError("commands need the supervised cycle (Lockstep(supervisor=…))")
-        return self.runner.apply(c, self.t_ns)
+        the daemon applies a queued one; returns its result."""
+        return self.supervisor.apply(c, self.t_ns)
 
-    def cycle(self, *, armed: bool = True) -> core.CoreOutputs:
-        """One control cycle and one control period of the plant. ``armed`` applies to the
-        unsupervised core only (the supervised cycle's lifecycle decides)."""
+    def advance(self) -> core.CoreOutputs:
+        """One cycle, then one control period of the plant under its command."""
         ins, dvl, depth = self._pending
         omega = self.plant.thrusters.omega.copy()
-        if self.runner is not None:
-            from uvd.runtime.cycle import ActuatorStatus, CycleInputs
-            act = ActuatorStatus(omega_rad_s=omega, enabled=True, faults=self.amplifier_faults,
-                                 feedback_t_ns=self.t_ns)
-            self.last_result = r = self.runner.update(
-                CycleInputs(self.t_ns, ins, dvl, depth, act, extra=self.extra),
-                self.dt_control)
-            out = r.out
-            self.state = self.runner.state
-        else:
-            inputs = core.CoreInputs(t_ns=self.t_ns, ins=ins, dvl=dvl, depth=depth,
-                                     propeller_speed_rad_s=omega, armed=armed,
-                                     thruster_eta=self.thruster_eta)
-            out, self.state = core.step(self.core_cfg, inputs, self.state, self.dt_control)
+        act = ActuatorStatus(omega_rad_s=omega, enabled=True, faults=self.amplifier_faults,
+                             feedback_t_ns=self.t_ns)
+        self.last_result = r = self.supervisor.update(
+            CycleInputs(self.t_ns, ins, dvl, depth, act, extra=self.extra), self.dt_control)
+        out = r.out
         self.thrust_cmd = out.thrust_n
         newest = [None, None, None]
         for _ in range(self.substeps):
@@ -211,7 +228,7 @@ def run(sim: Lockstep, duration_s: float, *, progress: Callable[[str], None] | N
     next_report = progress_every_s
     for k in range(n):
         H, v = sim.plant.H.copy(), sim.plant.v.copy()
-        out = sim.cycle()
+        out = sim.advance()
         ref = out.reference
         log.t[k] = k * sim.dt_control
         log.eta[k] = eta_of(H)

@@ -140,15 +140,27 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
     }
 
 
-def lockstep_run(cfg, duration_s: float, seed: int):
-    """The same configuration (same core, same controller) in lockstep simulation; the log."""
-    from uvd.lockstep import Lockstep, lockstep_config, run
-    from uvd.runtime.build import build_core, start_pose
+def lockstep_sim(cfg, seed: int):
+    """The same configuration in lockstep simulation: the daemon's very cycle
+    (:func:`uvd.runtime.build.make_cycle`: the same core, failsafes and lifecycle), armed from
+    the start."""
+    from uvd.lockstep import Lockstep, lockstep_config
+    from uvd.runtime.build import make_cycle, start_pose
 
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, build_core(cfg, vehicle), lockstep_config(cfg, seed), H0=H0, v0=v0)
-    return run(sim, duration_s)
+    return Lockstep(vehicle, make_cycle(cfg, vehicle), lockstep_config(cfg, seed), H0=H0, v0=v0)
+
+
+def lockstep_run(cfg, duration_s: float, seed: int):
+    """:func:`lockstep_sim` run for ``duration_s``; the log (its ``supervisor`` keeps the
+    failsafe events)."""
+    from uvd.lockstep import run
+
+    sim = lockstep_sim(cfg, seed)
+    log = run(sim, duration_s)
+    log.failsafe_events = sim.supervisor.failsafe_events()
+    return log
 
 
 def lockstep_tracking(log, end_s: float | None = None) -> dict[str, Any]:
@@ -291,6 +303,9 @@ def _figures(cfg, duration_s: float, seed: int, run_dir: Path, truth_path: Path,
                                "ratio": ratio,
                                "within_25pct": {k: bool(abs(r - 1.0) <= 0.25)
                                                 for k, r in ratio.items()},
+                               # the same supervised cycle: its failsafes, as the HIL run's
+                               "failsafe_events": [e for e in lock_log.failsafe_events
+                                                   if e.get("type") == "failsafe"],
                                "cycles_not_ok": lock["cycles_not_ok"]}
         if spread_logs:
             figures["lockstep"]["seed_spread"] = _seed_spread(

@@ -34,6 +34,7 @@ from uvd.control.allocation import Allocator
 from uvd.estimation.navigation import NavConfig
 from uvd.lockstep import DOF_NAMES, VEL_NAMES, Lockstep, LockstepConfig
 from uvd.model.vehicle import Vehicle
+from uvd.runtime.cycle import unsupervised
 
 
 @numba.njit(cache=True)
@@ -195,7 +196,7 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
         r0 = reference.at(0.0)
         H0 = r0.H if H0 is None else H0
         v0 = r0.v if v0 is None else v0
-    sim = Lockstep(vehicle, cfg, LockstepConfig(
+    sim = Lockstep(vehicle, unsupervised(cfg), LockstepConfig(
         plant_rate_hz=plant_rate_hz, control_rate_hz=control_rate_hz,
         plant=PlantConfig(rate_hz=plant_rate_hz, thrusters=thrusters),
         instruments=InstrumentConfig(noise=noise) if instruments is None else
@@ -230,7 +231,7 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
         v = plant.v.copy()
         if box is not None:
             omega = plant.thrusters.omega.copy()
-        out = sim.cycle()
+        out = sim.advance()
         if box is not None:
             box.cycle(k, out, omega)
         ref = out.reference

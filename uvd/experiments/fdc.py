@@ -46,13 +46,14 @@ class SimVehicle:
         from uvd.lockstep import Lockstep, LockstepConfig
         from uvd.runtime.build import build_core, start_pose
         from uvd.runtime.config import DEFAULT_CONFIG, load_config
+        from uvd.runtime.cycle import unsupervised
 
         cfg = load_config(DEFAULT_CONFIG if config is None else config)
         vehicle = cfg.load_vehicle()
         core_cfg = build_core(cfg, vehicle, estimators=(
             aid6_estimator(vehicle.params.theta, cfg.estimation.aid_params()),))
         H0, v0 = start_pose(cfg)
-        self.sim = Lockstep(vehicle, core_cfg, LockstepConfig(
+        self.sim = Lockstep(vehicle, unsupervised(core_cfg), LockstepConfig(
             control_rate_hz=cfg.loop.rate_hz, seed=seed,
             instruments=InstrumentConfig() if instruments is None else instruments),
             H0=H0, v0=v0)
@@ -96,7 +97,7 @@ class SimVehicle:
                     sim.plant.thrusters.health[i] = h
                 else:
                     sim.plant.set_fault(PlantFault(**args))
-            out = sim.cycle()
+            out = sim.advance()
             self.cycles.append(lockstep_cycle_record(sim.t_ns, sim.dt_control, out))
             self.k += 1
             if (self.k - 1) % self.every == 0:

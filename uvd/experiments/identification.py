@@ -64,11 +64,12 @@ from uvd.estimation.xval import (
     format_mae_table,
 )
 from uvd.experiments import Experiment, ExperimentOptions
-from uvd.lockstep import Lockstep, LockstepConfig
 from uvd.io.figures import write_xval_figures
 from uvd.io.runlog import save_runlog
 from uvd.io.vehicle import load_vehicle
+from uvd.lockstep import Lockstep, LockstepConfig
 from uvd.model.params import ROTATIONAL_INDEX, RotParams, UVParams
+from uvd.runtime.cycle import unsupervised
 
 VEHICLE = "jhu-rov-coupled"
 _DEG = math.pi / 180.0
@@ -285,7 +286,7 @@ def record(ds: Dataset, *, kind: str, seed: int, minutes: float | None = None,
     ests = ([] if estimator is None else [estimator]) + list(extra_estimators)
     cfg = _core_config(vehicle, ds, ests, controller)
     ref0 = cfg.reference.at(0.0)
-    sim = Lockstep(vehicle, cfg, lcfg, H0=ref0.H, v0=np.zeros(6))
+    sim = Lockstep(vehicle, unsupervised(cfg), lcfg, H0=ref0.H, v0=np.zeros(6))
     n = int(round(minutes * 60.0 / sim.dt_control))
     t = np.arange(n) * sim.dt_control
     R = np.empty((n, 3, 3))
@@ -317,7 +318,7 @@ def record(ds: Dataset, *, kind: str, seed: int, minutes: float | None = None,
     for k in range(n):
         R_true[k] = sim.plant.H[:3, :3]
         v_true[k] = sim.plant.v
-        out = sim.cycle()
+        out = sim.advance()
         R[k] = out.nav.H[:3, :3]
         p[k] = out.nav.H[:3, 3]
         v[k] = out.nav.v

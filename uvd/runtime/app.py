@@ -67,6 +67,7 @@ from uvd.links import LINKS, LinkContext
 from uvd.runtime.clock import Clock
 from uvd.runtime.commands import CommandQueue
 from uvd.runtime.config import Config, ConfigValidationError, load_config
+from uvd.runtime.cycle import CycleConfig
 from uvd.runtime.failsafe import Decision, FailsafeEvent, Health
 from uvd.runtime.lifecycle import Transition
 from uvd.runtime.loop import FixedRateLoop, RealtimeReport, apply_realtime
@@ -176,7 +177,7 @@ class App:
             Path(config.source) if config.source else None)
         self.components = list(components)
         self.notifier = notifier if notifier is not None else SdNotifier()
-        self.supervisor = supervisor or Supervisor(config.failsafe)
+        self.supervisor = supervisor or Supervisor(CycleConfig(None, config.failsafe))
         self._user_on_event = self.supervisor.on_event
         self._user_on_transition = self.supervisor.on_transition
         self.supervisor.on_event = self._on_failsafe_event

@@ -1,8 +1,10 @@
-"""The cycle a configuration describes: :func:`build_core` turns a validated
-:class:`~uvd.runtime.config.Config` into the pure core's :class:`uvd.core.CoreConfig` —
-navigation timeouts, the controller, the reference, allocation, the online estimators and
-the gains of the PDC and hold-depth modes. Shared by the daemon, ``uvd demo``'s lockstep
-comparison and replay, so all three run the very same cycle.
+"""The cycle a configuration describes: :func:`make_cycle` turns a validated
+:class:`~uvd.runtime.config.Config` into the cycle's constant
+:class:`~uvd.runtime.cycle.CycleConfig` — the pure core's :class:`uvd.core.CoreConfig`
+(:func:`build_core`: navigation timeouts, the controller, the reference, allocation, the online
+estimators, the gains of the PDC and hold-depth modes), the failsafe thresholds, the plug-in
+triggers and the arming rule. The one assembly of the daemon (at start and on every reload),
+``uvd demo``'s lockstep reference and replay, so all three run the very same cycle.
 """
 
 from __future__ import annotations
@@ -21,9 +23,11 @@ from uvd.control.trajectory import start_pose as trajectory_start_pose
 from uvd.control.types import ControllerSpec
 from uvd.estimation.navigation import NavConfig
 from uvd.runtime.config import Config
+from uvd.runtime.cycle import CycleConfig
+from uvd.runtime.triggers import plugin_triggers
 
-__all__ = ["build_core", "make_controller", "nav_config", "make_reference", "start_pose",
-           "aid_theta0", "pd_gains", "adaptation_gains"]
+__all__ = ["make_cycle", "build_core", "make_controller", "nav_config", "make_reference",
+           "start_pose", "aid_theta0", "pd_gains", "adaptation_gains"]
 
 log = logging.getLogger("uvd.daemon")
 
@@ -132,6 +136,15 @@ def build_core(cfg: Config, vehicle=None, estimators: tuple | None = None
                            reference=traj, allocator=alloc, k_thrust=vehicle.k_thrust,
                            estimators=estimators, lag_compensation=cfg.control.lag_compensation,
                            pd=pd_gains(cfg), dof_priority=cfg.control.dof_priority)
+
+
+def make_cycle(cfg: Config, vehicle=None, *, estimators: tuple | None = None) -> CycleConfig:
+    """The cycle of a configuration (module docstring). ``estimators`` as :func:`build_core`
+    (a reload keeps the running ones; a replay starts them where the recording did)."""
+    nav = cfg.navigation
+    return CycleConfig(build_core(cfg, vehicle, estimators), cfg.failsafe,
+                       tuple(plugin_triggers(cfg)), hold_on_arm=cfg.control.reference == "hold",
+                       north_m=nav.initial_north_m, east_m=nav.initial_east_m)
 
 
 def aid_theta0(cfg: Config, vehicle=None) -> np.ndarray | None:

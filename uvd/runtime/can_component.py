@@ -94,6 +94,8 @@ class CanComponent:
         self.recorder = None
         self.start_report = None
         self.last_can_depth = None
+        self.first_write_ns = 0  # the feedback's age counts from the first command
+        self.counters = {"feedback_invalid": 0, "write_failed": 0}
 
     def _open_bus(self) -> None:
         """Open the bus from the event loop's thread: its receive thread inherits that
@@ -135,6 +137,27 @@ class CanComponent:
 
     async def run(self) -> None:
         return None
+
+    # -- its part of the cycle (a hardware interface, uvd.runtime.interfaces) --
+
+    def read(self, t_ns: int, armed: bool, parts) -> None:
+        """The amplifiers' typed status (none fitted: None)."""
+        group = self.group
+        if group is not None:
+            fb = group.read()
+            if not bool(fb.valid.all()):
+                self.counters["feedback_invalid"] += 1
+            parts.actuators = actuator_status(fb, self.first_write_ns)
+
+    def write(self, t_ns: int, thrust_n: np.ndarray) -> None:
+        """The cycle's command to the amplifiers (RPDOs + SYNC); a failed send is counted
+        (the bus reports it as a fault the next cycle reads)."""
+        group = self.group
+        if group is not None:
+            if not self.first_write_ns:
+                self.first_write_ns = t_ns
+            if not group.write(thrust_n).ok:
+                self.counters["write_failed"] += 1
 
     def zero(self) -> None:
         """Zero target on every amplifier (one cycle: RPDOs + SYNC); never raises."""

@@ -29,7 +29,7 @@ from typing import Any
 
 __all__ = ["CommandResult", "command_from_record", "Arm", "Disarm", "SetMode", "ManualWrench",
            "HoldPose", "ResetFailsafe", "SetParams", "SetThrusterEta", "Command", "CommandQueue",
-           "OPERATOR_MODES"]
+           "OPERATOR_MODES", "AutoArm"]
 
 #: the operator's modes: ``auto`` runs the configured controller (PDC, AMBC, two-step AMBC);
 #: ``pdc`` PD control with adaptation frozen; ``hold-depth`` depth, roll and pitch only;
@@ -195,3 +195,34 @@ class CommandQueue:
 
     def stats(self) -> dict[str, int]:
         return {"accepted": self.accepted, "dropped": self.dropped, "waiting": len(self._q)}
+
+
+class AutoArm:
+    """``uvd run --arm``: an :class:`Arm` every 200 ms of cycles (every second cycle at 10 Hz,
+    counted from the first in STANDBY) until one succeeds — once: a failsafe disarm is never
+    undone automatically. Tries are counted in cycles, not measured in time: the cycle a try
+    falls on must not depend on jitter, or a realtime replay arms a cycle apart from the
+    recording. Refusals are logged with their reasons every 2 s."""
+
+    def __init__(self, rate_hz: float) -> None:
+        self.every = max(1, round(0.2 * rate_hz))
+        self._wait = 0
+        self._last_log_ns = 0
+        #: the last try's refusal (None: armed, or not tried)
+        self.refusal: str | None = None
+
+    def due(self, t_ns: int, standby: bool, armed_before: bool) -> Arm | None:
+        """The command to apply at this cycle, if a try falls on it."""
+        if armed_before or not standby:
+            return None
+        if self._wait > 0:
+            self._wait -= 1
+            return None
+        self._wait = self.every - 1
+        return Arm(cause="uvd run --arm", source="uvd run --arm")
+
+    def answered(self, res: CommandResult, t_ns: int, log) -> None:
+        self.refusal = None if res.ok else res.reason
+        if self.refusal and t_ns - self._last_log_ns >= 2_000_000_000:
+            self._last_log_ns = t_ns
+            log.info("%s", self.refusal)

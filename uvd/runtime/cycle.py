@@ -1,25 +1,36 @@
-"""The update of read → **update** → write: one cycle with its failsafes, shared by the daemon,
-lockstep simulation and replay.
+"""The cycle: the update of read → **update** → write with its failsafes, shared by the
+daemon, lockstep simulation and replay — the one thing uvd calls "cycle".
 
-:class:`Cycle` owns the pure core's configuration and state, the failsafe arbiter with the
-lifecycle (:class:`~uvd.runtime.supervisor.Supervisor`) and the operator's choices (mode,
-manual wrench, a pose to hold). :meth:`Cycle.update` takes what the read phase gathered — the
-new sensor samples and the amplifiers' typed status, as :class:`CycleInputs` — and returns
-everything the write phase needs (:class:`CycleResult`)::
+As Pinocchio splits a constant model from its data, the cycle is a constant
+:class:`CycleConfig` (the pure core's :class:`~uvd.core.CoreConfig`, the failsafe thresholds
+and triggers, the arming checks; :func:`uvd.runtime.build.make_cycle` builds it from a
+configuration file) and one value, :class:`CycleState`, that holds everything carried from
+one cycle to the next: the core's state (navigation, controller, estimators, the running
+reference, the pose held), the arbiter's memory, the lifecycle, the operator's mode and manual
+wrench. Free functions take both and return a new state; nothing else holds any::
+
+    result, state = update(config, state, inputs, dt)       one cycle
+    result, state, effects = apply(config, state, command, t_ns)   an operator command
+    state = cycle_init(config)                              the state a run starts in
+
+:func:`update` takes what the read phase gathered — the new sensor samples and the
+amplifiers' typed status, as :class:`CycleInputs` — and returns everything the write phase
+needs (:class:`CycleResult`)::
 
     uvd.core.sense      navigation, applied wrench, online estimators
     Health              source ages, non-finite inputs and the last command, M̂/θ̂ of the
                         controller (its spec's diagnostics hook), amplifiers, bus, loop, leak
-    Supervisor.step     the arbiter's action and the lifecycle (armed or not)
+    supervise           the arbiter's action and the lifecycle (armed or not)
     mode                the operator's mode, overridden by a more restrictive failsafe action
     uvd.core.act        reference, control in that mode, allocation, the output guard
 
 The mode is decided *before* anything is commanded: a FALLBACK runs PDC and does not step the
 adaptive controller (θ̂ frozen, nothing undone afterwards); HOLD_DEPTH, ZERO_THRUST and DISARM
 are modes of :func:`uvd.core.act`. ``CycleResult.out.thrust_n`` is exactly what the amplifiers
-get. Deterministic: no clock (time comes in ``CycleInputs.t_ns``), no I/O, no logging — the
-supervisor's listeners (logging, systemd status, telemetry) are the only effects, and lockstep
-runs without them.
+get. Deterministic: no clock (time comes in ``CycleInputs.t_ns``), no I/O, no logging. What
+changed — failsafe events and lifecycle transitions — comes back as data (``effects``); the
+holder of the running state (:class:`~uvd.runtime.supervisor.Supervisor`) hands it to the
+listeners (logging, systemd status, telemetry).
 
 Two signals reach the arbiter one cycle late, by construction: a non-finite command (the core
 has already zeroed that cycle's command) and the controller's θ̂/M̂ (read from the state the
@@ -29,9 +40,9 @@ previous cycle committed).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass, replace
-from typing import Any
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -41,12 +52,33 @@ from uvd.control.trajectory import setpoint
 from uvd.core import Mode
 from uvd.runtime import commands as cmd
 from uvd.runtime.commands import OPERATOR_MODES, CommandResult
-from uvd.runtime.failsafe import Action, Decision, Health, nav_health
-from uvd.runtime.lifecycle import State
-from uvd.runtime.supervisor import Supervisor
+from uvd.runtime.failsafe import (
+    BUILTIN_NAMES,
+    Action,
+    ArbiterState,
+    Decision,
+    Health,
+    Thresholds,
+    TriggerDef,
+    arbiter_init,
+    evaluate,
+    make_registry,
+    nav_health,
+    reset,
+)
+from uvd.runtime.lifecycle import (
+    ArmingCheck,
+    Lifecycle,
+    LifecycleStep,
+    State,
+    builtin_checks,
+    run_checks,
+)
 
-__all__ = ["ActuatorStatus", "CycleInputs", "CycleResult", "Cycle", "mode_for",
-           "nonfinite_inputs", "inputs_record", "inputs_from_record"]
+__all__ = ["ActuatorStatus", "CycleInputs", "CycleResult", "CycleConfig", "CycleState",
+           "cycle_init", "update", "apply", "supervise", "boot_complete", "request_arm",
+           "request_disarm", "request_shutdown", "reset_failsafe", "unsupervised",
+           "mode_for", "nonfinite_inputs", "inputs_record", "inputs_from_record"]
 
 _OPERATOR_MODE = {"auto": Mode.CONTROL, "pdc": Mode.PDC, "hold-depth": Mode.HOLD_DEPTH,
                   "manual": Mode.MANUAL, "observe": Mode.ZERO}
@@ -134,13 +166,19 @@ def inputs_from_record(t_ns: int, rec: Mapping[str, Any], ins=None, dvl=None, de
 
 @dataclass(frozen=True, slots=True)
 class CycleResult:
-    """Everything the write phase needs from one update."""
+    """Everything the write phase needs from one update.
+
+    ``state`` is the lifecycle's (ARMED, FAILSAFE, …); ``effects`` the failsafe events and
+    lifecycle transitions of this update, in order, for the listeners; ``armed_at_ns`` when
+    the vehicle was last armed (None: not yet)."""
 
     out: core.CoreOutputs
     health: Health
     decision: Decision
     state: State
     operator_mode: str
+    effects: tuple = ()
+    armed_at_ns: int | None = None
 
 
 def mode_for(action: Action, operator_mode: str) -> Mode:
@@ -172,163 +210,281 @@ def nonfinite_inputs(ins, dvl, depth) -> tuple[str, ...]:
     return tuple(bad)
 
 
-class Cycle:
-    """The cycle's update and the state it carries between cycles (module docstring).
+Effects = tuple  # of FailsafeEvent and Transition, in the order they happened
+
+
+@dataclass(frozen=True)
+class CycleConfig:
+    """Everything constant about the cycle for the life of a run (a reload makes a new one,
+    between cycles, with :func:`uvd.runtime.build.make_cycle`).
 
     Parameters
     ----------
-    core_cfg : uvd.core.CoreConfig
-    supervisor : Supervisor
-        Failsafe arbiter + lifecycle (its listeners are the caller's effects).
+    core : uvd.core.CoreConfig or None
+        The pure core (None: a lifecycle without a core — an :class:`~uvd.runtime.app.App`
+        run alone).
+    thresholds : Thresholds
+        ``[failsafe]``.
+    extra_triggers : tuple of TriggerDef
+        Plug-in triggers (:func:`uvd.runtime.triggers.plugin_triggers`).
+    checks : tuple of ArmingCheck, optional
+        Arming checks; :func:`~uvd.runtime.lifecycle.builtin_checks` of ``thresholds`` when
+        None.
     hold_on_arm : bool
         ``[control] reference = "hold"``: arming replaces the reference with the pose the
         vehicle has then.
     north_m, east_m : float
-        Navigation's initial horizontal position.
+        Navigation's initial horizontal position (``[navigation]``).
     """
 
-    def __init__(self, core_cfg: core.CoreConfig, supervisor: Supervisor, *,
-                 hold_on_arm: bool = False, north_m: float = 0.0, east_m: float = 0.0) -> None:
-        self.core_cfg = core_cfg
-        self.state = core.core_init(core_cfg, north_m=north_m, east_m=east_m)
-        self.supervisor = supervisor
-        self.hold_on_arm = hold_on_arm
-        self.operator_mode = "auto"
-        #: each thruster's effectiveness η the cycle allocates with (None: all healthy)
-        self.thruster_eta: np.ndarray | None = None
-        self.armed_at_ns: int | None = None
-        self._manual: np.ndarray | None = None
-        self._manual_until_ns = 0
-        self._manual_timeout_ns = 0
-        self._nonfinite_out: tuple[str, ...] = ()
-        self._was_armed = False
-        self._pending_hold: core.Reference | None = None
+    core: core.CoreConfig | None
+    thresholds: Thresholds = field(default_factory=Thresholds)
+    extra_triggers: tuple[TriggerDef, ...] = ()
+    checks: tuple[ArmingCheck, ...] | None = None
+    hold_on_arm: bool = False
+    north_m: float = 0.0
+    east_m: float = 0.0
+    registry: tuple[TriggerDef, ...] = field(init=False, repr=False, compare=False)
+    arming_checks: tuple[ArmingCheck, ...] = field(init=False, repr=False, compare=False)
 
-    # -- the operator (applied between cycles, by the caller's thread) --
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "extra_triggers", tuple(self.extra_triggers))
+        object.__setattr__(self, "registry", make_registry(self.thresholds,
+                                                           self.extra_triggers))
+        object.__setattr__(self, "arming_checks", tuple(self.checks) if self.checks is not None
+                           else builtin_checks(self.thresholds))
 
-    def apply(self, c: Any, t_ns: int) -> CommandResult:
-        """Apply a command of :mod:`uvd.runtime.commands` (all but ``SetParams``, which is the
-        configuration's: the daemon applies it)."""
-        sup = self.supervisor
-        if isinstance(c, cmd.Arm):
-            step = sup.request_arm(t_ns, cause=c.cause)
-            return CommandResult(bool(step.ok and sup.armed), step.refused or "")
-        if isinstance(c, cmd.Disarm):
-            step = sup.request_disarm(t_ns, cause=c.cause)
-            return CommandResult(True, "" if step.transitions else "not armed")
-        if isinstance(c, cmd.ResetFailsafe):
-            refused = sup.reset_failsafe(t_ns, c.names)
-            return CommandResult(not refused, "; ".join(f"{n}: {r}" for n, r in refused))
-        if isinstance(c, cmd.SetMode):
-            if c.mode not in OPERATOR_MODES:
-                return CommandResult(False, f"unknown mode {c.mode!r} (one of "
-                                            f"{', '.join(OPERATOR_MODES)})")
-            if c.mode == "manual":
-                self._manual = None  # a new manual session starts from zero wrench
-            self.operator_mode = c.mode
-            return CommandResult(True)
-        if isinstance(c, cmd.ManualWrench):
-            u = np.asarray(c.u, dtype=float)
-            if u.shape != (6,) or not np.all(np.isfinite(u)):
-                return CommandResult(False, "manual wrench must be six finite numbers")
-            if not (math.isfinite(c.timeout_s) and c.timeout_s > 0.0):
-                return CommandResult(False, "manual timeout_s must be > 0")
-            self._manual = u
-            self._manual_timeout_ns = int(c.timeout_s * 1e9)
-            self._manual_until_ns = 0  # counted from the cycle that takes it
-            return CommandResult(True, "" if self.operator_mode == "manual"
-                                 else f"stored; mode is {self.operator_mode}, not manual")
-        if isinstance(c, cmd.HoldPose):
-            vals = (c.north_m, c.east_m, c.down_m, c.heading_rad)
-            if not all(math.isfinite(float(x)) for x in vals):
-                return CommandResult(False, "hold pose must be finite numbers")
-            self._pending_hold = setpoint((c.north_m, c.east_m, c.down_m, 0.0, 0.0,
-                                           c.heading_rad))
-            return CommandResult(True)
-        if isinstance(c, cmd.SetThrusterEta):
-            return self._set_eta(c)
-        return CommandResult(False, f"{type(c).__name__} is not supported by the cycle")
 
-    def _set_eta(self, c: cmd.SetThrusterEta) -> CommandResult:
-        """One thruster's effectiveness η (the operator's source); the result says which DOFs
-        the cycle gives up with it."""
-        n = self.core_cfg.allocator.n_thrusters
-        try:
-            i, e = int(c.thruster), float(c.eta)
-        except (TypeError, ValueError):
-            return CommandResult(False, "thruster must be an integer and eta a number")
-        if not 1 <= i <= n:
-            return CommandResult(False, f"thruster {i} is not one of 1…{n}")
-        if not 0.0 <= e <= 1.0:  # NaN fails too
-            return CommandResult(False, f"eta {c.eta!r} is not in [0, 1]")
-        eta = np.ones(n) if self.thruster_eta is None else self.thruster_eta.copy()
-        eta[i - 1] = e
-        self.thruster_eta = None if (eta == 1.0).all() else eta
-        given_up = self.core_cfg.accommodation_for(eta)[0].given_up
-        return CommandResult(True, f"thruster {i} eta {e:g} ({c.source or 'operator'}); "
-                                   f"given up: {', '.join(given_up) or 'none'}")
+def unsupervised(core_cfg: core.CoreConfig) -> CycleConfig:
+    """The cycle of the thesis's experiments: ``core_cfg`` with every built-in failsafe
+    trigger switched off (the thesis ran none). Started armed (``cycle_init(…, armed=True)``)
+    it commands exactly what :func:`uvd.core.step` does in the configured controller's mode."""
+    return CycleConfig(core_cfg, Thresholds(disabled=BUILTIN_NAMES))
 
-    def request_arm(self, t_ns: int, cause: str = "operator request"):
-        """Run the arming checks on the latest health and arm (the lifecycle's step)."""
-        return self.supervisor.request_arm(t_ns, cause=cause)
 
-    def _manual_wrench(self, t_ns: int) -> np.ndarray | None:
-        if self._manual is None:
-            return None
-        if self._manual_until_ns == 0:
-            self._manual_until_ns = t_ns + self._manual_timeout_ns
-        if t_ns > self._manual_until_ns:
-            self._manual = None  # a silent joystick stops the vehicle
-            return None
-        return self._manual
+class CycleState(NamedTuple):
+    """Everything the cycle carries from one cycle to the next — one immutable value
+    (a named tuple: a new one every cycle costs less than a frozen dataclass).
 
-    # -- the update --
+    Attributes
+    ----------
+    core : uvd.core.CoreState or None
+        Navigation memory, the controller's and estimators' states, the running reference and
+        the pose held.
+    arbiter : ArbiterState
+        The failsafe triggers' memory.
+    lifecycle : Lifecycle
+    decision : Decision or None
+        The arbiter's last decision.
+    health : Health or None
+        The last cycle's health (arming checks and failsafe resets read it).
+    operator_mode : str
+        One of :data:`uvd.runtime.commands.OPERATOR_MODES`.
+    manual, manual_until_ns, manual_timeout_ns
+        The operator's manual wrench and when it lapses (0: counted from the next cycle).
+    pending_hold : Reference or None
+        A pose to hold (``HoldPose``), taken by the next update.
+    thruster_mask : ndarray or None
+        Thrusters allocation may use (None: all).
+    was_armed : bool
+        Armed at the end of the last update.
+    armed_at_ns : int or None
+        When the vehicle was last armed.
+    nonfinite_out : tuple of str
+        ``("command",)`` when the last command was not finite (the arbiter sees it next cycle).
+    """
 
-    def update(self, inp: CycleInputs, dt: float) -> CycleResult:
-        """One cycle: sense → health → arbiter → mode → act (module docstring)."""
-        cfg = self.core_cfg
-        st = self.state
-        a = inp.actuators
-        omega = a.omega_rad_s if a is not None else None
-        ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega,
-                             thruster_eta=self.thruster_eta)
-        sensed = core.sense(cfg, ci, st, dt)
-        nav = sensed.nav
+    core: core.CoreState | None
+    arbiter: ArbiterState
+    lifecycle: Lifecycle
+    decision: Decision | None = None
+    health: Health | None = None
+    operator_mode: str = "auto"
+    manual: np.ndarray | None = None
+    manual_until_ns: int = 0
+    manual_timeout_ns: int = 0
+    pending_hold: Any = None
+    thruster_mask: np.ndarray | None = None
+    was_armed: bool = False
+    armed_at_ns: int | None = None
+    nonfinite_out: tuple[str, ...] = ()
 
-        diag = cfg.controller.diagnostics(st.ctrl)
-        fb_age = None
-        if a is not None:
-            fb_age = 0.0 if a.feedback_t_ns is None else (inp.t_ns - a.feedback_t_ns) * 1e-9
-        h = Health(inp.t_ns, **nav_health(nav),
-                   nonfinite_inputs=nonfinite_inputs(inp.ins, inp.dvl, inp.depth),
-                   nonfinite_outputs=self._nonfinite_out, m_hat_min_eig=diag.m_min_eig,
-                   theta_hat=diag.theta, amplifiers_enabled=bool(a is not None and a.enabled),
-                   amplifier_faults=a.faults if a is not None else (), feedback_age_s=fb_age,
-                   bus_off=bool(a is not None and a.bus_off),
-                   overrun_streak=inp.overrun_streak,
-                   overrun_streak_exceeded=inp.overrun_streak_exceeded, leak=inp.leak,
-                   extra=inp.extra, armed=self.supervisor.armed)
-        sup = self.supervisor
-        d = sup.step(h)
-        armed = sup.armed
+    @property
+    def armed(self) -> bool:
+        return self.lifecycle.armed
 
-        if armed and not self._was_armed:
-            # armed since the last cycle: the reference's clock starts now; "hold" holds the
-            # pose the vehicle has now
-            self.armed_at_ns = inp.t_ns
-            st = replace(st, t0_ns=None)
-            if self.hold_on_arm:
-                self.core_cfg = cfg = replace(cfg, reference=setpoint(eta_of(nav.H)))
-        self._was_armed = armed
-        if self._pending_hold is not None:
-            self.core_cfg = cfg = replace(cfg, reference=self._pending_hold)
-            self._pending_hold = None
-            st = replace(st, t0_ns=None)
 
-        mode = mode_for(d.action, self.operator_mode)
-        manual = self._manual_wrench(inp.t_ns) if mode is Mode.MANUAL else None
-        ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega, armed, mode, manual,
-                             self.thruster_eta)
-        out, self.state = core.act(cfg, sensed, ci, st, dt)
-        self._nonfinite_out = ("command",) if out.status == "non-finite" else ()
-        return CycleResult(out, h, d, sup.state, self.operator_mode)
+def cycle_init(config: CycleConfig, *, armed: bool = False, north_m: float | None = None,
+               east_m: float | None = None) -> CycleState:
+    """The state a run starts in: the lifecycle in BOOT, or — ``armed`` — ARMED from the start
+    (lockstep runs: the thesis's experiments, the demo's reference run); navigation at
+    ``north_m``, ``east_m`` (the configuration's by default)."""
+    c = config.core
+    cs = None if c is None else core.core_init(
+        c, north_m=config.north_m if north_m is None else north_m,
+        east_m=config.east_m if east_m is None else east_m)
+    life = Lifecycle(State.ARMED, 0) if armed else Lifecycle()
+    return CycleState(cs, arbiter_init(config.registry), life)
+
+
+# -- the lifecycle and the arbiter (between cycles, and inside update) --
+
+def _step(state: CycleState, step: LifecycleStep) -> CycleState:
+    return state._replace(lifecycle=step.lifecycle)
+
+
+def supervise(config: CycleConfig, state: CycleState, health: Health
+              ) -> tuple[Decision, CycleState, Effects]:
+    """Evaluate the arbiter on ``health`` and follow it with the lifecycle; never raises."""
+    decision, arbiter = evaluate(config.registry, config.thresholds, state.arbiter, health)
+    step = state.lifecycle.on_failsafe(health.t_ns, decision)
+    return decision, state._replace(arbiter=arbiter, lifecycle=step.lifecycle,
+                                    decision=decision, health=health), \
+        (*decision.events, *step.transitions)
+
+
+def boot_complete(state: CycleState, t_ns: int, cause: str = "drivers up"
+                  ) -> tuple[LifecycleStep, CycleState]:
+    step = state.lifecycle.boot_complete(t_ns, cause)
+    return step, _step(state, step)
+
+
+def request_arm(config: CycleConfig, state: CycleState, t_ns: int,
+                cause: str = "operator request", health: Health | None = None
+                ) -> tuple[LifecycleStep, CycleState]:
+    """Run the arming checks on ``health`` (the last cycle's by default) and arm."""
+    h = health if health is not None else (state.health or Health(t_ns=t_ns))
+    step = state.lifecycle.request_arm(t_ns, run_checks(config.arming_checks, h,
+                                                        state.decision), cause)
+    return step, _step(state, step)
+
+
+def request_disarm(state: CycleState, t_ns: int, cause: str = "operator request"
+                   ) -> tuple[LifecycleStep, CycleState]:
+    step = state.lifecycle.request_disarm(t_ns, cause)
+    return step, _step(state, step)
+
+
+def request_shutdown(state: CycleState, t_ns: int, cause: str
+                     ) -> tuple[LifecycleStep, CycleState]:
+    step = state.lifecycle.request_shutdown(t_ns, cause)
+    return step, _step(state, step)
+
+
+def reset_failsafe(config: CycleConfig, state: CycleState, t_ns: int,
+                   names: Sequence[str] | None = None
+                   ) -> tuple[tuple[tuple[str, str], ...], CycleState, Effects]:
+    """Operator reset of latched triggers: the refused ones with reasons, the new state and
+    the events."""
+    h = state.health or Health(t_ns=t_ns)
+    if h.t_ns != t_ns:
+        h = replace(h, t_ns=t_ns)
+    arbiter, events, refused = reset(config.registry, config.thresholds, state.arbiter,
+                                     h, names)
+    return refused, state._replace(arbiter=arbiter), tuple(events)
+
+
+# -- the operator (applied between cycles) --
+
+def apply(config: CycleConfig, state: CycleState, c: Any, t_ns: int
+          ) -> tuple[CommandResult, CycleState, Effects]:
+    """Apply a command of :mod:`uvd.runtime.commands` (all but ``SetParams``, which is the
+    configuration's: the daemon applies it through a reload)."""
+    if isinstance(c, cmd.Arm):
+        step, st = request_arm(config, state, t_ns, cause=c.cause)
+        return CommandResult(bool(step.ok and st.armed), step.refused or ""), st, \
+            step.transitions
+    if isinstance(c, cmd.Disarm):
+        step, st = request_disarm(state, t_ns, cause=c.cause)
+        return CommandResult(True, "" if step.transitions else "not armed"), st, \
+            step.transitions
+    if isinstance(c, cmd.ResetFailsafe):
+        refused, st, events = reset_failsafe(config, state, t_ns, c.names)
+        return CommandResult(not refused, "; ".join(f"{n}: {r}" for n, r in refused)), st, \
+            events
+    if isinstance(c, cmd.SetMode):
+        if c.mode not in OPERATOR_MODES:
+            return CommandResult(False, f"unknown mode {c.mode!r} (one of "
+                                        f"{', '.join(OPERATOR_MODES)})"), state, ()
+        st = state._replace(operator_mode=c.mode)
+        if c.mode == "manual":
+            st = st._replace(manual=None)  # a new manual session starts from zero wrench
+        return CommandResult(True), st, ()
+    if isinstance(c, cmd.ManualWrench):
+        u = np.asarray(c.u, dtype=float)
+        if u.shape != (6,) or not np.all(np.isfinite(u)):
+            return CommandResult(False, "manual wrench must be six finite numbers"), state, ()
+        if not (math.isfinite(c.timeout_s) and c.timeout_s > 0.0):
+            return CommandResult(False, "manual timeout_s must be > 0"), state, ()
+        # the timeout is counted from the cycle that takes it (manual_until_ns 0)
+        st = state._replace(manual=u, manual_timeout_ns=int(c.timeout_s * 1e9),
+                            manual_until_ns=0)
+        return CommandResult(True, "" if state.operator_mode == "manual"
+                             else f"stored; mode is {state.operator_mode}, not manual"), st, ()
+    if isinstance(c, cmd.HoldPose):
+        vals = (c.north_m, c.east_m, c.down_m, c.heading_rad)
+        if not all(math.isfinite(float(x)) for x in vals):
+            return CommandResult(False, "hold pose must be finite numbers"), state, ()
+        return CommandResult(True), state._replace(pending_hold=setpoint(
+            (c.north_m, c.east_m, c.down_m, 0.0, 0.0, c.heading_rad))), ()
+    return CommandResult(False, f"{type(c).__name__} is not supported by the cycle"), state, ()
+
+
+# -- the update --
+
+def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
+           ) -> tuple[CycleResult, CycleState]:
+    """One cycle: sense → health → arbiter → mode → act (module docstring). Pure: ``state``
+    is not modified; the new one is returned with the result."""
+    cfg = config.core
+    st = state.core
+    a = inp.actuators
+    omega = a.omega_rad_s if a is not None else None
+    ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega)
+    sensed = core.sense(cfg, ci, st, dt)
+    nav = sensed.nav
+
+    diag = cfg.controller.diagnostics(st.ctrl)
+    fb_age = None
+    if a is not None:
+        fb_age = 0.0 if a.feedback_t_ns is None else (inp.t_ns - a.feedback_t_ns) * 1e-9
+    h = Health(inp.t_ns, **nav_health(nav),
+               nonfinite_inputs=nonfinite_inputs(inp.ins, inp.dvl, inp.depth),
+               nonfinite_outputs=state.nonfinite_out, m_hat_min_eig=diag.m_min_eig,
+               theta_hat=diag.theta, amplifiers_enabled=bool(a is not None and a.enabled),
+               amplifier_faults=a.faults if a is not None else (), feedback_age_s=fb_age,
+               bus_off=bool(a is not None and a.bus_off),
+               overrun_streak=inp.overrun_streak,
+               overrun_streak_exceeded=inp.overrun_streak_exceeded, leak=inp.leak,
+               extra=inp.extra, armed=state.lifecycle.armed)
+    d, state, effects = supervise(config, state, h)
+    armed = state.lifecycle.armed
+
+    armed_at = state.armed_at_ns
+    if armed and not state.was_armed:
+        # armed since the last cycle: the reference's clock starts now; "hold" holds the
+        # pose the vehicle has now
+        armed_at = inp.t_ns
+        st = replace(st, t0_ns=None)
+        if config.hold_on_arm:
+            st = replace(st, reference=setpoint(eta_of(nav.H)))
+    if state.pending_hold is not None:
+        st = replace(st, reference=state.pending_hold, t0_ns=None)
+
+    mode = mode_for(d.action, state.operator_mode)
+    manual, until = None, state.manual_until_ns
+    if mode is Mode.MANUAL and state.manual is not None:
+        if until == 0:
+            until = inp.t_ns + state.manual_timeout_ns
+        if inp.t_ns <= until:
+            manual = state.manual
+    ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega, armed, mode, manual,
+                         state.thruster_mask)
+    out, st = core.act(cfg, sensed, ci, st, dt)
+    lapsed = mode is Mode.MANUAL and state.manual is not None and manual is None
+    new = CycleState(st, state.arbiter, state.lifecycle, d, h, state.operator_mode,
+                     None if lapsed else state.manual,  # a silent joystick stops the vehicle
+                     until, state.manual_timeout_ns, None, state.thruster_mask, armed, armed_at,
+                     ("command",) if out.status == "non-finite" else ())
+    return CycleResult(out, h, d, new.lifecycle.state, state.operator_mode, effects,
+                       armed_at), new

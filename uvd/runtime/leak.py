@@ -133,6 +133,12 @@ class LeakInput:
                    f"{(t_ns - self.last_good_ns) * 1e-9:.2f} s")
         return leak, err
 
+    def read(self, t_ns: int, armed: bool, parts) -> None:
+        """Its part of the cycle's inputs (:mod:`uvd.runtime.interfaces`): the leak, and the
+        sensor's fault for the ``leak_sensor_fault`` trigger."""
+        parts.leak, fault = self.health(t_ns)
+        parts.signal("leak_sensor_fault", fault)
+
     def stats(self) -> dict[str, Any]:
         return {**self.counters, "error": self.error, "active_count": self.active_count}
 

@@ -13,7 +13,7 @@ from typing import Any
 from uvd.runtime.config import Config
 from uvd.runtime.mailbox import Mailbox
 
-__all__ = ["SerialSensor", "make_sensors"]
+__all__ = ["SerialSensor", "Instruments", "make_sensors"]
 
 log = logging.getLogger("uvd.daemon")
 
@@ -95,18 +95,13 @@ class SerialSensor:
         # the App shuts its executor down
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout_s
-        while self.reader._transport is not None and loop.time() < deadline:
+        while self.reader.source_open and loop.time() < deadline:
             await asyncio.sleep(0.005)
 
-    def force_close(self) -> None:
-        """Close the port under the transport if its graceful close never completed."""
-        tr = self.reader._transport
-        ser = getattr(tr, "serial", None) if tr is not None else None
-        if ser is not None:
-            try:
-                ser.close()
-            except OSError:
-                pass
+    def close_now(self) -> None:
+        """Close the port if it is still open (a stop the App had no time left for)."""
+        if self.reader.connected or self.reader.source_open:
+            self.reader.force_close()
 
     def stats(self) -> dict[str, Any]:
         return {"samples": self.samples, "rejected": self.rejected,
@@ -115,6 +110,37 @@ class SerialSensor:
                 "counters": self.reader.counters.as_dict()
                 if hasattr(self.reader.counters, "as_dict") else {},
                 "mailbox": self.box.stats()}
+
+
+class Instruments:
+    """The instruments' part of the cycle's inputs (a hardware interface,
+    :mod:`uvd.runtime.interfaces`): the newest INS, DVL and depth samples, from the mailboxes
+    the readers (serial, network, the CAN depth sensor) fill.
+
+    ``sync`` (``[loop] trigger = "ins"``): the sensor-synchronous cycle acts on the state as
+    of its INS frame — a DVL or depth frame received after that frame waits for the next
+    cycle (docs/runtime.md), so which cycle gets a frame follows the receive stamps, not the
+    order in which the event loop happened to serve the readers (counted: ``dvl_deferred``,
+    ``depth_deferred``).
+    """
+
+    def __init__(self, sync: bool = False) -> None:
+        self.ins_box: Mailbox = Mailbox("ins")
+        self.dvl_box: Mailbox = Mailbox("dvl")
+        self.depth_box: Mailbox = Mailbox("depth")
+        self.sync = sync
+        self.counters = {"dvl_deferred": 0, "depth_deferred": 0}
+
+    def read(self, t_ns: int, armed: bool, parts) -> None:
+        ins = self.ins_box.take()
+        if ins is not None and self.sync:
+            dvl, depth = self.dvl_box.take_until(ins.t_ns), self.depth_box.take_until(ins.t_ns)
+            self.counters["dvl_deferred"] += dvl is None and self.dvl_box.peek() is not None
+            self.counters["depth_deferred"] += depth is None and \
+                self.depth_box.peek() is not None
+        else:
+            dvl, depth = self.dvl_box.take(), self.depth_box.take()
+        parts.ins, parts.dvl, parts.depth = ins, dvl, depth
 
 
 def _open_reader(port: str, codec, baud: int, name: str):

@@ -25,7 +25,7 @@ from typing import Any
 from uvd.runtime.failsafe import Action, Health, Thresholds, TriggerDef
 from uvd.runtime.leak import leak_sensor_fault_trigger
 
-__all__ = ["operator_loss_trigger", "plugin_triggers", "OPERATOR_AGE"]
+__all__ = ["operator_loss_trigger", "plugin_triggers", "OperatorHeartbeat", "OPERATOR_AGE"]
 
 OPERATOR_AGE = "operator_heartbeat_age_s"
 _ACTIONS = {"warn": Action.WARN, "fallback": Action.FALLBACK, "hold-depth": Action.HOLD_DEPTH,
@@ -54,3 +54,16 @@ def plugin_triggers(config) -> list[TriggerDef]:
     if m.enabled and m.operator_timeout_s > 0:
         out.append(operator_loss_trigger(m.operator_timeout_s, m.operator_action))
     return out
+
+
+class OperatorHeartbeat:
+    """A ground-station link's part of the cycle's inputs (a hardware interface,
+    :mod:`uvd.runtime.interfaces`): ``operator_heartbeat_age_s``, the age of the operator's
+    newest heartbeat while armed, once one was heard (``link.operator_heartbeat_ns``)."""
+
+    def __init__(self, link) -> None:
+        self.link = link
+
+    def read(self, t_ns: int, armed: bool, parts) -> None:
+        hb = self.link.operator_heartbeat_ns
+        parts.signal(OPERATOR_AGE, None if hb is None or not armed else (t_ns - hb) * 1e-9)

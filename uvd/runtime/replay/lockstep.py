@@ -1,6 +1,7 @@
 """Lockstep replay of a black-box recording: the recorded raw bytes through the same decoders,
-the same update (:class:`~uvd.runtime.cycle.Cycle`), the recorded clock — and every amplifier
-command compared with the one the daemon sent.
+the same cycle (:func:`uvd.runtime.cycle.update`, built by :func:`uvd.runtime.build.make_cycle`
+as the daemon builds it), the recorded clock — and every amplifier command compared with the
+one the daemon sent.
 
 What a recording holds for this (docs/recording.md): the start record (the configuration's
 text and the online estimators' θ̂(0)), every chunk of bytes each serial instrument delivered
@@ -9,7 +10,7 @@ samples it took, the rest of its inputs (amplifier status, overrun streak, leak,
 signals) and the thrust it commanded; the commands applied at each cycle; the lifecycle's
 transitions. Replay decodes the bytes with :func:`uvd.runtime.sensors.decoders` (the readers'
 own codecs and converters), rebuilds each cycle's :class:`~uvd.runtime.cycle.CycleInputs`,
-applies the same commands at the same cycles and runs :meth:`Cycle.update` on the recorded
+applies the same commands at the same cycles and runs the update on the recorded
 ``t_ns`` and ``dt``. The cycle is deterministic, so the commands come out bit-identical — or
 the first mismatch says where they part.
 
@@ -36,14 +37,13 @@ import numpy as np
 
 from drivers.framing import Stamped, StreamDecoder
 from uvd.errors import ConfigError
-from uvd.runtime.build import build_core
+from uvd.runtime.build import make_cycle
 from uvd.runtime.commands import SetParams, command_from_record
 from uvd.runtime.config import Config, load_config
-from uvd.runtime.cycle import Cycle, inputs_from_record
+from uvd.runtime.cycle import inputs_from_record
 from uvd.runtime.schema import with_values
 from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
-from uvd.runtime.triggers import plugin_triggers
 from uvd.telemetry.recording import RecordingError, read_messages
 from uvd.telemetry.records import tracking_error_norms
 
@@ -209,11 +209,7 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
                           "raw serial channels, so this recording cannot be replayed")
     report = ReplayReport(recording=str(rec.path), same_config=same)
     vehicle = cfg.load_vehicle()
-    core_cfg = build_core(cfg, vehicle, estimators=_estimators(cfg, rec))
-    sup = Supervisor(cfg.failsafe, extra_triggers=plugin_triggers(cfg))
-    nav = cfg.navigation
-    cyc = Cycle(core_cfg, sup, hold_on_arm=cfg.control.reference == "hold",
-                north_m=nav.initial_north_m, east_m=nav.initial_east_m)
+    sup = Supervisor(make_cycle(cfg, vehicle, estimators=_estimators(cfg, rec)))
     samples = _samples(cfg, rec)
     boot = next((tr for tr in rec.lifecycle if tr.get("to") == "STANDBY"), None)
     booted = False
@@ -243,7 +239,7 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
         while ci < len(cmds) and int(cmds[ci]["t_ns"]) <= t:
             c = command_from_record(cmds[ci])
             if not isinstance(c, SetParams):
-                cyc.apply(c, int(cmds[ci]["t_ns"]))
+                sup.apply(c, int(cmds[ci]["t_ns"]))
             report.operator_commands += 1
             ci += 1
         got = {}
@@ -256,7 +252,7 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
                 got[src] = s
         inp = inputs_from_record(t, r["inputs"], got.get("ins"), got.get("dvl"),
                                  got.get("depth"))
-        res = cyc.update(inp, float(r["dt"]))
+        res = sup.update(inp, float(r["dt"]))
         thrust = res.out.thrust_n
         want = np.asarray(r["thrust"], dtype=float)
         report.cycles += 1
