@@ -250,7 +250,7 @@ def test_amplifier_fault_disarms_and_latches(hil):
     async def scenario(d):
         await call(proc, "fault", node=3, name="overcurrent", persistent=True)
         await until(lambda: events(d, "fired", "amplifier_fault"), 1.0, "amplifier_fault")
-        node = next(n for n in d.can.group.nodes if n.node_id == 3)
+        node = next(n for n in d.hardware.can.group.nodes if n.node_id == 3)
         info["emcy_rx"] = min(node.emcy_active.values())
         await wait_state(d, State.STANDBY, 1.0, "disarm")
         await asyncio.sleep(0.5)
@@ -306,9 +306,9 @@ def test_bus_off_disarms_at_the_next_cycle_and_latches(hil):
     async def scenario(d):
         await call(proc, "bus_off", seconds=0.3)
         await until(lambda: events(d, "fired", "bus_off"), 1.0, "bus_off")
-        info["since"] = d.can.bus.monitor.since_ns
+        info["since"] = d.hardware.can.bus.monitor.since_ns
         await asyncio.sleep(1.5)
-        info["bus_after"] = d.can.bus.status().state
+        info["bus_after"] = d.hardware.can.bus.status().state
 
     d, cycles = run_scenario(cfg, scenario)
     ev = fired(d, "bus_off")
@@ -345,7 +345,7 @@ def test_leak_disarms_within_a_poll_and_a_cycle_and_latches_until_dry_and_reset(
         await asyncio.sleep(2 * PERIOD)
         info["active_after_reset"] = {a.name for a in d.supervisor.decision.active}
         info["state_after_reset"] = d.supervisor.state
-        info["leak_stats"] = d.leak.stats()
+        info["leak_stats"] = d.hardware.leak.stats()
 
     d, cycles = run_scenario(cfg, scenario)
     ev = fired(d, "leak")

@@ -80,19 +80,19 @@ def test_a_synchronous_cycle_takes_dvl_and_depth_frames_received_up_to_its_ins_f
 
     before = DvlSample(t_ns=900, velocity_body=np.zeros(3), bottom_lock=True)
     after = DepthSample(t_ns=1100, depth_m=1.0)
-    d.instruments.ins_box.put(ins(1000))
-    d.instruments.dvl_box.put(before)
-    d.instruments.depth_box.put(after)
+    d.hardware.instruments.ins_box.put(ins(1000))
+    d.hardware.instruments.dvl_box.put(before)
+    d.hardware.instruments.depth_box.put(after)
     inp = d.read(1200)
     assert inp.ins.t_ns == 1000 and inp.dvl is before
     sync = trigger == "ins"
     assert (inp.depth is None) if sync else (inp.depth is after)
-    counters = d.instruments.counters
+    counters = d.hardware.instruments.counters
     assert counters["depth_deferred"] == int(sync) and counters["dvl_deferred"] == 0
-    d.instruments.ins_box.put(ins(2000))
+    d.hardware.instruments.ins_box.put(ins(2000))
     inp = d.read(2100)                    # the next INS frame's cycle takes it
     assert (inp.depth is after) if sync else (inp.depth is None)
-    d.instruments.depth_box.put(DepthSample(t_ns=2500, depth_m=1.1))
+    d.hardware.instruments.depth_box.put(DepthSample(t_ns=2500, depth_m=1.1))
     inp = d.read(3100)                    # no INS frame (the fallback schedule): all is taken
     assert inp.ins is None and inp.depth.t_ns == 2500
-    assert d.instruments.counters["depth_deferred"] == int(sync)
+    assert d.hardware.instruments.counters["depth_deferred"] == int(sync)

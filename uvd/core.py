@@ -1,4 +1,5 @@
-"""One control cycle — the pure core that the daemon, lockstep simulation and replay all drive.
+"""The pure core of the cycle — what the cycle's update (:func:`uvd.runtime.cycle.update`, run
+by the daemon, lockstep simulation and replay) computes around its failsafe arbiter.
 
     step(config, inputs, state, dt) -> (outputs, state)
          = act(config, sense(config, inputs, state, dt), inputs, state, dt)
@@ -7,7 +8,8 @@
 :class:`Mode`, allocation and the output guard. The split lets the failsafe arbiter
 (:mod:`uvd.runtime.cycle`) decide the mode from what :func:`sense` found before anything is
 commanded: the mode is an *input* of :func:`act`, and what :func:`act` returns is exactly what
-the amplifiers get.
+the amplifiers get. :func:`step` runs the two back to back without the arbiter (the kernels'
+warm-up, tests, benchmarks of the core alone).
 
 **Modes** (docs/architecture.md, "where each failsafe acts"):
 
@@ -549,5 +551,6 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
 
 def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float
          ) -> tuple[CoreOutputs, CoreState]:
-    """One control cycle, :func:`act` after :func:`sense`. ``state`` is not modified."""
+    """The core's step: :func:`act` after :func:`sense`, in ``inputs.mode`` (no arbiter
+    between them). ``state`` is not modified."""
     return act(cfg, sense(cfg, inputs, state, dt), inputs, state, dt)

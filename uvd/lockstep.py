@@ -98,6 +98,7 @@ class LockstepLog:
     thrust: np.ndarray
     saturated: np.ndarray
     status: list
+    mode: list = field(default_factory=list)  # the mode each cycle applied (core.Mode)
     wall_s: float = 0.0
     #: the supervisor's failsafe events and lifecycle transitions (plain dicts), when kept
     failsafe_events: list = field(default_factory=list)
@@ -241,6 +242,7 @@ def run(sim: Lockstep, duration_s: float, *, progress: Callable[[str], None] | N
         log.thrust[k] = out.thrust_n
         log.saturated[k] = out.saturated
         log.status.append(out.status)
+        log.mode.append(out.mode)
         if progress is not None and log.t[k] >= next_report:
             next_report += progress_every_s
             progress(f"  simulated {log.t[k] / 60:.0f} / {duration_s / 60:.0f} min "

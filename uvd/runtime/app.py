@@ -2,9 +2,9 @@
 
 :class:`App` is the skeleton ``uvd run`` fills in. It owns
 
-* the :class:`~uvd.runtime.loop.FixedRateLoop` running the integration's ``cycle(t_ns, dt)``
-  (the pure core, fed from :class:`~uvd.runtime.mailbox.Mailbox`\\ es, writing the
-  amplifiers), with the systemd watchdog ping as its ``after_cycle`` hook;
+* the :class:`~uvd.runtime.loop.FixedRateLoop` running the integration's ``tick(t_ns, dt)``
+  (the daemon's: commands, then the cycle — read, update, write), with the systemd watchdog
+  ping as its ``after_cycle`` hook;
 * the :class:`~uvd.runtime.supervisor.Supervisor` (failsafe arbiter + lifecycle), whose events
   and transitions it logs, reports as ``STATUS=`` and publishes as telemetry;
 * the :class:`~uvd.telemetry.sink.TelemetryHub` with the faces the configuration enables,
@@ -147,8 +147,8 @@ class App:
     ----------
     config : Config
         Validated configuration.
-    cycle : callable
-        ``cycle(t_ns, dt)`` — the control cycle (plain function, must not await).
+    tick : callable
+        ``tick(t_ns, dt)`` — one period of the loop (plain function, must not await).
     components : sequence of Component
         Started in order, stopped in reverse order.
     sinks : sequence of TelemetrySink
@@ -167,7 +167,7 @@ class App:
         Apply ``[loop] sched_fifo_priority`` / ``cpu_affinity`` when running.
     """
 
-    def __init__(self, config: Config, cycle: Callable[[int, float], None], *,
+    def __init__(self, config: Config, tick: Callable[[int, float], None], *,
                  components: Sequence[Component] = (), sinks: Sequence[TelemetrySink] = (),
                  supervisor: Supervisor | None = None, notifier: SdNotifier | None = None,
                  clock: Clock | None = None, config_path: str | Path | None = None,
@@ -195,7 +195,7 @@ class App:
             if face is not None:
                 self.hub.add_sink(face.sink, every_n=face.every_n, types=face.types)
                 self.links[name] = face.sink
-        self.loop = FixedRateLoop(cycle, config.loop, clock=clock, on_error=self._on_cycle_error)
+        self.loop = FixedRateLoop(tick, config.loop, clock=clock, on_error=self._on_cycle_error)
         self.watchdog = WatchdogPinger.from_env(self.notifier)
         if self.watchdog is not None:
             self.loop.after_cycle.append(self.watchdog)

@@ -26,20 +26,18 @@ from typing import Any
 import numpy as np
 
 from uvd import _jitcache, core
-from uvd.runtime.app import App, ShutdownStep
+from uvd.runtime.app import App
 from uvd.runtime.build import make_cycle, start_pose
-from uvd.runtime.can_component import CanComponent, GcFreeze
 from uvd.runtime.commands import AutoArm, CommandResult, SetParams
 from uvd.runtime.config import Config
 from uvd.runtime.cycle import CycleInputs, CycleResult
 from uvd.runtime.failsafe import Action
+from uvd.runtime.hardware import Hardware
 from uvd.runtime.interfaces import InputParts
-from uvd.runtime.leak import LeakInput
 from uvd.runtime.lifecycle import State
 from uvd.runtime.loop import CpuLatencyRequest
 from uvd.runtime.reporting import Estimates, cycle_record
 from uvd.runtime.schema import reloadable_changes, with_values
-from uvd.runtime.sensors import Instruments, make_sensors
 from uvd.runtime.startup import kept_params, prepare, start_record
 from uvd.runtime.supervisor import Supervisor
 from uvd.runtime.triggers import OperatorHeartbeat
@@ -79,9 +77,6 @@ class Daemon:
         self.config = config
         self.vehicle = config.load_vehicle()
         self.supervisor = Supervisor(make_cycle(config, self.vehicle))
-        self.instruments = Instruments(sync=config.loop.trigger == "ins")
-        i = self.instruments
-        self.sensors = make_sensors(config, i.ins_box, i.dvl_box, i.depth_box)
         self.recorder = None
         if config.recording.enabled:
             from uvd.telemetry.mcap_recorder import McapRecorder
@@ -89,31 +84,22 @@ class Daemon:
             self.recorder = McapRecorder(r.dir, flush_interval_s=r.flush_interval_s,
                                          rotate_mb=r.rotate_mb, rotate_s=r.rotate_s,
                                          raw_queue_size=r.raw_queue_size)
-            for s in self.sensors:
-                s.reader.tap = self.recorder.tap_serial
-        self.can = CanComponent(config, self.vehicle, i.depth_box,
-                                tap=None if self.recorder is None else self.recorder.tap_can)
-        self.leak = LeakInput(config.sensors.leak) if config.sensors.leak.enabled else None
-        self.app = App(config, self.tick,
-                       components=[*self.sensors, *([self.leak] if self.leak else []),
-                                   self.can, GcFreeze()],
+        self.hardware = hw = Hardware(config, self.vehicle, recorder=self.recorder)
+        self.app = App(config, self.tick, components=hw.components,
                        sinks=[*sinks, *([self.recorder] if self.recorder else [])],
                        supervisor=self.supervisor, notifier=notifier, clock=clock,
                        realtime=realtime)
-        if i.sync:   # the sensor-synchronous cycle (docs/runtime.md)
-            for s in self.sensors:
-                if s.name == "ins":
-                    s.on_sample = self.app.loop.wake
-        self.app.set_amplifier_hooks(zero=self.can.zero, disable=self.can.disable)
+        if hw.instruments.sync:
+            hw.wake_on_ins(self.app.loop.wake)
+        self.app.set_amplifier_hooks(zero=hw.can.zero, disable=hw.can.disable)
         self.app.reload_hooks.append(self._on_reload)
         self.max_thrust = np.asarray(self.core_cfg.allocator.max_thrust_n, dtype=float)
         self.mavlink = _mavlink_link(config, self.app, self.max_thrust)
-        #: the hardware interfaces, in the order they are read
-        self.inputs = [self.can, *([self.leak] if self.leak else []),
-                       *([OperatorHeartbeat(self.mavlink)] if self.mavlink else []), i]
+        if self.mavlink is not None:
+            hw.inputs.insert(-1, OperatorHeartbeat(self.mavlink))
         self.estimates = Estimates(self.app.hub, self.supervisor,
                                    config.estimation.publish_every_s)
-        self._estimate_sinks(config)
+        self.estimates.attach(self.app, config)
         self.app.hub.publish(start_record(config, self.params_kept, self.supervisor.config,
                                           self.supervisor.data), always=True)
         self.auto_arm = AutoArm(config.loop.rate_hz) if auto_arm else None
@@ -122,21 +108,6 @@ class Daemon:
         self.commands_max_abs = 0.0
         self.warm_up_s = prepare(self.supervisor.config, start_pose(config)[0],
                                  self.app.notifier.status, cold=cold, t_init=t_init)
-
-    def _estimate_sinks(self, config: Config) -> None:
-        if not self.core_cfg.estimators:
-            return
-        if config.estimation.save_path:
-            from uvd.telemetry.params_file import RECORD_TYPE, ParamsFileSink
-            e = config.estimation
-            self.app.hub.add_sink(ParamsFileSink(e.save_path, every_s=e.save_every_s),
-                                  types=(RECORD_TYPE,))
-
-        # after the amplifiers are safe, before the sinks close: the newest θ̂ reaches them
-        # (and save_path) however long ago the last periodic record went out
-        async def final() -> None:
-            self.estimates.publish(self.last.t_ns)
-        self.app.add_shutdown_step(ShutdownStep("publish the final estimate", final))
 
     # -- the cycle's configuration and state, for tests and tools --
 
@@ -185,7 +156,7 @@ class Daemon:
         """Every hardware interface's part of the cycle's inputs, gathered without waiting."""
         parts = InputParts()
         armed = self.supervisor.armed
-        for hw in self.inputs:
+        for hw in self.hardware.inputs:
             hw.read(t_ns, armed, parts)
         loop = self.app.loop
         return parts.inputs(t_ns, loop.overrun_streak, loop.streak_exceeded)
@@ -194,7 +165,7 @@ class Daemon:
         """The command to the amplifiers, the counters, one telemetry record."""
         out = r.out
         thrust = out.thrust_n
-        self.can.write(t_ns, thrust)
+        self.hardware.write(t_ns, thrust)
         if out.guard:
             self.counters["guard_clamped" if out.guard == 1 else "guard_nonfinite"] += 1
         self.commands_max_abs = max(self.commands_max_abs, float(np.abs(thrust).max()))
@@ -244,10 +215,7 @@ class Daemon:
         finally:
             if cpu_latency is not None:
                 cpu_latency.close()
-            for s in self.sensors:
-                s.close_now()
-            if self.can.bus is not None and self.can.bus.is_open:
-                await self.can.stop()
+            await self.hardware.close_now()
 
     def stop(self, reason: str = "requested") -> None:
         self.app.request_stop(reason)
@@ -255,17 +223,11 @@ class Daemon:
     def summary(self) -> dict[str, Any]:
         """App summary (loop statistics, failsafe events, …) plus the daemon's counters."""
         out = self.app.summary()
-        out["daemon"] = {**self.counters, **self.can.counters, **self.instruments.counters,
+        out["daemon"] = {**self.counters, **self.hardware.counters,
                          "commands_max_abs_n": self.commands_max_abs,
                          "armed_at_ns": self.armed_at_ns,
                          "arm_refusal": None if self.auto_arm is None else self.auto_arm.refusal}
-        out["sensors"] = {s.name: s.stats() for s in self.sensors}
-        if self.leak is not None:
-            out["sensors"]["leak"] = self.leak.stats()
-        if self.can.group is not None:
-            out["can"] = self.can.group.stats()
-            out["can"]["start"] = None if self.can.start_report is None else \
-                self.can.start_report.nodes
+        out.update(self.hardware.stats())
         out["shutdown"] = self.app.shutdown_report
         return out
 

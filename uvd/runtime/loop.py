@@ -1,6 +1,6 @@
 """The fixed-rate control loop: absolute monotonic deadlines, no catch-up, statistics.
 
-:class:`FixedRateLoop` calls a plain function ``cycle(t_ns, dt)`` once per period, on deadlines
+:class:`FixedRateLoop` calls a plain function ``tick(t_ns, dt)`` once per period, on deadlines
 ``t₀ + k·T`` of the monotonic clock (never ``sleep(T)`` after the work, which drifts). Each
 wait has two phases (:mod:`uvd.runtime.clock`): a coarse wait in the event loop to
 ``deadline − margin`` (a timerfd, so other tasks run meanwhile and there is no millisecond
@@ -281,7 +281,7 @@ def drop_realtime() -> None:
 
 # ------------------------------------------------------------------------------ the loop
 
-CycleFn = Callable[[int, float], None]
+TickFn = Callable[[int, float], None]
 
 
 @dataclass
@@ -293,12 +293,13 @@ class _Trace:
 
 @dataclass
 class FixedRateLoop:
-    """Run ``cycle(t_ns, dt)`` at a fixed rate on absolute deadlines.
+    """Run ``tick(t_ns, dt)`` at a fixed rate on absolute deadlines.
 
     Parameters
     ----------
-    cycle : callable
-        ``cycle(t_ns, dt) -> None``; plain function, must not await, should not block.
+    tick : callable
+        ``tick(t_ns, dt) -> None``, one period's work (the daemon's: its commands, then the
+        cycle — read, update, write); plain function, must not await, should not block.
     settings : LoopSettings
         Rate, timer and overrun-streak threshold (scheduling is applied by
         :func:`apply_realtime`, not here).
@@ -314,7 +315,7 @@ class FixedRateLoop:
         Keep the first N raw lateness/compute samples (benchmarks); 0 = none.
     """
 
-    cycle: CycleFn
+    tick: TickFn
     settings: LoopSettings = field(default_factory=LoopSettings)
     clock: Clock | None = None
     on_error: Callable[[BaseException, int], None] | None = None
@@ -414,7 +415,7 @@ class FixedRateLoop:
         clock = self.clock
         period = self.period_ns
         margin = self.margin_ns
-        cycle = self.cycle
+        tick = self.tick
         lat_h, comp_h = self.lateness, self.compute
         trace = self.trace
         own_gc = self.settings.gc == "slack"
@@ -459,7 +460,7 @@ class FixedRateLoop:
                 prev_t = t
                 ok = True
                 try:
-                    cycle(t, dt)
+                    tick(t, dt)
                 except Exception as exc:  # failure is data: never raises out of the loop
                     ok = False
                     self._cycle_failed(exc, t)

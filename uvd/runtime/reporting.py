@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from uvd.runtime.app import ShutdownStep
 from uvd.runtime.cycle import CycleInputs, CycleResult, inputs_record
 from uvd.telemetry.records import CycleRecord, estimate_records
 
@@ -54,11 +55,28 @@ class Estimates:
         self.supervisor = supervisor  # the running cycle: its configuration and state
         self.period_ns = int(period_s * 1e9)
         self._next_ns = 0
+        self.last_t_ns = 0
         self._frozen_logged: set[str] = set()
         c = supervisor.config.core
         #: anything to publish: online estimators, or a controller adapting its own θ̂
         self.adapts = bool(c.estimators) or \
             c.controller.diagnostics(supervisor.data.core.ctrl).theta is not None
+
+    def attach(self, app, config) -> None:
+        """With online estimators: ``[estimation] save_path``'s sink on ``app``'s hub, and a
+        shutdown step — after the amplifiers are safe, before the sinks close — that
+        publishes the newest θ̂ however long ago the last periodic record went out."""
+        if not self.supervisor.config.core.estimators:
+            return
+        e = config.estimation
+        if e.save_path:
+            from uvd.telemetry.params_file import RECORD_TYPE, ParamsFileSink
+            app.hub.add_sink(ParamsFileSink(e.save_path, every_s=e.save_every_s),
+                             types=(RECORD_TYPE,))
+
+        async def final() -> None:
+            self.publish(self.last_t_ns)
+        app.add_shutdown_step(ShutdownStep("publish the final estimate", final))
 
     def records(self, t_ns: int) -> list[dict[str, Any]]:
         return estimate_records(self.supervisor.config.core, self.supervisor.data.core, t_ns)
@@ -66,6 +84,7 @@ class Estimates:
     def after_cycle(self, t_ns: int, dt: float) -> None:
         """Publish when due — within half a period of the due time: a cycle a few µs early
         is not skipped."""
+        self.last_t_ns = t_ns
         if self.adapts and t_ns >= self._next_ns - int(dt * 5e8):
             self._next_ns = t_ns + self.period_ns
             self.publish(t_ns)
