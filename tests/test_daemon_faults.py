@@ -256,7 +256,7 @@ def test_amplifier_fault_disarms_and_latches(hil):
         await asyncio.sleep(0.5)
         # the drive is still in FAULT: the reset is refused and the vehicle stays disarmed
         info["refused"] = d.supervisor.reset_failsafe(time.monotonic_ns(), ["amplifier_fault"])
-        info["arm"] = d.request_arm()
+        info["arm"] = d.supervisor.request_arm(time.monotonic_ns())
         await asyncio.sleep(0.3)
 
     d, cycles = run_scenario(cfg, scenario)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
@@ -31,7 +31,6 @@ from uvd.runtime.build import make_cycle, start_pose
 from uvd.runtime.commands import AutoArm, CommandResult, SetParams
 from uvd.runtime.config import Config
 from uvd.runtime.cycle import CycleInputs, CycleResult
-from uvd.runtime.failsafe import Action
 from uvd.runtime.hardware import Hardware
 from uvd.runtime.interfaces import InputParts
 from uvd.runtime.lifecycle import State
@@ -42,21 +41,9 @@ from uvd.runtime.startup import kept_params, prepare, start_record
 from uvd.runtime.supervisor import Supervisor
 from uvd.runtime.triggers import OperatorHeartbeat
 
-__all__ = ["Daemon", "LastCycle", "kept_params"]
+__all__ = ["Daemon", "kept_params"]
 
 log = logging.getLogger("uvd.daemon")
-
-
-@dataclass
-class LastCycle:
-    """What the last cycle decided (for tests and the demo)."""
-
-    t_ns: int = 0
-    action: Action = Action.NONE
-    state: State = State.BOOT
-    status: str = ""
-    thrust_n: np.ndarray | None = None
-    mode: str = "idle"
 
 
 class Daemon:
@@ -94,7 +81,10 @@ class Daemon:
         self.app.set_amplifier_hooks(zero=hw.can.zero, disable=hw.can.disable)
         self.app.reload_hooks.append(self._on_reload)
         self.max_thrust = np.asarray(self.core_cfg.allocator.max_thrust_n, dtype=float)
-        self.mavlink = _mavlink_link(config, self.app, self.max_thrust)
+        self.mavlink = None
+        if config.mavlink.enabled:
+            from uvd.runtime.mavlink_link import MavlinkLink
+            self.mavlink = MavlinkLink.for_daemon(config, self.app, self.max_thrust)
         if self.mavlink is not None:
             hw.inputs.insert(-1, OperatorHeartbeat(self.mavlink))
         self.estimates = Estimates(self.app.hub, self.supervisor,
@@ -103,7 +93,6 @@ class Daemon:
         self.app.hub.publish(start_record(config, self.params_kept, self.supervisor.config,
                                           self.supervisor.data), always=True)
         self.auto_arm = AutoArm(config.loop.rate_hz) if auto_arm else None
-        self.last = LastCycle()
         self.counters = {"cycles": 0, "guard_nonfinite": 0, "guard_clamped": 0}
         self.commands_max_abs = 0.0
         self.warm_up_s = prepare(self.supervisor.config, start_pose(config)[0],
@@ -122,12 +111,6 @@ class Daemon:
     @property
     def armed_at_ns(self) -> int | None:
         return self.supervisor.armed_at_ns
-
-    def request_arm(self, t_ns: int | None = None, cause: str = "operator request"):
-        """Run the arming checks on the latest health and arm (returns the lifecycle step).
-        From the loop's own thread between cycles (tests); links queue an ``Arm`` command."""
-        t = time.monotonic_ns() if t_ns is None else t_ns
-        return self.supervisor.request_arm(t, cause=cause)
 
     def _on_reload(self, cfg: Config, applied: list[str]) -> None:
         """The reloaded configuration's cycle, built as at start; the running estimators stay
@@ -170,7 +153,6 @@ class Daemon:
             self.counters["guard_clamped" if out.guard == 1 else "guard_nonfinite"] += 1
         self.commands_max_abs = max(self.commands_max_abs, float(np.abs(thrust).max()))
         self.counters["cycles"] += 1
-        self.last = LastCycle(t_ns, r.decision.action, r.state, out.status, thrust, out.mode)
         self.app.hub.publish(cycle_record(t_ns, dt, inp, r))
         self.estimates.after_cycle(t_ns, dt)
 
@@ -231,18 +213,3 @@ class Daemon:
         out["shutdown"] = self.app.shutdown_report
         return out
 
-
-def _mavlink_link(config: Config, app: App, max_thrust: np.ndarray):
-    """The ground-station link (``[mavlink]``, docs/mavlink.md) as a sink of the hub, or None."""
-    if not config.mavlink.enabled:
-        return None
-    from uvd.runtime.mavlink_link import MavlinkLink
-    f = config.failsafe
-    link = MavlinkLink(config.mavlink, app.commands, lambda: app.config,
-                       thresholds={"ins": f.ins_stale_s, "dvl": f.dvl_stale_s,
-                                   "depth": f.depth_stale_s, "feedback": f.feedback_stale_s},
-                       max_thrust_n=max_thrust, controller=config.control.controller,
-                       step1_s=config.control.step1_duration_s,
-                       loop_cpus=config.loop.cpu_affinity)
-    app.hub.add_sink(link)
-    return link
