@@ -77,7 +77,7 @@ def check(variant: str, run_dir: str) -> None:
         dvl = DvlSample(t_ns=t - 41_000_000, velocity_body=_readonly([0.1, 0.0, 0.0]),
                         bottom_lock=True)
         depth = DepthSample(t_ns=t - 7_000_000, depth_m=float(H[2, 3]))
-        speeds = _readonly(np.full(d.allocator.n_thrusters, 3.0))  # as decoded from CAN
+        speeds = _readonly(np.full(d.core_cfg.allocator.n_thrusters, 3.0))  # as decoded from CAN
         out, st = core.step(d.core_cfg, core.CoreInputs(
             t_ns=t, ins=ins, dvl=dvl, depth=depth, armed=k % 2 == 1,
             propeller_speed_rad_s=speeds), st, 0.1)
