@@ -42,14 +42,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, NamedTuple
+from functools import cache
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from drivers.samples import DepthSample, DvlSample, InsSample, eta_of
-from uvd import core
-from uvd.control.trajectory import setpoint
-from uvd.core import Mode
 from uvd.runtime import commands as cmd
 from uvd.runtime.commands import OPERATOR_MODES, CommandResult
 from uvd.runtime.failsafe import (
@@ -80,12 +78,26 @@ __all__ = ["ActuatorStatus", "CycleInputs", "CycleResult", "CycleConfig", "Cycle
            "request_disarm", "request_shutdown", "reset_failsafe", "unsupervised",
            "mode_for", "nonfinite_inputs", "inputs_record", "inputs_from_record"]
 
-_OPERATOR_MODE = {"auto": Mode.CONTROL, "pdc": Mode.PDC, "hold-depth": Mode.HOLD_DEPTH,
-                  "manual": Mode.MANUAL, "observe": Mode.ZERO}
-#: how restrictive each mode is: a failsafe action never makes the mode less restrictive
-_RANK = {Mode.CONTROL: 0, Mode.PDC: 1, Mode.MANUAL: 1, Mode.HOLD_DEPTH: 2, Mode.ZERO: 3}
-_ACTION_MODE = {Action.FALLBACK: Mode.PDC, Action.HOLD_DEPTH: Mode.HOLD_DEPTH,
-                Action.ZERO_THRUST: Mode.ZERO, Action.DISARM: Mode.ZERO}
+if TYPE_CHECKING:
+    from uvd import core
+    from uvd.core import Mode
+
+# The numerical core (uvd.core, uvd.control: numba and its ~30 000 objects) is imported by the
+# functions that run it, not with this module: the lifecycle and the arbiter run without it
+# (an App alone; tests of the runtime), and the heap a loop freezes at start stays small.
+
+
+@cache
+def _modes() -> tuple[dict, dict, dict]:
+    """The operator's modes, the failsafe actions' modes and how restrictive each mode is."""
+    from uvd.core import Mode
+    operator = {"auto": Mode.CONTROL, "pdc": Mode.PDC, "hold-depth": Mode.HOLD_DEPTH,
+                "manual": Mode.MANUAL, "observe": Mode.ZERO}
+    #: how restrictive each mode is: a failsafe action never makes the mode less restrictive
+    rank = {Mode.CONTROL: 0, Mode.PDC: 1, Mode.MANUAL: 1, Mode.HOLD_DEPTH: 2, Mode.ZERO: 3}
+    action = {Action.FALLBACK: Mode.PDC, Action.HOLD_DEPTH: Mode.HOLD_DEPTH,
+              Action.ZERO_THRUST: Mode.ZERO, Action.DISARM: Mode.ZERO}
+    return operator, rank, action
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,13 +197,14 @@ def mode_for(action: Action, operator_mode: str) -> Mode:
     """The core's mode: the operator's, unless the failsafe action asks a more restrictive
     one (FALLBACK turns the configured controller into PDC and leaves the others as they
     are; HOLD_DEPTH and ZERO_THRUST/DISARM override all but a more restrictive choice)."""
-    mode = _OPERATOR_MODE[operator_mode]
-    forced = _ACTION_MODE.get(action)
+    operator, rank, forcing = _modes()
+    mode = operator[operator_mode]
+    forced = forcing.get(action)
     if forced is None:
         return mode
-    if forced is Mode.PDC:
-        return Mode.PDC if mode is Mode.CONTROL else mode
-    return forced if _RANK[forced] >= _RANK[mode] else mode
+    if forced is forcing[Action.FALLBACK]:
+        return forced if rank[mode] == 0 else mode  # PDC instead of the controller
+    return forced if rank[forced] >= rank[mode] else mode
 
 
 def nonfinite_inputs(ins, dvl, depth) -> tuple[str, ...]:
@@ -320,9 +333,11 @@ def cycle_init(config: CycleConfig, *, armed: bool = False, north_m: float | Non
     (lockstep runs: the thesis's experiments, the demo's reference run); navigation at
     ``north_m``, ``east_m`` (the configuration's by default)."""
     c = config.core
-    cs = None if c is None else core.core_init(
-        c, north_m=config.north_m if north_m is None else north_m,
-        east_m=config.east_m if east_m is None else east_m)
+    cs = None
+    if c is not None:
+        from uvd.core import core_init
+        cs = core_init(c, north_m=config.north_m if north_m is None else north_m,
+                       east_m=config.east_m if east_m is None else east_m)
     life = Lifecycle(State.ARMED, 0) if armed else Lifecycle()
     return CycleState(cs, arbiter_init(config.registry), life)
 
@@ -425,6 +440,7 @@ def apply(config: CycleConfig, state: CycleState, c: Any, t_ns: int
         vals = (c.north_m, c.east_m, c.down_m, c.heading_rad)
         if not all(math.isfinite(float(x)) for x in vals):
             return CommandResult(False, "hold pose must be finite numbers"), state, ()
+        from uvd.control.trajectory import setpoint
         return CommandResult(True), state._replace(pending_hold=setpoint(
             (c.north_m, c.east_m, c.down_m, 0.0, 0.0, c.heading_rad))), ()
     return CommandResult(False, f"{type(c).__name__} is not supported by the cycle"), state, ()
@@ -436,6 +452,7 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
            ) -> tuple[CycleResult, CycleState]:
     """One cycle: sense → health → arbiter → mode → act (module docstring). Pure: ``state``
     is not modified; the new one is returned with the result."""
+    from uvd import core  # once imported, a look-up (module comment above)
     cfg = config.core
     st = state.core
     a = inp.actuators
@@ -467,13 +484,15 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
         armed_at = inp.t_ns
         st = replace(st, t0_ns=None)
         if config.hold_on_arm:
+            from uvd.control.trajectory import setpoint
             st = replace(st, reference=setpoint(eta_of(nav.H)))
     if state.pending_hold is not None:
         st = replace(st, reference=state.pending_hold, t0_ns=None)
 
     mode = mode_for(d.action, state.operator_mode)
     manual, until = None, state.manual_until_ns
-    if mode is Mode.MANUAL and state.manual is not None:
+    manual_mode = mode is core.Mode.MANUAL
+    if manual_mode and state.manual is not None:
         if until == 0:
             until = inp.t_ns + state.manual_timeout_ns
         if inp.t_ns <= until:
@@ -481,7 +500,7 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
     ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega, armed, mode, manual,
                          state.thruster_mask)
     out, st = core.act(cfg, sensed, ci, st, dt)
-    lapsed = mode is Mode.MANUAL and state.manual is not None and manual is None
+    lapsed = manual_mode and state.manual is not None and manual is None
     new = CycleState(st, state.arbiter, state.lifecycle, d, h, state.operator_mode,
                      None if lapsed else state.manual,  # a silent joystick stops the vehicle
                      until, state.manual_timeout_ns, None, state.thruster_mask, armed, armed_at,
