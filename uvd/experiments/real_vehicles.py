@@ -301,6 +301,7 @@ def aid_bluerov2_demo(out: Path, duration_s: float = 120.0) -> dict:
     from uvd.model.params import params_from_theta
     from uvd.runtime.build import build_core, start_pose
     from uvd.runtime.config import parse_config
+    from uvd.runtime.cycle import unsupervised
 
     here = Path(__file__).resolve().parents[2]
     src = here / "config" / "sim-bluerov2.toml"
@@ -316,11 +317,12 @@ def aid_bluerov2_demo(out: Path, duration_s: float = 120.0) -> dict:
         cfg = parse_config(doc, source=src)
         vehicle = cfg.load_vehicle()
         H0, v0 = start_pose(cfg)
-        sim = Lockstep(vehicle, build_core(cfg, vehicle), lockstep_config(cfg, 0), H0=H0, v0=v0)
+        sim = Lockstep(vehicle, unsupervised(build_core(cfg, vehicle)), lockstep_config(cfg, 0),
+                       H0=H0, v0=v0)
         n = int(round(duration_s / sim.dt_control))
         ts, ms, ds, bs = [], [], [], []
         for k in range(n):
-            sim.cycle()
+            sim.advance()
             if k % 25 == 0 or k == n - 1:
                 p = params_from_theta(sim.state.est[0].theta)
                 ts.append((k + 1) * sim.dt_control)

@@ -64,32 +64,24 @@ class Daemon:
         self.config = config
         self.vehicle = config.load_vehicle()
         self.supervisor = Supervisor(make_cycle(config, self.vehicle))
-        self.recorder = None
-        if config.recording.enabled:
-            from uvd.telemetry.mcap_recorder import McapRecorder
-            r = config.recording
-            self.recorder = McapRecorder(r.dir, flush_interval_s=r.flush_interval_s,
-                                         rotate_mb=r.rotate_mb, rotate_s=r.rotate_s,
-                                         raw_queue_size=r.raw_queue_size)
-        self.hardware = hw = Hardware(config, self.vehicle, recorder=self.recorder)
-        self.app = App(config, self.tick, components=hw.components,
-                       sinks=[*sinks, *([self.recorder] if self.recorder else [])],
+        self.hardware = hw = Hardware(config, self.vehicle)
+        self.app = App(config, self.tick, components=hw.components, sinks=sinks,
                        supervisor=self.supervisor, notifier=notifier, clock=clock,
                        realtime=realtime)
+        # the faces (uvd.links) are the App's; the black box taps every raw input frame
+        self.recorder, self.mavlink = self.app.links.get("mcap"), self.app.links.get("mavlink")
+        if self.recorder is not None:
+            hw.tap(self.recorder)
         if hw.instruments.sync:
             hw.wake_on_ins(self.app.loop.wake)
         self.app.set_amplifier_hooks(zero=hw.can.zero, disable=hw.can.disable)
         self.app.reload_hooks.append(self._on_reload)
         self.max_thrust = np.asarray(self.core_cfg.allocator.max_thrust_n, dtype=float)
-        self.mavlink = None
-        if config.mavlink.enabled:
-            from uvd.runtime.mavlink_link import MavlinkLink
-            self.mavlink = MavlinkLink.for_daemon(config, self.app, self.max_thrust)
         if self.mavlink is not None:
             hw.inputs.insert(-1, OperatorHeartbeat(self.mavlink))
         self.estimates = Estimates(self.app.hub, self.supervisor,
                                    config.estimation.publish_every_s)
-        self.estimates.attach(self.app, config)
+        self.estimates.attach(self.app)
         self.app.hub.publish(start_record(config, self.params_kept, self.supervisor.config,
                                           self.supervisor.data), always=True)
         self.auto_arm = AutoArm(config.loop.rate_hz) if auto_arm else None

@@ -19,17 +19,13 @@ __all__ = ["Hardware"]
 
 class Hardware:
     """The hardware interfaces of ``config``: :attr:`inputs` read in this order, the
-    amplifiers written; ``recorder`` (a black box) taps every serial chunk and CAN frame."""
+    amplifiers written."""
 
-    def __init__(self, config: Config, vehicle, *, recorder=None) -> None:
+    def __init__(self, config: Config, vehicle) -> None:
         self.instruments = Instruments(sync=config.loop.trigger == "ins")
         i = self.instruments
         self.sensors = make_sensors(config, i.ins_box, i.dvl_box, i.depth_box)
-        if recorder is not None:
-            for s in self.sensors:
-                s.reader.tap = recorder.tap_serial
-        self.can = CanComponent(config, vehicle, i.depth_box,
-                                tap=None if recorder is None else recorder.tap_can)
+        self.can = CanComponent(config, vehicle, i.depth_box)
         self.leak = LeakInput(config.sensors.leak) if config.sensors.leak.enabled else None
         leak = [self.leak] if self.leak is not None else []
         #: what the App starts and stops (GcFreeze last: it freezes what the others made)
@@ -37,6 +33,12 @@ class Hardware:
         #: the interfaces that provide a part of the cycle's inputs, in the order read (a
         #: link's heartbeat is added by the daemon)
         self.inputs: list[Any] = [self.can, *leak, i]
+
+    def tap(self, recorder) -> None:
+        """A black box (``uvd.links.mcap``) taps every serial chunk and CAN frame."""
+        for s in self.sensors:
+            s.reader.tap = recorder.tap_serial
+        self.can.tap = recorder.tap_can
 
     def wake_on_ins(self, wake) -> None:
         """The sensor-synchronous cycle: each INS sample calls ``wake`` (docs/runtime.md)."""

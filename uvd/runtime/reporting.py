@@ -62,17 +62,12 @@ class Estimates:
         self.adapts = bool(c.estimators) or \
             c.controller.diagnostics(supervisor.data.core.ctrl).theta is not None
 
-    def attach(self, app, config) -> None:
-        """With online estimators: ``[estimation] save_path``'s sink on ``app``'s hub, and a
-        shutdown step — after the amplifiers are safe, before the sinks close — that
-        publishes the newest θ̂ however long ago the last periodic record went out."""
+    def attach(self, app) -> None:
+        """With online estimators: a shutdown step of ``app`` — after the amplifiers are safe,
+        before the sinks close (``[estimation] save_path``'s among them) — that publishes the
+        newest θ̂ however long ago the last periodic record went out."""
         if not self.supervisor.config.core.estimators:
             return
-        e = config.estimation
-        if e.save_path:
-            from uvd.telemetry.params_file import RECORD_TYPE, ParamsFileSink
-            app.hub.add_sink(ParamsFileSink(e.save_path, every_s=e.save_every_s),
-                             types=(RECORD_TYPE,))
 
         async def final() -> None:
             self.publish(self.last_t_ns)

@@ -27,7 +27,7 @@ def kept_params(config: Config, path: str) -> tuple[Config, dict[str, Any]]:
     """``config`` with the parameters a ground station set (``[mavlink] params_file``,
     docs/mavlink.md), and those applied; a value that is no longer valid is named in the log
     and skipped."""
-    from uvd.runtime.mavlink_params import read_params_file
+    from uvd.links.mavlink.params import read_params_file
     try:
         values = read_params_file(path)
     except ValueError as exc:

@@ -160,19 +160,6 @@ class MavlinkLink:
 
     name = "mavlink"
 
-    @classmethod
-    def for_daemon(cls, config, app, max_thrust_n: Sequence[float]) -> MavlinkLink:
-        """The link of a daemon's configuration (``[mavlink]``), queueing on ``app.commands``
-        and added to its hub as a sink."""
-        f = config.failsafe
-        link = cls(config.mavlink, app.commands, lambda: app.config,
-                   thresholds={"ins": f.ins_stale_s, "dvl": f.dvl_stale_s,
-                               "depth": f.depth_stale_s, "feedback": f.feedback_stale_s},
-                   max_thrust_n=max_thrust_n, controller=config.control.controller,
-                   step1_s=config.control.step1_duration_s, loop_cpus=config.loop.cpu_affinity)
-        app.hub.add_sink(link)
-        return link
-
     def __init__(self, cfg: MavlinkSection, commands: CommandQueue, config: Callable[[], Any],
                  *, thresholds: Mapping[str, float], max_thrust_n: Sequence[float],
                  controller: str = "pdc", step1_s: float = 0.0,
