@@ -11,11 +11,10 @@ import numpy as np
 import pytest
 
 from uvd.control.ambc import drag_index, mass_index
-from uvd.experiments.lockstep import Lockstep, LockstepConfig
+from uvd.lockstep import Lockstep, LockstepConfig
 from uvd.runtime import commands as cmd
-from uvd.runtime.build import build_core, start_pose
+from uvd.runtime.build import make_cycle, start_pose
 from uvd.runtime.config import DEFAULT_CONFIG, load_config
-from uvd.runtime.supervisor import Supervisor
 
 
 def _sim(**control):
@@ -24,10 +23,10 @@ def _sim(**control):
         cfg = replace(cfg, control=replace(cfg.control, **control))
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, build_core(cfg, vehicle),
+    sim = Lockstep(vehicle, make_cycle(cfg, vehicle),
                    LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
-                   supervisor=Supervisor(cfg.failsafe))
-    sim.cycle()  # standby: the arming checks need a health snapshot
+                   armed=False)
+    sim.advance()  # standby: the arming checks need a health snapshot
     assert sim.command(cmd.Arm()).ok
     return sim
 
@@ -35,7 +34,7 @@ def _sim(**control):
 def _run(sim, seconds):
     outs = []
     for _ in range(round(seconds / sim.dt_control)):
-        outs.append((sim.cycle(), sim.last_result.decision.action.label))
+        outs.append((sim.advance(), sim.last_result.decision.action.label))
     return outs
 
 
@@ -70,7 +69,7 @@ def test_an_effectiveness_that_does_not_fit_is_refused_by_name(c, why):
     sim = _sim()
     res = sim.command(c)
     assert not res.ok and res.reason == why
-    assert sim.runner.thruster_eta is None
+    assert sim.supervisor.data.thruster_eta is None
 
 
 def test_the_command_round_trips_through_its_record():

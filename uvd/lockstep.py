@@ -140,6 +140,10 @@ class Lockstep:
                                              frame_seed=cfg.seed if cfg.frame_noise else None)
         #: amplifier faults the cycle sees (names, e.g. ``("node 3: overcurrent",)``)
         self.amplifier_faults: tuple[str, ...] = ()
+        #: the thrusters' effectiveness η the cycle is told (None: all healthy), as an amplifier
+        #: reports it; the plant's own is ``plant.thrusters.health``. Set, it replaces the
+        #: cycle's η (the operator's SetThrusterEta) before the next cycle
+        self.thruster_eta: np.ndarray | None = None
         #: signals of plug-in failsafe triggers the cycle sees, as the daemon's read phase
         #: gathers them (``{"operator_heartbeat_age_s": 6.0}``, uvd/runtime/triggers.py)
         self.extra: dict | None = None
@@ -178,6 +182,9 @@ class Lockstep:
         """One cycle, then one control period of the plant under its command."""
         ins, dvl, depth = self._pending
         omega = self.plant.thrusters.omega.copy()
+        if self.thruster_eta is not None and \
+                self.supervisor.data.thruster_eta is not self.thruster_eta:
+            self.supervisor.data = self.supervisor.data._replace(thruster_eta=self.thruster_eta)
         act = ActuatorStatus(omega_rad_s=omega, enabled=True, faults=self.amplifier_faults,
                              feedback_t_ns=self.t_ns)
         self.last_result = r = self.supervisor.update(

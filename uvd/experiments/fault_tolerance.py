@@ -56,32 +56,34 @@ def run_arm(config_name: str, k: int, eta_k: float, arm: str, *, t_fault_s: floa
             duration_s: float = DURATION_S, seed: int = 0) -> dict[str, Any]:
     """One lockstep run of ``config_name`` with thruster ``k`` at ``eta_k`` from
     ``t_fault_s`` (``arm``: "fault-free", "none" or "amplifier")."""
-    from uvd.experiments.lockstep import Lockstep, lockstep_config, run, tracking_errors
+    from uvd.lockstep import Lockstep, lockstep_config, run, tracking_errors
     from uvd.runtime.build import build_core, start_pose
     from uvd.runtime.config import load_config
+    from uvd.runtime.cycle import unsupervised
 
     cfg = load_config(_config_dir() / config_name)
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, build_core(cfg, vehicle), lockstep_config(cfg, seed), H0=H0, v0=v0)
+    sim = Lockstep(vehicle, unsupervised(build_core(cfg, vehicle)), lockstep_config(cfg, seed),
+                   H0=H0, v0=v0)
     n = vehicle.n_thrusters
     fault_ns = int(round(t_fault_s * 1e9))
     eta = np.ones(n)
     eta[k - 1] = eta_k
-    step = sim.cycle
+    step = sim.advance
     seen: dict[str, Any] = {"given_up": set(), "told_s": None}
 
-    def cycle(armed: bool = True):
+    def advance():
         if arm != "fault-free" and sim.t_ns >= fault_ns:
             sim.plant.thrusters.health[k - 1] = eta_k
             if arm == "amplifier" and sim.thruster_eta is None:
                 sim.thruster_eta = eta
                 seen["told_s"] = sim.t_ns * 1e-9
-        out = step(armed=armed)
+        out = step()
         seen["given_up"].update(out.given_up)
         return out
 
-    sim.cycle = cycle
+    sim.advance = advance
     log = run(sim, duration_s)
     before = tracking_errors(log, 0.0, t_fault_s)["position_mae"]
     after = tracking_errors(log, t_fault_s + SETTLE_S)["position_mae"]

@@ -297,8 +297,9 @@ class CycleState(NamedTuple):
         The operator's manual wrench and when it lapses (0: counted from the next cycle).
     pending_hold : Reference or None
         A pose to hold (``HoldPose``), taken by the next update.
-    thruster_mask : ndarray or None
-        Thrusters allocation may use (None: all).
+    thruster_eta : ndarray or None
+        Each thruster's effectiveness η the cycle allocates with (None: all healthy;
+        ``SetThrusterEta``).
     was_armed : bool
         Armed at the end of the last update.
     armed_at_ns : int or None
@@ -317,7 +318,7 @@ class CycleState(NamedTuple):
     manual_until_ns: int = 0
     manual_timeout_ns: int = 0
     pending_hold: Any = None
-    thruster_mask: np.ndarray | None = None
+    thruster_eta: np.ndarray | None = None
     was_armed: bool = False
     armed_at_ns: int | None = None
     nonfinite_out: tuple[str, ...] = ()
@@ -443,7 +444,30 @@ def apply(config: CycleConfig, state: CycleState, c: Any, t_ns: int
         from uvd.control.trajectory import setpoint
         return CommandResult(True), state._replace(pending_hold=setpoint(
             (c.north_m, c.east_m, c.down_m, 0.0, 0.0, c.heading_rad))), ()
+    if isinstance(c, cmd.SetThrusterEta):
+        return _set_eta(config, state, c)
     return CommandResult(False, f"{type(c).__name__} is not supported by the cycle"), state, ()
+
+
+def _set_eta(config: CycleConfig, state: CycleState, c: Any
+             ) -> tuple[CommandResult, CycleState, Effects]:
+    """One thruster's effectiveness η (the operator's source); the result says which DOFs the
+    cycle gives up with it."""
+    n = config.core.allocator.n_thrusters
+    try:
+        i, e = int(c.thruster), float(c.eta)
+    except (TypeError, ValueError):
+        return CommandResult(False, "thruster must be an integer and eta a number"), state, ()
+    if not 1 <= i <= n:
+        return CommandResult(False, f"thruster {i} is not one of 1…{n}"), state, ()
+    if not 0.0 <= e <= 1.0:  # NaN fails too
+        return CommandResult(False, f"eta {c.eta!r} is not in [0, 1]"), state, ()
+    eta = np.ones(n) if state.thruster_eta is None else state.thruster_eta.copy()
+    eta[i - 1] = e
+    given_up = config.core.accommodation_for(eta)[0].given_up
+    return CommandResult(True, f"thruster {i} eta {e:g} ({c.source or 'operator'}); "
+                               f"given up: {', '.join(given_up) or 'none'}"), \
+        state._replace(thruster_eta=None if (eta == 1.0).all() else eta), ()
 
 
 # -- the update --
@@ -457,7 +481,8 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
     st = state.core
     a = inp.actuators
     omega = a.omega_rad_s if a is not None else None
-    ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega)
+    ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega,
+                         thruster_eta=state.thruster_eta)
     sensed = core.sense(cfg, ci, st, dt)
     nav = sensed.nav
 
@@ -498,12 +523,12 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
         if inp.t_ns <= until:
             manual = state.manual
     ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega, armed, mode, manual,
-                         state.thruster_mask)
+                         state.thruster_eta)
     out, st = core.act(cfg, sensed, ci, st, dt)
     lapsed = manual_mode and state.manual is not None and manual is None
     new = CycleState(st, state.arbiter, state.lifecycle, d, h, state.operator_mode,
                      None if lapsed else state.manual,  # a silent joystick stops the vehicle
-                     until, state.manual_timeout_ns, None, state.thruster_mask, armed, armed_at,
+                     until, state.manual_timeout_ns, None, state.thruster_eta, armed, armed_at,
                      ("command",) if out.status == "non-finite" else ())
     return CycleResult(out, h, d, new.lifecycle.state, state.operator_mode, effects,
                        armed_at), new
