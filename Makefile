@@ -1,15 +1,26 @@
 # The two commands of the README's quick start are `make demo` and `make test`.
+# Installs take the tested versions pinned in constraints.txt; `make constraints` refreshes it.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench results lint clean
+.PHONY: demo test bench results lint clean constraints
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[dev]'
+	touch $(STAMP)
+
+# Refresh the pinned versions: install the newest that pyproject.toml allows into the venv,
+# then pin what is installed (uvd itself excluded). Run `make test` before committing it.
+constraints:
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade --upgrade-strategy eager -e '.[dev]'
+	{ echo "# The versions uvd was tested with (pip freeze of the test venv, uvd itself excluded)."; \
+	  echo "# make demo, make test and CI install with -c constraints.txt; refresh: make constraints."; \
+	  $(PY) -m pip freeze --exclude uvd; } > constraints.txt
 	touch $(STAMP)
 
 demo: $(STAMP)

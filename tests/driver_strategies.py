@@ -1,4 +1,4 @@
-"""Hypothesis strategies, sample frames and the recordings of ../shared/data shared by the
+"""Hypothesis strategies, sample frames and the real recordings (tests/data/) shared by the
 driver tests (no tests here)."""
 
 from __future__ import annotations
@@ -15,14 +15,15 @@ from drivers import digiquartz, pd0, phins_ascii, phins_stdbin
 from drivers._layout import Layout
 from drivers.framing import decode_bytes
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+#: the real recordings whose licence lets them live in the repository (tests/data/README.md)
+DATA = Path(__file__).resolve().parent / "data"
 
 
 def read_data(rel: str) -> bytes:
     path = DATA / rel
     if not path.is_file():
-        pytest.fail(f"recording {path} is missing: the tests read ../shared/data/ relative to "
-                    f"the project root (see ../shared/data/README.md)")
+        pytest.fail(f"recording {path} is missing: it belongs to the repository "
+                    f"(tests/data/README.md)")
     return path.read_bytes()
 
 

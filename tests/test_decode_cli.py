@@ -9,16 +9,15 @@ import sys
 from pathlib import Path
 
 import pytest
+from driver_strategies import DATA
 
 from uvd.cli import main
-
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
 def _path(rel: str) -> Path:
     p = DATA / rel
     if not p.is_file():
-        pytest.fail(f"recording {p} is missing (../shared/data/ relative to the project root)")
+        pytest.fail(f"recording {p} is missing: it belongs to the repository (tests/data/)")
     return p
 
 

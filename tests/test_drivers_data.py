@@ -1,4 +1,4 @@
-"""Every real recording in ../shared/data decodes and agrees with its expected values."""
+"""Every real recording in tests/data decodes and agrees with its expected values."""
 
 from __future__ import annotations
 

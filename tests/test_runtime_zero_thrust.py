@@ -48,7 +48,7 @@ def test_zero_rpdos_reach_every_amplifier(tmp_path):
     rpdos = [m for m in msgs if 0x200 < m.arbitration_id < 0x280]
     per_node = Counter(m.arbitration_id - 0x200 for m in rpdos)
     assert per_node == {n: 4 for n in range(11, 17)}
-    for m in rpdos:   # RPDO1 of config/amplifier.eds: controlword 0x6040, target torque 0x6071
+    for m in rpdos:   # RPDO1 of drivers/can/amplifier.eds: controlword 0x6040, target torque 0x6071
         controlword, target = struct.unpack_from("<Hh", bytes(m.data))
         assert target == 0 and controlword == 0x0000     # "disable voltage"
     assert sum(m.arbitration_id == 0x80 for m in msgs) == 4          # a SYNC per cycle

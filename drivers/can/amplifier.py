@@ -344,7 +344,7 @@ class AmplifierGroup:
                     rpdo, var_cw, var_target = m, m[OD_CONTROLWORD], m[OD_TARGET_TORQUE]
         if rpdo is None:
             raise ConfigError(f"{where} eds: node {nid}: no enabled RPDO maps both controlword "
-                              "0x6040 and target torque 0x6071 (see config/amplifier.eds)")
+                              "0x6040 and target torque 0x6071 (see drivers/can/amplifier.eds)")
         found: dict[int, tuple[object, object]] = {}
         for m in remote.tpdo.map.values():
             if not m.enabled:
@@ -354,7 +354,7 @@ class AmplifierGroup:
             self.bus.expect(m.cob_id, (m.length + 7) // 8)
         if OD_STATUSWORD not in found or OD_VELOCITY_ACTUAL not in found:
             raise ConfigError(f"{where} eds: node {nid}: the enabled TPDOs must map statusword "
-                              "0x6041 and velocity actual 0x606C (see config/amplifier.eds)")
+                              "0x6041 and velocity actual 0x606C (see drivers/can/amplifier.eds)")
         fb_pdo, var_sw = found[OD_STATUSWORD]
         var_vel = found[OD_VELOCITY_ACTUAL][1]
         var_torque = found.get(OD_TORQUE_ACTUAL, (None, None))[1]

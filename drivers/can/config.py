@@ -30,15 +30,17 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
 #: Interface-local IPv6 multicast group (scope 1): the kernel never puts it on a wire.
 DEFAULT_UDP_GROUP = "ff11::7576:6463"
 DEFAULT_UDP_PORT = 43113
-_REPO_CONFIG = Path(__file__).resolve().parents[2] / "config"
-DEFAULT_AMPLIFIER_EDS = _REPO_CONFIG / "amplifier.eds"
-DEFAULT_PRESSURE_EDS = _REPO_CONFIG / "pressure-transmitter.eds"
+#: The reference devices' object dictionaries, package data of this package (a checkout, an
+#: editable install and an installed wheel alike find them here)
+DEFAULT_AMPLIFIER_EDS = Path(str(resources.files("drivers.can") / "amplifier.eds"))
+DEFAULT_PRESSURE_EDS = Path(str(resources.files("drivers.can") / "pressure-transmitter.eds"))
 LOG_SUFFIXES = (".log", ".asc", ".blf")
 
 

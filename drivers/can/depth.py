@@ -1,7 +1,7 @@
 """A CANopen pressure transmitter (CiA 404 measuring device) as a depth source.
 
 The transmitter publishes its analog input process value (absolute pressure) by TPDO — on the
-reference device (``config/pressure-transmitter.eds``) 0x9130:01 INTEGER32 in 0.1 Pa plus the
+reference device (``drivers/can/pressure-transmitter.eds``) 0x9130:01 INTEGER32 in 0.1 Pa plus the
 AI status 0x6150:01, every 50 ms. Each TPDO becomes a :class:`drivers.samples.DepthSample`
 with ``source="can_depth"``; the serial Digiquartz remains the other depth source and the
 daemon's configuration picks one (``[can.depth] enabled``; see ``docs/can.md``).

@@ -32,7 +32,7 @@ class CanPressureTransmitter(EmulatedNode):
     node_id : int
         Its node id (32 by default, as ``[can.depth] node_id``).
     eds : Path
-        Object dictionary (``config/pressure-transmitter.eds``).
+        Object dictionary (``drivers/can/pressure-transmitter.eds``).
     cfg : DepthConfig
         Fluid density, gravity, atmospheric pressure and the PV scaling — the same numbers the
         driver uses to turn pressure back into depth.

@@ -1,6 +1,6 @@
 """``uvd bench drivers``: decode throughput per codec and pty latency (issue 5 acceptance).
 
-* **Throughput**: a recorded stream (``../shared/data``; synthetic frames from the encoders if
+* **Throughput**: a recorded stream (``tests/data``; synthetic frames from the encoders if
   a recording is absent) fed to :class:`~drivers.framing.StreamDecoder` in 4 KiB chunks, as a
   transport does, repeated for ``--duration`` seconds; frames/s is the median over repetitions
   (wall clock), also given per CPU-second of this process and as the best pass, with the load
@@ -29,7 +29,9 @@ from drivers.framing import StreamDecoder
 from drivers.samples import DepthSample, DvlSample, InsSample
 from uvd.bench import Bench, percentiles
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+#: the real recordings of a checkout (tests/data/); an installed package has none: synthetic
+#: frames then
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / "tests" / "data"
 
 
 def _add_arguments(p) -> None:
@@ -38,7 +40,7 @@ def _add_arguments(p) -> None:
     p.add_argument("--samples", type=int, default=300,
                    help="latency samples per codec (default 300)")
     p.add_argument("--data", type=Path, default=DEFAULT_DATA,
-                   help="folder of the recordings (default ../shared/data)")
+                   help="folder of the recordings (default tests/data of the checkout)")
 
 
 def _streams(data_dir: Path) -> dict[str, tuple[object, bytes, str]]:

@@ -1,4 +1,5 @@
-"""``uvd check-config [FILE] [--doc-out MD] [--print]``: validate a configuration, or write its
+"""``uvd check-config [FILE] [--shipped] [--doc-out MD] [--print]``: validate a configuration
+(a file, the name of a shipped one, or with ``--shipped`` every shipped one), or write its
 reference.
 
 Validation is exactly what ``uvd run`` does at start (:func:`uvd.runtime.config.load_config`),
@@ -20,7 +21,10 @@ def register(sub) -> None:
                                             "reference with --doc-out)",
                        description=__doc__.split("\n\n")[0])
     p.add_argument("file", nargs="?", type=Path, metavar="FILE",
-                   help="TOML configuration to validate")
+                   help="TOML configuration to validate (or the name of a shipped one: sim, "
+                        "sim-bluerov2, jhu-rov)")
+    p.add_argument("--shipped", action="store_true",
+                   help="validate every configuration shipped with the package")
     p.add_argument("--doc-out", type=Path, metavar="MD",
                    help="write the configuration reference generated from the schema "
                         "(docs/config.md)")
@@ -30,12 +34,12 @@ def register(sub) -> None:
 
 
 def _run(args) -> int:
-    from uvd.runtime.config import ConfigValidationError, load_config, render_config_doc
-    from uvd.runtime.schema import as_dict
+    from uvd.runtime.config import render_config_doc, shipped_configs
 
-    if args.file is None and args.doc_out is None:
+    if args.file is None and args.doc_out is None and not args.shipped:
         args.parser.print_usage(sys.stderr)
-        print("uvd check-config: give a FILE to validate and/or --doc-out MD", file=sys.stderr)
+        print("uvd check-config: give a FILE to validate, --shipped and/or --doc-out MD",
+              file=sys.stderr)
         return 2
     if args.doc_out is not None:
         args.doc_out.parent.mkdir(parents=True, exist_ok=True)
@@ -46,19 +50,28 @@ def _run(args) -> int:
             from uvd.links.mavlink.params import refresh_doc
             mav.write_text(refresh_doc(mav.read_text(encoding="utf-8")), encoding="utf-8")
             print(f"uvd check-config: refreshed the parameter list in {mav}")
-    if args.file is None:
-        return 0
+    files = [args.file] if args.file is not None else []
+    if args.shipped:
+        files += shipped_configs()
+    return max((_check(f, args.dump) for f in files), default=0)
+
+
+def _check(file, dump: bool) -> int:
+    """Validate one configuration: 0 and a one-line summary, or 2 and every error."""
+    from uvd.runtime.config import ConfigValidationError, load_config
+    from uvd.runtime.schema import as_dict
+
     try:
-        cfg = load_config(args.file)
+        cfg = load_config(file)
     except ConfigValidationError as exc:
         n = len(exc.errors)
-        print(f"uvd check-config: {args.file}: {n} error{'s' if n != 1 else ''}",
+        print(f"uvd check-config: {file}: {n} error{'s' if n != 1 else ''}",
               file=sys.stderr)
         print(str(exc), file=sys.stderr)
         return 2
-    if args.dump:
+    if dump:
         print(json.dumps(as_dict(cfg), indent=2, default=str))
-    print(f"{args.file}: OK — vehicle {cfg.vehicle.name}, loop {cfg.loop.rate_hz:g} Hz, "
+    print(f"{file}: OK — vehicle {cfg.vehicle.name}, loop {cfg.loop.rate_hz:g} Hz, "
           f"controller {cfg.control.controller}, INS {cfg.sensors.ins.port}, "
           f"CAN {cfg.can.bus.interface}:{cfg.can.bus.channel} "
           f"(nodes {', '.join(map(str, cfg.can.amplifiers.node_ids))})"

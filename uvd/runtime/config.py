@@ -47,6 +47,7 @@ import math
 import re
 import tomllib
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
@@ -71,13 +72,36 @@ from uvd.runtime.loop import LoopSettings
 from uvd.runtime.schema import PerAxis, section, setting
 
 __all__ = ["Config", "ConfigValidationError", "load_config", "parse_config",
-           "render_config_doc", "DEFAULT_CONFIG", "VehicleSection", "ControlSection",
+           "render_config_doc", "DEFAULT_CONFIG", "CONFIG_DIR", "shipped_configs",
+           "config_path", "VehicleSection", "ControlSection",
            "InsSection", "DvlSection", "DepthSection", "SensorsSection", "TelemetrySection",
            "JsonlSection", "DaemonSection", "NavigationSection", "EstimationSection",
            "CanSection", "CanAmplifiersSection", "CanDepthSection", "CanLogSection"]
 
+#: The shipped configurations (``config/*.toml`` of the checkout): package data. ``uvd/config``
+#: is a link to the project's ``config/``, so setuptools ships them inside the package and
+#: importlib.resources finds them in a checkout, an editable install and an installed wheel
+#: alike (resolved: in a checkout, messages name ``config/…``).
+CONFIG_DIR = Path(str(resources.files("uvd") / "config")).resolve()
 #: The embedded default: the simulated vehicle, everything local (``config/sim.toml``).
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim.toml"
+DEFAULT_CONFIG = CONFIG_DIR / "sim.toml"
+
+
+def shipped_configs() -> list[str]:
+    """Names of the shipped configurations (``sim``, ``sim-bluerov2``, …)."""
+    return sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
+
+
+def config_path(name_or_path: str | Path) -> Path:
+    """The file of ``name_or_path``: an existing file as it is; else the shipped configuration
+    of that name (``sim-bluerov2`` or ``sim-bluerov2.toml``), so that an installed package
+    runs ``uvd demo --config sim-bluerov2`` with no checkout; else the path itself (reading it
+    then fails naming it)."""
+    p = Path(name_or_path)
+    if p.exists() or len(p.parts) != 1:
+        return p
+    shipped = CONFIG_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
+    return shipped if shipped.is_file() else p
 
 BAUD_RATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)
 _URL = re.compile(r"^(udp|tcp)://(?P<host>[^:/]+|\[[0-9a-fA-F:]+\]):(?P<port>\d{1,5})$")
@@ -890,7 +914,8 @@ def parse_config(data: dict[str, Any], *, source: str | Path | None = None) -> C
 
 
 def load_config(path: str | Path | None = None) -> Config:
-    """Read and validate a TOML configuration file (default: :data:`DEFAULT_CONFIG`).
+    """Read and validate a TOML configuration file (default: :data:`DEFAULT_CONFIG`; a bare
+    name is a shipped configuration, :func:`config_path`).
 
     Raises
     ------
@@ -898,7 +923,7 @@ def load_config(path: str | Path | None = None) -> Config:
         Unreadable file, TOML syntax error, or any schema violation — one line per problem
         naming the file, the dotted key and the reason.
     """
-    path = Path(path) if path is not None else DEFAULT_CONFIG
+    path = config_path(path) if path is not None else DEFAULT_CONFIG
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:

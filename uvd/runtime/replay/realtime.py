@@ -18,7 +18,7 @@ the daemon's first frame (``wait_s`` bounds that wait); the recording's end plus
 ends the run.
 
 The comparison is made on the wire too: the target torque (‰ of rated, RPDO1 bytes 2–3,
-``config/amplifier.eds``) each drive was sent in the cycle between two SYNCs, recorded against
+``drivers/can/amplifier.eds``) each drive was sent in the cycle between two SYNCs, recorded against
 live, cycle by cycle (the *j*-th SYNC of each). Tracking (navigation against reference) comes
 from the daemon under test's own recording when it writes one (``--daemon`` sets that up).
 
