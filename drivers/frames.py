@@ -2,7 +2,7 @@
 
 Our frames (thesis App. A, Fig. A.2): world x north, y east, z down; body x bow, y starboard,
 z keel; Euler sequence heading about z, then pitch about the new y, then roll about the new x,
-so R = Rz(heading) Ry(pitch) Rx(roll) maps body to world (:func:`drivers.samples.euler_to_R`).
+so R = Rz(heading) Ry(pitch) Rx(roll) maps body to world (:func:`uvd.geometry.euler_to_R`).
 Angles are radians inside uvd; degrees appear only in names at the codec edge (``pitch_deg``).
 
 Instrument conventions handled here:
@@ -13,7 +13,8 @@ Instrument conventions handled here:
   rotation about +y starboard) is positive bow *up*. :func:`phins_pitch_to_ours`.
 * **PHINS roll**: positive port side up (starboard down), which is ours — no flip
   (:func:`phins_roll_to_ours` exists so the statement has a test).
-* **PHINS heading**: degrees 0–360 clockwise from true north, ours — only wrapped to (−π, π].
+* **PHINS heading**: degrees 0–360 clockwise from true north, ours — only wrapped to (−π, π]
+  (:func:`uvd.geometry.wrap_angle`, the one convention).
 * **PHINS heading/roll/pitch rates**: follow the angle conventions; the pitch rate flips.
 * **PHINS geographic speed** (``$PIXSE,SPEED_``, STDBIN "speed geographic frame"): east,
   north, up. → NED: (north, east, −up). :func:`enu_to_ned`.
@@ -34,22 +35,7 @@ import math
 
 import numpy as np
 
-from drivers.samples import euler_to_R
-
-_TWO_PI = 2.0 * math.pi
-
-
-def wrap_pi(angle_rad: float) -> float:
-    """Wrap an angle to (−π, π]."""
-    a = math.fmod(angle_rad + math.pi, _TWO_PI)
-    if a <= 0.0:
-        a += _TWO_PI
-    return a - math.pi
-
-
-def wrap_pi_array(angle_rad):
-    """:func:`wrap_pi` of every entry of an array: angles wrapped to (−π, π]."""
-    return np.pi - np.mod(np.pi - np.asarray(angle_rad, dtype=float), _TWO_PI)
+from uvd.geometry import euler_to_R, wrap_angle
 
 
 def phins_heading_to_ours(heading_deg: float) -> float:
@@ -57,7 +43,7 @@ def phins_heading_to_ours(heading_deg: float) -> float:
 
     Same sense (rotation about +z down); only the unit and the range change.
     """
-    return wrap_pi(math.radians(heading_deg))
+    return wrap_angle(math.radians(heading_deg))
 
 
 def ours_heading_to_phins(heading_rad: float) -> float:

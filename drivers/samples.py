@@ -13,6 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# The attitude conventions live in one pure module below every layer (Euler ⇄ R, η, wrap);
+# re-exported here for the modules that import them from drivers.samples (prefer uvd.geometry)
+from uvd.geometry import R_to_euler, eta_of, euler_to_R  # noqa: F401
+
 
 @dataclass(frozen=True, slots=True)
 class InsSample:
@@ -60,29 +64,3 @@ class PositionSample:
     east_m: float
     source: str = "position"
     extra: dict = field(default_factory=dict)
-
-
-def euler_to_R(roll: float, pitch: float, heading: float) -> np.ndarray:
-    """Rotation body → world for the Euler sequence of App. A: R = Rz(ψ) Ry(θ) Rx(φ)."""
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    ch, sh = np.cos(heading), np.sin(heading)
-    return np.array([
-        [ch * cp, ch * sp * sr - sh * cr, ch * sp * cr + sh * sr],
-        [sh * cp, sh * sp * sr + ch * cr, sh * sp * cr - ch * sr],
-        [-sp, cp * sr, cp * cr],
-    ])
-
-
-def R_to_euler(R: np.ndarray) -> tuple[float, float, float]:
-    """(roll, pitch, heading) of R (inverse of :func:`euler_to_R`; heading in (−π, π])."""
-    pitch = float(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
-    roll = float(np.arctan2(R[2, 1], R[2, 2]))
-    heading = float(np.arctan2(R[1, 0], R[0, 0]))
-    return roll, pitch, heading
-
-
-def eta_of(H: np.ndarray) -> np.ndarray:
-    """[north, east, down, roll, pitch, heading] of a pose H (4×4, body → world)."""
-    roll, pitch, heading = R_to_euler(H[:3, :3])
-    return np.array([H[0, 3], H[1, 3], H[2, 3], roll, pitch, heading])

@@ -69,12 +69,12 @@ from typing import Any
 import numpy as np
 
 from drivers.pty import PtyPort
-from drivers.samples import R_to_euler
+from sim_bridge.config import BridgeConfig
 from sim_bridge.instruments.faults import SENSOR_MODES, FaultyInstruments, SensorFaults
-from sim_bridge.instruments.models import instrument_config
 from sim_bridge.instruments.pty_emulators import EmulatorConfig, InstrumentEmulators
 from sim_bridge.plant import Plant, PlantConfig, PlantFault
 from sim_bridge.thrusters import ThrusterBank, ThrusterEffects
+from uvd.geometry import R_to_euler
 from uvd.io.toml import dump_toml
 from uvd.netports import free_port
 
@@ -150,8 +150,9 @@ class SimBridge:
 
     Parameters
     ----------
-    config : uvd.runtime.config.Config
-        The daemon's configuration (ports, bus, vehicle, start pose).
+    config : sim_bridge.config.BridgeConfig
+        The simulated vehicle (model, start pose, ports, bus): made from the daemon's
+        configuration file by ``uvd.commands.sim_bridge.bridge_config``.
     seed : int
         Seed of every random number (instrument noise, garbage bytes).
     hold : bool
@@ -162,16 +163,15 @@ class SimBridge:
         Plant integration rate.
     """
 
-    def __init__(self, config, *, seed: int = 0, hold: bool = False,
+    def __init__(self, config: BridgeConfig, *, seed: int = 0, hold: bool = False,
                  truth_log: str | Path | None = None, plant_rate_hz: float = 100.0,
                  clock: Callable[[], int] = time.monotonic_ns) -> None:
         from uvd.control.trajectory import start_pose
         self.config = config
         self.clock = clock
-        self.vehicle = config.load_vehicle()
-        nav = config.navigation
-        self.H0, self.v0 = start_pose(config.control.reference, nav.initial_north_m,
-                                      nav.initial_east_m)
+        self.vehicle = config.vehicle
+        self.H0, self.v0 = start_pose(config.trajectory, config.start_north_m,
+                                      config.start_east_m)
         self.plant = Plant(self.vehicle, PlantConfig(rate_hz=plant_rate_hz), H0=self.H0,
                            v0=self.v0)
         self.rng = np.random.default_rng(seed)
@@ -189,26 +189,24 @@ class SimBridge:
         self._timed: list[tuple[int, str, dict]] = []  # (due ns, op, args), soonest first
         self._timed_lock = threading.Lock()  # the control thread adds, the plant loop takes
         self.timed_results: list[dict] = []
-        self._links = self._links_from(config)
-        ins_protocol = "ascii" if config.sensors.ins.format == "phins-ascii" else "stdbin"
+        self._links = dict(config.serial_ports)
         # each frame's noise keyed by (seed, instrument, frame since the release) as the
         # demo's lockstep run draws it (sim_bridge.instruments.models, "Noise streams")
-        self.instruments = FaultyInstruments(instrument_config(config.simulation.instruments),
+        self.instruments = FaultyInstruments(config.instruments,
                                              self.rng, self.faults, frame_seed=seed)
         if hold:
             self.instruments.set_epoch(None)
         self.instruments.dr_north, self.instruments.dr_east = self.H0[0, 3], self.H0[1, 3]
         self.emulators = InstrumentEmulators(
             self._truth_now, self._links, self.instruments,
-            EmulatorConfig(ins_protocol=ins_protocol, depth=config.sensors.depth.conversion),
+            EmulatorConfig(ins_protocol=config.ins_protocol, depth=config.depth),
             clock=clock)
         self.emulators.ports = {name: FaultyPort(path, name, self.faults, self.rng)
                                 for name, path in self._links.items()}
         self.can = None
         # the leak detector's digital input ([sensors.leak]): a file holding 0 or 1, as a
         # GPIO's sysfs value file; dry until a "leak" command floods it
-        leak = config.sensors.leak
-        self.leak_path = Path(leak.path) if leak.enabled and leak.path else None
+        self.leak_path = config.leak_path
         self.leak_wet = False
         if self.leak_path is not None:
             self.set_leak(False)
@@ -236,7 +234,7 @@ class SimBridge:
         (monotonic ns) the new level became readable."""
         if self.leak_path is None:
             raise ValueError("no leak input configured ([sensors.leak] enabled = false)")
-        active = self.config.sensors.leak.active_level
+        active = self.config.leak_active_level
         level = active if wet else 1 - active
         self.leak_path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.leak_path.with_name(self.leak_path.name + ".tmp")
@@ -244,20 +242,6 @@ class SimBridge:
         os.replace(tmp, self.leak_path)
         self.leak_wet = bool(wet)
         return self.clock()
-
-    @staticmethod
-    def _links_from(config) -> dict[str, Path]:
-        s = config.sensors
-        links = {}
-        for name, port in (("ins", s.ins.port), ("dvl", s.dvl.port),
-                           ("depth", s.depth.port if s.depth.source == "serial" else None)):
-            if port is None:
-                continue
-            if not port.startswith("/"):
-                raise ValueError(f"sim-bridge emulates serial instruments on pseudo-terminals: "
-                                 f"sensors.{name}.port must be a path, not {port!r}")
-            links[name] = Path(port)
-        return links
 
     def _truth_now(self, t_ns: int) -> tuple[np.ndarray, np.ndarray]:
         return self.plant.H.copy(), self.plant.v.copy()
@@ -554,7 +538,8 @@ def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
                        changes: dict | None = None) -> Path:
     """A configuration for one local simulated run, isolated from any other.
 
-    Takes ``base`` (the embedded ``config/sim.toml`` by default), points the instruments at
+    Takes ``base`` (a file or a shipped configuration's name; the embedded ``config/sim.toml``
+    by default), points the instruments at
     pseudo-terminal links in ``run_dir``, picks a fresh interface-local multicast group and
     a free UDP port for the CAN bus, records telemetry to ``run_dir/telemetry.jsonl``, keeps
     the MAVLink link's parameters and signing timestamp in ``run_dir``, and
@@ -563,10 +548,10 @@ def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
     """
     import tomllib
 
-    from uvd.runtime.config import DEFAULT_CONFIG
+    from uvd.shipped import DEFAULT_CONFIG, config_path
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    base = Path(base) if base is not None else DEFAULT_CONFIG
+    base = config_path(base) if base is not None else DEFAULT_CONFIG
     data = tomllib.loads(base.read_text(encoding="utf-8"))
     vehicle = data.get("vehicle", {}).get("name")
     if vehicle and vehicle.endswith(".toml") and not Path(vehicle).is_absolute():
@@ -632,7 +617,7 @@ class BridgeProcess(_emulator_process_base()):
                  extra: list[str] | None = None) -> None:
         import sys
         super().__init__("unused", 0, duration_s=duration_s)
-        self.argv = [sys.executable, "-m", "sim_bridge.cli", "--config", str(config_path),
+        self.argv = [sys.executable, "-m", "uvd", "sim-bridge", "--config", str(config_path),
                      "--control", "--duration", str(duration_s), "--seed", str(seed),
                      *(["--hold"] if hold else []),
                      *(["--truth-log", str(truth_log)] if truth_log is not None else []),

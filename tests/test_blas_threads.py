@@ -38,7 +38,7 @@ def _clean_env(**extra) -> dict:
     return {**{k: v for k, v in os.environ.items() if k not in VARIABLES}, **extra}
 
 
-@pytest.mark.parametrize("mod", ["uvd.cli", "sim_bridge.cli"])
+@pytest.mark.parametrize("mod", ["uvd.cli", "uvd.commands.sim_bridge"])
 def test_entry_point_asks_for_one_blas_thread_before_numpy_loads(mod):
     values, n_threads = _probe(mod, _clean_env())
     assert values == ["1"] * len(VARIABLES)

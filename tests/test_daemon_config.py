@@ -52,7 +52,7 @@ def test_the_real_process_exits_2_before_opening_anything(tmp_path):
 
 def test_sim_bridge_refuses_a_wrong_config_too(tmp_path):
     path = bad(tmp_path, 'interface = "udp_multicast"', 'interface = "no-such-bus"')
-    r = subprocess.run([sys.executable, "-m", "sim_bridge.cli", "--config", str(path)],
+    r = subprocess.run([sys.executable, "-m", "uvd", "sim-bridge", "--config", str(path)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "can.interface" in r.stderr
 

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers import frames
-from drivers.samples import R_to_euler, euler_to_R
+from uvd.geometry import R_to_euler, euler_to_R
 from uvd.model.lie import J, exp_so3
 
 E = np.eye(3)
@@ -42,24 +42,7 @@ def test_phins_heading_clockwise_from_north_wrapped():
     assert frames.ours_heading_to_phins(-math.pi / 2) == pytest.approx(270.0)
 
 
-@settings(max_examples=200, deadline=None)
-@given(st.floats(-1e4, 1e4))
-def test_wrap_pi_range(a):
-    w = frames.wrap_pi(a)
-    assert -math.pi < w <= math.pi
-    assert math.cos(w) == pytest.approx(math.cos(a), abs=1e-9)
-    assert math.sin(w) == pytest.approx(math.sin(a), abs=1e-9)
-
-
-@settings(max_examples=100, deadline=None)
-@given(st.lists(st.floats(-1e4, 1e4), min_size=1, max_size=8))
-def test_wrap_pi_array_is_wrap_pi_entrywise(angles):
-    w = frames.wrap_pi_array(np.array(angles))
-    assert np.all((w > -math.pi) & (w <= math.pi))
-    ref = np.array([frames.wrap_pi(a) for a in angles])
-    # the same angle (equal, or ±π on either side of the cut at one rounding)
-    np.testing.assert_allclose(np.cos(w), np.cos(ref), atol=1e-9)
-    np.testing.assert_allclose(np.sin(w), np.sin(ref), atol=1e-9)
+# the wrap itself (one convention, (−π, π]) is tested in tests/test_geometry.py
 
 
 def test_phins_vessel_frame_y_port_z_up():

@@ -184,7 +184,7 @@ def test_pd0_two_bad_beams_is_no_lock():
 
 
 def test_pd0_earth_coordinates_need_the_attitude():
-    from drivers.samples import euler_to_R
+    from uvd.geometry import euler_to_R
 
     v_body = np.array([0.4, -0.1, 0.05])
     R = euler_to_R(0.05, -0.1, 2.0)

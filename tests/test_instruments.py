@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.samples import R_to_euler, euler_to_R
 from sim_bridge.instruments.models import InstrumentConfig, Instruments
+from uvd.geometry import R_to_euler, euler_to_R, wrap_angle
 from uvd.model.lie import make_H
 
 
@@ -170,11 +170,11 @@ def test_one_stream_noise_is_drawn_as_before():
     depth = ref.normal(0, cfg.depth_std_m)
     heading2 = ref.normal(0, cfg.heading_std_rad)
     assert ins._dr_scale == scale
-    assert a.heading == (heading + math.pi) % (2 * math.pi) - math.pi
+    assert a.heading == wrap_angle(heading)  # the one convention (uvd.geometry)
     assert (a.roll, a.pitch) == (roll, pitch)
     assert np.array_equal(a.omega_body, omega) and np.array_equal(b.velocity_body, dvl)
     assert c.depth_m == 2.0 + depth
-    assert a2.heading == (heading2 + math.pi) % (2 * math.pi) - math.pi
+    assert a2.heading == wrap_angle(heading2)
 
 
 def test_dvl_resolution_rounds_as_the_pd0_wire_does():

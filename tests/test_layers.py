@@ -16,12 +16,14 @@ Layers, top to bottom (a module may import its own layer and any layer below it)
   5. uvd.core
   6. uvd.control, uvd.estimation
   7. uvd.model
-  8. drivers            (imports nothing of uvd but the one error hierarchy, uvd.errors)
+  8. drivers            (imports nothing of uvd but uvd.errors and uvd.geometry)
 
-``sim_bridge`` may import drivers, uvd.model, uvd.io, uvd.control and the utilities; only the
-top two layers may import sim_bridge. The utilities (uvd.errors, uvd.jsonio, uvd.blas,
-uvd._jitcache, uvd.progress, uvd.netports, the ``uvd`` package itself) are importable from
-anywhere in uvd and import no other layer.
+``sim_bridge`` may import drivers, uvd.model, uvd.io, uvd.control and the utilities — nothing
+of uvd.runtime: it takes a configuration of its own (sim_bridge.config); only the top two
+layers may import sim_bridge. The utilities (uvd.errors, uvd.jsonio, uvd.blas, uvd._jitcache,
+uvd.progress, uvd.netports, uvd.geometry, uvd.rtthreads, uvd.shipped, the ``uvd`` package) are
+importable from anywhere in uvd and import no other layer. drivers imports nothing of uvd but
+uvd.errors and uvd.geometry.
 """
 
 from __future__ import annotations
@@ -47,22 +49,19 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("drivers",),
 )
 UTILITIES = ("uvd", "uvd.errors", "uvd.jsonio", "uvd.blas", "uvd._jitcache", "uvd.progress",
-             "uvd.netports")
-#: drivers never import uvd, except the design card's one error hierarchy (UvdError and the
-#: matching built-ins), which imports nothing itself
-DRIVERS_MAY_IMPORT = ("uvd.errors",)
-#: besides those, two modules of uvd.runtime that are not the daemon: the configuration file
-#: (sim-bridge reads the very file the daemon reads — its [sensors] ports and [can] bus are
-#: the contract between the two processes) and the thread-scheduling helpers
-SIM_BRIDGE_MAY_IMPORT = ("sim_bridge", "drivers", "uvd.model", "uvd.io", "uvd.control",
-                         "uvd.runtime.config", "uvd.runtime.rtthreads")
+             "uvd.netports", "uvd.geometry", "uvd.rtthreads", "uvd.shipped")
+#: drivers never import uvd, except two pure modules that import nothing of the project: the
+#: design card's one error hierarchy (UvdError and the matching built-ins) and the attitude
+#: conventions every layer shares (Euler ⇄ R, η, the one angle wrap)
+DRIVERS_MAY_IMPORT = ("uvd.errors", "uvd.geometry")
+SIM_BRIDGE_MAY_IMPORT = ("sim_bridge", "drivers", "uvd.model", "uvd.io", "uvd.control")
 #: the layers that may import sim_bridge (lockstep, its experiments, benchmarks, `uvd demo`)
 SIM_BRIDGE_IMPORTED_BY = (0, 1)
 
 #: What a module of uvd/model, uvd/control, uvd/estimation may import besides the project's
 #: own modules (which the layer rule checks): numerics, and standard-library modules that do
 #: no I/O, read no clock and log nothing. Extend only with such modules.
-PURE_PACKAGES = ("uvd.model", "uvd.control", "uvd.estimation")
+PURE_PACKAGES = ("uvd.model", "uvd.control", "uvd.estimation", "uvd.geometry")
 PURE_MAY_IMPORT = {
     "numpy", "scipy", "numba", "cvxpy",
     "__future__", "abc", "collections", "dataclasses", "enum", "functools", "itertools",
@@ -227,6 +226,11 @@ def test_pure_packages_do_no_io_clock_or_logging():
     ("sim_bridge.bridge", "uvd.runtime.daemon", True),
     ("drivers.pd0", "uvd.errors", False),
     ("drivers.pd0", "uvd.model.lie", True),
+    ("drivers.frames", "uvd.geometry", False),
+    ("uvd.geometry", "uvd.model.lie", True),
+    ("sim_bridge.bridge", "uvd.runtime.config", True),
+    ("sim_bridge.bridge", "uvd.rtthreads", False),
+    ("uvd.commands.sim_bridge", "sim_bridge.bridge", False),
     ("uvd.errors", "uvd.model.lie", True),
     ("uvd.core", "uvd.jsonio", False),
     ("uvd.core", "uvd.io.params", True),

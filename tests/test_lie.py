@@ -119,6 +119,6 @@ def test_stack_and_kron_identity():
 @given(st.floats(-np.pi, np.pi), st.floats(-1.5, 1.5), st.floats(-np.pi, np.pi))
 @settings(max_examples=200, deadline=None)
 def test_compiled_euler_R_is_the_drivers_formula(roll, pitch, heading):
-    from drivers.samples import euler_to_R
+    from uvd.geometry import euler_to_R
     np.testing.assert_allclose(lie.euler_R(roll, pitch, heading),
                                euler_to_R(roll, pitch, heading), rtol=0, atol=1e-15)

@@ -10,8 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.samples import DepthSample, DvlSample, InsSample, euler_to_R
+from drivers.samples import DepthSample, DvlSample, InsSample
 from uvd.estimation.navigation import NavConfig, nav_init, nav_set_position, nav_step
+from uvd.geometry import euler_to_R
 from uvd.model.lie import J, exp_so3
 
 MS = 1_000_000  # ns per ms
@@ -152,7 +153,7 @@ def test_rates_derived_from_attitude_when_ins_has_none():
     w = np.array([0.05, -0.03, 0.2])
     R0 = euler_to_R(0.1, 0.05, 1.0)
     nan3 = (float("nan"),) * 3
-    from drivers.samples import R_to_euler
+    from uvd.geometry import R_to_euler
     for k in range(5):
         t = k * 100 * MS
         R = R0 @ exp_so3(w * (t * 1e-9))
@@ -262,7 +263,7 @@ def test_ins_carried_to_the_cycle_time_on_a_constant_rate_is_exact():
     mem = nav_init(cfg)
     w = np.array([0.05, -0.03, 0.2])
     R0 = euler_to_R(0.1, 0.05, 1.0)
-    from drivers.samples import R_to_euler
+    from uvd.geometry import R_to_euler
     for k in range(3):
         t_ins = k * 100 * MS
         r, p, h = R_to_euler(R0 @ exp_so3(w * (t_ins * 1e-9)))
@@ -292,7 +293,7 @@ def test_ins_carried_to_the_cycle_time_follows_a_smooth_trajectory():
         for k in range(600):
             t_ins = k * 100 * MS + 40 * MS
             ref = traj.at(t_ins * 1e-9)
-            from drivers.samples import R_to_euler
+            from uvd.geometry import R_to_euler
             r, p, h = R_to_euler(ref.H[:3, :3])
             t = t_ins + 60 * MS
             s, mem = nav_step(cfg, mem, t, _ins(t_ins, r, p, h, ref.v[3:]), None, None)

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 from numba.core.registry import CPUDispatcher
 
-from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+from drivers.samples import DepthSample, DvlSample, InsSample
 from sim_bridge.bridge import write_local_config
 from uvd import core
+from uvd.geometry import R_to_euler
 from uvd.runtime.build import start_pose
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon

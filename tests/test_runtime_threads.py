@@ -1,4 +1,4 @@
-"""Every thread of a real-time App runs with the configured policy (uvd.runtime.rtthreads).
+"""Every thread of a real-time App runs with the configured policy (uvd.rtthreads).
 
 The GIL makes the loop wait for whichever thread holds it: a normally scheduled helper thread
 preempted by other load while holding it stalls the SCHED_FIFO loop (issue 7's demo stall).
@@ -19,15 +19,15 @@ from pathlib import Path
 
 import pytest
 
-from uvd.runtime.app import App
-from uvd.runtime.config import load_config
-from uvd.runtime.notify import SdNotifier
-from uvd.runtime.rtthreads import (
+from uvd.rtthreads import (
     ThreadPolicyReport,
     promote_threads,
     restore_threads,
     thread_table,
 )
+from uvd.runtime.app import App
+from uvd.runtime.config import load_config
+from uvd.runtime.notify import SdNotifier
 
 ROOT = Path(__file__).resolve().parents[1]
 LOOP_PRIO = 5  # low: whatever else runs on this machine at real-time priority stays above

@@ -15,9 +15,10 @@ sys.path.insert(0, {str(ROOT)!r})
 import numpy as np
 from sim_bridge import plant
 from sim_bridge.bridge import SimBridge
+from uvd.commands.sim_bridge import bridge_config
 from uvd.runtime.config import load_config
 assert not plant._thrusters_then_rigid_body.signatures
-b = SimBridge(load_config({str(ROOT / "config" / "sim.toml")!r}), hold=True)
+b = SimBridge(bridge_config(load_config({str(ROOT / "config" / "sim.toml")!r})), hold=True)
 assert b.held and b.plant.steps == 0  # the real plant did not move
 n_warm = len(plant._thrusters_then_rigid_body.signatures)
 # the live plant's first step (released from the cradle) needs no other compiled version: the

@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.samples import euler_to_R
 from uvd.control.trajectory import (
     CosineTerm,
     CosineTrajectory,
@@ -20,6 +19,7 @@ from uvd.control.trajectory import (
     reftraj2,
     setpoint,
 )
+from uvd.geometry import euler_to_R
 from uvd.model.lie import hat6, inv_H
 
 DEG = math.pi / 180

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from drivers.samples import euler_to_R
 from sim_bridge.plant import Plant, PlantConfig
 from uvd.estimation.runlog import RunLog
 from uvd.estimation.xval import (
@@ -22,6 +21,7 @@ from uvd.estimation.xval import (
     simulate_run,
     states_of,
 )
+from uvd.geometry import euler_to_R
 from uvd.io.vehicle import load_vehicle
 from uvd.model.dynamics import rot_accel
 from uvd.model.lie import J

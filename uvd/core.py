@@ -72,7 +72,7 @@ from typing import Any, NamedTuple
 import numba
 import numpy as np
 
-from drivers.samples import DepthSample, DvlSample, InsSample, euler_to_R
+from drivers.samples import DepthSample, DvlSample, InsSample
 from uvd.control.allocation import (
     DEFAULT_DOF_PRIORITY,
     Accommodation,
@@ -85,6 +85,7 @@ from uvd.control.allocation import (
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.types import ControllerSpec, EstimatorSpec, Reference, VehicleState
 from uvd.estimation.navigation import NavConfig, NavMemory, NavState, nav_init, nav_step
+from uvd.geometry import euler_to_R
 
 __all__ = ["Mode", "CoreConfig", "CoreInputs", "CoreState", "CoreOutputs", "Sensed",
            "ControllerSpec", "EstimatorSpec", "core_init", "sense", "act", "step",

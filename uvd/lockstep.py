@@ -27,13 +27,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drivers.frames import wrap_pi_array
-from drivers.samples import eta_of
 from sim_bridge.instruments.faults import FaultyInstruments, SensorFaults
 from sim_bridge.instruments.models import InstrumentConfig
 from sim_bridge.plant import Plant, PlantConfig
 from uvd import core
 from uvd.control.errors import error_coordinates
+from uvd.geometry import eta_of, wrap_angles
 from uvd.model.vehicle import Vehicle
 from uvd.runtime.cycle import ActuatorStatus, CycleConfig, CycleInputs, CycleResult
 from uvd.runtime.supervisor import Supervisor
@@ -266,7 +265,7 @@ def tracking_errors(log: LockstepLog, start_s: float = 0.0, end_s: float | None 
     if end_s is not None:
         sel &= log.t < end_s
     e = log.eta[sel] - log.eta_ref[sel]
-    e[:, 3:] = wrap_pi_array(e[:, 3:])
+    e[:, 3:] = wrap_angles(e[:, 3:])
     return {
         "position_mae": {n: float(np.mean(np.abs(e[:, i]))) for i, n in enumerate(DOF_NAMES)},
         "velocity_mae": {n: float(np.mean(np.abs(log.dv[sel, i])))

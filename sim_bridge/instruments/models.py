@@ -47,7 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler, euler_to_R
+from drivers.samples import DepthSample, DvlSample, InsSample
+from uvd.geometry import R_to_euler, euler_to_R, wrap_angle
 
 _DEG = math.pi / 180.0
 
@@ -193,7 +194,7 @@ class Instruments:
         if self._ins.due(t_ns):
             self._frame("ins", self._ins)
             roll, pitch, heading = R_to_euler(H[:3, :3])
-            heading = (heading + self._n(c.heading_std_rad) + math.pi) % (2 * math.pi) - math.pi
+            heading = wrap_angle(heading + self._n(c.heading_std_rad))
             ins = InsSample(t_ns=t_ns, roll=roll + self._n(c.roll_pitch_std_rad),
                             pitch=pitch + self._n(c.roll_pitch_std_rad), heading=heading,
                             omega_body=v[3:] + self._n(c.rate_std_rad_s, 3))

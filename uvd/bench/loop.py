@@ -56,12 +56,13 @@ def _cycle_none() -> Callable[[int, float], None]:
 
 def _cycle_pdc() -> Callable[[int, float], None]:
     """The core's PDC cycle on jhu-rov tracking RefTraj1 (built as in ``uvd demo``)."""
-    from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+    from drivers.samples import DepthSample, DvlSample, InsSample
     from uvd import core
     from uvd.control.allocation import Allocator
     from uvd.control.pdc import PDGains, PDState, pdc_step
     from uvd.control.trajectory import reftraj1
     from uvd.estimation.navigation import NavConfig
+    from uvd.geometry import R_to_euler
     from uvd.io.vehicle import load_vehicle
 
     vehicle = load_vehicle("jhu-rov")
@@ -127,8 +128,9 @@ def ambc_aid_config():
 
 def _cycle_ambc_aid() -> Callable[[int, float], None]:
     """The core cycle of :func:`ambc_aid_config` on fresh INS, DVL and depth samples."""
-    from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+    from drivers.samples import DepthSample, DvlSample, InsSample
     from uvd import core
+    from uvd.geometry import R_to_euler
 
     cfg = ambc_aid_config()
     traj = cfg.reference

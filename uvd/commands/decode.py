@@ -16,6 +16,7 @@ from pathlib import Path
 from drivers import digiquartz, frames, pd0, phins_ascii, phins_stdbin
 from drivers.framing import decode_bytes
 from uvd.errors import ConfigError
+from uvd.geometry import wrap_angle
 from uvd.jsonio import to_jsonable
 
 FORMATS = ("phins-stdbin", "phins-ascii", "pd0", "digiquartz")
@@ -78,7 +79,7 @@ def _si_stdbin(f: phins_stdbin.StdbinFrame) -> dict:
     pos = f.blocks.get("position")
     if pos:
         out.update(latitude_deg=pos["latitude_deg"],
-                   longitude_deg=_r(math.degrees(frames.wrap_pi(math.radians(
+                   longitude_deg=_r(math.degrees(wrap_angle(math.radians(
                        pos["longitude_deg"])))), altitude_m=_r(pos["altitude_m"], 4))
     d = phins_stdbin.to_depth_sample(f, 0)
     if d is not None:
@@ -102,7 +103,7 @@ def _si_ascii(s: phins_ascii.PhinsSentence) -> dict:
                                                          v["up_m_s"]))
     elif s.kind == "POSITI" and v:
         out.update(latitude_deg=v["latitude_deg"],
-                   longitude_deg=_r(math.degrees(frames.wrap_pi(math.radians(
+                   longitude_deg=_r(math.degrees(wrap_angle(math.radians(
                        v["longitude_deg"])))), altitude_m=v["altitude_m"])
     elif s.kind == "STDHRP" and v:
         out["attitude_std_rad"] = _vec([math.radians(v[k]) for k in

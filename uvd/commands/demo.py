@@ -38,9 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from drivers.frames import wrap_pi_array
 from uvd import _jitcache
 from uvd.bench import host_steal_s
+from uvd.geometry import wrap_angles
 from uvd.jsonio import write_json
 
 #: lockstep runs (seeds seed … seed + SPREAD_SEEDS − 1) whose spread the HIL run is set against
@@ -84,8 +84,8 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
     """Tracking error of the armed cycles: the true state (truth log, interpolated at each
     cycle's time) against the reference the daemon used — the same measures as
     :func:`uvd.lockstep.tracking_errors`."""
-    from drivers.samples import euler_to_R
     from uvd.control.errors import error_coordinates
+    from uvd.geometry import euler_to_R
     from uvd.lockstep import DOF_NAMES, VEL_NAMES
     from uvd.telemetry.records import CycleRecord
 
@@ -119,7 +119,7 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
         eta[:, i] = np.interp(t, tt, col)
     v = np.stack([np.interp(t, tt, truth[:, 7 + i]) for i in range(6)], axis=1)
     e = eta - ref_eta
-    e[:, 3:] = wrap_pi_array(e[:, 3:])
+    e[:, 3:] = wrap_angles(e[:, 3:])
     dpsi = np.empty((t.size, 6))
     dv = np.empty((t.size, 6))
     for k in range(t.size):
@@ -280,7 +280,7 @@ def _figures(cfg, duration_s: float, seed: int, run_dir: Path, truth_path: Path,
                    "warm_up_and_start_s": start_s},
         "sim_bridge": {"counters": bridge_stats.get("counters"),
                        "ports": bridge_stats.get("ports")},
-        # scheduling of every thread of both processes (uvd.runtime.rtthreads)
+        # scheduling of every thread of both processes (uvd.rtthreads)
         "realtime": {"daemon": summary.get("realtime"),
                      "sim_bridge": {"sched_fifo_priority": prio,
                                     "threads": ready.get("threads"),

@@ -125,7 +125,7 @@ class RunLog:
         The lockstep log records the plant's *true* pose and velocity, so the run is noise-free
         in its states; ``u_applied`` is the wrench the core's estimators saw.
         """
-        from drivers.samples import euler_to_R
+        from uvd.geometry import euler_to_R
 
         eta = np.asarray(log.eta, dtype=float)
         R = np.stack([euler_to_R(*e[3:]) for e in eta])

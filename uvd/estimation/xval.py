@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from uvd.geometry import euler_of_rotations
 from uvd.model.dynamics import UVModel
 from uvd.model.integrate import _rkmk4
 from uvd.model.params import RotParams, UVParams
@@ -144,9 +145,7 @@ def simulate_run(params: UVParams | RotParams, run, *, substeps: int = 2
 
 def states_of(R: np.ndarray, v: np.ndarray) -> dict[str, np.ndarray]:
     """The compared states (units of the module table) of attitudes R and velocities v."""
-    r20 = np.clip(R[:, 2, 0], -1.0, 1.0)
-    roll = np.arctan2(R[:, 2, 1], R[:, 2, 2])
-    pitch = -np.arcsin(r20)
+    roll, pitch, _ = euler_of_rotations(R).T
     deg = 180.0 / math.pi
     return {"roll_deg": roll * deg, "pitch_deg": pitch * deg, "u_mps": v[:, 0],
             "v_mps": v[:, 1], "w_mps": v[:, 2], "p_degps": v[:, 3] * deg,

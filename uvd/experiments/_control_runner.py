@@ -13,7 +13,6 @@ the one core) for a duration and records, every control cycle, the true state an
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -23,7 +22,6 @@ from typing import Any
 import numba
 import numpy as np
 
-from drivers.frames import wrap_pi_array
 from sim_bridge.instruments.models import InstrumentConfig
 from sim_bridge.plant import PlantConfig
 from sim_bridge.tank import TankEffects, attach
@@ -32,20 +30,18 @@ from uvd import core
 from uvd.control import _kernels
 from uvd.control.allocation import Allocator
 from uvd.estimation.navigation import NavConfig
+from uvd.geometry import wrap_angles
 from uvd.lockstep import DOF_NAMES, VEL_NAMES, Lockstep, LockstepConfig
+from uvd.model.lie import R_euler
 from uvd.model.vehicle import Vehicle
 from uvd.runtime.cycle import unsupervised
 
 
 @numba.njit(cache=True)
 def _eta(H, out):
-    """[x, y, z, roll, pitch, heading] of H (App. A Euler angles, as drivers.samples)."""
+    """η = [x, y, z, roll, pitch, heading] of H into ``out`` (:func:`uvd.geometry.eta_of`)."""
     out[0], out[1], out[2] = H[0, 3], H[1, 3], H[2, 3]
-    s = -H[2, 0]
-    s = min(max(s, -1.0), 1.0)
-    out[4] = math.asin(s)
-    out[3] = math.atan2(H[2, 1], H[2, 2])
-    out[5] = math.atan2(H[1, 0], H[0, 0])
+    out[3], out[4], out[5] = R_euler(H[:3, :3])
 
 
 @numba.njit(cache=True)
@@ -291,7 +287,7 @@ def tracking_stats(run: ControlRun, start_s: float = 0.0, end_s: float | None = 
 
     def block(eta: np.ndarray, dpsi: np.ndarray, dv: np.ndarray) -> dict:
         e = eta[sel] - run.eta_ref[sel]
-        e[:, 3:] = wrap_pi_array(e[:, 3:])
+        e[:, 3:] = wrap_angles(e[:, 3:])
         return {
             "position_mae": {nm: float(np.mean(np.abs(e[:, i])))
                              for i, nm in enumerate(DOF_NAMES)},

@@ -59,6 +59,7 @@ from uvd.experiments._control_runner import (
     tracking_stats,
     windows,
 )
+from uvd.geometry import R_to_euler
 from uvd.io.figures import write_estimates, write_mne, write_series
 from uvd.io.vehicle import load_vehicle
 from uvd.model.dynamics import UVModel, uv_inverse_dynamics
@@ -889,8 +890,7 @@ def _forward(params, run: ControlRun, seconds: float) -> np.ndarray:
     out = np.empty((n, 8))
     for k, i in enumerate(idx):
         H = Hs[i]
-        out[k, 0] = math.atan2(H[2, 1], H[2, 2])
-        out[k, 1] = math.asin(max(-1.0, min(1.0, -H[2, 0])))
+        out[k, 0], out[k, 1], _ = R_to_euler(H[:3, :3])
         out[k, 2:] = vs[i]
     return out
 

@@ -30,7 +30,6 @@ the sink's worker thread, off the event loop.
 from __future__ import annotations
 
 import json
-import math
 import threading
 import time
 from collections.abc import Mapping, Sequence
@@ -39,7 +38,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from drivers.samples import R_to_euler
+from uvd.geometry import R_to_euler, wrap_angle
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
 
@@ -79,10 +78,6 @@ def zenoh_config(*, mode: str = "peer", listen: Sequence[str] = (),
 
 def _rpy(R) -> list[float]:
     return list(R_to_euler(np.asarray(R, dtype=float).reshape(3, 3)))
-
-
-def _wrap(a: float) -> float:
-    return math.remainder(a, 2.0 * math.pi)
 
 
 class ZenohSink:
@@ -253,7 +248,7 @@ def state_payload(r: Mapping[str, Any]) -> dict[str, Any]:
         rpy, rpy_ref = out["rpy"], _rpy(r["R_ref"])
         out.update(p_ref=r["p_ref"], rpy_ref=rpy_ref, v_ref=r["v_ref"], tracking_error={
             "position_m": (np.asarray(r["p"], float) - np.asarray(r["p_ref"], float)),
-            "attitude_rad": [_wrap(a - b) for a, b in zip(rpy, rpy_ref, strict=True)]})
+            "attitude_rad": [wrap_angle(a - b) for a, b in zip(rpy, rpy_ref, strict=True)]})
     return to_jsonable(out)
 
 

@@ -24,6 +24,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from uvd import geometry
+
 _EPS_SMALL = 1e-4  # below this angle, series expansions are used (errors ~ θ⁶ ≪ 1e-16)
 _jit = numba.njit(cache=True)
 
@@ -399,21 +401,7 @@ def A_inv_se3_T_psi(psi) -> np.ndarray:
     return _A_inv_se3_blocks(psi).T @ psi
 
 
-@numba.njit(cache=True)
-def euler_R(roll, pitch, heading):
-    """R = Rz(ψ) Ry(θ) Rx(φ) from heading ψ, pitch θ, roll φ (App. A, Fig. A.2), compiled;
-    the same formula as :func:`drivers.samples.euler_to_R`."""
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    ch, sh = np.cos(heading), np.sin(heading)
-    R = np.empty((3, 3))
-    R[0, 0] = ch * cp
-    R[0, 1] = ch * sp * sr - sh * cr
-    R[0, 2] = ch * sp * cr + sh * sr
-    R[1, 0] = sh * cp
-    R[1, 1] = sh * sp * sr + ch * cr
-    R[1, 2] = sh * sp * cr - ch * sr
-    R[2, 0] = -sp
-    R[2, 1] = cp * sr
-    R[2, 2] = cp * cr
-    return R
+#: R = Rz(ψ) Ry(θ) Rx(φ) (App. A), compiled for compiled callers: :func:`uvd.geometry.euler_to_R`
+euler_R = numba.njit(cache=True)(geometry.euler_to_R)
+#: (φ, θ, ψ) of R, compiled for compiled callers: :func:`uvd.geometry.R_to_euler`
+R_euler = numba.njit(cache=True)(geometry.R_to_euler)

@@ -64,6 +64,13 @@ from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 from uvd.links import LINKS, LinkContext
+from uvd.rtthreads import (
+    ThreadPolicyReport,
+    helper_initializer,
+    promote_threads,
+    restore_threads,
+    thread_table,
+)
 from uvd.runtime.clock import Clock
 from uvd.runtime.commands import CommandQueue
 from uvd.runtime.config import Config, ConfigValidationError, load_config
@@ -72,13 +79,6 @@ from uvd.runtime.failsafe import Decision, FailsafeEvent, Health
 from uvd.runtime.lifecycle import Transition
 from uvd.runtime.loop import FixedRateLoop, RealtimeReport, apply_realtime
 from uvd.runtime.notify import SdNotifier, WatchdogPinger
-from uvd.runtime.rtthreads import (
-    ThreadPolicyReport,
-    helper_initializer,
-    promote_threads,
-    restore_threads,
-    thread_table,
-)
 from uvd.runtime.schema import reloadable_changes
 from uvd.runtime.supervisor import Supervisor
 from uvd.telemetry._worker import run_in_daemon_thread
@@ -411,7 +411,7 @@ class App:
 
     def _promote_helpers(self, when: str) -> None:
         """Every thread but the loop's to SCHED_FIFO at :meth:`helper_priority`, on the
-        loop's CPUs (see :mod:`uvd.runtime.rtthreads`); tables before/after are kept."""
+        loop's CPUs (see :mod:`uvd.rtthreads`); tables before/after are kept."""
         if self._loop_tid is None:
             self._loop_tid = threading.get_native_id()
             self.thread_tables["before"] = [t.as_dict() for t in thread_table()]

@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.samples import eta_of
 from uvd import core
 from uvd.control.allocation import Allocator
 from uvd.control.pdc import PDGains, PDState, pdc_step
@@ -22,6 +21,7 @@ from uvd.control.trajectory import named, setpoint
 from uvd.control.trajectory import start_pose as trajectory_start_pose
 from uvd.control.types import ControllerSpec
 from uvd.estimation.navigation import NavConfig
+from uvd.geometry import eta_of
 from uvd.runtime.config import Config
 from uvd.runtime.cycle import CycleConfig
 from uvd.runtime.triggers import plugin_triggers

@@ -100,7 +100,7 @@ class CanComponent:
     def _open_bus(self) -> None:
         """Open the bus from the event loop's thread: its receive thread inherits that
         thread's scheduling (SCHED_FIFO when configured; the App then puts it one below the
-        loop, with every other thread, :mod:`uvd.runtime.rtthreads`). A normally scheduled
+        loop, with every other thread, :mod:`uvd.rtthreads`). A normally scheduled
         thread that holds the GIL while other processes preempt it would delay the loop by
         milliseconds (priority inversion through the GIL)."""
         from drivers.can import CanBus, CanRecorder

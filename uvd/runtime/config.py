@@ -47,7 +47,6 @@ import math
 import re
 import tomllib
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
@@ -70,6 +69,7 @@ from uvd.runtime.failsafe import Thresholds
 from uvd.runtime.leak import LeakSection
 from uvd.runtime.loop import LoopSettings
 from uvd.runtime.schema import PerAxis, section, setting
+from uvd.shipped import CONFIG_DIR, DEFAULT_CONFIG, config_path, shipped_configs
 
 __all__ = ["Config", "ConfigValidationError", "load_config", "parse_config",
            "render_config_doc", "DEFAULT_CONFIG", "CONFIG_DIR", "shipped_configs",
@@ -78,30 +78,7 @@ __all__ = ["Config", "ConfigValidationError", "load_config", "parse_config",
            "JsonlSection", "DaemonSection", "NavigationSection", "EstimationSection",
            "CanSection", "CanAmplifiersSection", "CanDepthSection", "CanLogSection"]
 
-#: The shipped configurations (``config/*.toml`` of the checkout): package data. ``uvd/config``
-#: is a link to the project's ``config/``, so setuptools ships them inside the package and
-#: importlib.resources finds them in a checkout, an editable install and an installed wheel
-#: alike (resolved: in a checkout, messages name ``config/…``).
-CONFIG_DIR = Path(str(resources.files("uvd") / "config")).resolve()
-#: The embedded default: the simulated vehicle, everything local (``config/sim.toml``).
-DEFAULT_CONFIG = CONFIG_DIR / "sim.toml"
-
-
-def shipped_configs() -> list[str]:
-    """Names of the shipped configurations (``sim``, ``sim-bluerov2``, …)."""
-    return sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
-
-
-def config_path(name_or_path: str | Path) -> Path:
-    """The file of ``name_or_path``: an existing file as it is; else the shipped configuration
-    of that name (``sim-bluerov2`` or ``sim-bluerov2.toml``), so that an installed package
-    runs ``uvd demo --config sim-bluerov2`` with no checkout; else the path itself (reading it
-    then fails naming it)."""
-    p = Path(name_or_path)
-    if p.exists() or len(p.parts) != 1:
-        return p
-    shipped = CONFIG_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
-    return shipped if shipped.is_file() else p
+# The shipped configurations and the embedded default: package data (uvd.shipped)
 
 BAUD_RATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600)
 _URL = re.compile(r"^(udp|tcp)://(?P<host>[^:/]+|\[[0-9a-fA-F:]+\]):(?P<port>\d{1,5})$")

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.samples import R_to_euler
+from uvd.geometry import R_to_euler
 
 __all__ = ["CycleRecord", "estimate_record", "euler_of", "eta_of_record", "CYCLE",
            "tracking_error_norms"]

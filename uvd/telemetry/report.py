@@ -27,8 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.frames import wrap_pi_array
-from drivers.samples import R_to_euler
+from uvd.geometry import R_to_euler, wrap_angles
 from uvd.io.figures import estimates_figure, mne_figure
 from uvd.telemetry.recording import RecordingError, read_messages
 from uvd.telemetry.records import tracking_error_norms
@@ -141,7 +140,7 @@ def _tracking_figures(plt, save, cyc: list, t: np.ndarray, armed: np.ndarray) ->
     ref = np.array([_eta(r["p_ref"], r["R_ref"]) for r, a in zip(cyc, armed, strict=True)
                     if a])
     err = eta - ref
-    err[:, 3:] = wrap_pi_array(err[:, 3:])
+    err[:, 3:] = wrap_angles(err[:, 3:])
     scale = np.array([1, 1, 1, 180 / math.pi, 180 / math.pi, 180 / math.pi])
     fig, axes = plt.subplots(6, 2, figsize=(12, 13), sharex=True)
     for i in range(6):

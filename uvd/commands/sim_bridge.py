@@ -1,4 +1,10 @@
-"""``sim-bridge --config FILE``: the simulated vehicle on the daemon's real wire protocols.
+"""``sim-bridge --config FILE`` (also ``uvd sim-bridge``): the simulated vehicle on the daemon's
+real wire protocols.
+
+The process's entry point, here above both sides: it reads and validates the daemon's very
+configuration file (its ``[sensors]`` ports and ``[can]`` bus are the contract between the two
+processes) and hands :class:`sim_bridge.bridge.SimBridge` a configuration of its own
+(:func:`bridge_config`) — sim_bridge imports nothing of uvd.runtime.
 
 Runs :class:`sim_bridge.bridge.SimBridge` until SIGTERM/SIGINT, ``--duration`` or (with
 ``--control``) the end of standard input. With ``--control`` it reads JSON commands on
@@ -20,14 +26,48 @@ import sys
 import threading
 from pathlib import Path
 
-from sim_bridge.control_channel import JsonLines, serve_commands
 from uvd.blas import single_threaded_blas
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sim-bridge", description=__doc__.split("\n\n")[0])
+    _add_arguments(p)
+    return p
+
+
+def register(sub) -> None:
+    p = sub.add_parser("sim-bridge", help="the simulated vehicle on the daemon's wire "
+                                          "protocols (as the sim-bridge command)",
+                       description=__doc__.split("\n\n")[0])
+    _add_arguments(p)
+    p.set_defaults(handler=_run)
+
+
+def bridge_config(cfg):
+    """The :class:`sim_bridge.config.BridgeConfig` of a validated daemon configuration
+    (:class:`uvd.runtime.config.Config`): where the daemon expects the instruments and the
+    CAN nodes, the vehicle it controls, its start pose, ``[simulation.instruments]``."""
+    from sim_bridge.config import BridgeConfig
+    from sim_bridge.instruments.models import instrument_config
+
+    s = cfg.sensors
+    ports = {name: Path(port) for name, port in (
+        ("ins", s.ins.port), ("dvl", s.dvl.port),
+        ("depth", s.depth.port if s.depth.source == "serial" else None)) if port is not None}
+    leak = s.leak
+    return BridgeConfig(
+        vehicle=cfg.load_vehicle(), trajectory=cfg.control.reference,
+        start_north_m=cfg.navigation.initial_north_m, start_east_m=cfg.navigation.initial_east_m,
+        serial_ports=ports, ins_protocol="ascii" if s.ins.format == "phins-ascii" else "stdbin",
+        depth=s.depth.conversion, instruments=instrument_config(cfg.simulation.instruments),
+        leak_path=Path(leak.path) if leak.enabled and leak.path else None,
+        leak_active_level=leak.active_level, can=cfg.can)
+
+
+def _add_arguments(p) -> None:
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
-                   help="the daemon's configuration (default: the embedded config/sim.toml)")
+                   help="the daemon's configuration, a file or a shipped one's name "
+                        "(default: the embedded config/sim.toml)")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="end by itself after S seconds (default: until signalled)")
     p.add_argument("--seed", type=int, default=0, help="seed of the instrument noise")
@@ -47,12 +87,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cpu", type=int, action="append", default=[], metavar="N",
                    help="run on this CPU (repeatable): keep the emulated devices off the "
                         "daemon's CPU, as separate hardware would be")
-    return p
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``sim-bridge`` command."""
     single_threaded_blas()  # before the bridge's modules import numpy
-    args = build_parser().parse_args(argv)
+    return _run(build_parser().parse_args(argv))
+
+
+def _run(args) -> int:
+    from sim_bridge.control_channel import JsonLines, serve_commands
+
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("canopen").setLevel(logging.WARNING)
@@ -74,7 +119,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"sim-bridge: CPU affinity {args.cpu} refused: {exc}", file=sys.stderr)
     from sim_bridge.bridge import SimBridge
     try:
-        bridge = SimBridge(cfg, seed=args.seed, hold=args.hold, truth_log=args.truth_log)
+        bridge = SimBridge(bridge_config(cfg), seed=args.seed, hold=args.hold,
+                           truth_log=args.truth_log)
     except (UvdError, ValueError, OSError) as exc:
         emit({"event": "error", "error": str(exc)})
         return 2
@@ -105,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         # …and those started before (OpenBLAS workers of numpy and scipy, anything an import
         # started) one below it, on the same CPUs: a normally scheduled thread holding the
         # GIL while other load preempts it would hold up the plant and the emulators
-        from uvd.runtime.rtthreads import promote_threads
+        from uvd.rtthreads import promote_threads
         rep = promote_threads(max(1, realtime - 1), args.cpu,
                               exclude={threading.get_native_id()})
         thread_msgs = rep.messages
@@ -122,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
             serve_commands(bridge.call, emit, lambda: loop.call_soon_threadsafe(stop.set))
 
         def ready(info: dict) -> None:
-            from uvd.runtime.rtthreads import thread_table
+            from uvd.rtthreads import thread_table
             info["realtime"] = realtime
             info["threads"] = [t.as_dict() for t in thread_table()]
             info["thread_messages"] = thread_msgs
