@@ -46,7 +46,8 @@ def test_constraints_pin_every_dependency_and_not_uvd():
 
 
 @pytest.mark.slow
-def test_the_wheel_runs_outside_the_checkout(tmp_path):
+@pytest.mark.timeout(900)  # a wheel build and an install of ~60 wheels: ~1 min quiet, minutes
+def test_the_wheel_runs_outside_the_checkout(tmp_path):  # on a loaded machine
     src, wheels, venv, empty = (tmp_path / n for n in ("src", "wheels", "venv", "empty"))
     empty.mkdir()
     # the tracked source only (the config/ link resolved by the build, as in a fresh clone)
