@@ -2,7 +2,7 @@
 the published-model conversion and ``uvd identify`` / ``uvd xval`` with ``--profile``.
 
 Real files: ``../shared/data/bluerov-exjobb`` (no licence: never copied into the repo; tests
-skip naming the folder when it is absent) and ``../shared/data/ardusub``.
+skip naming the folder when it is absent) and ``tests/data/ardusub`` (MIT, in the repository).
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SHARED_DATA, shared_recordings
+from driver_strategies import DATA
 
 from uvd.errors import ConfigError, LogReadError, ParameterError
 from uvd.io.logprofile import builtin_profiles, load_profile, profile_from_mapping
@@ -30,14 +32,20 @@ from uvd.io.vehicle import load_curve, load_vehicle
 from uvd.model.thrusters import ThrustCurve
 
 REPO = Path(__file__).resolve().parents[1]
-EXJOBB = REPO.parent / "shared" / "data" / "bluerov-exjobb"
-ARDUSUB = REPO.parent / "shared" / "data" / "ardusub"
+#: no licence: outside the repository (../shared/data), its tests skip naming the folder
+EXJOBB = SHARED_DATA / "bluerov-exjobb"
+#: MIT: copied into the repository (tests/data/ardusub, NOTICE beside it)
+ARDUSUB = DATA / "ardusub"
 
 
 def _need(folder: Path) -> Path:
-    if not folder.is_dir():
-        pytest.skip(f"recordings not present: {folder} (shared data outside the repo)")
-    return folder
+    """``folder`` if present; a recording of the repository that is missing fails, one
+    outside it skips naming its folder (conftest.shared_recordings)."""
+    if folder.is_dir():
+        return folder
+    if DATA in folder.parents:
+        pytest.fail(f"recordings {folder} missing: they belong to the repository (tests/data)")
+    return shared_recordings(folder.name)
 
 
 def _readme_table() -> dict[str, str]:
@@ -53,7 +61,7 @@ BAGS = sorted(p.name for p in EXJOBB.glob("*.bag")) if EXJOBB.is_dir() else []
 # ---------------------------------------------------------------------------------------------
 # every file read with the counts its own library reports
 # ---------------------------------------------------------------------------------------------
-@pytest.mark.skipif(not BAGS, reason=f"recordings not present: {EXJOBB}")
+@pytest.mark.skipif(not BAGS, reason=f"recordings bluerov-exjobb/ not found at {EXJOBB}")
 @pytest.mark.parametrize("name", BAGS)
 def test_bag_counts_match_rosbags(name):
     """Per topic, uvd reads (and decodes) exactly the messages rosbags' own index counts."""
