@@ -173,5 +173,6 @@ def _figure(rows: dict, path: Path) -> None:
 EXPERIMENTS = [Experiment(
     "fault-tolerance",
     "a thruster weak (η 0.5) or dead (η 0) mid-run on the JHU ROV and the BlueROV2-heavy: "
-    "tracking MAE without accommodation and with η from the amplifier",
+    "tracking MAE without accommodation and with the cycle told η at the fault (as an "
+    "amplifier's report would; that source is not wired in the daemon yet)",
     _run)]
