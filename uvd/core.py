@@ -442,6 +442,9 @@ def _hold_pose(nav: NavState) -> Reference:
     return Reference(H=Hh, v=np.zeros(6), vdot=np.zeros(6), closed_loop=HOLD_DEPTH_MASK)
 
 
+# act is long (~105 lines) on purpose: it runs every cycle on the loop's path, and the mode
+# decision, allocation and output guard read top to bottom in one place; splitting it would
+# add calls to the hot path and spread the one rule of what reaches the amplifiers.
 def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, dt: float
         ) -> tuple[CoreOutputs, CoreState]:
     """Reference, control in ``inputs.mode``, allocation and the output guard (pure).

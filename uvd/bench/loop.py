@@ -822,6 +822,9 @@ async def _with_fuzz(settings: LoopSettings, cycle, duration: float, warmup: flo
     return out
 
 
+# _run is long (~150 lines): it owns the loop under test, its sinks and the peer processes
+# (Zenoh subscriber, MAVLink fuzz sender) for the whole measurement and must stop each of
+# them in one finally; its phases are the benchmark's printed protocol.
 def _run(args) -> dict:
     settings = LoopSettings(rate_hz=args.rate, timer=args.timer, fine=args.fine,
                             fine_margin_us=args.margin_us, gc=args.gc)

@@ -220,6 +220,9 @@ def _run(args) -> int:
     return 0
 
 
+# _run_logs is long (~105 lines): about half of it is the command's printed report (the
+# physical checks, refusals and bounds); the identification itself is
+# uvd.estimation.realdata.identify_rotational.
 def _run_logs(args) -> int:
     """``uvd identify --log FILE… --profile NAME``: another system's recordings."""
     import time

@@ -100,6 +100,10 @@ def client_config(connect: list[str], config_file: str | None = None):
     return conf
 
 
+# main is long (~215 lines): the Zenoh callbacks are closures over one session's per-vehicle
+# state (detectors, aligners, thruster matrices) under one lock; the decisions themselves
+# live in uvd.fdc.detector and uvd.fdc.align. Making that state a class is the way to
+# shorten it (not yet done).
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="uvd-fdc", description=__doc__.split("\n\n")[0])
     add_connection_arguments(p)
