@@ -337,7 +337,7 @@ P_K = P_GAINS + 24
 
 def pack_ambc_params(model, K, kp, kd, mass_floor, drag_ceiling, eps, robust, dead_zone,
                      freeze_on_saturation, hold_s, band, B_pinv, f_max):
-    """The constant parameters of :func:`ambc_cycle` as one float64 vector (its packed
+    """The constant parameters of :func:`ambc_step_kernel` as one float64 vector (its packed
     structure: one array crosses into the kernel instead of fourteen values). ``adapt`` is
     K ≠ 0; flags are 1.0 / 0.0; gains are (6,) each; B_pinv (N × 6), f_max (N,)."""
     K = np.ascontiguousarray(K, dtype=np.float64).reshape(-1)
@@ -352,9 +352,9 @@ def pack_ambc_params(model, K, kp, kd, mass_floor, drag_ceiling, eps, robust, de
 
 
 @_jit
-def ambc_cycle(P, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, dt, t, last_f,
-               hold_until, out):
-    """One AMBC cycle: the control law (5.27) with θ̂_k and the Euler step of the update law
+def ambc_step_kernel(P, H_a, v_a, H_d, v_d, vdot_d, mask, ff, use_ff, theta, dt, t, last_f,
+                     hold_until, out):
+    """One AMBC step: the control law (5.27) with θ̂_k and the Euler step of the update law
     (5.28), θ̂_{k+1} = θ̂_k + dt θ̂̇ with θ̂̇ = −K_θ W_MBCᵀ(εΔψ + Δv).
 
     ``P``: the constant parameters packed by :func:`pack_ambc_params` (model, ε, k_p, k_d,

@@ -325,7 +325,7 @@ def ambc_step(state: VehicleState, reference: Reference, params: AMBCParams, ctr
     out = np.empty(n_out)  # [u, err, θ̂⁺, θ̂̇, f]: the new state's arrays are views of it
     last_f = ctrl.last_f if ctrl.last_f is not None else f0
     ff, use_ff = _ff(code, ctrl.theta, reference)
-    saturated, frozen, projected, hold_until = _kernels.ambc_cycle(
+    saturated, frozen, projected, hold_until = _kernels.ambc_step_kernel(
         P, state.H, state.v, reference.H, reference.v, reference.vdot, _mask(reference), ff,
         use_ff, ctrl.theta, float(dt), float(ctrl.t), last_f, float(ctrl.hold_until), out)
     # positional, in the field order of AMBCState (a frozen dataclass's keyword __init__ costs
@@ -392,7 +392,7 @@ def mbc_step(state: VehicleState, reference: Reference, params: MBCParams, ctrl:
     code, P, n_out, f0 = params._ambc._hot  # K_θ = 0: no adaptation
     out = np.empty(n_out)
     ff, use_ff = _ff(code, params.theta, reference)
-    _kernels.ambc_cycle(P, state.H, state.v, reference.H, reference.v, reference.vdot,
+    _kernels.ambc_step_kernel(P, state.H, state.v, reference.H, reference.v, reference.vdot,
                         _mask(reference), ff, use_ff, params.theta, float(dt), 0.0, f0, -1.0,
                         out)
     return out[0:6], MBCState(dpsi=out[6:12], dv=out[12:18])
