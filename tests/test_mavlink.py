@@ -128,10 +128,10 @@ def test_a_station_and_mavproxy_see_arm_switch_tune_and_drive_the_submarine(brid
             assert st.severity == mav.MAV_SEVERITY_WARNING
             rest = s.wait("STATUSTEXT", lambda m: m.id == st.id and m.chunk_seq == 1)
             assert (st.text + rest.text).endswith("; given up: pitch")  # 50-character chunks
-            assert d.control.thruster_eta.tolist() == [1, 1, 1, 0, 1, 1]
+            assert d.supervisor.data.thruster_eta.tolist() == [1, 1, 1, 0, 1, 1]
             assert s.command(31010, 4, 1).result == mav.MAV_RESULT_ACCEPTED
             s.wait("STATUSTEXT", lambda m: m.text.startswith("thruster 4 eta 1 (mavlink"))
-            assert d.control.thruster_eta is None
+            assert d.supervisor.data.thruster_eta is None
             assert s.command(31010, 9, 0).result == mav.MAV_RESULT_DENIED  # no thruster 9
 
             params = s.params()
