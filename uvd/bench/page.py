@@ -46,7 +46,7 @@ alone (percentile rows: p50 · p90 · p99 · p99.9 · max, n = samples). Timing 
 the machine and its load: read them with the date, machine and commit above each table. The
 long real-time benchmarks (`can` 60 s at 100 Hz, `loop` at 1 kHz / 100 Hz with the HIL demo
 running, `latency`) were measured with their set-up in `docs/results/bench-*.json`,
-`docs/can.md` and `docs/runtime.md`.
+`docs/can.md` and `docs/runtime-measured.md`.
 """
 
 
