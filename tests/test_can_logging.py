@@ -129,7 +129,7 @@ def test_can_logger_recording_replayed_by_can_player_moves_the_thrusters(tmp_pat
             bus.close()
         time.sleep(0.2)
         logger.send_signal(signal.SIGINT)
-        logger.wait(timeout=15)
+        logger.wait(timeout=60)  # a bound: can.logger took > 15 s to exit at load 17
         recorded = rig.call("stats", history=True)
         assert rig.call("reset")["ok"]
         player = subprocess.run([sys.executable, "-m", "can.player", *bus_args, "--",
