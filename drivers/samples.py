@@ -13,10 +13,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# The attitude conventions live in one pure module below every layer (Euler ⇄ R, η, wrap);
-# re-exported here for the modules that import them from drivers.samples (prefer uvd.geometry)
-from uvd.geometry import R_to_euler, eta_of, euler_to_R  # noqa: F401
-
 
 @dataclass(frozen=True, slots=True)
 class InsSample:

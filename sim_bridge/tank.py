@@ -44,8 +44,9 @@ from dataclasses import dataclass, fields, replace
 import numba
 import numpy as np
 
-from drivers.samples import InsSample, R_to_euler, euler_to_R
+from drivers.samples import InsSample
 from sim_bridge.thrusters import _thruster_step
+from uvd.geometry import R_to_euler, euler_to_R
 from uvd.model.integrate import _rkmk4
 
 

@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.samples import euler_to_R
 from sim_bridge.instruments.models import InstrumentConfig, Instruments
 from sim_bridge.plant import Plant
 from sim_bridge.tank import (
@@ -21,6 +20,7 @@ from sim_bridge.tank import (
     buoyancy_wrench,
     tether_wrench,
 )
+from uvd.geometry import euler_to_R
 from uvd.io.vehicle import load_vehicle
 from uvd.model.dynamics import gravity_wrench
 

@@ -47,7 +47,8 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from drivers.samples import DepthSample, DvlSample, InsSample, eta_of
+from drivers.samples import DepthSample, DvlSample, InsSample
+from uvd.geometry import eta_of
 from uvd.runtime import commands as cmd
 from uvd.runtime.commands import OPERATOR_MODES, CommandResult
 from uvd.runtime.failsafe import (

@@ -12,8 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from drivers.samples import DepthSample, DvlSample, InsSample, R_to_euler
+from drivers.samples import DepthSample, DvlSample, InsSample
 from uvd import __version__, core
+from uvd.geometry import R_to_euler
 from uvd.runtime.config import Config
 from uvd.runtime.cycle import CycleConfig, CycleState
 from uvd.runtime.schema import with_values
