@@ -118,7 +118,7 @@ def run(data: Path, out: Path) -> dict:
     theta0 = rot_of(vehicle.params)
     scaled = scaled_aid_gains(np.diag(vehicle.params.M), rotational=True)
     slow = AID3Gains(a=scaled.a, gamma1=scaled.gamma1 * 1e-3, gamma2=scaled.gamma2 * 1e-3,
-                     gamma3=scaled.gamma3 * 1e-3)
+                     gamma3=scaled.gamma3 * 1e-3, dof_scale=scaled.dof_scale)
     estimates, info = {}, {}
     for name, method, gains in (("uvd-ls", "ls", None), ("uvd-ls-consistent", "ls-consistent",
                                                          None),
