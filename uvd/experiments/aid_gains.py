@@ -3,8 +3,9 @@
 §4.5 chose AID's gains "from simulations which sparsely covered a roughly logarithmic scaling
 for a range of possible gains"; §4.6 took them over for the 6-DOF law. This module does the
 same for the configured vehicle and reference: one lockstep run of the configuration (its
-vehicle, controller, reference, instruments and their noise; ``seed`` other than the demo's
-so the gains are not chosen on the run they are judged on) records what AID sees each cycle
+vehicle, controller, reference, instruments and their noise, failsafes; ``seed`` other than
+the demo's so the gains are not chosen on the run they are judged on; an INS outage halfway,
+:data:`OUTAGE_S`, so the run holds a failsafe and a re-arm) records what AID sees each cycle
 (R, v = [ν; ω], the applied wrench u, dt); AID (Theorem 4.3.1) is then replayed over that record
 for every pair of per-DOF gain factors (translation, rotation) on a logarithmic grid, with the
 gains and INITP of ``[estimation] scale_to_vehicle``
@@ -24,15 +25,22 @@ import numpy as np
 #: the logarithmic grid of per-DOF gain factors (translation and rotation each)
 FACTORS = (1.0, 3.0, 10.0, 30.0, 100.0)
 
+#: INS silence halfway through the sweep's run (s): longer than the configured ins_stale_s
+#: of the shipped configurations (0.25 s), so the failsafe zeroes the thrust and, a second
+#: later, the controller re-arms with a jump of wrench — what a HIL demo run on a loaded
+#: machine met (docs/real-vehicles.md). Gains that only survive a smooth run are not chosen.
+OUTAGE_S = 0.3
 
-def record_aid_inputs(cfg, vehicle, duration_s: float, seed: int) -> dict[str, np.ndarray]:
-    """One lockstep run of ``cfg`` (``duration_s`` simulated, instrument noise ``seed``);
-    returns what the online AID would see each cycle: ``H`` (n, 4, 4), ``v`` (n, 6),
+
+def record_aid_inputs(cfg, vehicle, duration_s: float, seed: int,
+                      outage_s: float = OUTAGE_S) -> dict[str, np.ndarray]:
+    """One lockstep run of ``cfg`` through the daemon's cycle (failsafes included;
+    ``duration_s`` simulated, instrument noise ``seed``), the INS silent for ``outage_s``
+    halfway; returns what the online AID sees each cycle: ``H`` (n, 4, 4), ``v`` (n, 6),
     ``u`` (n, 6), ``dt`` (n,)."""
     from uvd.estimation.aid import aid6_estimator
     from uvd.lockstep import Lockstep, lockstep_config
-    from uvd.runtime.build import build_core, start_pose
-    from uvd.runtime.cycle import unsupervised
+    from uvd.runtime.build import make_cycle, start_pose
 
     H, v, u, dts = [], [], [], []
 
@@ -45,9 +53,12 @@ def record_aid_inputs(cfg, vehicle, duration_s: float, seed: int) -> dict[str, n
 
     spec = dataclasses.replace(aid6_estimator(), step=step, name="aid6-record")
     H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, unsupervised(build_core(cfg, vehicle, (spec,))),
+    sim = Lockstep(vehicle, make_cycle(cfg, vehicle, estimators=(spec,)),
                    lockstep_config(cfg, seed), H0=H0, v0=v0)
-    for _ in range(int(round(duration_s / sim.dt_control))):
+    n = int(round(duration_s / sim.dt_control))
+    for k in range(n):
+        if outage_s > 0.0 and k == n // 2:
+            sim.faults.set("ins", "silence", outage_s)
         sim.advance()
     return {"H": np.array(H), "v": np.array(v), "u": np.array(u), "dt": np.array(dts)}
 
