@@ -206,7 +206,8 @@ def test_aid_sweep_prints_gain_factors_from_a_simulated_run(capsys, tmp_path):
                  "--aid-sweep", "3", "--json", str(out_json)]) == 0
     out = capsys.readouterr().out
     sw = json.loads(out_json.read_text())["aid_sweep"]
-    assert sw["cycles"] == 150 and len(sw["grid"]) == 25
+    # 150 cycles at 50 Hz less those the INS outage left without navigation
+    assert 100 < sw["cycles"] < 150 and len(sw["grid"]) == 25
     best = min(sw["grid"], key=lambda r: r["error"])
     assert sw["best"] == [best["translation"], best["rotation"]]
     assert np.isfinite(sw["best_error"]) and sw["best_error"] <= sw["error_at_1_1"]
