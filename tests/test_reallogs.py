@@ -595,3 +595,37 @@ def test_profile_match_validated():
     doc["signals"]["depth"]["match"] = [1]
     with pytest.raises(ConfigError, match=r"\[signals.depth\]: match must be a table"):
         profile_from_mapping(doc, where="p")
+
+
+def test_aid_demo_series_reads_the_estimates_of_a_recorded_run(tmp_path):
+    """The AID figure of docs/real-vehicles.md reads a `uvd demo --record` folder: the run's
+    configuration (its vehicle's truth, AID settings) and the "estimate" records of its
+    telemetry, in time order; a run without AID is a named error."""
+    import json
+    import shutil
+
+    from uvd.estimation.aid import aid6_init, aid_diagnostics, scaled_initp
+    from uvd.experiments.real_vehicles import aid_demo_series
+    from uvd.jsonio import to_jsonable
+    from uvd.telemetry.records import estimate_record
+
+    run = tmp_path / "run"
+    run.mkdir()
+    cfg = (REPO / "config" / "sim-bluerov2.toml").read_text()
+    (run / "uvd.toml").write_text(cfg + "\n[estimation]\naid = true\ngain_factors = [10, 3]\n")
+    truth = load_vehicle("bluerov2-heavy").params
+    st0 = aid6_init(scaled_initp(truth))
+    st1 = aid6_init(truth)
+    lines = [json.dumps({"type": "cycle", "t_ns": 1}),
+             json.dumps(to_jsonable(estimate_record(2_000_000_000, "aid6", aid_diagnostics(st0)))),
+             json.dumps(to_jsonable(estimate_record(3_500_000_000, "aid6", aid_diagnostics(st1))))]
+    (run / "telemetry.jsonl").write_text("\n".join(lines) + "\n")
+    s = aid_demo_series(run)
+    assert s["t"] == [0.0, 1.5]
+    assert np.allclose(s["M_diag"][0], np.diag(scaled_initp(truth).M))
+    assert np.allclose(s["M_diag"][1], s["M_diag_truth"]) and s["g_b"][1][3] == 1.31
+    assert s["settings"]["gain_factors"] == [10.0, 3.0] and not s["frozen"]
+    shutil.copy(run / "uvd.toml", tmp_path / "uvd.toml")
+    (tmp_path / "telemetry.jsonl").write_text(lines[0] + "\n")
+    with pytest.raises(ValueError, match="no AID estimate records"):
+        aid_demo_series(tmp_path)

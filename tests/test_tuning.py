@@ -208,7 +208,9 @@ def test_aid_sweep_prints_gain_factors_from_a_simulated_run(capsys, tmp_path):
     sw = json.loads(out_json.read_text())["aid_sweep"]
     # 150 cycles at 50 Hz less those the INS outage left without navigation
     assert 100 < sw["cycles"] < 150 and len(sw["grid"]) == 25
-    best = min(sw["grid"], key=lambda r: r["error"])
+    err = [np.inf if r["error"] is None else r["error"] for r in sw["grid"]]  # JSON: inf → null
+    assert all(r["error"] is None for r in sw["grid"] if r["frozen"])  # a frozen AID: inf
+    best = sw["grid"][int(np.argmin(err))]
     assert sw["best"] == [best["translation"], best["rotation"]]
     assert np.isfinite(sw["best_error"]) and sw["best_error"] <= sw["error_at_1_1"]
     line = next(x for x in out.splitlines() if x.startswith("gain_factors = "))
