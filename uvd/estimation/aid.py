@@ -729,10 +729,11 @@ def scaled_aid_gains(masses: np.ndarray, *, rotational: bool = False,
     In (4.10)–(4.13) / (4.23)–(4.27) each parameter's update is γ times its regressor times
     ∆v, and the observer error is ∆v ≈ M̂⁻¹ 𝒲 θ̃ / a: a parameter of DOF j's equation moves
     at a relative rate ≈ γ E[𝒲ⱼ²] / (a mⱼ). With γⱼ ∝ mⱼ it moves, for the same motion, as
-    fast as on the JHU ROV (where sⱼ = 1: §4.6's gains exactly) — whichever DOF: one mean-mass ratio
-    for all six (the previous rule, 0.026 on a BlueROV2 Heavy) made its rotation 5–10× faster
-    than the JHU ROV's (inertia ratios 0.0025–0.0054) and its translation about as fast. Any positive diagonal gain keeps Theorem 4.3.1's V̇
-    (:class:`AID6Gains`; Chapter 5's K_θ is diagonal per DOF too). ``factors`` multiply the
+    fast as on the JHU ROV (where sⱼ = 1: §4.6's gains exactly) — whichever DOF: one mean-mass
+    ratio for all six (the previous rule, 0.026 on a BlueROV2 Heavy) made its rotation 5–10×
+    faster than the JHU ROV's (inertia ratios 0.0025–0.0054), its translation about as fast.
+    Any positive diagonal gain keeps Theorem 4.3.1's V̇ (:class:`AID6Gains`; Chapter 5's K_θ
+    is diagonal per DOF too). ``factors`` multiply the
     translational and rotational sⱼ: the thesis ran 22–35 min of data (Tables 4.1, 4.5), a
     2-minute run needs faster rates, chosen as §4.5 chose its gains — a logarithmic sweep in
     simulation (``uvd tune --aid-sweep``, :mod:`uvd.experiments.aid_gains`). ``base``: the
