@@ -53,24 +53,26 @@ def _reference_step6(theta, vhat, v, r, u, dt, g, v_prev, v_now=None):
     if v_now is not None:
         dv = vhat_new - v_now
     psi1 = ad(v) @ dv
-    Mdot = 0.5 * g.gamma1 * (-np.outer(psi1, v) - np.outer(v, psi1) + np.outer(dv, psi2)
-                             + np.outer(psi2, dv))
-    Ddot = np.stack([-g.gamma2 * abs(v[i]) * np.outer(dv, v) for i in range(6)])
-    gdot = -g.gamma3 * dv[:3] @ r
-    bdot = g.gamma4 * J(dv[3:]) @ r
+    s = np.asarray(g.dof_scale)  # the diagonal gain per DOF (ones: the theorem's scalar γ's)
+    Mdot = 0.5 * g.gamma1 * np.sqrt(np.outer(s, s)) * (
+        -np.outer(psi1, v) - np.outer(v, psi1) + np.outer(dv, psi2) + np.outer(psi2, dv))
+    Ddot = np.stack([-g.gamma2 * abs(v[i]) * np.outer(s * dv, v) for i in range(6)])
+    gdot = -g.gamma3 * np.mean(s[:3]) * dv[:3] @ r
+    bdot = g.gamma4 * s[3:] * (J(dv[3:]) @ r)
     new = UVParams(M=M + dt * Mdot, D=D + dt * Ddot, g=gg + dt * gdot, b=b + dt * bdot)
     return new.theta, vhat_new
 
 
 @settings(max_examples=60, deadline=None)
 @given(M=spd(6, floor=50.0), R=rotation(), v=vec(6, 0.3), vhat=vec(6, 0.3), u=vec(6, 50.0),
-       dseed=st.integers(0, 2**31 - 1))
-def test_aid6_step_is_the_theorem(M, R, v, vhat, u, dseed):
-    """One compiled step equals the dense (4.23)–(4.27); M̂ stays exactly symmetric."""
+       dseed=st.integers(0, 2**31 - 1), per_dof=st.booleans())
+def test_aid6_step_is_the_theorem(M, R, v, vhat, u, dseed, per_dof):
+    """One compiled step equals the dense (4.23)–(4.27) — with the scalar γ's and with a
+    diagonal gain per DOF; M̂ stays exactly symmetric."""
     rng = np.random.default_rng(dseed)
     D = rng.normal(size=(6, 6, 6)) * 100.0
     theta0 = UVParams(M=M, D=D, g=rng.normal() * 10, b=rng.normal(size=3) * 50).theta
-    gains = AID6Gains()
+    gains = AID6Gains(dof_scale=tuple(np.exp(rng.normal(size=6))) if per_dof else (1.0,) * 6)
     prm = AID6Params(gains=gains, input_interp="hold", sampling="euler")
     st0 = replace(aid6_init(theta0), v_hat=vhat, v_prev=v, r_prev=R[2].copy(),
                   u_prev=np.zeros(6))
@@ -208,10 +210,13 @@ def test_true_parameters_are_nearly_an_equilibrium():
                                                                                  axis=1)))
 
 
-def test_lyapunov_function_non_increasing_small_step():
+@pytest.mark.parametrize("scale", [(1.0,) * 6, (0.3, 2.0, 1.0, 5.0, 0.5, 3.0)])
+def test_lyapunov_function_non_increasing_small_step(scale):
     """V of (4.31) along a fine-step noise-free run: V̇ = −a∆vᵀM∆v ≤ 0 (4.33), so V may not grow
-    beyond the O(dt²) of Euler."""
-    gains = AID6Gains()
+    beyond the O(dt²) of Euler — also with a diagonal gain per DOF, V's parameter terms then
+    weighted by the inverse of each entry's gain."""
+    gains = AID6Gains(dof_scale=scale)
+    sc = np.array(scale)
     dt = 0.002
     plant = Plant(load_vehicle("jhu-rov-coupled"), PlantConfig(rate_hz=1.0 / dt))
     prm = AID6Params(gains=gains, input_interp="hold")
@@ -222,9 +227,12 @@ def test_lyapunov_function_non_increasing_small_step():
         d = s.theta - th0
         dM = UVParams.from_theta(s.theta).M - TRUE.M
         dv = s.dv
-        return (0.5 * dv @ TRUE.M @ dv + np.sum(dM * dM) / (2 * gains.gamma1)
-                + np.sum(d[21:237] ** 2) / (2 * gains.gamma2) + d[237] ** 2 / (2 * gains.gamma3)
-                + np.sum(d[238:] ** 2) / (2 * gains.gamma4))
+        dD = d[21:237].reshape(6, 6, 6)  # [i, column, row]: row r of every D̂ᵢ at γ₂s_r
+        return (0.5 * dv @ TRUE.M @ dv
+                + np.sum(dM * dM / np.sqrt(np.outer(sc, sc))) / (2 * gains.gamma1)
+                + np.sum(dD ** 2 / sc) / (2 * gains.gamma2)
+                + d[237] ** 2 / (2 * gains.gamma3 * np.mean(sc[:3]))
+                + np.sum(d[238:] ** 2 / sc[3:]) / (2 * gains.gamma4))
 
     u = np.zeros(6)
     vals = []

@@ -480,7 +480,7 @@ def test_identify_refuses_without_vehicle(tmp_path, capsys):
 # ---------------------------------------------------------------------------------------------
 # AID scaled to the vehicle
 # ---------------------------------------------------------------------------------------------
-def test_aid_scaling_is_identity_on_the_jhu_rov_and_scales_the_bluerov2():
+def test_aid_scaling_is_identity_on_the_jhu_rov_and_scales_the_bluerov2_per_dof():
     from uvd.estimation.aid import (
         INITP_6DOF,
         AID3Gains,
@@ -489,32 +489,42 @@ def test_aid_scaling_is_identity_on_the_jhu_rov_and_scales_the_bluerov2():
         scaled_initp,
     )
 
-    jhu = np.diag(load_vehicle("jhu-rov").params.M)
+    jhu_p = load_vehicle("jhu-rov").params
+    jhu = np.diag(jhu_p.M)
     assert scaled_aid_gains(jhu) == AID6Gains()
     g3 = scaled_aid_gains(jhu, rotational=True)
     assert np.allclose([g3.a, g3.gamma1, g3.gamma2, g3.gamma3], [10, 5000, 10000, 1000])
-    assert np.allclose(scaled_initp(jhu).theta, INITP_6DOF.theta)
-    blue = np.diag(load_vehicle("bluerov2-heavy").params.M)
-    s = np.mean(blue) / np.mean(jhu)
+    assert g3.dof_scale == (1.0, 1.0, 1.0)
+    assert np.allclose(scaled_initp(jhu_p).theta, INITP_6DOF.theta)
+    blue_p = load_vehicle("bluerov2-heavy").params
+    blue = np.diag(blue_p.M)
     g = scaled_aid_gains(blue)
-    assert g.a == 10.0 and g.gamma1 == pytest.approx(5000 * s) and g.gamma4 == pytest.approx(
-        2000 * s)
-    p = scaled_initp(blue)
-    assert np.allclose(np.diag(p.M)[:3], 100 * np.mean(blue[:3]) / np.mean(jhu[:3]))
-    assert np.allclose(np.diag(p.M)[3:], 100 * np.mean(blue[3:]) / np.mean(jhu[3:]))
-    assert p.b[2] == pytest.approx(100 * np.mean(blue[3:]) / np.mean(jhu[3:])) and p.g == 0.0
+    assert (g.a, g.gamma1, g.gamma2, g.gamma3, g.gamma4) == (10.0, 5000.0, 20000.0, 2000.0,
+                                                             2000.0)
+    assert np.allclose(g.dof_scale, blue / jhu)  # each DOF's own mass ratio
+    gf = scaled_aid_gains(blue, factors=(10.0, 3.0))
+    assert np.allclose(gf.dof_scale, blue / jhu * [10, 10, 10, 3, 3, 3])
+    p = scaled_initp(blue_p)
+    assert np.allclose(np.diag(p.M), 100 * blue / jhu)
+    d = [blue_p.D[i][i, i] / jhu_p.D[i][i, i] for i in range(6)]
+    assert all(np.allclose(np.diag(p.D[i]), -100 * np.array(d)) for i in range(6))
+    assert p.b[2] == pytest.approx(100 * 1.31 / 300) and p.g == 0.0
     p.validate(where="scaled INITP")
     custom = scaled_aid_gains(blue, base=AID6Gains(5.0, 1.0, 2.0, 3.0, 4.0))
-    assert custom.a == 5.0 and custom.gamma3 == pytest.approx(3.0 * s)
-    with pytest.raises(ValueError, match="positive masses"):
+    assert custom.a == 5.0 and custom.gamma3 == 3.0 and custom.dof_scale == g.dof_scale
+    with pytest.raises(ValueError, match="positive"):
         scaled_aid_gains(np.array([1.0, 1, 1, 1, 1, 0]))
+    with pytest.raises(ValueError, match="factors"):
+        scaled_aid_gains(blue, factors=(1.0, -1.0))
+    with pytest.raises(ValueError, match="dof_scale"):
+        AID6Gains(dof_scale=(1.0,) * 5)
     assert AID3Gains() == scaled_aid_gains(jhu, rotational=True, base=AID3Gains())
 
 
 def test_runtime_aid_starts_scaled_unless_switched_off():
     import tomllib
 
-    from uvd.estimation.aid import INITP_6DOF, scaled_initp
+    from uvd.estimation.aid import INITP_6DOF, JHU_MASSES, AID6Gains, scaled_initp
     from uvd.runtime.build import aid_theta0
     from uvd.runtime.config import parse_config
 
@@ -523,12 +533,16 @@ def test_runtime_aid_starts_scaled_unless_switched_off():
     doc.setdefault("estimation", {})["aid"] = True
     cfg = parse_config(doc, source=src)
     v = cfg.load_vehicle()
-    assert np.allclose(aid_theta0(cfg, v), scaled_initp(np.diag(v.params.M)).theta)
-    assert cfg.estimation.aid_params(v).gains.gamma1 < 200  # 5000 × 0.026
+    assert np.allclose(aid_theta0(cfg, v), scaled_initp(v.params).theta)
+    g = cfg.estimation.aid_params(v).gains
+    assert g.gamma1 == 5000.0 and np.allclose(g.dof_scale, np.diag(v.params.M) / JHU_MASSES)
+    doc["estimation"]["gain_factors"] = [10, 3]
+    g = parse_config(doc, source=src).estimation.aid_params(v).gains
+    assert np.allclose(g.dof_scale, np.diag(v.params.M) / JHU_MASSES * [10, 10, 10, 3, 3, 3])
     doc["estimation"]["scale_to_vehicle"] = False
     cfg = parse_config(doc, source=src)
     assert aid_theta0(cfg, v) is None  # INITP
-    assert cfg.estimation.aid_params(v).gains.gamma1 == 5000.0
+    assert cfg.estimation.aid_params(v).gains == AID6Gains()
     assert INITP_6DOF.M[0, 0] == 100.0
 
 
@@ -581,3 +595,37 @@ def test_profile_match_validated():
     doc["signals"]["depth"]["match"] = [1]
     with pytest.raises(ConfigError, match=r"\[signals.depth\]: match must be a table"):
         profile_from_mapping(doc, where="p")
+
+
+def test_aid_demo_series_reads_the_estimates_of_a_recorded_run(tmp_path):
+    """The AID figure of docs/real-vehicles.md reads a `uvd demo --record` folder: the run's
+    configuration (its vehicle's truth, AID settings) and the "estimate" records of its
+    telemetry, in time order; a run without AID is a named error."""
+    import json
+    import shutil
+
+    from uvd.estimation.aid import aid6_init, aid_diagnostics, scaled_initp
+    from uvd.experiments.real_vehicles import aid_demo_series
+    from uvd.jsonio import to_jsonable
+    from uvd.telemetry.records import estimate_record
+
+    run = tmp_path / "run"
+    run.mkdir()
+    cfg = (REPO / "config" / "sim-bluerov2.toml").read_text()
+    (run / "uvd.toml").write_text(cfg + "\n[estimation]\naid = true\ngain_factors = [10, 3]\n")
+    truth = load_vehicle("bluerov2-heavy").params
+    st0 = aid6_init(scaled_initp(truth))
+    st1 = aid6_init(truth)
+    lines = [json.dumps({"type": "cycle", "t_ns": 1}),
+             json.dumps(to_jsonable(estimate_record(2_000_000_000, "aid6", aid_diagnostics(st0)))),
+             json.dumps(to_jsonable(estimate_record(3_500_000_000, "aid6", aid_diagnostics(st1))))]
+    (run / "telemetry.jsonl").write_text("\n".join(lines) + "\n")
+    s = aid_demo_series(run)
+    assert s["t"] == [0.0, 1.5]
+    assert np.allclose(s["M_diag"][0], np.diag(scaled_initp(truth).M))
+    assert np.allclose(s["M_diag"][1], s["M_diag_truth"]) and s["g_b"][1][3] == 1.31
+    assert s["settings"]["gain_factors"] == [10.0, 3.0] and not s["frozen"]
+    shutil.copy(run / "uvd.toml", tmp_path / "uvd.toml")
+    (tmp_path / "telemetry.jsonl").write_text(lines[0] + "\n")
+    with pytest.raises(ValueError, match="no AID estimate records"):
+        aid_demo_series(tmp_path)

@@ -188,3 +188,31 @@ def test_adaptation_gains_keep_the_thesis_relative_rates_on_any_vehicle():
     np.testing.assert_allclose(g["gamma_m"] / m, 1000.0 / m_ref)   # γ/m as on the JHU ROV
     np.testing.assert_allclose(g["mass_floor"], m / 10.0)
     assert np.all(g["mass_floor"] < m)
+
+
+@pytest.mark.timeout(600)
+def test_aid_sweep_prints_gain_factors_from_a_simulated_run(capsys, tmp_path):
+    """``uvd tune --aid-sweep S``: §4.5's logarithmic sweep over a short lockstep run of the
+    configuration (its INS silent halfway, so the record holds a failsafe and a re-arm); the
+    chosen pair is the grid's best, the printed line pastes into [estimation]."""
+    import json
+
+    from uvd.experiments.aid_gains import convergence_error
+
+    truth = load_vehicle("bluerov2-heavy").params
+    assert convergence_error(truth.theta, truth) == 0.0
+    out_json = tmp_path / "tune.json"
+    assert main(["tune", "--config", str(ROOT / "config" / "sim-bluerov2.toml"),
+                 "--aid-sweep", "3", "--json", str(out_json)]) == 0
+    out = capsys.readouterr().out
+    sw = json.loads(out_json.read_text())["aid_sweep"]
+    # 150 cycles at 50 Hz less those the INS outage left without navigation
+    assert 100 < sw["cycles"] < 150 and len(sw["grid"]) == 25
+    err = [np.inf if r["error"] is None else r["error"] for r in sw["grid"]]  # JSON: inf → null
+    assert all(r["error"] is None for r in sw["grid"] if r["frozen"])  # a frozen AID: inf
+    best = sw["grid"][int(np.argmin(err))]
+    assert sw["best"] == [best["translation"], best["rotation"]]
+    assert np.isfinite(sw["best_error"]) and sw["best_error"] <= sw["error_at_1_1"]
+    line = next(x for x in out.splitlines() if x.startswith("gain_factors = "))
+    assert json.loads(line.split("=", 1)[1]) == sw["best"]
+    assert "each DOF's scaled by its mass" in out

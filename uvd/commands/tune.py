@@ -9,8 +9,10 @@ stiffness b₃ in roll and pitch and the quadratic drag linearised at the refere
 The suggestion is k_p = m ω², k_d = 2ζωm with one bandwidth ω and damping ratio ζ for every
 axis (default ω: the delay-limited bandwidth, ζ = 0.8), printed as the ``[control]`` lines to
 paste — with the AMBC adaptation gains and mass floor scaled from the thesis's on the JHU ROV
-(:func:`uvd.control.tuning.scaled_adaptation_gains`) and AID's gains scaled likewise
-(:func:`uvd.estimation.aid.scaled_aid_gains`).
+(:func:`uvd.control.tuning.scaled_adaptation_gains`) and AID's gains scaled likewise, per DOF
+(:func:`uvd.estimation.aid.scaled_aid_gains`). ``--aid-sweep S`` also chooses AID's
+``gain_factors`` as §4.5 chose its gains, by a logarithmic sweep over an S-second simulation
+of the configuration (:mod:`uvd.experiments.aid_gains`; minutes).
 """
 
 from __future__ import annotations
@@ -33,6 +35,9 @@ def register(sub) -> None:
                    help="ω in rad/s, one for every axis or six (default: delay-limited)")
     p.add_argument("--damping", type=float, nargs="+", metavar="Z", default=[DEFAULT_ZETA],
                    help=f"damping ratio ζ, one or six (default {DEFAULT_ZETA})")
+    p.add_argument("--aid-sweep", type=float, metavar="S", default=None,
+                   help="choose AID's [estimation] gain_factors by a logarithmic sweep over an "
+                        "S-second lockstep simulation of this configuration (seed 1; minutes)")
     p.add_argument("--json", type=Path, metavar="OUT", help="write the figures as JSON")
     p.set_defaults(handler=_run)
 
@@ -78,7 +83,7 @@ def tune_figures(cfg, omega=None, zeta=DEFAULT_ZETA) -> dict:
     ref = load_vehicle("jhu-rov").params
     adapt = scaled_adaptation_gains(m, d, np.diag(ref.M), [ref.D[i][i, i] for i in range(6)])
     from uvd.estimation.aid import scaled_aid_gains
-    aid = scaled_aid_gains(m)
+    aid = scaled_aid_gains(m, factors=cfg.estimation.gain_factors)
     return {"vehicle": vehicle.name, "rate_hz": cfg.loop.rate_hz, "lag_s": lag,
             "delay_cycles": delay, "peak_speed": speed.tolist(),
             "bandwidth": np.broadcast_to(w, (6,)).tolist(),
@@ -86,6 +91,7 @@ def tune_figures(cfg, omega=None, zeta=DEFAULT_ZETA) -> dict:
             "configured": configured, "suggested": suggested,
             "adaptation": {k: v.tolist() for k, v in adapt.items()},
             "aid_gains": [aid.a, aid.gamma1, aid.gamma2, aid.gamma3, aid.gamma4],
+            "aid_dof_scale": list(aid.dof_scale),
             "stable": all(r["pole_radius"] < 1.0 for r in configured)}
 
 
@@ -138,10 +144,23 @@ def _run(args) -> int:
     for k, v in f["adaptation"].items():
         print(f"{k} = {_toml_list(v)}")
     print("[estimation]")
-    print("# AID: §4.6's gains on the JHU ROV scaled by the vehicle's mean mass over the JHU "
-          "ROV's (what scale_to_vehicle = true applies to the configured gains; paste with "
-          "scale_to_vehicle = false)")
+    print("# AID: §4.6's gains [a, γ₁…γ₄], each DOF's scaled by its mass over the JHU ROV's "
+          "(scale_to_vehicle = true, the default, applies it), per-DOF scale:")
+    print(f"# {_toml_list(f['aid_dof_scale'])}")
     print(f"gains = {_toml_list(f['aid_gains'])}")
+    if args.aid_sweep is not None:
+        from uvd.experiments.aid_gains import sweep_gain_factors
+        print(f"# gain_factors by §4.5's rule: a logarithmic sweep over a {args.aid_sweep:g} s "
+              "lockstep run (seed 1) …", flush=True)
+        sw = sweep_gain_factors(cfg, cfg.load_vehicle(), args.aid_sweep)
+        f["aid_sweep"] = sw
+        for r in sw["grid"]:
+            print(f"#   translation ×{r['translation']:<5g} rotation ×{r['rotation']:<5g} "
+                  f"error {r['error']:.3f}{'  frozen' if r['frozen'] else ''}")
+        print(f"# mean |ln(estimate/truth)| of M's diagonal and b₃ after {args.aid_sweep:g} s: "
+              f"{sw['best_error']:.3f} (×1, ×1: {sw['error_at_1_1']:.3f}); "
+              f"{sw['record_cpu_s']:.0f} s + {sw['replay_cpu_s']:.0f} s CPU")
+        print(f"gain_factors = {_toml_list(sw['best'])}")
     if args.json is not None:
         write_json(args.json, f)
     return 0

@@ -151,34 +151,35 @@ def _observer(vhat, v_prev, psi, dt, a, n, v_now, fresh, vhat_out):
 
 
 @numba.njit(cache=True)
-def _inertia_law(theta_out, n, hg, psi_a, v, dv, psi_b):
-    """θ_M += hg(−ψ_a vᵀ − v ψ_aᵀ + ∆v ψ_bᵀ + ψ_b ∆vᵀ) on the upper triangle: (4.24) with
-    hg = γ₁dt/2, ψ_a = ψ₁, ψ_b = ψ₂; (4.11) with ψ_a = ψ₄, ψ_b = ψ₃."""
+def _inertia_law(theta_out, n, hg, s, psi_a, v, dv, psi_b):
+    """θ_M += hg √(sᵢsⱼ)(−ψ_a vᵀ − v ψ_aᵀ + ∆v ψ_bᵀ + ψ_b ∆vᵀ)ᵢⱼ on the upper triangle: (4.24)
+    with hg = γ₁dt/2, ψ_a = ψ₁, ψ_b = ψ₂; (4.11) with ψ_a = ψ₄, ψ_b = ψ₃; ``s`` the per-DOF
+    gain scales (ones: the thesis's scalar γ₁)."""
     k = 0
     for i in range(n):
         for j in range(i, n):
-            theta_out[k] += hg * (-psi_a[i] * v[j] - v[i] * psi_a[j]
-                                  + dv[i] * psi_b[j] + psi_b[i] * dv[j])
+            theta_out[k] += hg * math.sqrt(s[i] * s[j]) * (
+                -psi_a[i] * v[j] - v[i] * psi_a[j] + dv[i] * psi_b[j] + psi_b[i] * dv[j])
             k += 1
 
 
 @numba.njit(cache=True)
-def _drag_law(theta_out, base0, n, g2dt, v, dv):
-    """D̂ᵢ += −γ₂ dt |vᵢ| ∆v vᵀ ((4.25), (4.12))."""
+def _drag_law(theta_out, base0, n, g2dt, s, v, dv):
+    """D̂ᵢ += −γ₂ dt |vᵢ| diag(s) ∆v vᵀ ((4.25), (4.12); row r of every D̂ᵢ at s_r γ₂)."""
     for i in range(n):
         avi = abs(v[i])
         if avi != 0.0:
             sc = -g2dt * avi
             base = base0 + n * n * i
             for c in range(n):
-                s = sc * v[c]
+                x = sc * v[c]
                 off = base + n * c
                 for row in range(n):
-                    theta_out[off + row] += s * dv[row]
+                    theta_out[off + row] += x * s[row] * dv[row]
 
 
 @numba.njit(cache=True)
-def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, g4, adapt,
+def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, g4, s, adapt,
                  theta_out, vhat_out, diag):
     """One Euler step of (4.23)–(4.27).
 
@@ -225,13 +226,15 @@ def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, 
     psi1[4] = w3 * e1 - w1 * e3
     psi1[5] = w1 * e2 - w2 * e1
     # (4.24) on the upper triangle (θ_M of (2.45)); (4.25): D̂ᵢˢ += −γ₂ dt |vᵢ| (v ⊗ ∆v)
-    _inertia_law(theta_out, 6, 0.5 * g1 * dt, psi1, v, dv, psi2)
-    _drag_law(theta_out, 21, 6, g2 * dt, v, dv)
-    # (4.26), (4.27)
-    theta_out[237] -= g3 * dt * (d1 * r1 + d2 * r2 + d3 * r3)
-    theta_out[238] += g4 * dt * (e2 * r3 - e3 * r2)
-    theta_out[239] += g4 * dt * (e3 * r1 - e1 * r3)
-    theta_out[240] += g4 * dt * (e1 * r2 - e2 * r1)
+    _inertia_law(theta_out, 6, 0.5 * g1 * dt, s, psi1, v, dv, psi2)
+    _drag_law(theta_out, 21, 6, g2 * dt, s, v, dv)
+    # (4.26), (4.27); ĝ acts on surge, sway and heave: at their mean scale, b̂ₖ at roll's,
+    # pitch's and yaw's
+    sg = (s[0] + s[1] + s[2]) / 3.0
+    theta_out[237] -= g3 * sg * dt * (d1 * r1 + d2 * r2 + d3 * r3)
+    theta_out[238] += g4 * s[3] * dt * (e2 * r3 - e3 * r2)
+    theta_out[239] += g4 * s[4] * dt * (e3 * r1 - e1 * r3)
+    theta_out[240] += g4 * s[5] * dt * (e1 * r2 - e2 * r1)
     _sym_from_upper(theta_out, 6, M)
     lo, hi = min_max_eig(M)
     diag[0], diag[1] = lo, hi
@@ -239,7 +242,7 @@ def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, 
 
 
 @numba.njit(cache=True)
-def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3, adapt,
+def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3, s, adapt,
                  theta_out, what_out, diag):
     """One Euler step of (4.10)–(4.13); the 3-DOF analogue of :func:`_aid6_kernel`."""
     I = np.empty((3, 3))
@@ -270,12 +273,12 @@ def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3
     psi4[1] = w3 * e1 - w1 * e3
     psi4[2] = w1 * e2 - w2 * e1
     # (4.11) (the same symmetric form as (4.24)) and (4.12)
-    _inertia_law(theta_out, 3, 0.5 * g1 * dt, psi4, w, dw, psi3)
-    _drag_law(theta_out, 6, 3, g2 * dt, w, dw)
-    # (4.13): b̂̇ = −γ₃ J(r)∆ω = −γ₃ r × ∆ω
-    theta_out[33] -= g3 * dt * (r2 * e3 - r3 * e2)
-    theta_out[34] -= g3 * dt * (r3 * e1 - r1 * e3)
-    theta_out[35] -= g3 * dt * (r1 * e2 - r2 * e1)
+    _inertia_law(theta_out, 3, 0.5 * g1 * dt, s, psi4, w, dw, psi3)
+    _drag_law(theta_out, 6, 3, g2 * dt, s, w, dw)
+    # (4.13): b̂̇ = −γ₃ J(r)∆ω = −γ₃ r × ∆ω (b̂ₖ at DOF k's scale)
+    theta_out[33] -= g3 * s[0] * dt * (r2 * e3 - r3 * e2)
+    theta_out[34] -= g3 * s[1] * dt * (r3 * e1 - r1 * e3)
+    theta_out[35] -= g3 * s[2] * dt * (r1 * e2 - r2 * e1)
     _sym_from_upper(theta_out, 3, I)
     lo, hi = min_max_eig(I)
     diag[0], diag[1] = lo, hi
@@ -335,12 +338,14 @@ def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, dt, ada
         vs[i] = 0.5 * (v_prev[i] + v_out[i]) if midpoint else v_prev[i]
     for i in range(3):
         rs[i] = 0.5 * (r_prev[i] + r_out[i]) if midpoint else r_prev[i]
+    sc = cfg[8:8 + n]
     if n == 6:
         status = _aid6_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[0],
-                              cfg[1], cfg[2], cfg[3], cfg[4], adapt, theta_out, vhat_out, diag)
+                              cfg[1], cfg[2], cfg[3], cfg[4], sc, adapt, theta_out, vhat_out,
+                              diag)
     else:
         status = _aid3_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[0],
-                              cfg[1], cfg[2], cfg[3], adapt, theta_out, vhat_out, diag)
+                              cfg[1], cfg[2], cfg[3], sc, adapt, theta_out, vhat_out, diag)
     if status != 0:
         for i in range(n):
             vhat_out[i] = v_out[i]
@@ -361,19 +366,19 @@ def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, dt, ada
 
 
 def _cfg_template(params, n_v: int) -> np.ndarray:
-    """[a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint]: :func:`_drive`'s ``cfg``, built once
-    per parameter set (writable like every array handed to the kernel — one compiled
-    specialisation — and never written)."""
+    """[a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint, s₁ … s_n]: :func:`_drive`'s ``cfg``
+    (s: the gains' per-DOF scales), built once per parameter set (writable like every array
+    handed to the kernel — one compiled specialisation — and never written)."""
     gn = params.gains
     return np.array([gn.a, gn.gamma1, gn.gamma2, gn.gamma3, gn.gamma4 if n_v == 6 else 0.0,
                      params.pd_floor, params.input_interp == "linear",
-                     params.sampling == "midpoint"], dtype=float)
+                     params.sampling == "midpoint", *gn.dof_scale], dtype=float)
 
 
 # inputs of the gap step (dt = 0: only the sample is copied); never written by the kernel, and
 # writable like the arrays of the normal step so both share one compiled specialisation
 _ZEROS = {6: np.zeros(6), 3: np.zeros(3)}
-_GAP_CFG = np.zeros(8)
+_GAP_CFG = np.zeros(14)
 
 
 def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
@@ -424,19 +429,36 @@ def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class AID6Gains:
-    """Gains of Theorem 4.3.1: a (1/s) and γ₁…γ₄ (> 0); defaults are §4.6's."""
+    """Gains of Theorem 4.3.1: a (1/s) and γ₁…γ₄ (> 0); defaults are §4.6's.
+
+    ``dof_scale`` (6 numbers > 0, default ones: the thesis's scalar gains) makes the gain
+    matrix diagonal per DOF, as Chapter 5's K_θ (γ_mi, γ_di, γ_bi): M̂ᵢⱼ adapts at
+    γ₁√(sᵢsⱼ), row r of every D̂ᵢ at γ₂s_r, ĝ at γ₃ times the mean of s₁…s₃, b̂ₖ at γ₄s₃₊ₖ.
+    Any positive diagonal gain keeps V̇ = −a∆vᵀM∆v of (4.33): V's parameter terms are
+    weighted by the inverse gains, which cancel entry by entry.
+    """
 
     a: float = 10.0
     gamma1: float = 5000.0
     gamma2: float = 20000.0
     gamma3: float = 2000.0
     gamma4: float = 2000.0
+    dof_scale: tuple[float, ...] = (1.0,) * 6
 
     def __post_init__(self) -> None:
-        for name in ("a", "gamma1", "gamma2", "gamma3", "gamma4"):
-            x = getattr(self, name)
-            if not (math.isfinite(x) and x > 0.0):
-                raise ValueError(f"AID gain {name} must be finite and > 0, got {x!r}")
+        _check_gains(self, ("a", "gamma1", "gamma2", "gamma3", "gamma4"), 6)
+
+
+def _check_gains(g, names, n: int) -> None:
+    """Every gain of ``names`` and each of the ``n`` per-DOF scales finite and > 0."""
+    for name in names:
+        x = getattr(g, name)
+        if not (math.isfinite(x) and x > 0.0):
+            raise ValueError(f"AID gain {name} must be finite and > 0, got {x!r}")
+    sc = tuple(float(x) for x in g.dof_scale)
+    if len(sc) != n or not all(math.isfinite(x) and x > 0.0 for x in sc):
+        raise ValueError(f"AID dof_scale must be {n} finite numbers > 0, got {g.dof_scale!r}")
+    object.__setattr__(g, "dof_scale", sc)
 
 
 def _check_params(p) -> None:
@@ -598,18 +620,17 @@ def aid6_estimator(theta0: np.ndarray | UVParams | None = None,
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class AID3Gains:
-    """Gains of Theorem 4.2.1: a (1/s), γ₁, γ₂, γ₃ (> 0); defaults are §4.5's."""
+    """Gains of Theorem 4.2.1: a (1/s), γ₁, γ₂, γ₃ (> 0); defaults are §4.5's.
+    ``dof_scale``: per roll, pitch, yaw, as :class:`AID6Gains`'s (b̂ₖ at γ₃sₖ)."""
 
     a: float = 10.0
     gamma1: float = 5000.0
     gamma2: float = 10000.0
     gamma3: float = 1000.0
+    dof_scale: tuple[float, ...] = (1.0,) * 3
 
     def __post_init__(self) -> None:
-        for name in ("a", "gamma1", "gamma2", "gamma3"):
-            x = getattr(self, name)
-            if not (math.isfinite(x) and x > 0.0):
-                raise ValueError(f"AID gain {name} must be finite and > 0, got {x!r}")
+        _check_gains(self, ("a", "gamma1", "gamma2", "gamma3"), 3)
 
 
 @dataclass(frozen=True)
@@ -684,51 +705,63 @@ INITP_ROT = RotParams(I=100.0 * np.eye(3), C=np.stack([-100.0 * np.eye(3)] * 3),
 # ---------------------------------------------------------------------------------------------
 # gains scaled to the vehicle
 # ---------------------------------------------------------------------------------------------
-#: the JHU ROV's decoupled masses (Tables 5.4–5.5, uvd/vehicles/jhu-rov.toml): the
-#: vehicle §4.5's and §4.6's gains were chosen for
+#: the JHU ROV's decoupled model (Tables 5.4–5.5, uvd/vehicles/jhu-rov.toml): the vehicle
+#: §4.5's and §4.6's gains and INITP were chosen for — masses, quadratic drags, b₃
 JHU_MASSES = np.array([628.0, 791.0, 1043.0, 95.7, 145.3, 110.2])
+JHU_DRAGS = np.array([-1259.0, -1429.0, -3083.0, -727.1, -783.4, -465.6])
+JHU_B3 = 300.0
+
+
+def _positive(x, n: int, what: str) -> np.ndarray:
+    a = np.asarray(x, dtype=float)
+    if a.shape != (n,) or np.any(~(a > 0)) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{what}: {n} positive finite numbers needed, got {x!r}")
+    return a
 
 
 def scaled_aid_gains(masses: np.ndarray, *, rotational: bool = False,
-                     base: AID6Gains | AID3Gains | None = None) -> AID6Gains | AID3Gains:
-    """AID's gains for another vehicle: §4.6's (6-DOF) or §4.5's (rotational) γ's scaled by the
-    ratio of the vehicle's mean mass (inertia, for the rotational law) to the JHU ROV's.
+                     base: AID6Gains | AID3Gains | None = None,
+                     factors: tuple[float, float] = (1.0, 1.0)) -> AID6Gains | AID3Gains:
+    """AID's gains for another vehicle: §4.6's (6-DOF) or §4.5's (rotational) γ's with a
+    diagonal gain per DOF, ``dof_scale`` sⱼ = mⱼ / mⱼᴶᴴᵁ (times ``factors`` = (translation,
+    rotation)).
 
-    In (4.10)–(4.13) / (4.23)–(4.27) each block's update is γ times a regressor times ∆v, and
-    the observer error is ∆v ≈ M̂⁻¹ 𝒲 θ̃ / a: the parameter error obeys θ̃̇ ≈ −(γ/a) 𝒴ᵀ M̂⁻¹ 𝒲 θ̃.
-    For the same motion (the same regressors) its rate is γ/M, whatever the block — so a
-    vehicle s times lighter than the JHU ROV needs γ s times smaller for the same convergence,
-    and its first estimate is not thrown around by gains meant for 100 times its mass (what
-    §4.6's gains do to a BlueROV2: M̂ ends at 100–133 against a truth of 0.4–32). The observer
-    pole a is kept. A motion of another size changes the rate by the regressor's square
-    (drag ∝ |v|v): ``uvd identify --gains`` takes the user's own. ``base``: the gains to scale
-    (default §4.6's / §4.5's, tuned on the JHU ROV).
+    In (4.10)–(4.13) / (4.23)–(4.27) each parameter's update is γ times its regressor times
+    ∆v, and the observer error is ∆v ≈ M̂⁻¹ 𝒲 θ̃ / a: a parameter of DOF j's equation moves
+    at a relative rate ≈ γ E[𝒲ⱼ²] / (a mⱼ). With γⱼ ∝ mⱼ it moves, for the same motion, as
+    fast as on the JHU ROV (where sⱼ = 1: §4.6's gains exactly) — whichever DOF: one mean-mass
+    ratio for all six (the previous rule, 0.026 on a BlueROV2 Heavy) made its rotation 5–10×
+    faster than the JHU ROV's (inertia ratios 0.0025–0.0054), its translation about as fast.
+    Any positive diagonal gain keeps Theorem 4.3.1's V̇ (:class:`AID6Gains`; Chapter 5's K_θ
+    is diagonal per DOF too). ``factors`` multiply the
+    translational and rotational sⱼ: the thesis ran 22–35 min of data (Tables 4.1, 4.5), a
+    2-minute run needs faster rates, chosen as §4.5 chose its gains — a logarithmic sweep in
+    simulation (``uvd tune --aid-sweep``, :mod:`uvd.experiments.aid_gains`). ``base``: the
+    gains to scale (default §4.6's / §4.5's). ``masses``: the vehicle's M diagonal (6).
     """
-    m = np.asarray(masses, dtype=float)
-    if m.shape != (6,) or np.any(~(m > 0)):
-        raise ValueError("scaled_aid_gains: 6 positive masses (the diagonal of M) needed")
-    sl = slice(3, 6) if rotational else slice(0, 6)
-    s = float(np.mean(m[sl]) / np.mean(JHU_MASSES[sl]))
+    m = _positive(masses, 6, "scaled_aid_gains: the diagonal of M")
+    k = _positive(factors, 2, "scaled_aid_gains: factors (translation, rotation)")
+    s = m / JHU_MASSES * np.repeat(k, 3)
     if rotational:
         g3 = base or AID3Gains()
-        return AID3Gains(a=g3.a, gamma1=g3.gamma1 * s, gamma2=g3.gamma2 * s,
-                         gamma3=g3.gamma3 * s)
-    g0 = base or AID6Gains()
-    return AID6Gains(a=g0.a, gamma1=g0.gamma1 * s, gamma2=g0.gamma2 * s, gamma3=g0.gamma3 * s,
-                     gamma4=g0.gamma4 * s)
+        return replace(g3, dof_scale=tuple(float(x) for x in s[3:]))
+    return replace(base or AID6Gains(), dof_scale=tuple(float(x) for x in s))
 
 
-def scaled_initp(masses: np.ndarray) -> UVParams:
-    """INITP of Tables 4.6–4.7 (M̂ = 100 I, D̂ᵢ = −100 I, ĝ = 0, b̂ = [0, 0, 100]) scaled to
-    another vehicle: the translational entries by the ratio of its mean mass to the JHU ROV's,
-    the rotational ones (inertia, rotational drag, b̂₃) by the ratio of its mean inertia to
-    the JHU ROV's. On the JHU ROV itself both ratios are 1: INITP exactly. A first guess of the
-    right order, not the vehicle file's values (which a simulation's plant shares)."""
-    m = np.asarray(masses, dtype=float)
-    if m.shape != (6,) or np.any(~(m > 0)):
-        raise ValueError("scaled_initp: 6 positive masses (the diagonal of M) needed")
-    st = float(np.mean(m[:3]) / np.mean(JHU_MASSES[:3]))
-    sr = float(np.mean(m[3:]) / np.mean(JHU_MASSES[3:]))
-    scale = np.array([st] * 3 + [sr] * 3)
-    D = np.stack([np.diag(-100.0 * scale)] * 6)
-    return UVParams(M=np.diag(100.0 * scale), D=D, g=0.0, b=np.array([0.0, 0.0, 100.0 * sr]))
+def scaled_initp(params: UVParams) -> UVParams:
+    """INITP of Tables 4.6–4.7 (M̂ = 100 I, D̂ᵢ = −100 I, ĝ = 0, b̂ = [0, 0, 100]) carried to
+    another vehicle entry by entry: M̂ⱼⱼ = 100 mⱼ/mⱼᴶᴴᵁ, every D̂ᵢ's (j, j) = −100 dⱼ/dⱼᴶᴴᵁ,
+    b̂₃ = 100 b₃/b₃ᴶᴴᵁ, from the vehicle file's first guess ``params`` (M's and every Dᵢ's
+    diagonal, b₃; a b₃ ≤ 0 takes the mean inertia ratio instead). Each first guess is as far
+    from the vehicle's as the thesis's INITP was from the JHU ROV's (masses ×0.1–1,
+    drags ×0.03–0.2, b₃ ×⅓) — not the vehicle file's values, which a simulation's plant
+    shares. On the JHU ROV itself: INITP exactly."""
+    m = _positive(np.diag(params.M), 6, "scaled_initp: the diagonal of M")
+    d = np.array([params.D[i][i, i] for i in range(6)], dtype=float)
+    if not np.all(d < 0):
+        raise ValueError(f"scaled_initp: the drags D_i[i, i] must be < 0, got {d.tolist()}")
+    b3 = float(params.b[2])
+    rb = b3 / JHU_B3 if b3 > 0 else float(np.mean(m[3:] / JHU_MASSES[3:]))
+    D = np.stack([np.diag(-100.0 * d / JHU_DRAGS)] * 6)
+    return UVParams(M=np.diag(100.0 * m / JHU_MASSES), D=D, g=0.0,
+                    b=np.array([0.0, 0.0, 100.0 * rb]))

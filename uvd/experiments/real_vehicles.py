@@ -118,7 +118,7 @@ def run(data: Path, out: Path) -> dict:
     theta0 = rot_of(vehicle.params)
     scaled = scaled_aid_gains(np.diag(vehicle.params.M), rotational=True)
     slow = AID3Gains(a=scaled.a, gamma1=scaled.gamma1 * 1e-3, gamma2=scaled.gamma2 * 1e-3,
-                     gamma3=scaled.gamma3 * 1e-3)
+                     gamma3=scaled.gamma3 * 1e-3, dof_scale=scaled.dof_scale)
     estimates, info = {}, {}
     for name, method, gains in (("uvd-ls", "ls", None), ("uvd-ls-consistent", "ls-consistent",
                                                          None),
@@ -278,11 +278,19 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=here.parent / "shared" / "data" /
                     "bluerov-exjobb")
     ap.add_argument("--out", type=Path, default=here / "docs")
-    ap.add_argument("--aid-demo", action="store_true",
-                    help="only the BlueROV2 AID demo run (aid-bluerov2.png; ~4 min)")
+    ap.add_argument("--aid-demo", nargs="+", metavar="LABEL=RUN_DIR",
+                    help="only the AID figure (aid-bluerov2.png) from recorded `uvd demo "
+                         "--record RUN_DIR` runs with [estimation] aid = true")
+    ap.add_argument("--ablation", action="store_true",
+                    help="only the ablation of uvd's and the published estimate (ablation.json)")
     a = ap.parse_args(argv)
+    if a.ablation:
+        for name, mae in ablation(a.data, a.out).items():
+            print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in mae.values()) + " |")
+        return 0
     if a.aid_demo:
-        print(json.dumps(aid_bluerov2_demo(a.out), indent=1))
+        runs = [tuple(x.split("=", 1)) if "=" in x else (Path(x).name, x) for x in a.aid_demo]
+        print(json.dumps(aid_bluerov2_demo(a.out, runs), indent=1, default=float))
         return 0
     r = run(a.data, a.out)
     print(tables_md(r))
@@ -290,92 +298,141 @@ def main(argv=None) -> int:
     return 0
 
 
-def aid_bluerov2_demo(out: Path, duration_s: float = 120.0) -> dict:
-    """The demo's lockstep run of ``config/sim-bluerov2.toml`` with ``[estimation] aid = true``
-    (defaults otherwise), once with AID scaled to the vehicle (``scale_to_vehicle``, the
-    default) and once with §4.6's gains and INITP as they are; θ̂'s diagonal over time against
-    the plant's truth. Writes ``aid-bluerov2.json`` and ``aid-bluerov2.png``."""
-    import tomllib
+def ablation(data: Path, out: Path) -> dict:
+    """Why uvd's best estimate (ls-consistent) cross-validates worse than the published final
+    set in roll, pitch, p, q, measured: held-out mean MAE of the two, of the published set
+    without its linear damping, of uvd's with the published inertia (and b), and of uvd's
+    with the published linear damping added. Reads ``docs/real-vehicles/uvd-ls-consistent
+    .toml`` (written by :func:`run`); writes ``ablation.json``."""
+    from dataclasses import replace
 
-    from uvd.lockstep import Lockstep, lockstep_config
+    from uvd.estimation.realdata import rot_of
+    from uvd.estimation.xval import rot_xval_windows
+    from uvd.io.logprofile import load_profile
+    from uvd.io.logrun import load_log_runs
+    from uvd.io.params import params_from_toml
+    from uvd.io.vehicle import load_vehicle
+
+    d = out / "real-vehicles"
+    vehicle = load_vehicle("bluerov-exjobb")
+    uvd = rot_of(params_from_toml(d / "uvd-ls-consistent.toml"))
+    _text, pub, d_lin = published_toml("published-final", vehicle.params)
+    lz6 = PUBLISHED["published-final"]["lz6"]
+    cands = {"uvd-ls-consistent": (uvd, None, 0.11),
+             "published-final": (pub, d_lin, lz6),
+             "published-final without its linear damping": (pub, None, lz6),
+             "uvd-ls-consistent with the published inertia": (replace(uvd, I=pub.I), None, 0.11),
+             "uvd-ls-consistent with the published inertia and b": (
+                 replace(uvd, I=pub.I, b=pub.b), None, 0.11),
+             "uvd-ls-consistent + the published linear damping": (uvd, d_lin, 0.11)}
+    held = {}
+    for lz in {c[2] for c in cands.values()}:
+        veh = vehicle if lz == 0.11 else _vehicle_lz6(lz)
+        held[lz] = {stem: load_log_runs([_bag(data, stem)],
+                                        load_profile(f"bluerov-exjobb-{prof}"), veh,
+                                        quiet=True)[0] for stem, prof in HELD_OUT}
+    result = {}
+    for name, (rot, dl, lz) in cands.items():
+        per = []
+        for rs in held[lz].values():
+            maes = [(len(r), rot_xval_windows(rot, r, window_s=WINDOW_S,
+                                              linear_damping=dl).mae) for r in rs]
+            n = sum(k for k, _m in maes)
+            per.append({k: sum(c * m[k] for c, m in maes) / n for k in maes[0][1]})
+        result[name] = {k: float(np.mean([p[k] for p in per])) for k in per[0]}
+    (d / "ablation.json").write_text(json.dumps(result, indent=1))
+    return result
+
+
+def aid_demo_series(run_dir: Path) -> dict:
+    """θ̂ of the online AID over time from a recorded ``uvd demo --record RUN_DIR`` run (its
+    ``telemetry.jsonl`` "estimate" records, every ``publish_every_s``), with the plant's truth
+    (the run's vehicle file) and the run's AID settings."""
     from uvd.model.params import params_from_theta
-    from uvd.runtime.build import build_core, start_pose
-    from uvd.runtime.config import parse_config
-    from uvd.runtime.cycle import unsupervised
+    from uvd.runtime.config import load_config
 
-    here = Path(__file__).resolve().parents[2]
-    src = here / "config" / "sim-bluerov2.toml"
+    cfg = load_config(run_dir / "uvd.toml")
+    truth = cfg.load_vehicle().params
+    ts, ms, ds, bs, frozen = [], [], [], [], False
+    with (run_dir / "telemetry.jsonl").open(encoding="utf-8") as fh:
+        for line in fh:
+            if '"estimate"' not in line:
+                continue
+            r = json.loads(line)
+            if r.get("type") != "estimate" or r.get("source") != "estimator":
+                continue
+            p = params_from_theta(np.array(r["theta"], dtype=float))
+            ts.append(r["t_ns"] * 1e-9)
+            ms.append(np.diag(p.M).tolist())
+            ds.append([float(p.D[i][i, i]) for i in range(6)])
+            bs.append([float(p.g), *map(float, p.b)])
+            frozen = frozen or bool(r.get("frozen"))
+    if not ts:
+        raise ValueError(f"{run_dir}: no AID estimate records (was [estimation] aid = true?)")
+    e = cfg.estimation
+    return {"run": str(run_dir), "t": (np.array(ts) - ts[0]).tolist(), "M_diag": ms,
+            "D_diag": ds, "g_b": bs, "frozen": frozen,
+            "settings": {"scale_to_vehicle": e.scale_to_vehicle,
+                         "gain_factors": list(e.gain_factors), "gains": list(e.gains)},
+            "M_diag_truth": np.diag(truth.M).tolist(),
+            "D_diag_truth": [float(truth.D[i][i, i]) for i in range(6)],
+            "g_b_truth": [float(truth.g), *map(float, truth.b)]}
+
+
+def aid_bluerov2_demo(out: Path, runs: list[tuple[str, Path]]) -> dict:
+    """AID's estimates over time against the truth in recorded HIL runs of ``uvd demo``
+    (``runs``: (label, ``--record`` folder), first solid, then dotted, dashed). Writes
+    ``aid-bluerov2.json`` (final values, settings) and ``aid-bluerov2.png``."""
     d = out / "real-vehicles"
     d.mkdir(parents=True, exist_ok=True)
-    result = {"duration_s": duration_s, "config": "config/sim-bluerov2.toml + [estimation] "
-                                                  "aid = true"}
-    series = {}
-    for label, scale in (("scaled to the vehicle (default)", True),
-                         ("§4.6 gains and INITP (JHU ROV)", False)):
-        doc = tomllib.loads(src.read_text())
-        doc.setdefault("estimation", {}).update(aid=True, scale_to_vehicle=scale)
-        cfg = parse_config(doc, source=src)
-        vehicle = cfg.load_vehicle()
-        H0, v0 = start_pose(cfg)
-        sim = Lockstep(vehicle, unsupervised(build_core(cfg, vehicle)), lockstep_config(cfg, 0),
-                       H0=H0, v0=v0)
-        n = int(round(duration_s / sim.dt_control))
-        ts, ms, ds, bs = [], [], [], []
-        for k in range(n):
-            sim.advance()
-            if k % 25 == 0 or k == n - 1:
-                p = params_from_theta(sim.state.est[0].theta)
-                ts.append((k + 1) * sim.dt_control)
-                ms.append(np.diag(p.M).tolist())
-                ds.append([float(p.D[i][i, i]) for i in range(6)])
-                bs.append([float(p.g), *map(float, p.b)])
-        st = sim.state.est[0]
-        truth = vehicle.params
-        series[label] = (np.array(ts), np.array(ms), np.array(ds), np.array(bs))
-        result[label] = {"M_diag": ms[-1], "D_diag": ds[-1], "g_b": bs[-1],
-                         "frozen": bool(st.frozen), "freeze_reason": st.freeze_reason,
-                         "M_diag_truth": np.diag(truth.M).tolist(),
-                         "D_diag_truth": [float(truth.D[i][i, i]) for i in range(6)],
-                         "g_b_truth": [float(truth.g), *map(float, truth.b)]}
+    series = {label: aid_demo_series(Path(r)) for label, r in runs}
+    result = {label: {k: (v[-1] if k in ("M_diag", "D_diag", "g_b") else v)
+                      for k, v in s.items() if k != "t"} | {"duration_s": s["t"][-1]}
+              for label, s in series.items()}
     (d / "aid-bluerov2.json").write_text(json.dumps(result, indent=1))
     from uvd.io.figures import _pyplot
 
     plt = _pyplot()
-    if plt is not None:
-        fig, ax = plt.subplots(2, 2, figsize=(13, 7))
-        truth_m = np.array(result[next(iter(series))]["M_diag_truth"])
-        for j, (label, (t, m, _dd, b)) in enumerate(series.items()):
-            ls = "-" if j == 0 else ":"
-            for i in range(3):
-                ax[0, 0].plot(t, m[:, i], ls, color=f"C{i}", label=f"m{i + 1} {label}"
-                              if j == 0 or i == 0 else None)
-                ax[0, 1].plot(t, m[:, 3 + i], ls, color=f"C{i}")
-            ax[1, 0].plot(t, b[:, 3], ls, color="C3", label=f"b₃ {label}")
-            ax[1, 1].plot(t, b[:, 0], ls, color="C4", label=f"g {label}")
+    if plt is None:
+        return result
+    first = next(iter(series.values()))
+    fig, ax = plt.subplots(2, 2, figsize=(13, 7))
+    styles = ("-", ":", "--")
+    for j, (label, s) in enumerate(series.items()):
+        t, m, b = np.array(s["t"]), np.array(s["M_diag"]), np.array(s["g_b"])
+        ls = styles[j % 3]
         for i in range(3):
-            ax[0, 0].axhline(truth_m[i], color=f"C{i}", lw=0.6, ls="--")
-            ax[0, 1].axhline(truth_m[3 + i], color=f"C{i}", lw=0.6, ls="--")
-        gb = result[next(iter(series))]["g_b_truth"]
-        ax[1, 0].axhline(gb[3], color="C3", lw=0.6, ls="--")
-        ax[1, 1].axhline(gb[0], color="C4", lw=0.6, ls="--")
-        ax[0, 0].set_yscale("log")
-        ax[0, 1].set_yscale("log")
-        ax[1, 0].set_yscale("symlog", linthresh=1.0)
-        ax[0, 0].set_title("M̂ translational diagonal (kg); dashed: truth", fontsize=9)
-        ax[0, 1].set_title("M̂ rotational diagonal (kg m²); dashed: truth", fontsize=9)
-        ax[1, 0].set_title("b̂₃ (N m)", fontsize=9)
-        ax[1, 1].set_title("ĝ (N)", fontsize=9)
-        for a in ax.ravel():
-            a.set_xlabel("time (s)")
-        ax[0, 0].legend(fontsize=7)
-        ax[1, 0].legend(fontsize=7)
-        ax[1, 1].legend(fontsize=7)
-        fig.suptitle("BlueROV2 Heavy, uvd demo's lockstep run, 120 s at 50 Hz, [estimation] "
-                     "aid = true: solid = scaled to the vehicle, dotted = JHU ROV's gains/INITP",
-                     fontsize=9)
-        fig.tight_layout()
-        fig.savefig(d / "aid-bluerov2.png", dpi=100)
-        plt.close(fig)
+            ax[0, 0].plot(t, m[:, i], ls, color=f"C{i}",
+                          label=f"m{i + 1} {label}" if j == 0 or i == 0 else None)
+            ax[0, 1].plot(t, m[:, 3 + i], ls, color=f"C{i}",
+                          label=f"m{i + 4} {label}" if j == 0 or i == 0 else None)
+        ax[1, 0].plot(t, b[:, 3], ls, color="C3", label=f"b₃ {label}")
+        ax[1, 1].plot(t, np.abs(np.array(s["D_diag"])[:, 2]), ls, color="C2",
+                      label=f"|d₃| heave {label}")
+        ax[1, 1].plot(t, np.abs(np.array(s["D_diag"])[:, 5]), ls, color="C5",
+                      label=f"|d₆| yaw {label}")
+    tm, gb, dd = first["M_diag_truth"], first["g_b_truth"], first["D_diag_truth"]
+    for i in range(3):
+        ax[0, 0].axhline(tm[i], color=f"C{i}", lw=0.6, ls="--")
+        ax[0, 1].axhline(tm[3 + i], color=f"C{i}", lw=0.6, ls="--")
+    ax[1, 0].axhline(gb[3], color="C3", lw=0.6, ls="--")
+    ax[1, 1].axhline(abs(dd[2]), color="C2", lw=0.6, ls="--")
+    ax[1, 1].axhline(abs(dd[5]), color="C5", lw=0.6, ls="--")
+    for a in (ax[0, 0], ax[0, 1], ax[1, 1]):
+        a.set_yscale("log")
+    ax[0, 0].set_title("M̂ translational diagonal (kg); thin dashed: truth", fontsize=9)
+    ax[0, 1].set_title("M̂ rotational diagonal (kg m²); thin dashed: truth", fontsize=9)
+    ax[1, 0].set_title("b̂₃ (N m); thin dashed: truth", fontsize=9)
+    ax[1, 1].set_title("|D̂ᵢ(i, i)| heave and yaw (N s²/m², N m s²); thin dashed: truth",
+                       fontsize=9)
+    for a in ax.ravel():
+        a.set_xlabel("time since the daemon started (s)")
+        a.legend(fontsize=7)
+    fig.suptitle("BlueROV2 Heavy, uvd demo hardware in the loop, 50 Hz, [estimation] aid = "
+                 "true", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(d / "aid-bluerov2.png", dpi=100)
+    plt.close(fig)
     return result
 
 

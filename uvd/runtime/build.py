@@ -156,8 +156,8 @@ def aid_theta0(cfg: Config, vehicle=None) -> np.ndarray | None:
     path = cfg.estimation.start_path(base)
     if path is None and vehicle is not None and cfg.estimation.scale_to_vehicle:
         from uvd.estimation.aid import scaled_initp
-        log.info("AID starts from INITP (§4.6) scaled to %s's masses", vehicle.name)
-        return scaled_initp(np.diag(vehicle.params.M)).theta
+        log.info("AID starts from INITP (§4.6) scaled to %s's first guess", vehicle.name)
+        return scaled_initp(vehicle.params).theta
     log.info("AID starts from %s", path or "INITP (§4.6, Tables 4.6-4.7)")
     if path is None:
         return None

@@ -236,13 +236,18 @@ class EstimationSection:
         doc="AID gains [a, γ₁, γ₂, γ₃, γ₄] of Theorem 4.3.1, each > 0: a (1/s) pulls v̂ "
             "toward v (4.23); γ₁, γ₂, γ₃, γ₄ scale the adaptation rates of M̂, D̂ᵢ, ĝ, b̂ "
             "(4.24)-(4.27) (larger = faster); default §4.6's, chosen for the JHU ROV: with "
-            "scale_to_vehicle the γ's are multiplied by the vehicle's mean mass over the JHU "
-            "ROV's")
+            "scale_to_vehicle each DOF's γ's are multiplied by its mass over the JHU ROV's")
     scale_to_vehicle: bool = setting(
-        True, doc="scale AID to the vehicle: the γ's of gains and INITP (when no "
-                  "initial_params) by the ratio of the vehicle's masses to the JHU ROV's "
-                  "(uvd.estimation.aid.scaled_aid_gains, scaled_initp; 1 on the JHU ROV). Off: "
-                  "§4.6's gains and INITP as they are, whatever the vehicle")
+        True, doc="scale AID to the vehicle, per DOF: DOF j's γ's by m_j over the JHU ROV's "
+                  "m_j (times gain_factors), INITP (when no initial_params) entry by entry by "
+                  "the vehicle file's M, D, b₃ over the JHU ROV's "
+                  "(uvd.estimation.aid.scaled_aid_gains, scaled_initp; §4.6's on the JHU ROV). "
+                  "Off: §4.6's gains and INITP as they are, whatever the vehicle")
+    gain_factors: tuple[float, float] = setting(
+        (1.0, 1.0), min=1e-6, max=1e6,
+        doc="with scale_to_vehicle: [translation, rotation] multipliers of the per-DOF gain "
+            "scales — the thesis's 22-35 min runs against a short one; `uvd tune --aid-sweep` "
+            "suggests them from a logarithmic sweep in simulation (§4.5's rule)")
     publish_every_s: float = setting(
         1.0, unit="s", min=0.01, max=3600.0, reload=True,
         doc="how often the estimate goes to the telemetry sinks as an \"estimate\" record "
@@ -286,7 +291,8 @@ class EstimationSection:
         from uvd.estimation.aid import AID6Gains, AID6Params, scaled_aid_gains
         gains = AID6Gains(*self.gains)
         if vehicle is not None and self.scale_to_vehicle:
-            gains = scaled_aid_gains(np.diag(vehicle.params.M), base=gains)
+            gains = scaled_aid_gains(np.diag(vehicle.params.M), base=gains,
+                                     factors=self.gain_factors)
         return AID6Params(gains=gains)
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
