@@ -445,7 +445,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
 
         # -- the two processes --
         truth_path = run_dir / "truth.bin"
-        bound = duration_s + 90.0
+        bound = duration_s + 300.0  # a loaded machine takes minutes to arm (compiling)
         bridge = BridgeProcess(cfg_path, duration_s=bound, seed=seed, hold=True,
                                truth_log=truth_path, extra=bridge_args)
         bridge.start(timeout_s=120.0)

@@ -220,9 +220,7 @@ def _clear_over_mavlink(listen: str, thruster: int) -> None:
     host, _, port = listen.rpartition(":")
     conn = mavutil.mavlink_connection(f"udpout:{host}:{port}", source_system=255,
                                       dialect="ardupilotmega")
-    try:
-        conn.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS,
-                                mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    try:  # no HEARTBEAT: one would start the daemon's watch of the ground station's
         conn.mav.command_long_send(1, 1, 31010, 0, float(thruster), 1.0, 0, 0, 0, 0, 0)
         conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=2.0)
     finally:

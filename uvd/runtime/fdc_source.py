@@ -180,7 +180,7 @@ def decide(rule: FdcRule | None, st: FdcState | None, c: Any, n: int) -> Verdict
     if rule is None:
         return Verdict(None, None, "[faults.fdc] is not enabled", False, st)
     parsed = _parse(c, n)
-    conf = f"confidence {c.confidence:g}" if isinstance(c.confidence, (int, float)) else ""
+    conf = f"confidence {c.confidence:.3g}" if isinstance(c.confidence, (int, float)) else ""
     if isinstance(parsed, str):
         return Verdict(None, None, f"{c.source}: {parsed}; told, not acted on ({conf})",
                        True, st._replace(advisory=st.advisory + 1))
