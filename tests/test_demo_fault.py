@@ -1,7 +1,8 @@
 """``uvd demo --fault``: in hardware in the loop (sim-bridge + the daemon + uvd-fdc + uvd watch,
 over Zenoh on loopback), a thruster weakened by sim-bridge is named by uvd-fdc, confirmed by the
 daemon's own residual and accommodated; the operator's clearing follows; the demo measures
-fault → detection → reallocation. Bounded: every process of the demo is (its own bounds), and
+fault → detection → reallocation; ``uvd replay --lockstep`` of the run's black box reproduces
+every command bit for bit. Bounded: every process of the demo is (its own bounds), and
 the run is 60 s of armed tracking."""
 
 from __future__ import annotations
@@ -43,5 +44,14 @@ def test_a_weak_thruster_is_detected_over_zenoh_and_reallocated_in_hil(tmp_path)
     watched = "\n".join(f["watch_events"])
     assert "event: FaultReport from uvd-fdc: ok" in watched, watched
     assert "event: SetThrusterEta from mavlink" in watched, watched
-    # the cycle's η was in use: the daemon's telemetry carries the reallocation's cycle
+    # the clearing station sends no HEARTBEAT: no operator-heartbeat failsafe follows it
     assert not [e for e in figures["failsafe_events"] if "heartbeat" in str(e)]
+
+    # the decision went through the one cycle: replayed in lockstep from the black box, the
+    # FaultReport is applied at the same cycle, confirmed again, and every command matches
+    from uvd.runtime.replay.lockstep import replay_lockstep
+    (mcap,) = tmp_path.glob("uvd-*.mcap")
+    rep = replay_lockstep(mcap)
+    print(rep.as_dict())
+    assert rep.stopped is None and rep.cycles == rep.commands_compared > 0
+    assert rep.mismatches == 0 and rep.operator_commands >= 2

@@ -59,6 +59,7 @@ def _faulty_run(accept, health, claim=0.5, fault_at=20.0, detect_at=50.0):
 
 def test_confirm_acts_on_a_weak_thruster_its_own_residual_sees():
     sim, res, _ = _faulty_run("confirm", 0.5)
+    print(res.reason)
     assert res.ok, res.reason
     assert "confirmed" in res.reason and "thruster 4 eta 0.5 (uvd-fdc)" in res.reason
     eta_hat = float(res.reason.split("gives eta ")[1].split(" ")[0])
@@ -70,6 +71,7 @@ def test_confirm_acts_on_a_weak_thruster_its_own_residual_sees():
 
 def test_confirm_refuses_and_counts_a_sample_its_evidence_contradicts():
     sim, res, _ = _faulty_run("confirm", 1.0)  # the thruster is healthy: a false alarm
+    print(res.reason)
     assert not res.ok and "contradicted" in res.reason, res.reason
     eta_hat = float(res.reason.split("gives eta ")[1].split(" ")[0])
     assert abs(eta_hat - 1.0) <= 0.1, res.reason

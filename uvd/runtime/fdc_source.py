@@ -63,8 +63,7 @@ _THRUSTER = re.compile(r"thruster(\d+)$")
 
 @dataclass(frozen=True)
 class FdcSourceSection:
-    """uvd-fdc over Zenoh as a source of η (``[faults.fdc]``, module
-    :mod:`uvd.runtime.fdc_source`)."""
+    """uvd-fdc over Zenoh as a source of η (``[faults.fdc]``, docs/zenoh.md)."""
 
     enabled: bool = setting(False, doc="subscribe to uvd/<key>/fault/** on the daemon's Zenoh "
                                        "face (needs [telemetry.zenoh] enabled) and decide on "
