@@ -24,8 +24,10 @@ allocation, the STATUSTEXT, the Zenoh event).
     thruster i it fits ηᵢ by least squares over the segments since the change time uvd-fdc gives
     (``explanation.since_t_ns``; the whole window when absent). The sample is confirmed when
     |η̂ᵢ − η| ≤ ``tolerance`` with a standard error ≤ ``tolerance``/2 over at least
-    ``MIN_SEGMENTS`` segments. It is **contradicted** when the fit is that precise but
-    |η̂ᵢ − η| > ``tolerance`` (e.g. the thruster pushes as commanded), and **unconfirmed** when the
+    ``MIN_SEGMENTS`` segments, and η̂ᵢ is nearer the sample's η than a healthy 1
+    (|η̂ᵢ − η| < |η̂ᵢ − 1|: the fault explains the residual better than no fault). It is
+    **contradicted** when the fit is that precise but either fails (the thruster pushes as
+    commanded; or a small claimed loss the residual does not see), and **unconfirmed** when the
     fit is not precise enough (the thruster barely commanded since the change). Contradicted and
     unconfirmed samples are refused — logged, counted, told to the operator — and not acted on.
 
@@ -201,9 +203,9 @@ def decide(rule: FdcRule | None, st: FdcState | None, c: Any, n: int) -> Verdict
         return Verdict(None, None, f"{claim}; unconfirmed: {seen}, not precise to "
                                    f"{tol / 2:g}; not acted on", False,
                        st._replace(unconfirmed=st.unconfirmed + 1))
-    if abs(fit.eta - eta) > tol:
-        return Verdict(None, None, f"{claim}; contradicted: {seen}, not within {tol:g}; "
-                                   "not acted on", False,
-                       st._replace(contradicted=st.contradicted + 1))
+    if abs(fit.eta - eta) > tol or abs(fit.eta - eta) >= abs(fit.eta - 1.0):
+        why = f"not within {tol:g}" if abs(fit.eta - eta) > tol else "nearer a healthy 1"
+        return Verdict(None, None, f"{claim}; contradicted: {seen}, {why}; not acted on",
+                       False, st._replace(contradicted=st.contradicted + 1))
     return Verdict(i, eta, f"{claim}; confirmed: {seen}", True,
                    st._replace(acted=st.acted + 1))
