@@ -30,7 +30,8 @@ def test_a_fault_spec_reads_as_the_issue_writes_it():
 def test_a_weak_thruster_is_detected_over_zenoh_and_reallocated_in_hil(tmp_path):
     from uvd.commands.demo import run_demo
 
-    figures, _ = run_demo(60.0, record=tmp_path, fault=FaultSpec(4, 0.5, 20.0))
+    figures, _ = run_demo(60.0, record=tmp_path, fault=FaultSpec(4, 0.5, 20.0),
+                          false_alarm=True)
     f = figures["fault"]
     print({k: v for k, v in f.items() if k.endswith("_s")})
     assert f["detected"] is not None, (tmp_path / "fdc.log").read_text()
@@ -39,6 +40,12 @@ def test_a_weak_thruster_is_detected_over_zenoh_and_reallocated_in_hil(tmp_path)
     text = f["reallocated"]["text"]
     assert "confirmed" in text and "→ thruster 4 eta" in text, text
     assert f["fault_to_detection_s"] > 0.0 and f["fault_to_reallocation_s"] > 0.0
+    # the false alarm (healthy thruster 5 named at η 0.5, 5 s before the fault): refused by
+    # the daemon's own evidence, counted, not acted on
+    assert len(f["refused"]) == 1 and "thruster 5 eta 0.50" in f["refused"][0], f["refused"]
+    assert "not acted on" in f["refused"][0] and "refused" in f["refused"][0]
+    counts = f["daemon_counts"]
+    assert counts["acted"] == 1 and counts["contradicted"] + counts["unconfirmed"] == 1, counts
     # the operator's clearing after the repair, and uvd watch showed both
     assert f["cleared"] is not None and "thruster 4 eta 1 (mavlink" in f["cleared"]["text"]
     watched = "\n".join(f["watch_events"])

@@ -68,6 +68,9 @@ def register(sub) -> None:
                         "(uvd.commands.demo_fault)")
     p.add_argument("--accept", choices=("confirm", "advisory", "auto"), default="confirm",
                    help="with --fault: [faults.fdc] accept (default confirm)")
+    p.add_argument("--false-alarm", action="store_true",
+                   help="with --fault: also put a fault sample naming a healthy thruster 5 s "
+                        "before the fault, as a false alarm of uvd-fdc would")
     p.set_defaults(handler=_run)
 
 
@@ -394,8 +397,8 @@ def _stop(daemon, bridge, pump) -> tuple[int, float, dict]:
 # run_demo is long (~110 lines) because it owns two processes (sim-bridge and the daemon)
 # for its whole duration: start, arm, watch and stop share one try/finally that kills both.
 def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path | None = None,
-             seed: int = 0, progress=print, fault=None, accept: str = "confirm"
-             ) -> tuple[dict[str, Any], int]:
+             seed: int = 0, progress=print, fault=None, accept: str = "confirm",
+             false_alarm: bool = False) -> tuple[dict[str, Any], int]:
     """Run the demo; returns (figures, exit code). See the module docstring; ``fault`` a
     :class:`~uvd.commands.demo_fault.FaultSpec` (exit code 1 unless it was accommodated)."""
     from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
@@ -489,7 +492,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
                  f"{duration_s:g} s")
         watched = pump
         if fault is not None:
-            fault_run = demo_fault.FaultRun(fault, cfg, run_dir, progress)
+            fault_run = demo_fault.FaultRun(fault, cfg, run_dir, progress, false_alarm)
             fault_run.start(bridge, armed_at)
 
             def watched(wait_s: float = 0.0) -> None:
@@ -510,6 +513,8 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         if fault_run is not None:
             figures["fault"] = f = fault_run.finish()
             fault_run = None
+            if summary_path.is_file():  # the daemon's count of samples by outcome
+                f["daemon_counts"] = json.loads(summary_path.read_text()).get("fault_samples")
             demo_fault.report(f, progress)
             ok = ok and (f.get("reallocated") is not None or accept == "advisory")
         return figures, 0 if ok else 1
@@ -604,7 +609,8 @@ def _run(args) -> int:
             print(f"uvd demo: {exc}", file=sys.stderr)
             return 2
     figures, code = run_demo(args.duration, record=args.record, base=args.config,
-                             seed=args.seed, fault=fault, accept=args.accept)
+                             seed=args.seed, fault=fault, accept=args.accept,
+                             false_alarm=args.false_alarm)
     if args.json:
         write_json(args.json, figures)
     if args.record:

@@ -15,6 +15,10 @@ confirms it. The demo times, on the one monotonic clock of this machine:
 - **detection**: when uvd-fdc's sample ``uvd/<vehicle>/fault/thruster`` arrived;
 - **reallocation**: the cycle that applied it (the ``FaultReport`` command's event ``t_ns``).
 
+With ``--false-alarm`` the demo also puts, 5 s before the fault, a sample naming a healthy
+thruster (the next one) at η 0.5 — what a false alarm of uvd-fdc would publish: the daemon's own
+evidence contradicts it, and it is logged, counted and not acted on.
+
 Ten seconds after the reallocation the thruster is repaired (sim-bridge ``health`` 1) and the
 operator clears its η over MAVLink (COMMAND_LONG 31010, docs/mavlink.md); ``uvd watch``'s
 lines of both events are printed.
@@ -93,8 +97,12 @@ def config_changes(spec: FaultSpec, run_dir: Path, vehicle, accept: str = "confi
 class FaultRun:
     """The fault, uvd-fdc, ``uvd watch`` and the timing of one demo run (module docstring)."""
 
-    def __init__(self, spec: FaultSpec, cfg, run_dir: Path, progress) -> None:
+    def __init__(self, spec: FaultSpec, cfg, run_dir: Path, progress,
+                 false_alarm: bool = False) -> None:
         self.spec = spec
+        self.n_thrusters = len(cfg.can.amplifiers.node_ids)
+        self._false_at: float | None = None
+        self.false_alarm = false_alarm
         self.key = cfg.telemetry.zenoh.key or Path(cfg.vehicle.name).stem
         self.endpoint = cfg.telemetry.zenoh.listen[0]
         self.mavlink = cfg.mavlink.listen
@@ -123,6 +131,8 @@ class FaultRun:
         if not ans.get("ok"):
             raise RuntimeError(f"sim-bridge refused the fault: {ans}")
         self.fault_ns = int(ans["scheduled_ns"])
+        if self.false_alarm:
+            self._false_at = time.monotonic() + max(0.0, at - 5.0)
         self._session = zenoh.open(client_config([self.endpoint]))
         self._session.declare_subscriber(f"uvd/{self.key}/fault/**", self._on_fault)
         self._session.declare_subscriber(f"uvd/{self.key}/event", self._on_event)
@@ -142,7 +152,8 @@ class FaultRun:
 
     def _on_fault(self, sample) -> None:
         with self._lock:
-            if self.detected is None:
+            if self.detected is None and self.fault_ns is not None \
+                    and time.monotonic_ns() >= self.fault_ns:
                 with contextlib.suppress(ValueError):
                     self.detected = {"arrived_ns": time.monotonic_ns(),
                                      "sample": json.loads(sample.payload.to_bytes())}
@@ -169,8 +180,18 @@ class FaultRun:
     # -- while it runs --
 
     def poll(self, bridge) -> None:
-        """Once the reallocation is CLEAR_AFTER_S old: repair the thruster and clear its η
-        as the operator would (MAVLink)."""
+        """The false alarm when due; once the reallocation is CLEAR_AFTER_S old: repair the
+        thruster and clear its η as the operator would (MAVLink)."""
+        if self._false_at is not None and time.monotonic() >= self._false_at:
+            self._false_at = None
+            healthy = self.spec.thruster % self.n_thrusters + 1
+            now = time.monotonic_ns()
+            self._session.put(f"uvd/{self.key}/fault/thruster", json.dumps({
+                "vehicle": self.key, "kind": "thruster", "t_ns": now,
+                "channel": f"thruster{healthy}", "magnitude": 20.0, "relative_change": -0.5,
+                "confidence": 2.0, "explanation": {"coef": [0.5],
+                                                   "since_t_ns": now - 10_000_000_000}}))
+            self.progress(f"  put a false alarm: thruster {healthy} at eta 0.5")
         if self._clear_at is None or time.monotonic() < self._clear_at:
             return
         self._clear_at = None
@@ -240,6 +261,8 @@ def report(f: dict[str, Any], progress) -> None:
     t = f.get("fault_to_reallocation_s")
     progress("    fault → reallocation                  " + (f"{t:6.1f} s" if t is not None
                                                            else "no reallocation"))
+    if f.get("daemon_counts"):
+        progress(f"    the daemon's fault samples: {f['daemon_counts']}")
     for text in f.get("refused") or ():
         progress(f"    not acted on: {text}")
     for line in f.get("watch_events") or ():
