@@ -546,10 +546,11 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
     out, st = core.act(cfg, sensed, ci, st, dt)
     lapsed = manual_mode and state.manual is not None and manual is None
     fdc = state.fdc
-    if config.fdc is not None and fdc is not None:  # the daemon's own evidence (fdc_source)
-        from uvd.runtime.fdc_source import fdc_observe
-        fdc = fdc_observe(config.fdc, fdc, inp.t_ns, sensed.nav_ok, nav.v, nav.H[:3, :3],
-                          sensed.speeds, out.thrust_n)
+    if config.fdc is not None:  # the daemon's own evidence (fdc_source)
+        from uvd.runtime.fdc_source import fdc_init, fdc_observe
+        fdc = fdc_observe(config.fdc, fdc if fdc is not None else fdc_init(config.fdc),
+                          inp.t_ns, sensed.nav_ok, nav.v, nav.H[:3, :3], sensed.speeds,
+                          out.thrust_n)
     new = CycleState(st, state.arbiter, state.lifecycle, d, h, state.operator_mode,
                      None if lapsed else state.manual,  # a silent joystick stops the vehicle
                      until, state.manual_timeout_ns, None, state.thruster_eta, armed, armed_at,

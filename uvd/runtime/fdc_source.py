@@ -180,6 +180,7 @@ def decide(rule: FdcRule | None, st: FdcState | None, c: Any, n: int) -> Verdict
     vehicle of ``n`` thrusters (module docstring)."""
     if rule is None:
         return Verdict(None, None, "[faults.fdc] is not enabled", False, st)
+    st = st if st is not None else fdc_init(rule)  # no cycle since the rule came in
     parsed = _parse(c, n)
     conf = f"confidence {c.confidence:.3g}" if isinstance(c.confidence, (int, float)) else ""
     if isinstance(parsed, str):
