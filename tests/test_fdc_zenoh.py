@@ -16,11 +16,8 @@ import time
 import pytest
 import zenoh
 
-from sim_bridge.bridge import write_local_config
-from tests.test_zenoh_security import _certificates, _client, _example, _wait
-from uvd.netports import free_port
+from tests.test_zenoh_security import _client, _wait, fleet
 from uvd.runtime import commands as cmd
-from uvd.runtime.config import load_config
 
 pytestmark = pytest.mark.skipif(shutil.which("openssl") is None,
                                 reason="openssl makes the test's certificates")
@@ -34,19 +31,7 @@ def _sample(thruster: int, eta: float) -> bytes:
 
 
 def test_only_the_authorised_fdc_client_gets_a_fault_sample_to_the_daemon(tmp_path):
-    _certificates(tmp_path)
-    (tmp_path / "users.txt").write_text("rov:rov-secret\nfdc:fdc-secret\n")
-    endpoint = f"tls/localhost:{free_port()}"
-    router = zenoh.open(_example("router", tmp_path, endpoint, **{
-        "transport/link/tls/listen_certificate": "router.pem",
-        "transport/link/tls/listen_private_key": "router.key",
-        "transport/auth/usrpwd/dictionary_file": "users.txt"}))
-    (tmp_path / "vehicle.json5").write_text(str(_client("vehicle", tmp_path, endpoint,
-                                                        "rov-secret")))
-    cfg = load_config(write_local_config(tmp_path, changes={
-        "telemetry": {"zenoh": {"enabled": True, "key": "rov7",
-                                "config_file": "vehicle.json5"}},
-        "faults": {"fdc": {"enabled": True}}}))
+    router, endpoint, cfg = fleet(tmp_path, {"faults": {"fdc": {"enabled": True}}})
     from uvd.links.zenoh import zenoh_sink
     from uvd.telemetry.sink import TelemetryHub
     queue = cmd.CommandQueue()
