@@ -71,19 +71,26 @@ def _wait(pred, timeout_s: float = 5.0) -> bool:
     return pred()
 
 
-def test_router_tls_auth_and_acl_let_fdc_read_and_refuse_its_control_puts(tmp_path):
-    _certificates(tmp_path)
-    (tmp_path / "users.txt").write_text("rov:rov-secret\nfdc:fdc-secret\n")
+def fleet(d: Path, changes: dict | None = None):
+    """The router of router.json5 on a free port (users ``rov`` and ``fdc``, passwords
+    ``rov-secret`` and ``fdc-secret``) and the vehicle's uvd configuration naming its Zenoh
+    file (key ``rov7``), read as the daemon reads it, with ``changes``: (router, endpoint,
+    configuration)."""
+    _certificates(d)
+    (d / "users.txt").write_text("rov:rov-secret\nfdc:fdc-secret\n")
     endpoint = f"tls/localhost:{free_port()}"
-    router = zenoh.open(_example("router", tmp_path, endpoint, **{
+    router = zenoh.open(_example("router", d, endpoint, **{
         "transport/link/tls/listen_certificate": "router.pem",
         "transport/link/tls/listen_private_key": "router.key",
         "transport/auth/usrpwd/dictionary_file": "users.txt"}))
-    # the vehicle: a uvd configuration naming its Zenoh file, read as the daemon reads it
-    (tmp_path / "vehicle.json5").write_text(str(_client("vehicle", tmp_path, endpoint,
-                                                        "rov-secret")))
-    cfg = load_config(write_local_config(tmp_path, changes={"telemetry": {"zenoh": {
-        "enabled": True, "key": "rov7", "config_file": "vehicle.json5"}}}))
+    (d / "vehicle.json5").write_text(str(_client("vehicle", d, endpoint, "rov-secret")))
+    cfg = load_config(write_local_config(d, changes={"telemetry": {"zenoh": {
+        "enabled": True, "key": "rov7", "config_file": "vehicle.json5"}}, **(changes or {})}))
+    return router, endpoint, cfg
+
+
+def test_router_tls_auth_and_acl_let_fdc_read_and_refuse_its_control_puts(tmp_path):
+    router, endpoint, cfg = fleet(tmp_path)
     from uvd.links.zenoh import zenoh_sink
     from uvd.telemetry.sink import TelemetryHub
     sink = zenoh_sink(cfg, TelemetryHub())

@@ -13,7 +13,10 @@ from the seed (frame f after arming carries the same noise in both,
 :mod:`sim_bridge.instruments.models`, "Noise streams"), so the ratio measures the daemon's
 timing, not two draws of dead reckoning's random walk — and with the spread of
 ``SPREAD_SEEDS`` lockstep runs of other seeds, how wide that walk is.
-``--config config/sim-bluerov2.toml`` runs the BlueROV2 Heavy.
+``--config config/sim-bluerov2.toml`` runs the BlueROV2 Heavy. ``--fault thruster:4:0.5@30``
+weakens a thruster during the run, uvd-fdc detects it over Zenoh and the daemon accommodates
+it; the demo prints the times fault → detection → reallocation (:mod:`uvd.commands.demo_fault`;
+no lockstep comparison then).
 
 Every process is bounded in time and killed in all cases. ``--record DIR`` keeps the run:
 configuration, telemetry, truth log, CAN log, both processes' logs and the figures.
@@ -59,6 +62,15 @@ def register(sub) -> None:
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="base configuration (default: the embedded config/sim.toml)")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated instruments")
+    p.add_argument("--fault", metavar="thruster:I:ETA@T",
+                   help="T s after arming thruster I keeps ETA of its thrust (sim-bridge); "
+                        "uvd-fdc detects it over Zenoh, the daemon confirms and reallocates "
+                        "(uvd.commands.demo_fault)")
+    p.add_argument("--accept", choices=("confirm", "advisory", "auto"), default="confirm",
+                   help="with --fault: [faults.fdc] accept (default confirm)")
+    p.add_argument("--false-alarm", action="store_true",
+                   help="with --fault: also put a fault sample naming a healthy thruster 5 s "
+                        "before the fault, as a false alarm of uvd-fdc would")
     p.set_defaults(handler=_run)
 
 
@@ -289,7 +301,7 @@ def _figures(cfg, duration_s: float, seed: int, run_dir: Path, truth_path: Path,
                               "mean": sum(loads) / len(loads)} if loads else None,
         "host_steal": _steal_summary(steal),
     }
-    if hil.get("samples"):
+    if hil.get("samples") and lock_log is not None:
         # the same span of tracking: a run cut short by a failsafe disarm compares with
         # the lockstep run's same first seconds (dead-reckoning drift grows with time)
         lock = lockstep_tracking(lock_log, hil["duration_s"] + 1.0 / cfg.loop.rate_hz)
@@ -385,8 +397,10 @@ def _stop(daemon, bridge, pump) -> tuple[int, float, dict]:
 # run_demo is long (~110 lines) because it owns two processes (sim-bridge and the daemon)
 # for its whole duration: start, arm, watch and stop share one try/finally that kills both.
 def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path | None = None,
-             seed: int = 0, progress=print) -> tuple[dict[str, Any], int]:
-    """Run the demo; returns (figures, exit code). See the module docstring."""
+             seed: int = 0, progress=print, fault=None, accept: str = "confirm",
+             false_alarm: bool = False) -> tuple[dict[str, Any], int]:
+    """Run the demo; returns (figures, exit code). See the module docstring; ``fault`` a
+    :class:`~uvd.commands.demo_fault.FaultSpec` (exit code 1 unless it was accommodated)."""
     from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
     from uvd.runtime.config import load_config
 
@@ -397,7 +411,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
     else:
         tmp = tempfile.mkdtemp(prefix="uvd-demo-")
         run_dir = Path(tmp)
-    bridge = daemon = None
+    bridge = daemon = fault_run = None
     try:
         # Real-time priority as on the vehicle (config/jhu-rov.toml): on a shared machine a
         # normally scheduled loop is sometimes descheduled for tens of ms. The simulated
@@ -408,6 +422,10 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         if record:
             changes["can"] = {"log": {"path": str(run_dir / "can.log")}}
             changes["recording"] = {"enabled": True, "dir": str(run_dir)}
+        if fault is not None:
+            from uvd.commands import demo_fault
+            vehicle = load_config(write_local_config(run_dir, base=base)).load_vehicle()
+            changes.update(demo_fault.config_changes(fault, run_dir, vehicle, accept))
         cfg_path = write_local_config(run_dir, base=base, changes=changes)
         cfg = load_config(cfg_path)
         c = cfg.control
@@ -419,16 +437,18 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
             progress("  compiling the numeric kernels first (once after an install or upgrade: "
                      "about a minute)")
         t0 = time.monotonic()
-        lock_log = lockstep_run(cfg, duration_s, seed)
-        spread_logs = tuple(lockstep_run(cfg, duration_s, seed + k)
-                            for k in range(1, SPREAD_SEEDS))
-        progress(f"  lockstep simulation of the same configuration: {lock_log.wall_s:.1f} s "
-                 f"wall ({time.monotonic() - t0:.1f} s with compiling and {SPREAD_SEEDS - 1} "
-                 "more seeds)")
+        lock_log, spread_logs = None, ()
+        if fault is None:  # a faulty run is not the lockstep run's twin
+            lock_log = lockstep_run(cfg, duration_s, seed)
+            spread_logs = tuple(lockstep_run(cfg, duration_s, seed + k)
+                                for k in range(1, SPREAD_SEEDS))
+            progress(f"  lockstep simulation of the same configuration: {lock_log.wall_s:.1f} "
+                     f"s wall ({time.monotonic() - t0:.1f} s with compiling and "
+                     f"{SPREAD_SEEDS - 1} more seeds)")
 
         # -- the two processes --
         truth_path = run_dir / "truth.bin"
-        bound = duration_s + 90.0
+        bound = duration_s + 300.0  # a loaded machine takes minutes to arm (compiling)
         bridge = BridgeProcess(cfg_path, duration_s=bound, seed=seed, hold=True,
                                truth_log=truth_path, extra=bridge_args)
         bridge.start(timeout_s=120.0)
@@ -470,8 +490,16 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
                         "sim_bridge_log": bridge.stderr_tail()}, 1
         progress(f"  armed {armed_at - t_start:.1f} s after start; tracking for "
                  f"{duration_s:g} s")
+        watched = pump
+        if fault is not None:
+            fault_run = demo_fault.FaultRun(fault, cfg, run_dir, progress, false_alarm)
+            fault_run.start(bridge, armed_at)
 
-        watch = _watch(daemon, bridge, armed_at, duration_s, events, pump, tail, progress)
+            def watched(wait_s: float = 0.0) -> None:
+                pump(wait_s)
+                fault_run.poll(bridge)
+
+        watch = _watch(daemon, bridge, armed_at, duration_s, events, watched, tail, progress)
         # -- stop: SIGTERM as systemd would --
         code, stop_s, bridge_stats = _stop(daemon, bridge, pump)
         # -- figures --
@@ -482,8 +510,17 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         fs_events = figures["failsafe_events"]
         _report(figures, progress)
         ok = code == 0 and bool(hil.get("samples")) and not fs_events
+        if fault_run is not None:
+            figures["fault"] = f = fault_run.finish()
+            fault_run = None
+            if summary_path.is_file():  # the daemon's count of samples by outcome
+                f["daemon_counts"] = json.loads(summary_path.read_text()).get("fault_samples")
+            demo_fault.report(f, progress)
+            ok = ok and (f.get("reallocated") is not None or accept == "advisory")
         return figures, 0 if ok else 1
     finally:
+        if fault_run is not None:
+            fault_run.finish()
         if daemon is not None and daemon.poll() is None:
             daemon.kill()
             with contextlib.suppress(subprocess.TimeoutExpired):
@@ -511,7 +548,11 @@ def _disp(dof: str, value: float) -> str:
 
 def _report(f: dict, progress) -> None:
     hil = f["tracking"]
-    if hil.get("samples"):
+    if hil.get("samples") and "lockstep" not in f:  # a fault run: no lockstep twin
+        progress(f"Tracking error, true state vs reference ({hil['samples']} cycles, "
+                 f"{hil['duration_s']:.0f} s): " + ", ".join(
+                     f"{k} {_disp(k, v)}" for k, v in hil["position_mae"].items()))
+    elif hil.get("samples"):
         progress(f"Tracking error, true state vs reference ({hil['samples']} cycles, "
                  f"{hil['duration_s']:.0f} s), against lockstep simulation of the same "
                  "configuration:")
@@ -559,8 +600,17 @@ def _report(f: dict, progress) -> None:
 
 
 def _run(args) -> int:
+    fault = None
+    if args.fault:
+        from uvd.commands.demo_fault import FaultSpec
+        try:
+            fault = FaultSpec.parse(args.fault)
+        except ValueError as exc:
+            print(f"uvd demo: {exc}", file=sys.stderr)
+            return 2
     figures, code = run_demo(args.duration, record=args.record, base=args.config,
-                             seed=args.seed)
+                             seed=args.seed, fault=fault, accept=args.accept,
+                             false_alarm=args.false_alarm)
     if args.json:
         write_json(args.json, figures)
     if args.record:

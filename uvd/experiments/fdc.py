@@ -15,7 +15,9 @@ latency from the injection; false alarms of the fault-free run.
 
 from __future__ import annotations
 
+import json
 import time
+from dataclasses import replace
 
 from uvd.experiments import Experiment, ExperimentOptions
 
@@ -36,24 +38,29 @@ class SimVehicle:
 
     def __init__(self, fault: str | None, minutes_before: float, seed: int, *,
                  config=None, fault_args: dict | None = None, expected_kind: str | None = None,
-                 instruments=None) -> None:
+                 instruments=None, confirm: bool = False) -> None:
         """``config`` a configuration file (the demo's, ``config/sim.toml``, by default);
         ``fault_args`` and ``expected_kind`` a fault other than :data:`FAULTS`' (then
         ``fault`` is only its label); ``instruments`` an
-        :class:`~sim_bridge.instruments.models.InstrumentConfig` (Table A.1 by default)."""
+        :class:`~sim_bridge.instruments.models.InstrumentConfig` (Table A.1 by default);
+        ``confirm``: the cycle keeps the daemon's own thrust evidence (``[faults.fdc]``
+        ``accept = "confirm"``) and :func:`watch` applies each detection to it as the daemon
+        would (its verdict in the detection's ``"verdict"``)."""
         from sim_bridge.instruments.models import InstrumentConfig
         from uvd.estimation.aid import aid6_estimator
         from uvd.lockstep import Lockstep, LockstepConfig
         from uvd.runtime.build import build_core, start_pose
         from uvd.runtime.config import DEFAULT_CONFIG, load_config
         from uvd.runtime.cycle import unsupervised
+        from uvd.runtime.fdc_source import FdcRule, FdcSourceSection
 
         cfg = load_config(DEFAULT_CONFIG if config is None else config)
         vehicle = cfg.load_vehicle()
         core_cfg = build_core(cfg, vehicle, estimators=(
             aid6_estimator(vehicle.params.theta, cfg.estimation.aid_params()),))
         H0, v0 = start_pose(cfg)
-        self.sim = Lockstep(vehicle, unsupervised(core_cfg), LockstepConfig(
+        rule = FdcRule.of(FdcSourceSection(enabled=True), vehicle) if confirm else None
+        self.sim = Lockstep(vehicle, replace(unsupervised(core_cfg), fdc=rule), LockstepConfig(
             control_rate_hz=cfg.loop.rate_hz, seed=seed,
             instruments=InstrumentConfig() if instruments is None else instruments),
             H0=H0, v0=v0)
@@ -134,7 +141,7 @@ def watch(v: SimVehicle, minutes: float, progress=None) -> dict:
     """Run ``v`` for ``minutes`` simulated minutes under uvd-fdc's detector (every state
     payload, AID's estimates); its :meth:`SimVehicle.outcome` and the detector's baseline."""
     from uvd.fdc.detector import VehicleDetector
-    from uvd.links.zenoh import estimate_payload, state_payload
+    from uvd.links.zenoh import estimate_payload, fault_report, state_payload
 
     fault = v.fault
     det = VehicleDetector(v.vehicle_name, B=v.B)
@@ -143,13 +150,20 @@ def watch(v: SimVehicle, minutes: float, progress=None) -> dict:
     report = int(1800 * v.rate)
     while v.next_k < n:
         records = v.next_estimates()
+        found = []
         for c in v.cycles:
-            detections += [d.as_dict() for d in det.update_state(
+            found += [d.as_dict() for d in det.update_state(
                 {"t_ns": c["t_ns"], **state_payload(c)})]
         for rec in records:  # AID's (uvd-fdc does not judge a controller's θ̂)
             if rec["source"] == "estimator":
                 payload = {"t_ns": rec["t_ns"], **estimate_payload(rec)}
-                detections += [d.as_dict() for d in det.update(payload)]
+                found += [d.as_dict() for d in det.update(payload)]
+        if v.sim.supervisor.config.fdc is not None:
+            for d in found:  # as the daemon's Zenoh face queues it, for the next cycle
+                res = v.sim.command(fault_report(f"uvd/{v.vehicle_name}/fault/{d['kind']}",
+                                                 json.dumps(d).encode()))
+                d["verdict"] = {"ok": res.ok, "reason": res.reason}
+        detections += found
         if progress is not None and v.k // report != (v.k - v.every) // report:
             progress(f"  fdc {fault or 'fault-free'}: simulated {v.k / v.rate / 60:.0f} / "
                      f"{n / v.rate / 60:.0f} min")

@@ -115,6 +115,9 @@ def main(argv: list[str] | None = None) -> int:
                         "wall_time: same machine only)")
     p.add_argument("--warmup-s", type=float, default=CusumSettings.warmup_s)
     p.add_argument("--baseline-s", type=float, default=CusumSettings.baseline_s)
+    p.add_argument("--segment-s", type=float, default=CusumSettings.segment_s,
+                   help="length of the commanded vs realised wrench residual's segments (the "
+                        "baseline needs 10 of them to name a thruster)")
     p.add_argument("--threshold", type=float, default=CusumSettings.h,
                    help="CUSUM h (a log-likelihood ratio: about one false alarm in e^h "
                         "estimates)")
@@ -122,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     import zenoh
 
     settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s,
-                             h=args.threshold)
+                             h=args.threshold, segment_s=args.segment_s)
     conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
     link = LinkStats()

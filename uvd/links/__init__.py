@@ -95,7 +95,7 @@ def _zenoh(ctx: LinkContext) -> Face | None:
     if not ctx.config.telemetry.zenoh.enabled:
         return None
     from uvd.links.zenoh import zenoh_sink
-    return Face(zenoh_sink(ctx.config, ctx.hub, vehicle=ctx.vehicle))
+    return Face(zenoh_sink(ctx.config, ctx.hub, vehicle=ctx.vehicle, commands=ctx.commands))
 
 
 def _mavlink(ctx: LinkContext) -> Face | None:

@@ -18,6 +18,10 @@ hub's bounded drop-oldest queue stands between them). Key space (docs/zenoh.md):
                                     latest estimates (``uvd.params.v1``); ``?what=`` one of
                                     ``all`` (default), ``configuration``, ``estimates``
 ``uvd/<vehicle>/alive``             liveliness token while the daemon runs
+``uvd/<vehicle>/fault/**``          subscribed (``[faults.fdc] enabled``): uvd-fdc's fault
+                                    samples (``uvd.fault.v1``), each queued for the cycle as a
+                                    :class:`~uvd.runtime.commands.FaultReport`
+                                    (:mod:`uvd.runtime.fdc_source`)
 ==================================  ==========================================================
 
 Every payload is JSON with its schema in the sample's encoding
@@ -30,6 +34,7 @@ the sink's worker thread, off the event loop.
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import time
 from collections.abc import Mapping, Sequence
@@ -42,12 +47,14 @@ from uvd.geometry import R_to_euler, wrap_angle
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
 
+log = logging.getLogger(__name__)
+
 if TYPE_CHECKING:
     from uvd.runtime.config import Config
     from uvd.telemetry.sink import TelemetryHub
 
 __all__ = ["ZenohSink", "zenoh_config", "zenoh_sink", "estimate_payload", "state_payload",
-           "ENCODINGS", "QUERY_WHAT"]
+           "fault_report", "ENCODINGS", "QUERY_WHAT"]
 
 #: key (relative to uvd/<vehicle>) → the schema named in its samples' encoding
 ENCODINGS = {"state": "uvd.state.v1", "estimate": "uvd.zestimate.v1",
@@ -96,12 +103,17 @@ class ZenohSink:
         gains, failsafe thresholds), as plain data.
     dropped : callable, optional
         ``dropped() -> int``: records the hub dropped so far (published in ``health``).
+    faults : callable, optional
+        ``faults(report)``: subscribe to ``uvd/<vehicle>/fault/**`` and hand each well-formed
+        sample, as a :class:`~uvd.runtime.commands.FaultReport`, to it (the daemon's command
+        queue's ``put``); a malformed one is logged, counted (``faults_dropped``) and dropped.
     """
 
     name = "zenoh"
 
     def __init__(self, vehicle: str, config, *, state_hz: float = 20.0, health_hz: float = 2.0,
-                 configuration: Mapping[str, Any] | None = None, dropped=None) -> None:
+                 configuration: Mapping[str, Any] | None = None, dropped=None,
+                 faults=None) -> None:
         if not vehicle or any(c in vehicle for c in "/*?#$ "):
             raise ValueError(f"[telemetry.zenoh] vehicle: {vehicle!r} is not a single key "
                              "chunk (no '/', '*', '?', '#', '$' or spaces)")
@@ -124,6 +136,10 @@ class ZenohSink:
         self._queryable = None
         self.published = 0
         self.query_errors = 0
+        self.faults = faults
+        self._fault_sub = None
+        self.faults_received = 0
+        self.faults_dropped = 0
 
     # -- session (worker thread) --
 
@@ -133,6 +149,21 @@ class ZenohSink:
         self._token = self._session.liveliness().declare_token(f"{self.prefix}/alive")
         self._queryable = self._session.declare_queryable(f"{self.prefix}/params",
                                                           self._on_query)
+        if self.faults is not None:
+            self._fault_sub = self._session.declare_subscriber(f"{self.prefix}/fault/**",
+                                                               self._on_fault)
+
+    def _on_fault(self, sample) -> None:
+        """A fault sample (zenoh's thread): queued for the cycle, or counted and dropped."""
+        key = str(sample.key_expr)
+        try:
+            report = fault_report(key, sample.payload.to_bytes())
+        except ValueError as exc:
+            self.faults_dropped += 1
+            log.warning("%s", exc)
+            return
+        self.faults_received += 1
+        self.faults(report)
 
     def _publisher(self, key: str, schema_name: str):
         import zenoh
@@ -287,6 +318,35 @@ def estimate_payload(r: Mapping[str, Any]) -> dict[str, Any]:
                         "source": str(r.get("source") or "estimator")})
 
 
+def fault_report(key: str, payload: bytes):
+    """The :class:`~uvd.runtime.commands.FaultReport` of a ``uvd.fault.v1`` sample on ``key``;
+    ValueError naming the key and what is wrong otherwise."""
+    from uvd.runtime.commands import FaultReport
+    try:
+        d = json.loads(payload)
+    except ValueError as exc:
+        raise ValueError(f"{key}: fault sample is not JSON ({exc}); dropped") from exc
+    if not isinstance(d, dict):
+        raise ValueError(f"{key}: fault sample is not a JSON object; dropped")
+    expl = d.get("explanation") if isinstance(d.get("explanation"), dict) else {}
+    since = expl.get("since_t_ns")
+    checks = (("kind", str, "a string"), ("channel", str, "a string"),
+              ("t_ns", int, "an integer"), ("confidence", (int, float), "a number"))
+    for name, typ, what in checks:
+        if not isinstance(d.get(name), typ) or isinstance(d.get(name), bool):
+            raise ValueError(f"{key}: fault sample's {name} is {d.get(name)!r} (uvd.fault.v1 "
+                             f"wants {what}); dropped")
+    rc = d.get("relative_change")
+    if rc is not None and (isinstance(rc, bool) or not isinstance(rc, (int, float))):
+        raise ValueError(f"{key}: fault sample's relative_change is {rc!r} (a number or "
+                         "null); dropped")
+    if since is not None and (isinstance(since, bool) or not isinstance(since, int)):
+        raise ValueError(f"{key}: fault sample's explanation.since_t_ns is {since!r} (an "
+                         "integer); dropped")
+    return FaultReport(d["kind"], d["channel"], None if rc is None else float(rc),
+                       int(d["t_ns"]), float(d["confidence"]), since)
+
+
 def _event(kind: str, r: Mapping[str, Any]) -> dict[str, Any]:
     if kind == "failsafe":
         text = f"failsafe {r['kind']}: {r['trigger']} → {r['action']} ({r['reason']})"
@@ -305,9 +365,11 @@ def _event(kind: str, r: Mapping[str, Any]) -> dict[str, Any]:
     return to_jsonable({"kind": kind, "text": text, "record": rec})
 
 
-def zenoh_sink(config: Config, hub: TelemetryHub, vehicle: Any = None) -> ZenohSink:
+def zenoh_sink(config: Config, hub: TelemetryHub, vehicle: Any = None,
+               commands: Any = None) -> ZenohSink:
     """The ``[telemetry.zenoh]`` sink of a configuration (docs/zenoh.md); ``vehicle``: the
-    configured one when already loaded."""
+    configured one when already loaded; ``commands``: the daemon's command queue, which
+    uvd-fdc's fault samples go to when ``[faults.fdc]`` is enabled."""
     from uvd.runtime.schema import as_dict
     z = config.telemetry.zenoh
     base = Path(config.source).parent if config.source else Path.cwd()
@@ -324,4 +386,6 @@ def zenoh_sink(config: Config, hub: TelemetryHub, vehicle: Any = None) -> ZenohS
                                        multicast_scouting=z.multicast_scouting,
                                        config_file=file),
                      state_hz=z.state_hz, health_hz=z.health_hz, configuration=configuration,
-                     dropped=lambda: sum(s["dropped"] for s in hub.stats().values()))
+                     dropped=lambda: sum(s["dropped"] for s in hub.stats().values()),
+                     faults=commands.put if commands is not None and config.faults.fdc.enabled
+                     else None)

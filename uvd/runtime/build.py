@@ -141,10 +141,13 @@ def build_core(cfg: Config, vehicle=None, estimators: tuple | None = None
 def make_cycle(cfg: Config, vehicle=None, *, estimators: tuple | None = None) -> CycleConfig:
     """The cycle of a configuration (module docstring). ``estimators`` as :func:`build_core`
     (a reload keeps the running ones; a replay starts them where the recording did)."""
+    from uvd.runtime.fdc_source import FdcRule
     nav = cfg.navigation
+    vehicle = vehicle if vehicle is not None else cfg.load_vehicle()
     return CycleConfig(build_core(cfg, vehicle, estimators), cfg.failsafe,
                        tuple(plugin_triggers(cfg)), hold_on_arm=cfg.control.reference == "hold",
-                       north_m=nav.initial_north_m, east_m=nav.initial_east_m)
+                       north_m=nav.initial_north_m, east_m=nav.initial_east_m,
+                       fdc=FdcRule.of(cfg.faults.fdc, vehicle))
 
 
 def aid_theta0(cfg: Config, vehicle=None) -> np.ndarray | None:

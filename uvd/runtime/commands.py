@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 __all__ = ["CommandResult", "command_from_record", "Arm", "Disarm", "SetMode", "ManualWrench",
-           "HoldPose", "ResetFailsafe", "SetParams", "SetThrusterEta", "Command", "CommandQueue",
-           "OPERATOR_MODES", "AutoArm"]
+           "HoldPose", "ResetFailsafe", "SetParams", "SetThrusterEta", "FaultReport", "Command",
+           "CommandQueue", "OPERATOR_MODES", "AutoArm"]
 
 #: the operator's modes: ``auto`` runs the configured controller (PDC, AMBC, two-step AMBC);
 #: ``pdc`` PD control with adaptation frozen; ``hold-depth`` depth, roll and pitch only;
@@ -122,10 +122,28 @@ class SetThrusterEta:
     source: str = ""
 
 
+@dataclass(frozen=True)
+class FaultReport:
+    """A fault sample of uvd-fdc (``uvd/<vehicle>/fault/<kind>``, schema ``uvd.fault.v1``) as
+    the daemon's Zenoh face received it: uvd-fdc's source of η (issue 33). The cycle decides
+    what to do with it by ``[faults.fdc] accept`` (:mod:`uvd.runtime.fdc_source`): a
+    ``thruster`` sample names ``channel`` thrusterI with ``relative_change`` η − 1; every other
+    kind is told to the operator, never acted on. ``since_t_ns``: the change time uvd-fdc's
+    residual found (None: not given)."""
+
+    kind: str
+    channel: str
+    relative_change: float | None
+    t_ns: int
+    confidence: float = 1.0
+    since_t_ns: int | None = None
+    source: str = "uvd-fdc"
+
+
 Command = (Arm | Disarm | SetMode | ManualWrench | HoldPose | ResetFailsafe | SetParams
-           | SetThrusterEta)
+           | SetThrusterEta | FaultReport)
 _BY_NAME = {c.__name__: c for c in (Arm, Disarm, SetMode, ManualWrench, HoldPose, ResetFailsafe,
-                                    SetParams, SetThrusterEta)}
+                                    SetParams, SetThrusterEta, FaultReport)}
 
 
 def command_from_record(rec: Mapping[str, Any]) -> Any:

@@ -29,6 +29,8 @@ Sections and where their dataclass lives:
 ``[telemetry]``      :class:`TelemetrySection`
 ``[mavlink]``        :class:`MavlinkSection` — the ground-station link (docs/mavlink.md)
 ``[daemon]``         :class:`DaemonSection` — start/stop timeouts, the shutdown sequence
+``[faults]``         :class:`uvd.runtime.fdc_source.FaultsSection` — sources of thruster
+                     effectiveness η and their rules (``[faults.fdc]``: uvd-fdc over Zenoh)
 ===================  =========================================================================
 
 **Plugging in a subsystem's own configuration.** Any frozen dataclass can be a section: put
@@ -66,6 +68,7 @@ from drivers.digiquartz import DepthConverter
 from uvd.errors import ConfigError
 from uvd.runtime import schema
 from uvd.runtime.failsafe import Thresholds
+from uvd.runtime.fdc_source import FaultsSection
 from uvd.runtime.leak import LeakSection
 from uvd.runtime.loop import LoopSettings
 from uvd.runtime.schema import PerAxis, section, setting
@@ -631,6 +634,7 @@ class Config:
     mavlink: MavlinkSection = section(MavlinkSection)
     daemon: DaemonSection = section(DaemonSection)
     simulation: SimulationSection = section(SimulationSection)
+    faults: FaultsSection = section(FaultsSection)
     source: str | None = field(default=None, init=False, compare=False)
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
@@ -641,6 +645,9 @@ class Config:
                          f"{helper} is above [loop] sched_fifo_priority "
                          f"{self.loop.sched_fifo_priority} (helper threads must not preempt "
                          "the loop)"))
+        if self.faults.fdc.enabled and not self.telemetry.zenoh.enabled:
+            out.append(("faults.fdc.enabled", "uvd-fdc's samples come over Zenoh: needs "
+                                              "[telemetry.zenoh] enabled = true"))
         if self.sensors.depth.source == "can" and not self.can.depth.enabled:
             out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
         try:

@@ -249,6 +249,8 @@ class CycleConfig:
         vehicle has then.
     north_m, east_m : float
         Navigation's initial horizontal position (``[navigation]``).
+    fdc : uvd.runtime.fdc_source.FdcRule or None
+        ``[faults.fdc]``: what a fault sample of uvd-fdc may do (None: the source is off).
     """
 
     core: core.CoreConfig | None
@@ -258,6 +260,7 @@ class CycleConfig:
     hold_on_arm: bool = False
     north_m: float = 0.0
     east_m: float = 0.0
+    fdc: Any = None
     registry: tuple[TriggerDef, ...] = field(init=False, repr=False, compare=False)
     arming_checks: tuple[ArmingCheck, ...] = field(init=False, repr=False, compare=False)
 
@@ -307,6 +310,8 @@ class CycleState(NamedTuple):
         When the vehicle was last armed.
     nonfinite_out : tuple of str
         ``("command",)`` when the last command was not finite (the arbiter sees it next cycle).
+    fdc : uvd.runtime.fdc_source.FdcState or None
+        The daemon's own thrust evidence and the fault samples counted (``[faults.fdc]``).
     """
 
     core: core.CoreState | None
@@ -323,6 +328,7 @@ class CycleState(NamedTuple):
     was_armed: bool = False
     armed_at_ns: int | None = None
     nonfinite_out: tuple[str, ...] = ()
+    fdc: Any = None
 
     @property
     def armed(self) -> bool:
@@ -341,7 +347,11 @@ def cycle_init(config: CycleConfig, *, armed: bool = False, north_m: float | Non
         cs = core_init(c, north_m=config.north_m if north_m is None else north_m,
                        east_m=config.east_m if east_m is None else east_m)
     life = Lifecycle(State.ARMED, 0) if armed else Lifecycle()
-    return CycleState(cs, arbiter_init(config.registry), life)
+    fdc = None
+    if config.fdc is not None:
+        from uvd.runtime.fdc_source import fdc_init
+        fdc = fdc_init(config.fdc)
+    return CycleState(cs, arbiter_init(config.registry), life, fdc=fdc)
 
 
 # -- the lifecycle and the arbiter (between cycles, and inside update) --
@@ -447,6 +457,15 @@ def apply(config: CycleConfig, state: CycleState, c: Any, t_ns: int
             (c.north_m, c.east_m, c.down_m, 0.0, 0.0, c.heading_rad))), ()
     if isinstance(c, cmd.SetThrusterEta):
         return _set_eta(config, state, c)
+    if isinstance(c, cmd.FaultReport):
+        from uvd.runtime.fdc_source import decide
+        v = decide(config.fdc, state.fdc, c, config.core.allocator.n_thrusters)
+        state = state._replace(fdc=v.state)
+        if v.thruster is None:
+            return CommandResult(v.ok, v.text), state, ()
+        res, state, effects = _set_eta(config, state, cmd.SetThrusterEta(v.thruster, v.eta,
+                                                                         c.source))
+        return CommandResult(res.ok, f"{v.text} → {res.reason}"), state, effects
     return CommandResult(False, f"{type(c).__name__} is not supported by the cycle"), state, ()
 
 
@@ -527,9 +546,15 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
                          state.thruster_eta)
     out, st = core.act(cfg, sensed, ci, st, dt)
     lapsed = manual_mode and state.manual is not None and manual is None
+    fdc = state.fdc
+    if config.fdc is not None:  # the daemon's own evidence (fdc_source)
+        from uvd.runtime.fdc_source import fdc_init, fdc_observe
+        fdc = fdc_observe(config.fdc, fdc if fdc is not None else fdc_init(config.fdc),
+                          inp.t_ns, sensed.nav_ok, nav.v, nav.H[:3, :3], sensed.speeds,
+                          out.thrust_n)
     new = CycleState(st, state.arbiter, state.lifecycle, d, h, state.operator_mode,
                      None if lapsed else state.manual,  # a silent joystick stops the vehicle
                      until, state.manual_timeout_ns, None, state.thruster_eta, armed, armed_at,
-                     ("command",) if out.status == "non-finite" else ())
+                     ("command",) if out.status == "non-finite" else (), fdc)
     return CycleResult(out, h, d, new.lifecycle.state, state.operator_mode, effects,
                        armed_at), new

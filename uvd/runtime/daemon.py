@@ -28,7 +28,7 @@ import numpy as np
 from uvd import _jitcache, core
 from uvd.runtime.app import App
 from uvd.runtime.build import make_cycle, start_pose
-from uvd.runtime.commands import AutoArm, CommandResult, SetParams
+from uvd.runtime.commands import AutoArm, CommandResult, FaultReport, SetParams
 from uvd.runtime.config import Config
 from uvd.runtime.cycle import CycleInputs, CycleResult
 from uvd.runtime.hardware import Hardware
@@ -159,6 +159,8 @@ class Daemon:
         self.app.hub.publish({"type": "command", "t_ns": t_ns, "command": type(c).__name__,
                               "args": asdict(c), "source": c.source, "ok": res.ok,
                               "reason": res.reason}, always=True)
+        if isinstance(c, FaultReport):  # acted on, advisory or refused: in the daemon's log
+            log.warning("fault sample %s: %s", "accepted" if res.ok else "refused", res.reason)
         return res
 
     def _set_params(self, c: SetParams) -> CommandResult:
@@ -202,6 +204,9 @@ class Daemon:
                          "armed_at_ns": self.armed_at_ns,
                          "arm_refusal": None if self.auto_arm is None else self.auto_arm.refusal}
         out.update(self.hardware.stats())
+        fdc = self.supervisor.data.fdc
+        if fdc is not None:  # uvd-fdc's samples by outcome ([faults.fdc])
+            out["fault_samples"] = fdc.counts()
         out["shutdown"] = self.app.shutdown_report
         return out
 

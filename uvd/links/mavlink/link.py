@@ -275,7 +275,7 @@ class MavlinkLink:
                 self._text(("notice", f"{r['from']} -> {r['to']}: {r['cause']}"))
             elif kind == "command" and not r.get("ok"):
                 self._text(("warning", f"{r['command']} refused: {r['reason']}"))
-            elif kind == "command" and r.get("command") == "SetThrusterEta":
+            elif kind == "command" and r.get("command") in ("SetThrusterEta", "FaultReport"):
                 self._text(("warning", str(r.get("reason"))))  # thruster, η, source, given up
 
     async def flush(self) -> None:
