@@ -139,6 +139,8 @@ class Lockstep:
                                              frame_seed=cfg.seed if cfg.frame_noise else None)
         #: amplifier faults the cycle sees (names, e.g. ``("node 3: overcurrent",)``)
         self.amplifier_faults: tuple[str, ...] = ()
+        #: the thrusters (1…n) whose amplifier reports them (:meth:`amplifier_fault`)
+        self.amplifier_faulted: tuple[int, ...] = ()
         #: the thrusters' effectiveness η the cycle is told (None: all healthy), as an amplifier
         #: reports it; the plant's own is ``plant.thrusters.health``. Set, it replaces the
         #: cycle's η (the operator's SetThrusterEta) before the next cycle
@@ -177,6 +179,18 @@ class Lockstep:
         the daemon applies a queued one; returns its result."""
         return self.supervisor.apply(c, self.t_ns)
 
+    def amplifier_fault(self, thruster: int, name: str = "overcurrent") -> None:
+        """Thruster ``thruster`` (1…n)'s amplifier faults, as a CiA 402 drive does: its output
+        goes to zero (the plant's thruster health 0) and it reports the fault
+        (``"node k: name"``, :attr:`ActuatorStatus.faulted`) from the next cycle on — what the
+        cycle's amplifier source of η sees (:func:`uvd.runtime.cycle.amplifier_source`)."""
+        n = self.plant.thrusters.health.shape[0]
+        if not 1 <= int(thruster) <= n:
+            raise ValueError(f"thruster {thruster} is not one of 1…{n}")
+        self.plant.thrusters.health[int(thruster) - 1] = 0.0
+        self.amplifier_faults = (*self.amplifier_faults, f"node {int(thruster)}: {name}")
+        self.amplifier_faulted = tuple(sorted({*self.amplifier_faulted, int(thruster)}))
+
     def advance(self) -> core.CoreOutputs:
         """One cycle, then one control period of the plant under its command."""
         ins, dvl, depth = self._pending
@@ -184,8 +198,9 @@ class Lockstep:
         if self.thruster_eta is not None and \
                 self.supervisor.data.thruster_eta is not self.thruster_eta:
             self.supervisor.data = self.supervisor.data._replace(thruster_eta=self.thruster_eta)
-        act = ActuatorStatus(omega_rad_s=omega, enabled=True, faults=self.amplifier_faults,
-                             feedback_t_ns=self.t_ns)
+        act = ActuatorStatus(omega_rad_s=omega, enabled=not self.amplifier_faulted,
+                             faults=self.amplifier_faults, feedback_t_ns=self.t_ns,
+                             faulted=self.amplifier_faulted, healthy_feedback_t_ns=self.t_ns)
         self.last_result = r = self.supervisor.update(
             CycleInputs(self.t_ns, ins, dvl, depth, act, extra=self.extra), self.dt_control)
         out = r.out

@@ -29,7 +29,10 @@ def actuator_status(fb, first_write_ns: int) -> ActuatorStatus:
 
     Speeds only when every node's feedback is valid; faults named per node (node 0's are the
     bus's: ``bus_off``/``bus_closed`` set ``bus_off``, ``send_failed`` is a fault); the
-    feedback's age counts from the first command at the earliest."""
+    feedback's age counts from the first command at the earliest. ``faulted``: the thrusters
+    whose node has any fault, heartbeat and feedback lost included (the amplifier source of
+    η, :func:`uvd.runtime.cycle.amplifier_source`), and ``healthy_feedback_t_ns`` the
+    feedback's time over the others."""
     faults: list[str] = []
     bus_off = False
     for nid, names in fb.faults.items():
@@ -44,9 +47,14 @@ def actuator_status(fb, first_write_ns: int) -> ActuatorStatus:
         if real:
             faults.append(f"node {nid}: {', '.join(real)}")
     oldest = max(min(n.t_ns for n in fb.nodes), first_write_ns)
+    faulted = tuple(i + 1 for i, n in enumerate(fb.nodes) if n.faults)
+    healthy = [n.t_ns for n in fb.nodes if not n.faults]
+    oldest_ok = max(min(healthy), first_write_ns) if healthy else 0
     return ActuatorStatus(omega_rad_s=fb.omega_rad_s if bool(fb.valid.all()) else None,
                           enabled=bool(fb.enabled.all()), faults=tuple(faults),
-                          feedback_t_ns=oldest if oldest > 0 else None, bus_off=bus_off)
+                          feedback_t_ns=oldest if oldest > 0 else None, bus_off=bus_off,
+                          faulted=faulted,
+                          healthy_feedback_t_ns=oldest_ok if oldest_ok > 0 else None)
 
 
 class GcFreeze:
