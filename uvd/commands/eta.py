@@ -21,6 +21,7 @@ import sys
 import time
 from pathlib import Path
 
+
 def register(sub) -> None:
     p = sub.add_parser("eta", help="set or clear a thruster's effectiveness on a running "
                                    "daemon (MAVLink)",
