@@ -80,10 +80,11 @@ def _rss_mb(pid: int | None) -> tuple[float, float]:
     return vals.get("VmRSS", math.nan), vals.get("VmHWM", math.nan)
 
 
-def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
-    """Tracking error of the armed cycles: the true state (truth log, interpolated at each
-    cycle's time) against the reference the daemon used — the same measures as
-    :func:`uvd.lockstep.tracking_errors`."""
+def hil_tracking(telemetry: Path, truth: np.ndarray, since_ns: int | None = None,
+                 until_ns: int | None = None) -> dict[str, Any]:
+    """Tracking error of the armed cycles (those in [``since_ns``, ``until_ns``) when given,
+    monotonic ns): the true state (truth log, interpolated at each cycle's time) against the
+    reference the daemon used — the same measures as :func:`uvd.lockstep.tracking_errors`."""
     from uvd.control.errors import error_coordinates
     from uvd.geometry import euler_to_R
     from uvd.lockstep import DOF_NAMES, VEL_NAMES
@@ -100,6 +101,9 @@ def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
                     or r.get("p_ref") is None:
                 continue
             rec = CycleRecord.from_dict(r)
+            if (since_ns is not None and rec.t_ns < since_ns) or \
+                    (until_ns is not None and rec.t_ns >= until_ns):
+                continue
             t.append(rec.t_ns * 1e-9)
             ref_eta.append(rec.eta_ref())
             ref_v.append(rec.v_ref)
