@@ -41,7 +41,7 @@ def run_hil(config_name: str, k: int, *, fault: bool, t_fault_s: float = T_FAULT
     """One HIL run (module docstring); ``fault``: thruster ``k``'s drive faults at
     ``t_fault_s`` after the release."""
     from sim_bridge.bridge import BridgeProcess, cpu_split, read_truth, write_local_config
-    from uvd.commands.demo import hil_tracking
+    from uvd.lockstep import hil_tracking
     from uvd.runtime.config import load_config
 
     with tempfile.TemporaryDirectory(prefix="uvd-ft-hil-") as tmp:
