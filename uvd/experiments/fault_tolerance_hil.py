@@ -127,8 +127,15 @@ def _run(opts: ExperimentOptions) -> dict[str, Any]:
                    progress=opts.progress)
     dead = run_hil(CONFIG, THRUSTER, fault=True, duration_s=duration, seed=opts.seed,
                    progress=opts.progress)
+    from uvd.experiments.fault_tolerance import run_arm
+    # the same configuration's fault-free lockstep run over the same span: a baseline the
+    # machine's load cannot disturb (a HIL run under load may see a stale INS, zero thrust)
+    lock = run_arm(CONFIG, THRUSTER, 1.0, "fault-free", t_fault_s=T_FAULT_S,
+                   duration_s=duration, seed=opts.seed)
     ratio = {d: dead["after"][d] / free["after"][d] for d in DOFS}
+    ratio_lock = {d: dead["after"][d] / lock["after"][d] for d in DOFS}
     worst = max(ratio, key=ratio.get)
+    worst_lock = max(ratio_lock, key=ratio_lock.get)
     lat = dead["accommodated_after_fault_ms"]
     lines = [f"fault-tolerance-hil: bluerov2-heavy (sim-bridge, real buses), thruster "
              f"{THRUSTER}'s drive faults at {T_FAULT_S:g} s, {duration:g} s; position MAE "
@@ -137,11 +144,21 @@ def _run(opts: ExperimentOptions) -> dict[str, Any]:
              "dead        " + "  ".join(f"{d} {_fmt(d, dead['after'][d])}" for d in DOFS),
              "ratio       " + "  ".join(f"{d} {ratio[d]:.2f}x" for d in DOFS)
              + f"  (largest: {worst} {ratio[worst]:.2f}x; target 1.5x)",
+             "lockstep    " + "  ".join(f"{d} {_fmt(d, lock['after'][d])}" for d in DOFS)
+             + "  (fault-free, same configuration and span)",
+             "dead/lockst " + "  ".join(f"{d} {ratio_lock[d]:.2f}x" for d in DOFS)
+             + f"  (largest: {worst_lock} {ratio_lock[worst_lock]:.2f}x)",
              "accommodated: " + ("; ".join(dead["accommodated"]) or "no")
              + (f", {lat:.0f} ms after the fault" if lat is not None else "")
-             + f"; failsafes fired: {len(dead['failsafe_fired'])} (fault run), "
-             f"{len(free['failsafe_fired'])} (fault-free)"]
-    return {"fault_free": free, "dead": dead, "ratio_after": ratio, "thruster": THRUSTER,
+             + f"; failsafes fired: {len(dead['failsafe_fired'])} (fault run: "
+             f"{'; '.join(dead['failsafe_fired']) or 'none'}), "
+             f"{len(free['failsafe_fired'])} (fault-free: "
+             f"{'; '.join(free['failsafe_fired']) or 'none'})"]
+    if free["failsafe_fired"]:
+        lines.append("the fault-free HIL run is not a clean baseline (a failsafe fired in it): "
+                     "read the ratio to the lockstep run")
+    return {"fault_free": free, "dead": dead, "lockstep_fault_free": lock,
+            "ratio_after": ratio, "ratio_after_to_lockstep": ratio_lock, "thruster": THRUSTER,
             "t_fault_s": T_FAULT_S, "duration_s": duration, "settle_s": SETTLE_S,
             "summary": "\n".join(lines), "thesis_reference": THESIS_REFERENCE}
 
@@ -160,3 +177,24 @@ EXPERIMENTS = [Experiment(
     "the drive's fault accommodated by the daemon's amplifier source, tracking MAE against a "
     "fault-free HIL run",
     _run)]
+
+
+def note(result: dict) -> str | None:
+    """The page's reading of the HIL figures (docs/RESULTS.md), from the JSON only."""
+    try:
+        r, rl = result["ratio_after"], result["ratio_after_to_lockstep"]
+        dead, free = result["dead"], result["fault_free"]
+    except (KeyError, TypeError):
+        return None
+    w = max(r, key=r.get)
+    wl = max(rl, key=rl.get)
+    clean = not free["failsafe_fired"] and not dead["failsafe_fired"]
+    lat = dead["accommodated_after_fault_ms"]
+    return (
+        "**Reading.** In HIL the drive's fault was accommodated "
+        + (f"{lat:.0f} ms after the bridge faulted it" if lat is not None else "— not at all")
+        + f"; after it every DOF's MAE is within {r[w]:.2f}× of the fault-free HIL run "
+        f"({w}) and {rl[wl]:.2f}× of the fault-free lockstep run ({wl}); target 1.5×. "
+        + ("No failsafe fired in either run." if clean else
+           "A failsafe fired (above): that run's MAE carries it.")
+        + " Two HIL runs differ by the machine's timing as well as by the fault.")
