@@ -293,7 +293,8 @@ def note(result: dict) -> str | None:
         f"allocation's priorities — heave, roll, pitch and yaw are all kept — and not the "
         f"adaptive controller alone: with PD control (no model, no adaptation) the same fault "
         f"gives {p_w[0]} {p_w[1]:.2f}× of PDC's own fault-free run (thruster 2 at its limit in "
-        f"{sat_p[1]:.0%} of the cycles, 3 in {sat_p[2]:.0%}); depth z {told['ratio_after']['z']:.2f}× "
-        f"with the configured controller, {pdc['ratio_after']['z']:.2f}× with PDC. We read it "
+        f"{sat_p[1]:.0%} of the cycles, 3 in {sat_p[2]:.0%}); depth z "
+        f"{told['ratio_after']['z']:.2f}× with the configured controller, "
+        f"{pdc['ratio_after']['z']:.2f}× with PDC. We read it "
         f"as the vehicle's under-actuation on this trajectory, not a defect of uvd's; no fix "
         f"was made.")
