@@ -17,6 +17,7 @@ wrench. Free functions take both and return a new state; nothing else holds any:
 amplifiers' typed status, as :class:`CycleInputs` — and returns everything the write phase
 needs (:class:`CycleResult`)::
 
+    amplifier_source    η from the amplifiers' own faults (``[failsafe] amplifier_fault``)
     uvd.core.sense      navigation, applied wrench, online estimators
     Health              source ages, non-finite inputs and the last command, M̂/θ̂ of the
                         controller (its spec's diagnostics hook), amplifiers, bus, loop, leak
