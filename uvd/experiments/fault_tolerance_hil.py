@@ -73,6 +73,7 @@ def run_hil(config_name: str, k: int, *, fault: bool, t_fault_s: float = T_FAULT
             progress(f"  {'fault' if fault else 'fault-free'}: released; tracking "
                      f"{duration_s:g} s")
             time.sleep(max(0.0, (released + int(duration_s * 1e9) - time.monotonic_ns()) * 1e-9))
+            stop_ns = time.monotonic_ns()
             daemon.send_signal(signal.SIGTERM)
             code = daemon.wait(timeout=60.0)
             bridge.stop(timeout_s=10.0)
@@ -91,7 +92,9 @@ def run_hil(config_name: str, k: int, *, fault: bool, t_fault_s: float = T_FAULT
             "samples_after": after["samples"], "daemon_exit": code,
             "accommodated": [e["reason"] for e in acc],
             "accommodated_after_fault_ms": (acc[0]["t_ns"] - fault_ns) * 1e-6 if acc else None,
-            "failsafe_fired": [f"{e['trigger']}: {e['reason']}" for e in fired]}
+            "failsafe_fired": [f"{e['trigger']} at {(e['t_ns'] - fault_ns) * 1e-9:+.2f} s from "
+                               f"the fault: {e['reason']}" for e in fired],
+            "stopped_after_fault_s": (stop_ns - fault_ns) * 1e-9}
 
 
 def _released(bridge, daemon, run_dir: Path, timeout_s: float = 180.0) -> int:

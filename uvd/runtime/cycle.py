@@ -121,10 +121,11 @@ class ActuatorStatus:
     bus_off : bool
         The CAN controller is bus-off (or the bus is closed).
     faulted : tuple of int
-        The thrusters (1…n, thruster order) whose amplifier reports any fault of its own —
-        EMCY, a FAULT statusword, heartbeat or feedback lost, a reset: the amplifier source of
-        η (``[failsafe] amplifier_fault = "reallocate"``). Their names are in ``faults``
-        (``"node N: …"``; the bus's ``"bus: …"``).
+        The thrusters (1…n, thruster order) whose amplifier reports a fault of its own —
+        EMCY, a FAULT statusword, heartbeat lost, a reset (a few missed TPDOs alone are not:
+        they age the feedback): the amplifier source of η (``[failsafe] amplifier_fault =
+        "reallocate"``). Their names are in ``faults`` (``"node N: …"``; the bus's
+        ``"bus: …"``).
     healthy_feedback_t_ns : int or None
         As ``feedback_t_ns``, over the amplifiers not ``faulted`` only.
     """
