@@ -199,5 +199,8 @@ def note(result: dict) -> str | None:
         + f"; after it every DOF's MAE is within {r[w]:.2f}× of the fault-free HIL run "
         f"({w}) and {rl[wl]:.2f}× of the fault-free lockstep run ({wl}); target 1.5×. "
         + ("No failsafe fired in either run." if clean else
-           "A failsafe fired (above): that run's MAE carries it.")
+           "A failsafe fired in the "
+           + " and the ".join(n for n, r in (("fault-free run", free), ("fault run", dead))
+                              if r["failsafe_fired"])
+           + " (above): its MAE carries it.")
         + " Two HIL runs differ by the machine's timing as well as by the fault.")
