@@ -1,5 +1,7 @@
-"""`uvd experiment fault-tolerance`, one short arm per vehicle: the cycle told of a dead
-thruster at the fault reallocates in that cycle; the JHU ROV gives up pitch, the BlueROV2 none."""
+"""`uvd experiment fault-tolerance`, short arms: the cycle told of a dead thruster at the fault
+reallocates in that cycle (the JHU ROV gives up pitch, the BlueROV2 none); the amplifier's own
+fault does the same through the cycle's amplifier source where depth and attitude stay
+actuated, and is not accommodated where they would not."""
 
 import pytest
 
@@ -9,8 +11,20 @@ from uvd.experiments.fault_tolerance import run_arm
 @pytest.mark.parametrize("config, given_up", [("sim-bluerov2.toml", []),
                                                ("sim.toml", ["pitch"])])
 def test_a_dead_thruster_is_reallocated_in_the_cycle_that_is_told(config, given_up):
-    r = run_arm(config, 4, 0.0, "amplifier", t_fault_s=5.0, duration_s=20.0)
+    r = run_arm(config, 4, 0.0, "told", t_fault_s=5.0, duration_s=20.0)
     assert r["given_up"] == given_up and r["cycles_not_ok"] == 0
     assert r["fault_s"] == r["detected_s"] == r["reallocated_s"] == pytest.approx(5.0)
     blind = run_arm(config, 4, 0.0, "none", t_fault_s=5.0, duration_s=20.0)
     assert blind["given_up"] == [] and blind["detected_s"] is None
+
+
+def test_the_amplifier_arm_is_the_cycles_own_source():
+    r = run_arm("sim-bluerov2.toml", 4, 0.0, "amplifier", t_fault_s=5.0, duration_s=20.0)
+    assert r["given_up"] == [] and r["reallocated_s"] == pytest.approx(5.0)
+    assert r["events"] == ["thruster 4 eta 0 (amplifier); given up: none"]
+    aft = run_arm("sim.toml", 1, 0.0, "amplifier", t_fault_s=5.0, duration_s=20.0)
+    assert aft["given_up"] == ["surge"] and aft["reallocated_s"] == pytest.approx(5.0)
+    bow = run_arm("sim.toml", 4, 0.0, "amplifier", t_fault_s=5.0, duration_s=20.0)
+    assert bow["reallocated_s"] is None and bow["events"] == []  # pitch would be lost
+    with pytest.raises(ValueError, match="η 0 only"):
+        run_arm("sim.toml", 4, 0.5, "amplifier")

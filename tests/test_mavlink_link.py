@@ -142,6 +142,22 @@ def test_a_long_reason_goes_out_in_statustext_chunks():
     run_link(scenario)
 
 
+def test_an_amplifier_fault_accommodated_is_told_as_a_warning():
+    reason = "thruster 1 eta 0 (amplifier); given up: surge"
+
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        asyncio.run(link.write([{"type": "failsafe", "kind": "accommodated",
+                                 "trigger": "amplifier_fault", "action": "warn",
+                                 "reason": reason}]))
+        text = f"failsafe accommodated: amplifier_fault -> warn ({reason})"
+        parts = [st.wait("STATUSTEXT", lambda m, i=i: m.chunk_seq == i) for i in range(2)]
+        assert all(p.severity == mav.MAV_SEVERITY_WARNING for p in parts)
+        assert "".join(p.text for p in parts) == text
+
+    run_link(scenario)
+
+
 def test_serial_line_carries_telemetry_and_commands(tmp_path):
     """A pseudo-terminal as the radio: the station writes a HEARTBEAT and an ARM on the master
     side; the link queues the Arm and sends its telemetry down the line."""

@@ -40,7 +40,8 @@ def recorded(tmp_path_factory):
     """(recording file, config path, daemon) of a short recorded HIL run."""
     run_dir = tmp_path_factory.mktemp("rec")
     changes = {"recording": {"enabled": True, "dir": str(run_dir / "rec"),
-                             "flush_interval_s": 0.1}}
+                             "flush_interval_s": 0.1},
+               "failsafe": {"amplifier_fault": "reallocate"}}
     with running_bridge(run_dir, changes) as (cfg_path, proc):
         cfg = load_config(cfg_path)
 
@@ -61,6 +62,11 @@ def recorded(tmp_path_factory):
                 res = await asyncio.wrap_future(d.app.commands.put(cmd.SetThrusterEta(4, eta)))
                 assert res.ok, res
                 await asyncio.sleep(1.0)
+            # … and an aft amplifier's own fault: the cycle's amplifier source reallocates
+            ans = await asyncio.to_thread(proc.call, "fault", node=1, name="overcurrent",
+                                          persistent=True)
+            assert ans.get("ok"), ans
+            await asyncio.sleep(1.5)
 
         d, cycles = run_scenario(cfg, scenario)
     files = sorted((run_dir / "rec").glob("*.mcap"))
@@ -112,6 +118,31 @@ def test_lockstep_replay_is_bit_identical(recorded, tmp_path):
     assert {"pdc-fallback", "zero", "control"} <= modes  # the replay went through them all
     # … and through the reallocation: thruster 4 at exactly zero while controlling
     assert any(r["mode"] == "control" and r["thrust"][3] == 0.0 for r in cycles), cycles[-1]
+    # η is a recorded input of every cycle, compared by the replay: the operator's thruster 4,
+    # then the amplifier source's thruster 1 (no failsafe: the vehicle flew on)
+    etas = [r["inputs"]["thruster_eta"] for r in cycles]
+    assert any(e is not None and e.tolist() == [1, 1, 1, 0, 1, 1] for e in etas)
+    amp = [r for r, e in zip(cycles, etas, strict=True)
+           if e is not None and e.tolist() == [0, 1, 1, 1, 1, 1]]
+    assert len(amp) > 5 and all(r["mode"] == "control" and r["thrust"][0] == 0.0 for r in amp)
+
+
+def test_a_recorded_eta_the_replay_does_not_reach_is_a_mismatch(recorded, tmp_path):
+    path, _, _, _ = recorded
+    bad = tmp_path / "eta.mcap"
+    edited = []
+
+    def edit(k, topic, msg):
+        eta = (msg.get("inputs") or {}).get("thruster_eta") if topic == "/uvd/cycle" else None
+        if eta is not None and not edited:
+            msg["inputs"]["thruster_eta"] = [0.5 if x == 0 else x for x in eta]
+            edited.append(msg["t_ns"])
+        return msg
+    _rewrite(path, bad, edit)
+    rep = replay_lockstep(bad)
+    assert edited and rep.mismatches == 1, rep.first_mismatch
+    assert rep.first_mismatch["field"] == "thruster_eta"
+    assert rep.first_mismatch["t_ns"] == edited[0]
 
 
 def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = None,

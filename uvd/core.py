@@ -33,7 +33,9 @@ reference's closed loop — so the controller neither commands nor adapts on the
 is masked by the closed loop in (5.28), and its spec's ``hold_dofs`` keeps those DOFs'
 parameters, which other rows' Coriolis terms would still move) — and the wrench the
 estimators see is B diag(η) f, what the thrusters really give. The estimators (AID) run in
-every mode: they identify the vehicle whatever drives it.
+every mode: they identify the vehicle whatever drives it — except on a DOF given up, whose
+parameters an estimator's ``hold_dofs`` holds (AID: :func:`uvd.estimation.aid.aid_hold_dofs`,
+the reason in its estimates' ``hold_reason``).
 
 navigation → reference → control → estimation → allocation (docs/architecture.md). Pure and
 deterministic: no I/O, no clock (time arrives in ``inputs.t_ns``), no logging. Safety is
@@ -383,12 +385,18 @@ def _guard(f, f_max):
     return code
 
 
+_ALL_ACTUATED = np.ones(6, dtype=bool)
+_ALL_ACTUATED.setflags(write=False)
+
+
 def sense(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float) -> Sensed:
     """Navigation, the applied wrench and the estimators of one cycle (pure)."""
     B, _, _, k_thr, n_thr = cfg._glue
     eta = _eta_of(inputs.thruster_eta, n_thr)
+    actuated = _ALL_ACTUATED
     if eta is not None:
-        B = cfg.accommodation_for(eta)[1]  # the wrench a thrust f really gives: B diag(η) f
+        acc, B = cfg.accommodation_for(eta)  # the wrench a thrust f really gives: B diag(η) f
+        actuated = acc.actuated
     nav, nav_mem = nav_step(cfg.nav, state.nav, inputs.t_ns, inputs.ins, inputs.dvl, inputs.depth)
     nav_ok = nav.valid and _finite_hv(nav.H, nav.v)
 
@@ -412,6 +420,9 @@ def sense(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float) -> S
         dt_est = dt if est_t_ns is None else (inputs.t_ns - est_t_ns) * 1e-9
         est = tuple(e.step(vs, u_applied, e.params, s, dt_est)
                     for e, s in zip(cfg.estimators, state.est, strict=True))
+        # a DOF no thruster reaches any more: the estimator's parameters of it are held
+        est = tuple(n if e.hold_dofs is None else e.hold_dofs(n, s, actuated)
+                    for e, n, s in zip(cfg.estimators, est, state.est, strict=True))
         est_t_ns = inputs.t_ns
     return Sensed(nav, nav_mem, nav_ok, vs, est, est_t_ns, u_applied, speeds)
 

@@ -24,6 +24,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -139,6 +140,8 @@ class Lockstep:
                                              frame_seed=cfg.seed if cfg.frame_noise else None)
         #: amplifier faults the cycle sees (names, e.g. ``("node 3: overcurrent",)``)
         self.amplifier_faults: tuple[str, ...] = ()
+        #: the thrusters (1…n) whose amplifier reports them (:meth:`amplifier_fault`)
+        self.amplifier_faulted: tuple[int, ...] = ()
         #: the thrusters' effectiveness η the cycle is told (None: all healthy), as an amplifier
         #: reports it; the plant's own is ``plant.thrusters.health``. Set, it replaces the
         #: cycle's η (the operator's SetThrusterEta) before the next cycle
@@ -177,6 +180,18 @@ class Lockstep:
         the daemon applies a queued one; returns its result."""
         return self.supervisor.apply(c, self.t_ns)
 
+    def amplifier_fault(self, thruster: int, name: str = "overcurrent") -> None:
+        """Thruster ``thruster`` (1…n)'s amplifier faults, as a CiA 402 drive does: its output
+        goes to zero (the plant's thruster health 0) and it reports the fault
+        (``"node k: name"``, :attr:`ActuatorStatus.faulted`) from the next cycle on — what the
+        cycle's amplifier source of η sees (:func:`uvd.runtime.cycle.amplifier_source`)."""
+        n = self.plant.thrusters.health.shape[0]
+        if not 1 <= int(thruster) <= n:
+            raise ValueError(f"thruster {thruster} is not one of 1…{n}")
+        self.plant.thrusters.health[int(thruster) - 1] = 0.0
+        self.amplifier_faults = (*self.amplifier_faults, f"node {int(thruster)}: {name}")
+        self.amplifier_faulted = tuple(sorted({*self.amplifier_faulted, int(thruster)}))
+
     def advance(self) -> core.CoreOutputs:
         """One cycle, then one control period of the plant under its command."""
         ins, dvl, depth = self._pending
@@ -184,8 +199,9 @@ class Lockstep:
         if self.thruster_eta is not None and \
                 self.supervisor.data.thruster_eta is not self.thruster_eta:
             self.supervisor.data = self.supervisor.data._replace(thruster_eta=self.thruster_eta)
-        act = ActuatorStatus(omega_rad_s=omega, enabled=True, faults=self.amplifier_faults,
-                             feedback_t_ns=self.t_ns)
+        act = ActuatorStatus(omega_rad_s=omega, enabled=not self.amplifier_faulted,
+                             faults=self.amplifier_faults, feedback_t_ns=self.t_ns,
+                             faulted=self.amplifier_faulted, healthy_feedback_t_ns=self.t_ns)
         self.last_result = r = self.supervisor.update(
             CycleInputs(self.t_ns, ins, dvl, depth, act, extra=self.extra), self.dt_control)
         out = r.out
@@ -291,3 +307,69 @@ def format_tracking_table(errs: dict, title: str = "") -> str:
     lines.append(f"MNE: position {errs['position_mne']:.4f}, velocity {errs['velocity_mne']:.4f} "
                  f"({errs['samples']} cycles)")
     return "\n".join(lines)
+
+
+def hil_tracking(telemetry, truth: np.ndarray, since_ns: int | None = None,
+                 until_ns: int | None = None) -> dict[str, Any]:
+    """Tracking error of a hardware-in-the-loop run's armed cycles (those in [``since_ns``,
+    ``until_ns``) when given, monotonic ns): the true state (``truth``, sim-bridge's truth log,
+    :func:`sim_bridge.bridge.read_truth`, interpolated at each cycle's time) against the
+    reference the daemon used (``telemetry``, its JSON lines file) — the measures of
+    :func:`tracking_errors`."""
+    import json
+
+    from uvd.geometry import euler_to_R
+    from uvd.telemetry.records import CycleRecord
+
+    t, ref_eta, ref_v = [], [], []
+    with telemetry.open(encoding="utf-8") as fh:
+        for line in fh:
+            try:
+                r = json.loads(line)
+            except ValueError:
+                continue
+            if r.get("type") != "cycle" or r.get("state") not in ("ARMED", "FAILSAFE") \
+                    or r.get("p_ref") is None:
+                continue
+            rec = CycleRecord.from_dict(r)
+            if (since_ns is not None and rec.t_ns < since_ns) or \
+                    (until_ns is not None and rec.t_ns >= until_ns):
+                continue
+            t.append(rec.t_ns * 1e-9)
+            ref_eta.append(rec.eta_ref())
+            ref_v.append(rec.v_ref)
+    if len(t) < 2 or truth.shape[0] < 2:
+        return {"samples": 0}
+    t = np.asarray(t)
+    # the first armed cycle ends with arming; the reference clock starts on the next one
+    t, ref_eta, ref_v = t[1:], np.asarray(ref_eta)[1:], np.asarray(ref_v)[1:]
+    tt = truth[:, 0]
+    keep = (t >= tt[0]) & (t <= tt[-1])
+    t, ref_eta, ref_v = t[keep], ref_eta[keep], ref_v[keep]
+    eta = np.empty((t.size, 6))
+    for i in range(6):
+        col = truth[:, 1 + i]
+        if i >= 3:
+            col = np.unwrap(col)
+        eta[:, i] = np.interp(t, tt, col)
+    v = np.stack([np.interp(t, tt, truth[:, 7 + i]) for i in range(6)], axis=1)
+    e = eta - ref_eta
+    e[:, 3:] = wrap_angles(e[:, 3:])
+    dpsi = np.empty((t.size, 6))
+    dv = np.empty((t.size, 6))
+    for k in range(t.size):
+        H = np.eye(4)
+        H[:3, :3] = euler_to_R(*eta[k, 3:])
+        H[:3, 3] = eta[k, :3]
+        Hr = np.eye(4)
+        Hr[:3, :3] = euler_to_R(*ref_eta[k, 3:])
+        Hr[:3, 3] = ref_eta[k, :3]
+        _, dpsi[k], dv[k], _ = error_coordinates(H, v[k], Hr, ref_v[k])
+    return {
+        "position_mae": {n: float(np.mean(np.abs(e[:, i]))) for i, n in enumerate(DOF_NAMES)},
+        "velocity_mae": {n: float(np.mean(np.abs(dv[:, i]))) for i, n in enumerate(VEL_NAMES)},
+        "position_mne": float(np.mean(np.linalg.norm(dpsi, axis=1))),
+        "velocity_mne": float(np.mean(np.linalg.norm(dv, axis=1))),
+        "samples": int(t.size),
+        "duration_s": float(t[-1] - t[0]),
+    }

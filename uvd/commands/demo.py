@@ -43,8 +43,8 @@ import numpy as np
 
 from uvd import _jitcache
 from uvd.bench import host_steal_s
-from uvd.geometry import wrap_angles
 from uvd.jsonio import write_json
+from uvd.lockstep import hil_tracking
 
 #: lockstep runs (seeds seed … seed + SPREAD_SEEDS − 1) whose spread the HIL run is set against
 SPREAD_SEEDS = 5
@@ -90,66 +90,6 @@ def _rss_mb(pid: int | None) -> tuple[float, float]:
             k, v = line.split(":", 1)
             vals[k] = int(v.split()[0]) / 1024.0
     return vals.get("VmRSS", math.nan), vals.get("VmHWM", math.nan)
-
-
-def hil_tracking(telemetry: Path, truth: np.ndarray) -> dict[str, Any]:
-    """Tracking error of the armed cycles: the true state (truth log, interpolated at each
-    cycle's time) against the reference the daemon used — the same measures as
-    :func:`uvd.lockstep.tracking_errors`."""
-    from uvd.control.errors import error_coordinates
-    from uvd.geometry import euler_to_R
-    from uvd.lockstep import DOF_NAMES, VEL_NAMES
-    from uvd.telemetry.records import CycleRecord
-
-    t, ref_eta, ref_v = [], [], []
-    with telemetry.open(encoding="utf-8") as fh:
-        for line in fh:
-            try:
-                r = json.loads(line)
-            except ValueError:
-                continue
-            if r.get("type") != "cycle" or r.get("state") not in ("ARMED", "FAILSAFE") \
-                    or r.get("p_ref") is None:
-                continue
-            rec = CycleRecord.from_dict(r)
-            t.append(rec.t_ns * 1e-9)
-            ref_eta.append(rec.eta_ref())
-            ref_v.append(rec.v_ref)
-    if len(t) < 2 or truth.shape[0] < 2:
-        return {"samples": 0}
-    t = np.asarray(t)
-    # the first armed cycle ends with arming; the reference clock starts on the next one
-    t, ref_eta, ref_v = t[1:], np.asarray(ref_eta)[1:], np.asarray(ref_v)[1:]
-    tt = truth[:, 0]
-    keep = (t >= tt[0]) & (t <= tt[-1])
-    t, ref_eta, ref_v = t[keep], ref_eta[keep], ref_v[keep]
-    eta = np.empty((t.size, 6))
-    for i in range(6):
-        col = truth[:, 1 + i]
-        if i >= 3:
-            col = np.unwrap(col)
-        eta[:, i] = np.interp(t, tt, col)
-    v = np.stack([np.interp(t, tt, truth[:, 7 + i]) for i in range(6)], axis=1)
-    e = eta - ref_eta
-    e[:, 3:] = wrap_angles(e[:, 3:])
-    dpsi = np.empty((t.size, 6))
-    dv = np.empty((t.size, 6))
-    for k in range(t.size):
-        H = np.eye(4)
-        H[:3, :3] = euler_to_R(*eta[k, 3:])
-        H[:3, 3] = eta[k, :3]
-        Hr = np.eye(4)
-        Hr[:3, :3] = euler_to_R(*ref_eta[k, 3:])
-        Hr[:3, 3] = ref_eta[k, :3]
-        _, dpsi[k], dv[k], _ = error_coordinates(H, v[k], Hr, ref_v[k])
-    return {
-        "position_mae": {n: float(np.mean(np.abs(e[:, i]))) for i, n in enumerate(DOF_NAMES)},
-        "velocity_mae": {n: float(np.mean(np.abs(dv[:, i]))) for i, n in enumerate(VEL_NAMES)},
-        "position_mne": float(np.mean(np.linalg.norm(dpsi, axis=1))),
-        "velocity_mne": float(np.mean(np.linalg.norm(dv, axis=1))),
-        "samples": int(t.size),
-        "duration_s": float(t[-1] - t[0]),
-    }
 
 
 def lockstep_sim(cfg, seed: int):

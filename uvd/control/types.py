@@ -58,6 +58,8 @@ class Diagnostics:
         Estimator counters (adaptation steps, ignored calls, v̂ re-synchronisations).
     velocity_error : float or None
         ‖v̂ − v‖ of an observer-based estimator (AID's (4.23)).
+    hold_reason : str
+        The DOFs whose parameters are held while the others adapt, and why ("" : none).
     """
 
     theta: np.ndarray | None = None
@@ -70,6 +72,7 @@ class Diagnostics:
     skipped: int | None = None
     resyncs: int | None = None
     velocity_error: float | None = None
+    hold_reason: str = ""
 
 
 NO_DIAGNOSTICS = Diagnostics()
@@ -100,10 +103,14 @@ class ControllerSpec:
 @dataclass(frozen=True)
 class EstimatorSpec:
     """An estimator as the core runs it: ``step(VehicleState, u_applied, params, state, dt)
-    -> state``, with its ``diagnostics(state)`` hook."""
+    -> state``, with its ``diagnostics(state)`` hook and, when it adapts per DOF,
+    ``hold_dofs(new, old, actuated) -> state``: the new state with the parameters of the DOFs
+    not ``actuated`` ((6,) bool) kept at the old state's and the reason in its diagnostics'
+    ``hold_reason`` (the core calls it after every step; None: nothing held)."""
 
     name: str
     step: Callable[..., Any]
     params: Any
     init_state: Any
     diagnostics: Callable[[Any], Diagnostics] = no_diagnostics
+    hold_dofs: Callable[[Any, Any, np.ndarray], Any] | None = None

@@ -62,6 +62,7 @@ W_UVᵀ∆v are the structured products above (the drag block is −|vᵢ|(v ⊗
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -83,7 +84,7 @@ __all__ = [
     "aid6_estimator",
     "AID3Gains", "AID3Params", "AID3State", "aid3_init", "aid3_step", "aid3_params",
     "aid3_estimator",
-    "aid_unfreeze", "INITP_6DOF", "INITP_ROT",
+    "aid_unfreeze", "aid_hold_dofs", "held_indices", "INITP_6DOF", "INITP_ROT",
 ]
 
 _INTERP = ("linear", "hold")
@@ -523,15 +524,82 @@ class _AIDState:
     skipped: int = 0
     resyncs: int = 0
     t_s: float = 0.0
+    hold_reason: str = ""
 
 
 def aid_diagnostics(st: _AIDState) -> Diagnostics:
     """The diagnostics hook of AID's spec: θ̂ (a copy), M̂'s extreme eigenvalues (the health
-    of Theorem 4.3.1's (4.36)), the freeze and its reason, the counters and ‖v̂ − v‖."""
+    of Theorem 4.3.1's (4.36)), the freeze and its reason, the counters, ‖v̂ − v‖ and the
+    DOFs held (:func:`aid_hold_dofs`)."""
     return Diagnostics(theta=np.array(st.theta, dtype=float), m_min_eig=float(st.m_min_eig),
                        m_max_eig=float(st.m_max_eig), frozen=bool(st.frozen),
                        freeze_reason=st.freeze_reason, steps=st.steps, skipped=st.skipped,
-                       resyncs=st.resyncs, velocity_error=float(np.linalg.norm(st.dv)))
+                       resyncs=st.resyncs, velocity_error=float(np.linalg.norm(st.dv)),
+                       hold_reason=st.hold_reason)
+
+
+_DOFS = ("surge", "sway", "heave", "roll", "pitch", "yaw")
+
+
+@functools.cache
+def held_indices(n_v: int, given_up: tuple[int, ...]) -> np.ndarray:
+    """The entries of θ̂ that the model's rows ``given_up`` (DOF indices 0…5) own.
+
+    6-DOF (n_v 6, θ_UV of (2.48)): row and column j of M̂ — the θ_M entries (i, k), i ≤ k,
+    of (2.45) with i = j or k = j, since M̂ is symmetric and (4.24) moves both — row j of
+    every D̂ᵢ (4.25), ĝ when a translational row is given up (4.26: ĝ̇ sums ∆ν over those
+    rows) and b̂ when a rotational one is (4.27: ∆ω). 3-DOF (n_v 3, θ_UVR of (2.41)): the same
+    for Î (4.11), Ĉᵢ (4.12) and b̂ (4.13), on the rotational DOFs only (roll, pitch, yaw are
+    its rows 0, 1, 2; a translational DOF given up holds nothing there)."""
+    rows = [j for j in given_up if j < 6] if n_v == 6 else [j - 3 for j in given_up if j >= 3]
+    if not rows:
+        return np.zeros(0, dtype=np.int64)
+    n = n_v
+    n_m = n * (n + 1) // 2
+    idx = []
+    k = 0
+    for i in range(n):
+        for j in range(i, n):  # θ_M's upper triangle, as _inertia_law walks it
+            if i in rows or j in rows:
+                idx.append(k)
+            k += 1
+    for i in range(n):  # D̂ᵢ (Ĉᵢ) stored column-major: entry (r, c) at n_m + n²i + n c + r
+        for c in range(n):
+            idx.extend(n_m + n * n * i + n * c + r for r in rows)
+    tail = n_m + n ** 3
+    if n == 6:
+        if any(r < 3 for r in rows):
+            idx.append(tail)                     # ĝ
+        if any(r >= 3 for r in rows):
+            idx.extend((tail + 1, tail + 2, tail + 3))  # b̂
+    else:
+        idx.extend((tail, tail + 1, tail + 2))   # b̂
+    out = np.array(sorted(set(idx)), dtype=np.int64)
+    out.setflags(write=False)
+    return out
+
+
+def aid_hold_dofs(new: _AIDState, old: _AIDState, actuated: np.ndarray) -> _AIDState:
+    """AID's ``hold_dofs`` hook (:class:`~uvd.control.types.EstimatorSpec`): the parameters
+    of the DOFs not ``actuated`` ((6,) bool; the core's allocation gave them up) stay at
+    ``old``'s — their laws (4.24)–(4.27) ((4.11)–(4.13) for 3-DOF) are not integrated on
+    those rows (:func:`held_indices`) — while the other rows adapt; v̂ (4.23) still runs on
+    the whole model. ``hold_reason`` names them ("" when every DOF is actuated)."""
+    if actuated.all():
+        return new if not new.hold_reason else replace(new, hold_reason="")
+    given_up = tuple(int(j) for j in np.flatnonzero(~np.asarray(actuated, dtype=bool)))
+    n_v = 6 if new.theta.shape[0] == N_THETA_UV else 3
+    idx = held_indices(n_v, given_up)
+    theta = new.theta
+    if idx.size and new.theta is not old.theta:
+        theta = np.array(new.theta)
+        theta[idx] = old.theta[idx]
+        theta.setflags(write=False)
+    names = ", ".join(_DOFS[j] for j in given_up)
+    them = "it" if len(given_up) == 1 else "them"
+    reason = (f"{names} given up (no thruster reaches {them}): rows held, "
+              f"{idx.size} of {theta.shape[0]} parameters of θ̂")
+    return replace(new, theta=theta, hold_reason=reason)
 
 
 @dataclass(frozen=True)
@@ -612,7 +680,8 @@ def aid6_estimator(theta0: np.ndarray | UVParams | None = None,
     default)."""
     theta0 = INITP_6DOF.theta if theta0 is None else theta0
     return EstimatorSpec(name=name, step=aid6_step, params=params or AID6Params(),
-                         init_state=aid6_init(theta0), diagnostics=aid_diagnostics)
+                         init_state=aid6_init(theta0), diagnostics=aid_diagnostics,
+                         hold_dofs=aid_hold_dofs)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -687,7 +756,8 @@ def aid3_estimator(theta0: np.ndarray | RotParams | None = None,
     default)."""
     theta0 = INITP_ROT.theta if theta0 is None else theta0
     return EstimatorSpec(name=name, step=aid3_step, params=params or AID3Params(),
-                         init_state=aid3_init(theta0), diagnostics=aid_diagnostics)
+                         init_state=aid3_init(theta0), diagnostics=aid_diagnostics,
+                         hold_dofs=aid_hold_dofs)
 
 
 # ---------------------------------------------------------------------------------------------

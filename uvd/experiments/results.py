@@ -327,7 +327,16 @@ def _note_ambc_6dof_unstable(result: dict) -> str | None:
             "over the second half of step 2).")
 
 
-NOTES = {"aid-6dof": _note_aid_6dof, "aid-rot": _note_aid_rot,
+def _note_of(module: str):
+    def note(result: dict) -> str | None:
+        import importlib
+        return importlib.import_module(f"uvd.experiments.{module}").note(result)
+    return note
+
+
+NOTES = {"fault-tolerance": _note_of("fault_tolerance"),
+         "fault-tolerance-hil": _note_of("fault_tolerance_hil"),
+         "aid-6dof": _note_aid_6dof, "aid-rot": _note_aid_rot,
          "ambc-6dof-unstable": _note_ambc_6dof_unstable,
          "fig51-hunt": _note_fig51_hunt,
          "pdc-vs-ambc": _note_pdc_vs_ambc}

@@ -313,6 +313,7 @@ def estimate_payload(r: Mapping[str, Any]) -> dict[str, Any]:
                         "drags": drags, "g": g, "b": b, "m_min_eig": r.get("m_min_eig"),
                         "m_max_eig": r.get("m_max_eig"), "frozen": bool(r.get("frozen")),
                         "freeze_reason": str(r.get("freeze_reason") or ""),
+                        "hold_reason": str(r.get("hold_reason") or ""),
                         "steps": r.get("steps"), "velocity_error": r.get("velocity_error"),
                         "age_s": r.get("age_s"),
                         "source": str(r.get("source") or "estimator")})

@@ -29,7 +29,12 @@ def actuator_status(fb, first_write_ns: int) -> ActuatorStatus:
 
     Speeds only when every node's feedback is valid; faults named per node (node 0's are the
     bus's: ``bus_off``/``bus_closed`` set ``bus_off``, ``send_failed`` is a fault); the
-    feedback's age counts from the first command at the earliest."""
+    feedback's age counts from the first command at the earliest. ``faulted``: the thrusters
+    whose node has a fault of its own — EMCY, FAULT, a reset, heartbeat lost (the amplifier
+    source of η, :func:`uvd.runtime.cycle.amplifier_source`); ``feedback_lost`` alone (a few
+    TPDOs missed: a loaded bus or machine, often transient) is not one — it stays the
+    ``feedback_missing`` trigger's, aged against ``feedback_stale_s`` — and
+    ``healthy_feedback_t_ns`` is the feedback's time over the nodes not ``faulted``."""
     faults: list[str] = []
     bus_off = False
     for nid, names in fb.faults.items():
@@ -44,9 +49,15 @@ def actuator_status(fb, first_write_ns: int) -> ActuatorStatus:
         if real:
             faults.append(f"node {nid}: {', '.join(real)}")
     oldest = max(min(n.t_ns for n in fb.nodes), first_write_ns)
+    faulted = tuple(i + 1 for i, n in enumerate(fb.nodes)
+                    if any(f != "feedback_lost" for f in n.faults))
+    healthy = [n.t_ns for i, n in enumerate(fb.nodes) if i + 1 not in faulted]
+    oldest_ok = max(min(healthy), first_write_ns) if healthy else 0
     return ActuatorStatus(omega_rad_s=fb.omega_rad_s if bool(fb.valid.all()) else None,
                           enabled=bool(fb.enabled.all()), faults=tuple(faults),
-                          feedback_t_ns=oldest if oldest > 0 else None, bus_off=bus_off)
+                          feedback_t_ns=oldest if oldest > 0 else None, bus_off=bus_off,
+                          faulted=faulted,
+                          healthy_feedback_t_ns=oldest_ok if oldest_ok > 0 else None)
 
 
 class GcFreeze:

@@ -17,6 +17,7 @@ wrench. Free functions take both and return a new state; nothing else holds any:
 amplifiers' typed status, as :class:`CycleInputs` — and returns everything the write phase
 needs (:class:`CycleResult`)::
 
+    amplifier_source    η from the amplifiers' own faults (``[failsafe] amplifier_fault``)
     uvd.core.sense      navigation, applied wrench, online estimators
     Health              source ages, non-finite inputs and the last command, M̂/θ̂ of the
                         controller (its spec's diagnostics hook), amplifiers, bus, loop, leak
@@ -56,6 +57,7 @@ from uvd.runtime.failsafe import (
     Action,
     ArbiterState,
     Decision,
+    FailsafeEvent,
     Health,
     Thresholds,
     TriggerDef,
@@ -77,7 +79,8 @@ from uvd.runtime.lifecycle import (
 __all__ = ["ActuatorStatus", "CycleInputs", "CycleResult", "CycleConfig", "CycleState",
            "cycle_init", "update", "apply", "supervise", "boot_complete", "request_arm",
            "request_disarm", "request_shutdown", "reset_failsafe", "unsupervised",
-           "mode_for", "nonfinite_inputs", "inputs_record", "inputs_from_record"]
+           "mode_for", "nonfinite_inputs", "inputs_record", "inputs_from_record",
+           "amplifier_source", "KEEP_DOFS"]
 
 if TYPE_CHECKING:
     from uvd import core
@@ -118,6 +121,14 @@ class ActuatorStatus:
         earliest (None: no command sent yet — age 0).
     bus_off : bool
         The CAN controller is bus-off (or the bus is closed).
+    faulted : tuple of int
+        The thrusters (1…n, thruster order) whose amplifier reports a fault of its own —
+        EMCY, a FAULT statusword, heartbeat lost, a reset (a few missed TPDOs alone are not:
+        they age the feedback): the amplifier source of η (``[failsafe] amplifier_fault =
+        "reallocate"``). Their names are in ``faults`` (``"node N: …"``; the bus's
+        ``"bus: …"``).
+    healthy_feedback_t_ns : int or None
+        As ``feedback_t_ns``, over the amplifiers not ``faulted`` only.
     """
 
     omega_rad_s: np.ndarray | None = None
@@ -125,6 +136,8 @@ class ActuatorStatus:
     faults: tuple[str, ...] = ()
     feedback_t_ns: int | None = None
     bus_off: bool = False
+    faulted: tuple[int, ...] = ()
+    healthy_feedback_t_ns: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,17 +159,22 @@ class CycleInputs:
     extra: Mapping[str, Any] | None = None
 
 
-def inputs_record(inp: CycleInputs) -> dict[str, Any]:
+def inputs_record(inp: CycleInputs, thruster_eta: np.ndarray | None = None
+                  ) -> dict[str, Any]:
     """Everything of ``inp`` but the sensor samples, as plain data for the cycle record (the
     samples travel as raw frames and their receive stamps); :func:`inputs_from_record` reads
-    it back."""
+    it back. ``thruster_eta``: the effectiveness η the update allocated with
+    (:attr:`CycleResult.thruster_eta`), recorded beside the inputs it came from — a replay
+    derives it again from them and the recorded commands, and compares."""
     a = inp.actuators
     return {"actuators": None if a is None else {
                 "omega_rad_s": a.omega_rad_s, "enabled": a.enabled, "faults": list(a.faults),
-                "feedback_t_ns": a.feedback_t_ns, "bus_off": a.bus_off},
+                "feedback_t_ns": a.feedback_t_ns, "bus_off": a.bus_off,
+                "faulted": list(a.faulted), "healthy_feedback_t_ns": a.healthy_feedback_t_ns},
             "overrun_streak": inp.overrun_streak,
             "overrun_streak_exceeded": inp.overrun_streak_exceeded,
-            "leak": inp.leak, "extra": None if inp.extra is None else dict(inp.extra)}
+            "leak": inp.leak, "extra": None if inp.extra is None else dict(inp.extra),
+            "thruster_eta": None if thruster_eta is None else np.array(thruster_eta)}
 
 
 def inputs_from_record(t_ns: int, rec: Mapping[str, Any], ins=None, dvl=None, depth=None
@@ -167,11 +185,14 @@ def inputs_from_record(t_ns: int, rec: Mapping[str, Any], ins=None, dvl=None, de
     act = None
     if a is not None:
         w = a.get("omega_rad_s")
+        hf = a.get("healthy_feedback_t_ns")
         act = ActuatorStatus(
             omega_rad_s=None if w is None else np.asarray(w, dtype=float),
             enabled=bool(a["enabled"]), faults=tuple(a.get("faults") or ()),
             feedback_t_ns=None if a.get("feedback_t_ns") is None else int(a["feedback_t_ns"]),
-            bus_off=bool(a.get("bus_off", False)))
+            bus_off=bool(a.get("bus_off", False)),
+            faulted=tuple(int(i) for i in a.get("faulted") or ()),
+            healthy_feedback_t_ns=None if hf is None else int(hf))
     return CycleInputs(t_ns, ins, dvl, depth, act, int(rec.get("overrun_streak", 0)),
                        bool(rec.get("overrun_streak_exceeded", False)), rec.get("leak"),
                        rec.get("extra"))
@@ -183,7 +204,8 @@ class CycleResult:
 
     ``state`` is the lifecycle's (ARMED, FAILSAFE, …); ``effects`` the failsafe events and
     lifecycle transitions of this update, in order, for the listeners; ``armed_at_ns`` when
-    the vehicle was last armed (None: not yet)."""
+    the vehicle was last armed (None: not yet); ``thruster_eta`` the effectiveness η the
+    update allocated with (None: every thruster healthy)."""
 
     out: core.CoreOutputs
     health: Health
@@ -192,6 +214,7 @@ class CycleResult:
     operator_mode: str
     effects: tuple = ()
     armed_at_ns: int | None = None
+    thruster_eta: np.ndarray | None = None
 
 
 def mode_for(action: Action, operator_mode: str) -> Mode:
@@ -490,6 +513,57 @@ def _set_eta(config: CycleConfig, state: CycleState, c: Any
         state._replace(thruster_eta=None if (eta == 1.0).all() else eta), ()
 
 
+# -- the amplifier's own source of η (inside the update) --
+
+#: the DOFs the amplifier source must keep to accommodate a fault: depth and attitude (safety)
+KEEP_DOFS = ("heave", "roll", "pitch", "yaw")
+
+
+class _AmplifierView(NamedTuple):
+    eta: np.ndarray | None      # the η the update allocates with
+    faults: tuple[str, ...]     # the amplifier faults the arbiter sees
+    feedback_t_ns: int | None   # the feedback time the arbiter ages
+    effects: Effects            # one "accommodated" event per thruster newly at η 0
+
+
+def amplifier_source(config: CycleConfig, state: CycleState, a: ActuatorStatus | None,
+                     t_ns: int) -> _AmplifierView:
+    """The amplifier's own fault as a source of η (``[failsafe] amplifier_fault``).
+
+    ``"disarm"`` (the default) leaves η alone: the arbiter's ``amplifier_fault`` disarms and
+    ``feedback_missing`` zeroes thrust, as before. ``"reallocate"``: every thruster whose
+    amplifier reports a fault of its own (:attr:`ActuatorStatus.faulted`) gets η = 0 — when the
+    allocation of that η still keeps :data:`KEEP_DOFS` (depth and attitude); the arbiter then
+    sees neither those amplifiers' faults nor their feedback's age, the bus's faults still
+    count, and each newly dead thruster is told as a ``FailsafeEvent`` of kind
+    ``accommodated`` (trigger ``amplifier_fault``, action WARN: "thruster 4 eta 0 (amplifier);
+    given up: surge"). If the remaining thrusters cannot keep them, nothing is accommodated and
+    the failsafe acts as under ``"disarm"``. η 0 stays once set (the cycle's state): only the
+    operator's ``SetThrusterEta`` gives the thruster back, and only once its amplifier has
+    stopped reporting (while it reports, the next update sets η 0 again)."""
+    eta = state.thruster_eta
+    if a is None:
+        return _AmplifierView(eta, (), None, ())
+    if (not a.faulted or config.core is None
+            or config.thresholds.amplifier_fault != "reallocate"):
+        return _AmplifierView(eta, a.faults, a.feedback_t_ns, ())
+    n = config.core.allocator.n_thrusters
+    idx = sorted({i - 1 for i in a.faulted if 1 <= i <= n})
+    new = np.ones(n) if eta is None else eta.copy()
+    newly = [i for i in idx if new[i] != 0.0]
+    new[idx] = 0.0
+    given_up = config.core.accommodation_for(new)[0].given_up
+    if any(d in KEEP_DOFS for d in given_up):
+        return _AmplifierView(eta, a.faults, a.feedback_t_ns, ())
+    lost = ", ".join(given_up) or "none"
+    effects = tuple(FailsafeEvent(t_ns, "accommodated", "amplifier_fault", Action.WARN,
+                                  f"thruster {i + 1} eta 0 (amplifier); given up: {lost}")
+                    for i in newly)
+    return _AmplifierView(new if newly else eta,
+                          tuple(f for f in a.faults if f.startswith("bus:")),
+                          a.healthy_feedback_t_ns, effects)
+
+
 # -- the update --
 
 def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
@@ -501,25 +575,27 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
     st = state.core
     a = inp.actuators
     omega = a.omega_rad_s if a is not None else None
-    ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega,
-                         thruster_eta=state.thruster_eta)
+    amp = amplifier_source(config, state, a, inp.t_ns)
+    eta = amp.eta
+    ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega, thruster_eta=eta)
     sensed = core.sense(cfg, ci, st, dt)
     nav = sensed.nav
 
     diag = cfg.controller.diagnostics(st.ctrl)
     fb_age = None
     if a is not None:
-        fb_age = 0.0 if a.feedback_t_ns is None else (inp.t_ns - a.feedback_t_ns) * 1e-9
+        fb_age = 0.0 if amp.feedback_t_ns is None else (inp.t_ns - amp.feedback_t_ns) * 1e-9
     h = Health(inp.t_ns, **nav_health(nav),
                nonfinite_inputs=nonfinite_inputs(inp.ins, inp.dvl, inp.depth),
                nonfinite_outputs=state.nonfinite_out, m_hat_min_eig=diag.m_min_eig,
                theta_hat=diag.theta, amplifiers_enabled=bool(a is not None and a.enabled),
-               amplifier_faults=a.faults if a is not None else (), feedback_age_s=fb_age,
+               amplifier_faults=amp.faults, feedback_age_s=fb_age,
                bus_off=bool(a is not None and a.bus_off),
                overrun_streak=inp.overrun_streak,
                overrun_streak_exceeded=inp.overrun_streak_exceeded, leak=inp.leak,
                extra=inp.extra, armed=state.lifecycle.armed)
     d, state, effects = supervise(config, state, h)
+    effects = amp.effects + effects
     armed = state.lifecycle.armed
 
     armed_at = state.armed_at_ns
@@ -543,7 +619,7 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
         if inp.t_ns <= until:
             manual = state.manual
     ci = core.CoreInputs(inp.t_ns, inp.ins, inp.dvl, inp.depth, omega, armed, mode, manual,
-                         state.thruster_eta)
+                         eta)
     out, st = core.act(cfg, sensed, ci, st, dt)
     lapsed = manual_mode and state.manual is not None and manual is None
     fdc = state.fdc
@@ -554,7 +630,7 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
                           out.thrust_n)
     new = CycleState(st, state.arbiter, state.lifecycle, d, h, state.operator_mode,
                      None if lapsed else state.manual,  # a silent joystick stops the vehicle
-                     until, state.manual_timeout_ns, None, state.thruster_eta, armed, armed_at,
+                     until, state.manual_timeout_ns, None, eta, armed, armed_at,
                      ("command",) if out.status == "non-finite" else (), fdc)
     return CycleResult(out, h, d, new.lifecycle.state, state.operator_mode, effects,
-                       armed_at), new
+                       armed_at, eta), new

@@ -43,13 +43,19 @@ depth_stuck             depth value unchanged ``depth_stuck_s``     ZERO_THRUST 
 nonfinite_input         NaN/inf in a sensor input                   ZERO_THRUST   clear
 nonfinite_output        NaN/inf in a command or estimate            ZERO_THRUST   latch
 parameter_divergence    M̂ not PD or θ̂ out of bounds / not finite    FALLBACK      latch
-amplifier_fault         an amplifier reports a fault                DISARM        latch
+amplifier_fault         an amplifier reports a fault (below)        DISARM        latch
 feedback_missing        amplifier feedback older than threshold     ZERO_THRUST   clear
 bus_off                 CAN bus-off                                 DISARM        latch
 loop_overrun_streak     overrun streak reached ``[loop]`` limit     ZERO_THRUST   clear
 cycle_exception         the cycle callback raised                   ZERO_THRUST   latch
 leak                    leak input asserted                         DISARM        latch
 ======================  ==========================================  ============  ========
+
+**An amplifier's fault as a source of η.** With ``amplifier_fault = "reallocate"`` a faulted
+amplifier's thruster gets effectiveness η = 0 inside the cycle
+(:func:`uvd.runtime.cycle.amplifier_source`) when the rest still reach heave, roll, pitch
+and yaw; its faults and feedback age then never reach this arbiter. Otherwise — and always
+under the default ``"disarm"`` — the table's rows apply.
 
 **Not yet available.** A navigation source that has never delivered a sample (age ``inf``:
 the INS, DVL or depth sensor still starting after boot) is not a failure while the vehicle is
@@ -69,7 +75,7 @@ import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -209,6 +215,14 @@ class Thresholds:
     clear_after_s: float = setting(
         1.0, unit="s", min=0.0, max=600.0, reload=True,
         doc="a non-latching trigger clears once its condition has been false this long")
+    amplifier_fault: Literal["disarm", "reallocate"] = setting(
+        "disarm", reload=True,
+        doc="what an amplifier's own fault (EMCY, FAULT, heartbeat or feedback lost) does: "
+            "disarm (the default: the fault may have a cause the other amplifiers share — "
+            "supply, water, a fouled propeller — and a disarmed, positively buoyant vehicle "
+            "surfaces), or reallocate: that thruster's eta 0 through the cycle "
+            "(uvd.runtime.cycle.amplifier_source) while heave, roll, pitch and yaw stay "
+            "actuated, else disarm")
     disabled: tuple[str, ...] = setting(
         (), reload=True,
         doc="names of built-in triggers to switch off (e.g. dvl_bottom_lock_lost in a "

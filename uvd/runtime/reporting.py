@@ -30,7 +30,7 @@ def cycle_record(t_ns: int, dt: float, inp: CycleInputs, r: CycleResult) -> dict
         ins_rx_ns=None if inp.ins is None else inp.ins.t_ns,
         dvl_rx_ns=None if inp.dvl is None else inp.dvl.t_ns,
         depth_rx_ns=None if inp.depth is None else inp.depth.t_ns,
-        inputs=inputs_record(inp),
+        inputs=inputs_record(inp, r.thruster_eta),
         triggers=tuple(a.name for a in d.active), operator_mode=r.operator_mode,
         p_ref=None if ref is None else ref.H[:3, 3],
         R_ref=None if ref is None else ref.H[:3, :3],

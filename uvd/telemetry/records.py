@@ -178,13 +178,15 @@ def estimate_record(t_ns: int, estimator: str, g, age_s: float | None = None,
     """The ``"estimate"`` record of an online estimator (``source`` ``"estimator"``) or of an
     adaptive controller's own θ̂ (``"controller"``) from its spec's diagnostics
     (:class:`uvd.control.types.Diagnostics`): θ̂ (a copy), M̂'s extreme eigenvalues, frozen
-    and why, the counters, ‖v̂ − v‖ and ``age_s``, the time since θ̂ was last stepped (None:
-    not known)."""
+    and why, the counters, ‖v̂ − v‖, ``age_s``, the time since θ̂ was last stepped (None:
+    not known), and ``hold_reason``: the DOFs whose parameters are held because no thruster
+    reaches them any more ("" : none)."""
     return {"type": "estimate", "t_ns": int(t_ns), "estimator": estimator, "source": source,
             "theta": None if g.theta is None else np.array(g.theta, dtype=float),
             "m_min_eig": g.m_min_eig, "m_max_eig": g.m_max_eig, "frozen": bool(g.frozen),
             "freeze_reason": g.freeze_reason, "steps": g.steps, "skipped": g.skipped,
-            "resyncs": g.resyncs, "velocity_error": g.velocity_error, "age_s": age_s}
+            "resyncs": g.resyncs, "velocity_error": g.velocity_error, "age_s": age_s,
+            "hold_reason": g.hold_reason}
 
 
 def estimate_records(core_cfg, state, t_ns: int) -> list[dict[str, Any]]:

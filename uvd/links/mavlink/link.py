@@ -268,7 +268,8 @@ class MavlinkLink:
             elif kind == "estimate" and r.get("source", "estimator") == "estimator":
                 self._estimate = r
             elif kind == "failsafe":
-                sev = "warning" if r["kind"] in ("fired", "action") else "info"
+                # "accommodated": the amplifier source of η (thruster, η, source, given up)
+                sev = "warning" if r["kind"] in ("fired", "action", "accommodated") else "info"
                 self._text((sev, f"failsafe {r['kind']}: {r['trigger']} -> "
                                          f"{r['action']} ({r['reason']})"))
             elif kind == "lifecycle":

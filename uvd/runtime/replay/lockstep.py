@@ -260,10 +260,15 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
         recorded_thrust.append(want)
         if same:
             report.commands_compared += 1
+            bad = None
             if want.shape != thrust.shape or not np.array_equal(want, thrust):
+                bad = _mismatch(k, t, want, thrust, r, res)
+            elif "thruster_eta" in r["inputs"]:
+                bad = _eta_mismatch(k, t, r["inputs"]["thruster_eta"], res.thruster_eta)
+            if bad is not None:
                 report.mismatches += 1
                 if report.first_mismatch is None:
-                    report.first_mismatch = _mismatch(k, t, want, thrust, r, res)
+                    report.first_mismatch = bad
         if progress is not None:
             progress(k + 1, n)
     report.tracking = {"recorded": tracking(rec.cycles[:report.cycles], recorded_thrust),
@@ -294,6 +299,19 @@ def _as_record(res, r: Mapping[str, Any]) -> dict[str, Any]:
             "p_ref": None if ref is None else ref.H[:3, 3],
             "R_ref": None if ref is None else ref.H[:3, :3],
             "v_ref": None if ref is None else ref.v}
+
+
+def _eta_mismatch(k: int, t: int, want, got) -> dict[str, Any] | None:
+    """The recorded effectiveness η against the replayed one (None: the same, bit for bit;
+    None on both sides: every thruster healthy)."""
+    if want is None and got is None:
+        return None
+    w = None if want is None else np.asarray(want, dtype=float)
+    if w is not None and got is not None and w.shape == got.shape and np.array_equal(w, got):
+        return None
+    return {"cycle": k, "t_ns": t, "field": "thruster_eta",
+            "recorded": None if w is None else w.tolist(),
+            "replayed": None if got is None else np.asarray(got).tolist()}
 
 
 def _mismatch(k: int, t: int, want, got, r, res) -> dict[str, Any]:
