@@ -45,8 +45,8 @@ def register(sub) -> None:
                    help="aid: initial parameters (default INITP of Tables 4.6-4.7)")
     p.add_argument("--gains", metavar="a,g1,g2,g3,g4",
                    help="aid: gains a, γ1..γ4 (default 10,5000,20000,2000,2000, §4.6; with "
-                        "--profile a,γ1,γ2,γ3 of the rotational law, default §4.5's with each DOF's "
-                        "scaled by its inertia over the JHU ROV's, "
+                        "--profile a,γ1,γ2,γ3 of the rotational law, default §4.5's with each "
+                        "DOF's scaled by its inertia over the JHU ROV's, "
                         "uvd.estimation.aid.scaled_aid_gains)")
     p.add_argument("--window", type=float, default=None, metavar="S",
                    help="ls: Savitzky-Golay window in seconds (default 2.1; 1.0 with "
