@@ -92,13 +92,19 @@ class Plant:
 
     def step(self, thrust_command_n: np.ndarray) -> None:
         """Advance one step of 1/rate_hz with the thruster commands (N) held."""
+        self.steps_held(thrust_command_n, 1)
+
+    def steps_held(self, thrust_command_n: np.ndarray, n: int) -> None:
+        """Advance ``n`` steps of 1/rate_hz with the thruster commands (N) held (zero-order
+        hold): one compiled call, the very arithmetic of ``n`` calls of :meth:`step`."""
         m = self.model
-        _thrusters_then_rigid_body(self.thrusters.kernel_args(thrust_command_n, self.dt), self.B,
-                                   m.M, m.M_inv, m.D_flat, m.g, m.b, self.H, self.v, self.dt,
-                                   self.u, self._H_next, self._v_next)
-        self.H, self._H_next = self._H_next, self.H
-        self.v, self._v_next = self._v_next, self.v
-        self.steps += 1
+        _steps_held(n, self.thrusters.kernel_args(thrust_command_n, self.dt), self.B, m.M,
+                    m.M_inv, m.D_flat, m.g, m.b, self.H, self.v, self.dt, self.u, self._H_next,
+                    self._v_next)
+        if n % 2:  # the state ended in the second pair of buffers
+            self.H, self._H_next = self._H_next, self.H
+            self.v, self._v_next = self._v_next, self.v
+        self.steps += n
         self.t = self.steps * self.dt
 
     def step_wrench(self, u: np.ndarray) -> None:
@@ -127,3 +133,16 @@ def _thrusters_then_rigid_body(thr_args, B, M, M_inv, D_flat, g, b, H, v, dt, u,
             acc += B[i, j] * f[j]
         u[i] = acc
     _rkmk4(M, M_inv, D_flat, g, b, H, v, u, dt, H_out, v_out)
+
+
+@numba.njit(cache=True)
+def _steps_held(n, thr_args, B, M, M_inv, D_flat, g, b, H, v, dt, u, H_next, v_next):
+    """``n`` plant steps with the command held, alternating between the two state buffers
+    (after an odd ``n`` the state is in ``H_next``, ``v_next``)."""
+    for i in range(n):
+        if i % 2 == 0:
+            _thrusters_then_rigid_body(thr_args, B, M, M_inv, D_flat, g, b, H, v, dt, u,
+                                       H_next, v_next)
+        else:
+            _thrusters_then_rigid_body(thr_args, B, M, M_inv, D_flat, g, b, H_next, v_next,
+                                       dt, u, H, v)

@@ -263,6 +263,11 @@ class TankPlant:
         p.steps += 1
         p.t = p.steps * p.dt
 
+    def steps_held(self, thrust_command_n: np.ndarray, n: int) -> None:
+        """``n`` calls of :meth:`step` (the command shaper runs at every one)."""
+        for _ in range(n):
+            self.step(thrust_command_n)
+
 
 def mounted(ins: InsSample, R_b: np.ndarray) -> InsSample:
     """The INS sample as an INS mounted rotated by R_b reports it: attitude R R_b, rate R_bᵀ ω."""

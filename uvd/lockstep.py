@@ -207,9 +207,16 @@ class Lockstep:
         out = r.out
         self.thrust_cmd = out.thrust_n
         newest = [None, None, None]
-        for _ in range(self.substeps):
-            self.plant.step(self.thrust_cmd)
-            self.t_ns += self.plant_dt_ns
+        left, step_ns = self.substeps, self.plant_dt_ns
+        while left:
+            # the plant runs compiled up to the next step at which a sample falls due (before
+            # it the instruments return nothing and change nothing: Instruments.next_due_ns)
+            n = min(left, max(1, -((self.t_ns - self.instruments.next_due_ns) // step_ns)))
+            self.plant.steps_held(self.thrust_cmd, n)
+            self.t_ns += n * step_ns
+            left -= n
+            if self.t_ns < self.instruments.next_due_ns:
+                continue
             got = self.instruments.sample(self.t_ns, self.plant.H, self.plant.v)
             for i, s in enumerate(got):
                 if s is not None:

@@ -171,6 +171,12 @@ class Instruments:
             setattr(self, name, p)
         self._before_epoch = False
 
+    @property
+    def next_due_ns(self) -> int:
+        """The earliest time a sample falls due: :meth:`sample` before it returns nothing
+        and changes nothing."""
+        return min(self._ins.next_ns, self._dvl.next_ns, self._depth.next_ns)
+
     def _frame(self, name: str, periodic: _Periodic) -> None:
         """Point the noise at the frame that just fell due (the one stream, or its own)."""
         if self.frame_seed is None:
