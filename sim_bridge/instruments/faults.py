@@ -65,8 +65,10 @@ class FaultyInstruments(Instruments):
         self.faults = faults
 
     def sample(self, t_ns, H, v):
-        ins, dvl, depth = super().sample(t_ns, H, v)
+        got = ins, dvl, depth = super().sample(t_ns, H, v)
         f = self.faults
+        if not any(m != "ok" for m in f.mode.values()):
+            return got  # no fault injected: the samples as made
         out = []
         for name, s in (("ins", ins), ("dvl", dvl), ("depth", depth)):
             mode = f.get(name) if s is not None else "ok"

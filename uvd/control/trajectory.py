@@ -258,6 +258,8 @@ class SequenceTrajectory:
     def at(self, t: float) -> Reference:
         i, tau = self._locate(t)
         traj = self.segments[i][1]
+        if i == 0 or self.blend_s <= 0.0 or tau >= self.blend_s:
+            return traj.at(tau)  # outside a blend: the segment's own, in one compiled call
         eta, d1, d2 = self._dof(i, tau)
         mask = traj.closed_loop_mask
         return reference_from_euler(eta, d1, d2, open_loop_wrench=traj.open_loop_wrench(tau),
