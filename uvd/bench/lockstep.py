@@ -7,9 +7,12 @@ work, 88767d0), checked out with ``git worktree add`` into a temporary folder (o
 a checkout already there). Each side runs ``uvd experiment EXPERIMENT --hours H --json …`` in its
 own Python process, the same interpreter and virtual environment, only ``PYTHONPATH`` telling
 which sources; the sides alternate (old, new, new, old, …) so that a change of the machine's
-load falls on both alike. Figures: each side's wall seconds (median of ``--repeats``), the ratio
-old/new (> 1: this checkout is faster), the load average, and whether the two sides' results are
-bit for bit the same (the JSON minus its wall times).
+load falls on both alike. Figures: each side's CPU seconds (user + system of the run's process,
+which a shared machine's load changes far less than the wall time) and wall seconds, the
+medians of ``--repeats``; the ratio old/new of the CPU medians (> 1: this checkout is faster),
+also net of each side's start-up (the CPU of its 0.01 h warm-up run: imports, loading the
+kernels), which a 6 h run spreads over 200 000 cycles; the load average; and whether the two
+sides' results are bit for bit the same (the JSON minus its wall times).
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -53,13 +57,17 @@ def _strip(x):
     return x
 
 
-def _one(src: Path, experiment: str, hours: float, out: Path) -> float:
+def _one(src: Path, experiment: str, hours: float, out: Path) -> tuple[float, float]:
+    """One run in its own process: (CPU seconds, wall seconds)."""
     env = {**os.environ, "PYTHONPATH": str(src)}
     cmd = [sys.executable, "-c", "import sys; from uvd.cli import main; sys.exit(main())",
            "experiment", experiment, "--hours", str(hours), "--json", str(out), "--quiet"]
+    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(cmd, cwd=src, env=env, check=True, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime), wall
 
 
 def run(args: argparse.Namespace) -> dict:
@@ -74,17 +82,22 @@ def run(args: argparse.Namespace) -> dict:
             made = True
         try:
             sides = {"old": old.resolve(), "new": ROOT}
-            # a warm-up run of each side: numba compiles (or loads) its kernels
-            for name, src in sides.items():
-                _one(src, args.experiment, 0.01, tmp / f"warm-{name}.json")
+            # a warm-up run of each side: numba compiles (or loads) its kernels; the second
+            # one's CPU is the side's start-up
+            start: dict[str, float] = {}
+            for name, src in [*sides.items(), *sides.items()]:
+                start[name] = _one(src, args.experiment, 0.01, tmp / f"warm-{name}.json")[0]
             walls: dict[str, list[float]] = {"old": [], "new": []}
+            cpus: dict[str, list[float]] = {"old": [], "new": []}
             order = []
             for i in range(args.repeats):
                 order += ["old", "new"] if i % 2 == 0 else ["new", "old"]
             load0 = os.getloadavg()
             for j, name in enumerate(order):
-                walls[name].append(_one(sides[name], args.experiment, args.hours,
-                                        tmp / f"{name}-{j}.json"))
+                cpu, wall = _one(sides[name], args.experiment, args.hours,
+                                 tmp / f"{name}-{j}.json")
+                cpus[name].append(cpu)
+                walls[name].append(wall)
             load1 = os.getloadavg()
             res = {n: _strip(json.loads((tmp / f"{n}-{order.index(n)}.json").read_text()))
                    for n in ("old", "new")}
@@ -93,11 +106,19 @@ def run(args: argparse.Namespace) -> dict:
                 subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
                                 str(old)], capture_output=True)
     med = {n: statistics.median(w) for n, w in walls.items()}
+    cpu = {n: statistics.median(c) for n, c in cpus.items()}
+    net = {n: cpu[n] - start[n] for n in cpu}
     return {"experiment": args.experiment, "simulated_hours": args.hours,
             "old": {"source": args.old_ref if args.old_path is None else str(args.old_path),
-                    "wall_s": walls["old"], "median_s": med["old"]},
-            "new": {"wall_s": walls["new"], "median_s": med["new"]},
-            "speed_ratio_old_over_new": med["old"] / med["new"],
+                    "cpu_s": cpus["old"], "median_cpu_s": cpu["old"],
+                    "startup_cpu_s": start["old"], "wall_s": walls["old"],
+                    "median_s": med["old"]},
+            "new": {"cpu_s": cpus["new"], "median_cpu_s": cpu["new"],
+                    "startup_cpu_s": start["new"], "wall_s": walls["new"],
+                    "median_s": med["new"]},
+            "speed_ratio_old_over_new": cpu["old"] / cpu["new"],
+            "speed_ratio_net_of_startup": net["old"] / net["new"] if net["new"] > 0 else None,
+            "wall_ratio_old_over_new": med["old"] / med["new"],
             "results_bit_identical": res["old"] == res["new"],
             "load_average": {"before": list(load0), "after": list(load1)}}
 
