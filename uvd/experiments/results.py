@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from uvd import experiments
+from uvd.experiments.reproduce import compare, report_line
 from uvd.jsonio import write_json
 from uvd.progress import Progress
 
@@ -410,9 +411,13 @@ def main(argv: list[str] | None = None) -> int:
         result.setdefault("experiment", name)
         result.setdefault("seed", args.seed)
         result["wall_seconds"] = round(time.perf_counter() - t0, 3)
+        before = json.loads(path.read_text()) if path.exists() else None
         write_json(path, result)
         results[name] = result
         _progress(f"[results] {name} done in {result['wall_seconds']:.0f} s")
+        if before is not None:  # the run against the JSON it replaces (make results-check)
+            _progress("[results] " + report_line(name, compare(before,
+                                                                json.loads(path.read_text()))))
     # keep the results of experiments not run this time (--only) on the page, in page order
     for name in all_names:
         path = res_dir / f"{name}.json"

@@ -1,0 +1,167 @@
+"""``make results-check`` (``python -m uvd.experiments.reproduce NAME …``): every run named in
+docs/RESULTS.md's tables re-run from its printed command and compared with the committed JSON.
+
+Each NAME is run exactly as RESULTS.md prints it, ``uvd experiment NAME --json OUT`` (seed 0,
+default duration), into a temporary folder; :func:`compare` then walks the committed
+``docs/results/NAME.json`` and the new one side by side. A number counts as reproduced within
+``--rel`` (1e-9 relative by default: the last bits the compiled kernels may round differently
+on another processor, docs/experiments.md "Reproducibility"); anything else — a string, a
+flag, a key or a list length — must be equal. Timings (keys naming wall or CPU time) are not
+compared. Exit status 1 when any experiment does not reproduce; the figures go to stdout.
+
+``--against DIR`` compares JSON files already written (e.g. by ``make results --out DIR``)
+instead of running.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REL = 1e-9
+#: keys not compared: how long a run took, not what it computed
+TIMING_KEYS = frozenset({"wall_seconds", "sim_wall_s", "cpu_s", "real_time_factor",
+                         "recordings"})
+
+
+def _timing(key: str) -> bool:
+    return key in TIMING_KEYS or "wall" in key
+
+
+def _number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def relative_difference(a: float, b: float) -> float:
+    """|a − b| / max(|a|, |b|); 0 when equal (NaN equals NaN, like signs of inf are equal)."""
+    if a == b or (math.isnan(a) and math.isnan(b)):
+        return 0.0
+    if math.isinf(a) or math.isinf(b) or math.isnan(a) or math.isnan(b):
+        return math.inf
+    return abs(a - b) / max(abs(a), abs(b))
+
+
+def compare(committed, rerun, rel: float = REL, path: str = "") -> dict:
+    """Walk two JSON values side by side.
+
+    Returns
+    -------
+    dict
+        ``numbers`` (how many compared), ``max_rel`` and ``max_rel_at`` (the largest relative
+        difference of a number and its path), ``over`` ([path, committed, re-run, rel] of every
+        number off by more than ``rel``), ``unequal`` ([path, what] of every other difference:
+        a key missing on one side, a list length, a string, a flag, a type).
+    """
+    out = {"numbers": 0, "max_rel": 0.0, "max_rel_at": None, "over": [], "unequal": []}
+    _walk(committed, rerun, rel, path or "$", out)
+    return out
+
+
+def _walk(a, b, rel: float, path: str, out: dict) -> None:
+    if _number(a) and _number(b):
+        r = relative_difference(float(a), float(b))
+        out["numbers"] += 1
+        if r > out["max_rel"]:
+            out["max_rel"], out["max_rel_at"] = r, path
+        if r > rel:
+            out["over"].append([path, a, b, r])
+    elif isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            if _timing(k):
+                continue
+            if k not in a or k not in b:
+                out["unequal"].append([f"{path}.{k}", "only in the "
+                                       + ("re-run" if k not in a else "committed JSON")])
+                continue
+            _walk(a[k], b[k], rel, f"{path}.{k}", out)
+    elif isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            out["unequal"].append([path, f"length {len(a)} committed, {len(b)} re-run"])
+            return
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _walk(x, y, rel, f"{path}[{i}]", out)
+    elif type(a) is not type(b) or a != b:
+        what = "differs" if type(a) is type(b) else f"{type(a).__name__} vs {type(b).__name__}"
+        out["unequal"].append([path, what])
+
+
+def reproduced(result: dict) -> bool:
+    return not result["over"] and not result["unequal"]
+
+
+def report_line(name: str, result: dict) -> str:
+    """One line per experiment: verdict, how many numbers, the largest relative difference."""
+    verdict = "reproduced" if reproduced(result) else "NOT reproduced"
+    line = (f"{name}: {verdict} — {result['numbers']} numbers, max relative difference "
+            f"{result['max_rel']:.2g}" + (f" at {result['max_rel_at']}"
+                                          if result["max_rel_at"] else ""))
+    if result["over"]:
+        line += f"; {len(result['over'])} over the tolerance, first " + ", ".join(
+            f"{p} {a!r} -> {b!r}" for p, a, b, _ in result["over"][:3])
+    if result["unequal"]:
+        line += f"; {len(result['unequal'])} other differences, first " + ", ".join(
+            f"{p} ({w})" for p, w in result["unequal"][:3])
+    return line
+
+
+def run_command(name: str, out: Path, seed: int = 0) -> float:
+    """``uvd experiment NAME --json OUT`` in a fresh process (the command RESULTS.md prints);
+    returns its wall seconds."""
+    t0 = time.perf_counter()
+    cmd = [sys.executable, "-m", "uvd", "experiment", name, "--json", str(out), "--quiet"]
+    if seed:
+        cmd += ["--seed", str(seed)]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def main(argv: list[str] | None = None) -> int:
+    from uvd import experiments
+    from uvd.experiments.results import ORDER
+    ap = argparse.ArgumentParser(prog="python -m uvd.experiments.reproduce",
+                                 description=__doc__.split("\n\n")[0])
+    ap.add_argument("names", nargs="*", metavar="NAME",
+                    help="experiments to re-run (default: every one with a committed JSON)")
+    ap.add_argument("--committed", type=Path, default=Path("docs/results"),
+                    help="folder of the committed JSON (docs/results)")
+    ap.add_argument("--against", type=Path, metavar="DIR",
+                    help="do not run: compare the JSON already in DIR")
+    ap.add_argument("--rel", type=float, default=REL, help="relative tolerance (1e-9)")
+    args = ap.parse_args(argv)
+    reg = experiments.registry()
+    names = args.names or [n for n in [*ORDER, *sorted(set(reg) - set(ORDER))]
+                           if n in reg and (args.committed / f"{n}.json").exists()]
+    unknown = [n for n in names if n not in reg]
+    if unknown:
+        ap.error(f"unknown experiment(s) {unknown}; known: {sorted(reg)}")
+    failed = 0
+    with tempfile.TemporaryDirectory(prefix="uvd-reproduce-") as tmp:
+        for name in names:
+            committed = args.committed / f"{name}.json"
+            if not committed.exists():
+                print(f"{name}: no committed JSON at {committed}")
+                failed += 1
+                continue
+            if args.against is not None:
+                new, wall = args.against / f"{name}.json", None
+            else:
+                new = Path(tmp) / f"{name}.json"
+                print(f"[reproduce] uvd experiment {name} --json {new}", file=sys.stderr,
+                      flush=True)
+                wall = run_command(name, new)
+            result = compare(json.loads(committed.read_text()), json.loads(new.read_text()),
+                             args.rel)
+            failed += not reproduced(result)
+            print(report_line(name, result)
+                  + (f" ({wall:.0f} s wall)" if wall is not None else ""), flush=True)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
