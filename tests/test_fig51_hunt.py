@@ -50,3 +50,36 @@ def test_the_yaw_gain_fit_recovers_the_gain_that_made_the_pair(kp):
     fit = fit_gain(P, "heading", pair, 100.0, kp_grid=np.geomspace(100.0, 10000.0, 121),
                    seconds=120.0)
     assert fit["kp"] == pytest.approx(kp, rel=0.04)  # grid step 3.9 %
+
+
+def test_the_plan_covers_every_cause_of_issue_32_alone_and_from_table_5_2():
+    """Each switch of sim_bridge.tank is on alone in one cause (mounting bias of both signs,
+    latency, tether, buoyancy with depth, advance-speed loss, wider, held and hysteretic dead
+    band), the instrument rates have their contrast, the coupled plant runs from Table 5.2 at
+    ε 0.1, its bound and 1; every cause from the plant's and from Table 5.2's values."""
+    from dataclasses import fields
+
+    from sim_bridge.tank import TankEffects
+    from uvd.experiments.fig51_hunt import CAUSES, eps_bound, plan
+    geometry = {"tether_anchor_m", "tether_attach_m", "buoyancy_centre_m"}
+    default = TankEffects()
+    alone = {}
+    for name, _, kw in CAUSES:
+        if "tank" in kw:
+            on = [f.name for f in fields(TankEffects)
+                  if getattr(kw["tank"], f.name) != getattr(default, f.name)
+                  and f.name not in geometry]
+            if len(on) == 1:
+                alone.setdefault(on[0], []).append(name)
+    assert set(alone) == {f.name for f in fields(TankEffects)} - geometry
+    biases = {CAUSES[[n for n, _, _ in CAUSES].index(c)][2]["tank"].mounting_bias_rad[0]
+              for c in alone["mounting_bias_rad"]}
+    assert min(biases) < 0 < max(biases)
+    names = {n for n, _, _ in CAUSES}
+    assert {"dvl-depth-10hz", "coupled-plant", "all"} <= names
+    items = plan()
+    for name in names:
+        assert {i for n, i, _ in items if n == name} == {"plant", "table-5.2"}, name
+    coupled = sorted(kw.get("eps", 0.1) for n, i, kw in items
+                     if n == "coupled-plant" and i == "table-5.2")
+    assert coupled == pytest.approx(sorted([0.1, eps_bound("jhu-rov-coupled"), 1.0]))

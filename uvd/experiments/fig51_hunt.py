@@ -190,16 +190,56 @@ def run_plan(items, seconds: float, opts: ExperimentOptions) -> list[dict]:
     return rows
 
 
-def run_fig51_hunt(opts: ExperimentOptions, attempts: list[dict] | None = None) -> dict:
-    """The hunt; ``attempts`` given (the rows of :func:`run_plan` over the whole plan, e.g. run
-    in parts) are taken instead of running them."""
+def priority() -> list[int]:
+    """The plan's indices in the order the parts run them: Table 5.2's initial values first
+    (the thesis's start), then the plant's."""
+    items = plan()
+    return ([i for i, it in enumerate(items) if it[1] == "table-5.2"]
+            + [i for i, it in enumerate(items) if it[1] != "table-5.2"])
+
+
+def run_attempts(indices, seconds: float, out: Path, opts: ExperimentOptions) -> None:
+    """The plan's attempts ``indices`` (each exactly as :func:`run_plan` runs it), one JSON per
+    attempt in ``out`` (``NN.json``, NN the plan index, with its CPU seconds); an attempt whose
+    file exists is skipped, so a stopped part resumes."""
+    import json
+    import time
+    items = plan()
+    out.mkdir(parents=True, exist_ok=True)
+    for i in indices:
+        f = out / f"{i:02d}.json"
+        if f.exists():
+            continue
+        t0 = time.process_time()
+        row = run_plan([items[i]], seconds, opts)[0]
+        row["cpu_s"] = time.process_time() - t0
+        f.write_text(json.dumps(row))
+
+
+def load_attempts(out: Path) -> dict[int, dict]:
+    """The attempts :func:`run_attempts` wrote into ``out``, by plan index."""
+    import json
+    return {int(f.stem): json.loads(f.read_text()) for f in sorted(out.glob("[0-9][0-9].json"))}
+
+
+def run_fig51_hunt(opts: ExperimentOptions, attempts: dict[int, dict] | None = None) -> dict:
+    """The hunt; ``attempts`` given (by plan index, :func:`load_attempts` of parts run apart)
+    are taken instead of running them — the plan's others are listed as not run."""
     seconds = (HOURS if opts.hours is None else float(opts.hours)) * 3600.0
     items = plan()
     if attempts is None:
-        attempts = run_plan(items, seconds, opts)
-    if len(attempts) != len(items):
-        raise ValueError(f"fig51-hunt: {len(attempts)} attempts given, the plan has "
-                         f"{len(items)}")
+        attempts = dict(enumerate(run_plan(items, seconds, opts)))
+    for i, a in attempts.items():
+        if not 0 <= i < len(items) or (a["cause"], a["init"]) != items[i][:2]:
+            raise ValueError(f"fig51-hunt: attempt {i} ({a['cause']} from {a['init']}) is not "
+                             "the plan's")
+        if a["series"]["t"] and abs(a["series"]["t"][-1] - seconds) > 60.0:
+            raise ValueError(f"fig51-hunt: attempt {i} ran {a['series']['t'][-1]:.0f} s, not "
+                             f"{seconds:.0f} s")
+    not_run = [f"{items[i][0]} from {items[i][1]}"
+               + (f" (eps {items[i][2]['eps']:.3g})" if "eps" in items[i][2] else "")
+               for i in range(len(items)) if i not in attempts]
+    attempts = [attempts[i] for i in sorted(attempts)]
     found = [a for a in attempts if a["selective_drift"]]
     on_plant: dict = {}
     if found:
@@ -236,6 +276,13 @@ def run_fig51_hunt(opts: ExperimentOptions, attempts: list[dict] | None = None) 
           f" {'YES':>4} {'YES':>4}",
     ]
     lines += [_row(a, seconds) for a in attempts]
+    if not_run:
+        lines.append(f"NOT RUN at {seconds / 3600:.2f} h ({len(not_run)} of {len(items)} "
+                     "attempts of the plan): " + "; ".join(not_run))
+    m6 = [a["m6_final"] - a["initial"][5] for a in attempts]
+    lines.append(f"m6 (thesis 106.4 -> 41, {THESIS_RATE_PER_H[2]:.1f} per hour): ends above its "
+                 f"start in {sum(d > 0 for d in m6)} of {len(attempts)} attempts; change over "
+                 f"the run {min(m6):+.1f} to {max(m6):+.1f}")
     like = [a for a in attempts if thesis_like(a, seconds)]
     lines.append("<0: selective drift (m4 or m5 below zero, every other mass and drag within "
                  "0.5-2x its initial value throughout): "
@@ -271,6 +318,7 @@ def run_fig51_hunt(opts: ExperimentOptions, attempts: list[dict] | None = None) 
            "thesis_like_rate": [f"{a['cause']} from {a['init']}" for a in like],
            "reproduced_by": [f"{a['cause']} from {a['init']}" for a in found],
            "on_reproducing_plant": on_plant, "epsilon_bound": bound,
+           "plan_size": len(items), "not_run": not_run,
            "summary": "\n".join(lines)}
     if opts.plots is not None:
         write_m4_m5_figure(out, Path(opts.plots) / "fig51-hunt-m4-m5.png")
@@ -327,8 +375,48 @@ def write_m4_m5_figure(result: dict, path: Path) -> Path | None:
     return path
 
 
+def main(argv: list[str] | None = None) -> int:
+    """``python -m uvd.experiments.fig51_hunt part K N DIR [--hours H]``: part K of N of the
+    plan (every N-th attempt in :func:`priority` order), one JSON per attempt in DIR, resumable;
+    ``… assemble DIR --json OUT [--plots D] [--hours H]``: the result from the attempts in DIR
+    (those not run are listed). ``uvd experiment fig51-hunt`` runs the same attempts in one
+    process, and an attempt's row is the same either way (tests/test_reproduce.py)."""
+    import argparse
+
+    from uvd.jsonio import write_json
+    ap = argparse.ArgumentParser(prog="python -m uvd.experiments.fig51_hunt")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    pp = sub.add_parser("part")
+    pp.add_argument("k", type=int)
+    pp.add_argument("n", type=int)
+    pp.add_argument("dir", type=Path)
+    pa = sub.add_parser("assemble")
+    pa.add_argument("dir", type=Path)
+    pa.add_argument("--json", type=Path, required=True)
+    pa.add_argument("--plots", type=Path)
+    for q in (pp, pa):
+        q.add_argument("--hours", type=float, default=HOURS)
+    args = ap.parse_args(argv)
+    if args.cmd == "part":
+        if not 0 <= args.k < args.n:
+            ap.error(f"part {args.k} of {args.n}: K must be in 0..N-1")
+        opts = ExperimentOptions(seed=0)
+        run_attempts(priority()[args.k::args.n], args.hours * 3600.0, args.dir, opts)
+        return 0
+    opts = ExperimentOptions(seed=0, hours=args.hours, plots=args.plots)
+    result = run_fig51_hunt(opts, load_attempts(args.dir))
+    result.update(experiment="fig51-hunt", seed=0)
+    write_json(args.json, result)
+    print(result["summary"])
+    return 0
+
+
 EXPERIMENTS = [
     Experiment("fig51-hunt", "§5.3.2, Fig. 5.1: single-step AMBC with each candidate cause of "
                "the m4/m5 drift on (sim_bridge.tank), from the plant's and Table 5.2's values, "
                "2 h each", run_fig51_hunt),
 ]
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -239,9 +239,7 @@ def _note_pdc_vs_ambc(result: dict) -> str | None:
         f"decoupled plant {span(ratios(ideal['240-255']), ambc_cols)} — the decoupled plant is "
         "exactly the controller's model, which the real vehicle was not. Columns by name: "
         + ", ".join(f"{TABLE_5_6_COLS[i]} {ratios(head['240-255'])[i]:.2f}×"
-                    for i in ambc_cols) + " (coupled)."
-        + (f" *This JSON's rows:* {result['rows_from']} (docs/experiments.md, pdc-vs-ambc)."
-           if result.get("rows_from") else ""))
+                    for i in ambc_cols) + " (coupled).")
 
 
 def _note_fig51_hunt(result: dict) -> str | None:
