@@ -90,15 +90,13 @@ SETUP = {
     "fig51-hunt": "each attempt is `ambc-6dof-unstable`'s first block (plant lag 0.15 s, "
                   "stiction 5 N, saturation, Table A.1 noise and rates — INS 10 Hz, DVL 6 Hz, "
                   "depth 7 Hz —, ε = 0.1 unless the eps column says otherwise, no lag "
-                  "compensation, no preview) with one cause switched on, run for **0.5 h, not "
-                  "the thesis's 2 h**: the 25 attempts had to fit the shared 2-core machine "
-                  "(under its load one simulated hour took ~4 min of wall time, so 2 h each "
-                  "would have taken ~3.5 h in one process). m₄, m₅ are therefore judged by their "
-                  "minimum and by their change per hour against the thesis's 2 h average "
-                  "(−52.4, −47.3 kg m²/h); a drift that starts later than 30 min is not seen. "
-                  "The option values (1° bias, one sample of latency, 10 N tether, …) are ours; "
-                  "the thesis gives none. Two processes ran halves of the plan "
-                  "(`fig51_hunt.run_plan`); the command runs it in one.",
+                  "compensation, no preview) with one cause switched on, for the thesis's 2 h "
+                  "(§5.3.2's 'two-hour duration experiment'). The option values (±1° bias, one "
+                  "sample of latency, 10 N tether, …) are ours; the thesis gives none. The "
+                  "attempts ran in parts apart (`python -m uvd.experiments.fig51_hunt part K N "
+                  "DIR`, then `… assemble DIR`), Table 5.2's initial values first; a row is the "
+                  "same as in the one-process command, bit for bit (tests/test_reproduce.py). "
+                  "Attempts the session could not run are listed under NOT RUN.",
     "pitch-reversal": "plant `jhu-rov`, pitch-only decoupled AMBC started from the plant's own "
                       "values, ε = 0.1 (not reported); the thesis gives no amplitudes: about 0° "
                       "RefTraj1's pitch (8.6° at 0.6 rad/s), the no-reversal case 5° ± 3° at "
@@ -257,6 +255,9 @@ def _note_fig51_hunt(result: dict) -> str | None:
     low = min(att, key=lambda a: min(a["m4_min"], a["m5_min"]))
     m6_up = sum(a["m6_final"] > a["initial"][5] for a in att)
     falling = [a for a in att if min(a["rate_per_h"]["m4"], a["rate_per_h"]["m5"]) < 0]
+    m6 = [a["rate_per_h"]["m6"] for a in att]
+    cpu = [a["cpu_s"] for a in att if "cpu_s" in a]
+    missing = result.get("not_run", [])
     fig = ("![m4, m5 over time, every attempt](figures/fig51-hunt-m4-m5.png)\n\n"
            "*Figure:* m₄(t), m₅(t) of every attempt (left: from the plant's values; right: from "
            "Table 5.2's, with the thesis's ends as a dashed line — Fig. 5.1 itself is a plot of "
@@ -268,8 +269,10 @@ def _note_fig51_hunt(result: dict) -> str | None:
                       + ", ".join(found) + "; robust and two-step AMBC on that plant are in "
                       "the last line above.")
     return fig + (
-        f"*Not reproduced (measured), {len(att)} attempts of {h:g} h:* no cause, alone or "
-        "together, from the plant's or Table 5.2's values, drives m₄ or m₅ below zero with "
+        f"*Not reproduced (measured), {len(att)} attempts of {h:g} h:* no cause, alone"
+        + (" or together" if any(a["cause"] == "all" for a in att) else "") + ", from "
+        + " or ".join(sorted({"the plant's" if a["init"] == "plant" else "Table 5.2's"
+                              for a in att})) + " values, drives m₄ or m₅ below zero with "
         "the other masses and drags bounded"
         + (f" (lowest: m₄ {m4:.1f}, m₅ {m5:.1f}; the lowest attempt, {low['cause']} from "
            f"{low['init']} at ε {low['eps']:.3g}, is not selective)" if min(m4, m5) < 0 else
@@ -281,12 +284,18 @@ def _note_fig51_hunt(result: dict) -> str | None:
         + (", ".join(f"{a['cause']} from {a['init']} (ε {a['eps']:.3g}: m₄ "
                      f"{a['rate_per_h']['m4']:.1f}, m₅ {a['rate_per_h']['m5']:.1f} /h)"
                      for a in falling) or "none")
-        + f". m₆ ends above its start in {m6_up} of {len(att)} attempts; the thesis's fell "
-        "106.4 → 41. The table is the answer to the hunt: none of these causes, at these "
-        "sizes and in 30 minutes, produces the thesis's selective drift. Not tried: larger "
-        "sizes of these effects, runs of the thesis's full 2 h, thruster interaction and a "
-        "second-order thruster model (§5.3.3), the tank's walls, and couplings of the real "
-        "vehicle other than Tables 4.8/4.9's.")
+        + f". **m₆** ends above its start in {m6_up} of {len(att)} attempts (change per hour "
+        f"{min(m6):+.1f} to {max(m6):+.1f}); the thesis's fell 106.4 → 41 ({rate['m6']:.1f} "
+        f"per hour). The table is the answer to the hunt: none of these causes, at these sizes "
+        f"and over {h:g} h, produces the thesis's selective drift"
+        + (f" — for the {len(att)} attempts run; {len(missing)} of the plan's "
+           f"{result.get('plan_size', len(att) + len(missing))} were not run at {h:g} h (NOT "
+           "RUN above), so for them the table says nothing" if missing else "")
+        + ". Not tried: larger sizes of these effects, thruster interaction and a second-order "
+        "thruster model (§5.3.3), the tank's walls, and couplings of the real vehicle other "
+        "than Tables 4.8/4.9's."
+        + (f" CPU cost: {statistics.median(cpu):.0f} s per {h:g} h attempt (median of "
+           f"{len(cpu)}; {sum(cpu) / 60:.0f} CPU-minutes for these)." if cpu else ""))
 
 
 def _note_ambc_6dof_unstable(result: dict) -> str | None:
@@ -316,7 +325,8 @@ def _note_ambc_6dof_unstable(result: dict) -> str | None:
             f"with b₃ (Tables 5.2/5.3: Δm₅/Δb₃ = {theirs:.2f}, near 1/0.6² = 2.78 for "
             "RefTraj1's pitch at 0.6 rad/s, the direction a single-frequency reference leaves "
             f"unidentified); ours moves Δm₅/Δb₃ = {ours:.2f} on the asymmetric plant. "
-            f"**m₆ rises** on the default plant, {m6[0]:.1f} → {m6[1]:.1f} (max {m6[2]:.1f}), "
+            f"**m₆ rises** on the default plant, {m6[0]:.1f} → {m6[1]:.1f} (max of the 60 s samples "
+            f"{m6[2]:.1f}), "
             "where the thesis's fell 106.4 → 41 (Table 5.3). §5.3.4's mechanism (negative ṁ₅ "
             "spikes after thrust reversals) does not show as a fall of m₅ in our plant: in "
             "`pitch-reversal` m₅ ends higher with reversals than without (its last column). "
