@@ -1,5 +1,6 @@
-"""`make results-check` (uvd.experiments.reproduce): the comparison, and issue 32's two tables
-re-run from their printed command, short, reproducing bit for bit in a second process."""
+"""`make results-check` (uvd.experiments.reproduce): the comparison; and issue 32's two tables
+(pdc-vs-ambc, fig51-hunt), short, from their printed command and from their parts run in
+processes apart, equal bit for bit."""
 
 from __future__ import annotations
 
@@ -59,37 +60,44 @@ def test_relative_difference_edges():
     assert relative_difference(1.0, 2.0) == 0.5
 
 
-@pytest.mark.parametrize("name, hours", [("pdc-vs-ambc", 0.01)])
-def test_short_run_reproduces_from_its_command_bit_for_bit(tmp_path, name, hours, capsys):
-    """The printed command, twice, in two processes (a short duration: the full runs take
-    hours and go to `make results-check`); every number equal to the bit."""
-    for folder in ("a", "b"):
-        (tmp_path / folder).mkdir()
-        subprocess.run([sys.executable, "-m", "uvd", "experiment", name, "--hours", str(hours),
-                        "--json", str(tmp_path / folder / f"{name}.json"), "--quiet"],
-                       check=True, stdout=subprocess.DEVNULL, timeout=900)
-    assert main([name, "--committed", str(tmp_path / "a"), "--against", str(tmp_path / "b"),
-                 "--rel", "0"]) == 0
-    assert f"{name}: reproduced" in capsys.readouterr().out
-    # and the check can fail: one number of one run moved
-    d = json.loads((tmp_path / "b" / f"{name}.json").read_text())
-    key = "attempts" if name == "fig51-hunt" else "ambc_windows"
-    first = d[key][0]
-    field = "m4_min" if name == "fig51-hunt" else "position_mne"
-    first[field] = first[field] * (1 + 1e-6)
-    (tmp_path / "b" / f"{name}.json").write_text(json.dumps(d))
-    assert main([name, "--committed", str(tmp_path / "a"), "--against",
-                 str(tmp_path / "b")]) == 1
+def _command(name: str, hours: str, out) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    subprocess.run([sys.executable, "-m", "uvd", "experiment", name, "--hours", hours,
+                    "--json", str(out), "--quiet"], check=True, stdout=subprocess.DEVNULL,
+                   timeout=900)
+
+
+def test_pdc_vs_ambc_rows_run_apart_equal_the_command_bit_for_bit(tmp_path, capsys):
+    """pdc-vs-ambc's printed command, short, against its rows run in processes apart and
+    assembled (``python -m uvd.experiments.control pdc-vs-ambc-row``): every number equal to
+    the bit; then one number moved makes the check fail."""
+    from uvd.experiments.control import PDC_VS_AMBC_ROWS
+    hours = "0.01"
+    _command("pdc-vs-ambc", hours, tmp_path / "one" / "pdc-vs-ambc.json")
+    for spec in PDC_VS_AMBC_ROWS:
+        subprocess.run([sys.executable, "-m", "uvd.experiments.control", "pdc-vs-ambc-row",
+                        spec["name"], str(tmp_path / "rows" / f"{spec['name']}.json"),
+                        "--hours", hours], check=True, stderr=subprocess.DEVNULL, timeout=900)
+    (tmp_path / "two").mkdir()
+    subprocess.run([sys.executable, "-m", "uvd.experiments.control", "pdc-vs-ambc-assemble",
+                    str(tmp_path / "rows"), "--json", str(tmp_path / "two" / "pdc-vs-ambc.json"),
+                    "--hours", hours], check=True, stdout=subprocess.DEVNULL, timeout=900)
+    assert main(["pdc-vs-ambc", "--committed", str(tmp_path / "one"), "--against",
+                 str(tmp_path / "two"), "--rel", "0"]) == 0
+    assert "pdc-vs-ambc: reproduced" in capsys.readouterr().out
+    d = json.loads((tmp_path / "two" / "pdc-vs-ambc.json").read_text())
+    d["ambc_windows"][0]["position_mne"] *= 1 + 1e-6
+    (tmp_path / "two" / "pdc-vs-ambc.json").write_text(json.dumps(d))
+    assert main(["pdc-vs-ambc", "--committed", str(tmp_path / "one"), "--against",
+                 str(tmp_path / "two")]) == 1
+    assert "NOT reproduced" in capsys.readouterr().out
 
 
 def test_fig51_hunt_run_in_parts_equals_the_command_bit_for_bit(tmp_path, capsys):
     """The attempts of fig51-hunt run in two parts apart (``python -m
     uvd.experiments.fig51_hunt part K 2``) and assembled give the command's JSON to the bit."""
     hours = "0.002"
-    (tmp_path / "one").mkdir()
-    subprocess.run([sys.executable, "-m", "uvd", "experiment", "fig51-hunt", "--hours", hours,
-                    "--json", str(tmp_path / "one" / "fig51-hunt.json"), "--quiet"],
-                   check=True, stdout=subprocess.DEVNULL, timeout=900)
+    _command("fig51-hunt", hours, tmp_path / "one" / "fig51-hunt.json")
     for k in ("0", "1"):
         subprocess.run([sys.executable, "-m", "uvd.experiments.fig51_hunt", "part", k, "2",
                         str(tmp_path / "parts"), "--hours", hours], check=True, timeout=900)

@@ -848,16 +848,41 @@ def pdc_vs_ambc_result(rows: dict[str, dict]) -> dict:
     return out
 
 
-def run_pdc_vs_ambc(opts: ExperimentOptions) -> dict:
-    """§5.3.5.1, Fig. 5.4 and Table 5.6: PDC vs converged two-step AMBC; the thesis's settings
-    on the coupled plant first (headline), then on the decoupled plant, then our changes."""
+def _pdc_vs_ambc_schedule(opts: ExperimentOptions) -> tuple[float, ...]:
+    """(step1_s, step2_s, win_s, pdc_s, scale) of pdc-vs-ambc's runs for ``opts.hours``."""
     total_h = _hours(opts, (STEP1_DURATION_S + STEP2_DURATION_S) / 3600.0)
     scale = total_h * 3600.0 / (STEP1_DURATION_S + STEP2_DURATION_S)
     step1_s, step2_s = STEP1_DURATION_S * scale, STEP2_DURATION_S * scale
     win_s = min(900.0, step2_s)
     pdc_s = min(PDC_MINUTES * 60.0, max(60.0, step2_s))
-    rows = {spec["name"]: _pdc_vs_ambc_row(spec, opts, step1_s, step2_s, win_s, pdc_s, scale)
-            for spec in PDC_VS_AMBC_ROWS}
+    return step1_s, step2_s, win_s, pdc_s, scale
+
+
+def pdc_vs_ambc_row(name: str, opts: ExperimentOptions) -> dict:
+    """One row of pdc-vs-ambc by name, exactly as the command runs it (rows run apart:
+    ``python -m uvd.experiments.control pdc-vs-ambc-row NAME OUT``)."""
+    spec = next((r for r in PDC_VS_AMBC_ROWS if r["name"] == name), None)
+    if spec is None:
+        raise ValueError(f"pdc-vs-ambc has no row {name!r}; rows: "
+                         + ", ".join(r["name"] for r in PDC_VS_AMBC_ROWS))
+    return _pdc_vs_ambc_row(spec, opts, *_pdc_vs_ambc_schedule(opts))
+
+
+def run_pdc_vs_ambc(opts: ExperimentOptions, rows: dict[str, dict] | None = None) -> dict:
+    """§5.3.5.1, Fig. 5.4 and Table 5.6: PDC vs converged two-step AMBC; the thesis's settings
+    on the coupled plant first (headline), then on the decoupled plant, then our changes.
+    ``rows`` given (every row, run apart by :func:`pdc_vs_ambc_row` at the same ``hours``) are
+    taken instead of running them."""
+    step1_s, step2_s, win_s, pdc_s, scale = _pdc_vs_ambc_schedule(opts)
+    names = [spec["name"] for spec in PDC_VS_AMBC_ROWS]
+    if rows is None:
+        rows = {spec["name"]: _pdc_vs_ambc_row(spec, opts, step1_s, step2_s, win_s, pdc_s,
+                                               scale) for spec in PDC_VS_AMBC_ROWS}
+    elif sorted(rows) != sorted(names) or any(
+            r["ambc_window_s"][1] != step1_s + step2_s for r in rows.values()):
+        raise ValueError(f"pdc-vs-ambc: rows {sorted(rows)} given, every row of {names} at "
+                         f"{(step1_s + step2_s) / 3600:g} h needed")
+    rows = {n: rows[n] for n in names}
     out = pdc_vs_ambc_result(rows)
     if opts.plots is not None:
         ws = out["ambc_windows"]
@@ -1041,3 +1066,44 @@ EXPERIMENTS = [
     Experiment("ambc-full", "241-parameter AMBC with robust adaptation on jhu-rov-coupled vs "
                "PDC, 4 h", run_ambc_full),
 ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """pdc-vs-ambc's rows run apart (a shared machine): ``python -m uvd.experiments.control
+    pdc-vs-ambc-row NAME OUT.json [--hours H]`` runs one row as ``uvd experiment pdc-vs-ambc``
+    does; ``… pdc-vs-ambc-assemble DIR --json OUT [--hours H]`` builds the result from every
+    row's JSON in DIR. The result is the command's, bit for bit (tests/test_reproduce.py)."""
+    import argparse
+    import json
+    import time
+    from pathlib import Path
+
+    from uvd.jsonio import write_json
+    ap = argparse.ArgumentParser(prog="python -m uvd.experiments.control")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    pr = sub.add_parser("pdc-vs-ambc-row")
+    pr.add_argument("name")
+    pr.add_argument("out", type=Path)
+    pa = sub.add_parser("pdc-vs-ambc-assemble")
+    pa.add_argument("dir", type=Path)
+    pa.add_argument("--json", type=Path, required=True)
+    for q in (pr, pa):
+        q.add_argument("--hours", type=float)
+    args = ap.parse_args(argv)
+    opts = ExperimentOptions(seed=0, hours=args.hours)
+    if args.cmd == "pdc-vs-ambc-row":
+        t0 = time.process_time()
+        row = pdc_vs_ambc_row(args.name, opts)
+        write_json(args.out, {"name": args.name, "cpu_s": time.process_time() - t0, "row": row})
+        return 0
+    parts = [json.loads(f.read_text()) for f in sorted(args.dir.glob("*.json"))]
+    result = run_pdc_vs_ambc(opts, {p["name"]: p["row"] for p in parts})
+    result.update(experiment="pdc-vs-ambc", seed=0,
+                  rows_cpu_s={p["name"]: p["cpu_s"] for p in parts})
+    write_json(args.json, result)
+    print(result["summary"])
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -26,8 +26,8 @@ from pathlib import Path
 
 REL = 1e-9
 #: keys not compared: how long a run took, not what it computed
-TIMING_KEYS = frozenset({"wall_seconds", "sim_wall_s", "cpu_s", "real_time_factor",
-                         "recordings"})
+TIMING_KEYS = frozenset({"wall_seconds", "sim_wall_s", "cpu_s", "rows_cpu_s",
+                         "real_time_factor", "recordings"})
 
 
 def _timing(key: str) -> bool:
