@@ -122,11 +122,13 @@ SETUP = {
                      "(k_p = 300, k_d = 100), its input the wrench from measured propeller speed "
                      "(App. A.1); MAE against the plant's states.",
     "ambc-robust": "`ambc-6dof-unstable`'s first block (plant `jhu-rov`, k_p = 300, k_d = 100, "
-                   "ε = 0.1, from the plant's values) with robust adaptation (projection: mass "
+                   "ε = 0.1 — Theorem 5.2.2's bound with App. B.2's c is 0.0127 —, from the "
+                   "plant's values) with robust adaptation (projection: mass "
                    "floor 10, drag ceiling 0; dead zone 0.002; freeze on saturation), "
                    "propeller-lag compensation and the feed-forward preview; 4 h.",
     "ambc-full": "241-parameter AMBC on `jhu-rov-coupled` (Tables 4.8/4.9), robust adaptation, "
-                 "k_p = 300, k_d = 1000, ε = 2, propeller-lag compensation (no preview), 4 h; "
+                 "k_p = 300, k_d = 1000, ε = 2 (Theorem 5.2.2's bound with App. B.2's c for this "
+                 "M at k_d 1000: 0.089), propeller-lag compensation (no preview), 4 h; "
                  "PDC at the same gains.",
     "aid-6dof": "plant `jhu-rov-coupled` (Tables 4.8/4.9 as the truth, so parameter errors are "
                 "known), thruster dynamics and Table A.1 noise on; Table 4.5 inputs, INITP "
