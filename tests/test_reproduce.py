@@ -60,51 +60,62 @@ def test_relative_difference_edges():
     assert relative_difference(1.0, 2.0) == 0.5
 
 
-def _command(name: str, hours: str, out) -> None:
-    out.parent.mkdir(parents=True, exist_ok=True)
-    subprocess.run([sys.executable, "-m", "uvd", "experiment", name, "--hours", hours,
-                    "--json", str(out), "--quiet"], check=True, stdout=subprocess.DEVNULL,
-                   timeout=900)
+def _json(x):
+    return json.loads(json.dumps(x))
 
 
-def test_pdc_vs_ambc_rows_run_apart_equal_the_command_bit_for_bit(tmp_path, capsys):
-    """pdc-vs-ambc's printed command, short, against its rows run in processes apart and
-    assembled (``python -m uvd.experiments.control pdc-vs-ambc-row``): every number equal to
-    the bit; then one number moved makes the check fail."""
-    from uvd.experiments.control import PDC_VS_AMBC_ROWS
-    hours = "0.01"
-    _command("pdc-vs-ambc", hours, tmp_path / "one" / "pdc-vs-ambc.json")
-    for spec in PDC_VS_AMBC_ROWS:
-        subprocess.run([sys.executable, "-m", "uvd.experiments.control", "pdc-vs-ambc-row",
-                        spec["name"], str(tmp_path / "rows" / f"{spec['name']}.json"),
-                        "--hours", hours], check=True, stderr=subprocess.DEVNULL, timeout=900)
-    (tmp_path / "two").mkdir()
-    subprocess.run([sys.executable, "-m", "uvd.experiments.control", "pdc-vs-ambc-assemble",
-                    str(tmp_path / "rows"), "--json", str(tmp_path / "two" / "pdc-vs-ambc.json"),
-                    "--hours", hours], check=True, stdout=subprocess.DEVNULL, timeout=900)
-    assert main(["pdc-vs-ambc", "--committed", str(tmp_path / "one"), "--against",
-                 str(tmp_path / "two"), "--rel", "0"]) == 0
-    assert "pdc-vs-ambc: reproduced" in capsys.readouterr().out
-    d = json.loads((tmp_path / "two" / "pdc-vs-ambc.json").read_text())
-    d["ambc_windows"][0]["position_mne"] *= 1 + 1e-6
-    (tmp_path / "two" / "pdc-vs-ambc.json").write_text(json.dumps(d))
-    assert main(["pdc-vs-ambc", "--committed", str(tmp_path / "one"), "--against",
-                 str(tmp_path / "two")]) == 1
-    assert "NOT reproduced" in capsys.readouterr().out
+def test_a_pdc_vs_ambc_row_run_apart_equals_the_row_in_process_bit_for_bit(tmp_path, capsys):
+    """A row of pdc-vs-ambc run in a process apart (``python -m uvd.experiments.control
+    pdc-vs-ambc-row``, as the committed JSON's rows were) equals the same row computed here, by
+    the function the command calls, to the bit (short: 0.001 h and the 60 s PDC)."""
+    from uvd.experiments import ExperimentOptions
+    from uvd.experiments.control import pdc_vs_ambc_row, run_pdc_vs_ambc
+    hours = 0.001
+    out = tmp_path / "rows" / "kd1000.json"
+    subprocess.run([sys.executable, "-m", "uvd.experiments.control", "pdc-vs-ambc-row",
+                    "kd1000", str(out), "--hours", str(hours)], check=True,
+                   stderr=subprocess.DEVNULL, timeout=280)
+    apart = json.loads(out.read_text())
+    here = _json(pdc_vs_ambc_row("kd1000", ExperimentOptions(hours=hours,
+                                                              progress=lambda m: None)))
+    assert main(["pdc-vs-ambc", "--committed", str(_dump(tmp_path / "a", here)),
+                 "--against", str(_dump(tmp_path / "b", apart["row"])), "--rel", "0"]) == 0
+    assert "reproduced" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="every row"):  # a table is never built from some rows
+        run_pdc_vs_ambc(ExperimentOptions(hours=hours), {"kd1000": apart["row"]})
 
 
-def test_fig51_hunt_run_in_parts_equals_the_command_bit_for_bit(tmp_path, capsys):
-    """The attempts of fig51-hunt run in two parts apart (``python -m
-    uvd.experiments.fig51_hunt part K 2``) and assembled give the command's JSON to the bit."""
-    hours = "0.002"
-    _command("fig51-hunt", hours, tmp_path / "one" / "fig51-hunt.json")
-    for k in ("0", "1"):
-        subprocess.run([sys.executable, "-m", "uvd.experiments.fig51_hunt", "part", k, "2",
-                        str(tmp_path / "parts"), "--hours", hours], check=True, timeout=900)
-    (tmp_path / "two").mkdir()
-    subprocess.run([sys.executable, "-m", "uvd.experiments.fig51_hunt", "assemble",
-                    str(tmp_path / "parts"), "--json", str(tmp_path / "two" / "fig51-hunt.json"),
-                    "--hours", hours], check=True, stdout=subprocess.DEVNULL, timeout=900)
-    assert main(["fig51-hunt", "--committed", str(tmp_path / "one"), "--against",
-                 str(tmp_path / "two"), "--rel", "0"]) == 0
-    assert "fig51-hunt: reproduced" in capsys.readouterr().out
+def _dump(folder, result, name="pdc-vs-ambc"):
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{name}.json").write_text(json.dumps(result))
+    return folder
+
+
+def test_fig51_hunt_attempt_run_in_a_part_equals_the_command_s_bit_for_bit(tmp_path, capsys):
+    """An attempt of fig51-hunt run in a part apart (``python -m uvd.experiments.fig51_hunt
+    part``) equals the same attempt as the command runs it (:func:`run_plan`), to the bit; the
+    assembled result lists the plan's other attempts as not run."""
+    from uvd.experiments import ExperimentOptions
+    from uvd.experiments.fig51_hunt import (
+        load_attempts,
+        plan,
+        priority,
+        run_fig51_hunt,
+        run_plan,
+    )
+    hours, n = 0.004, len(plan())
+    subprocess.run([sys.executable, "-m", "uvd.experiments.fig51_hunt", "part", "0", str(n),
+                    str(tmp_path / "parts"), "--hours", str(hours)], check=True, timeout=280)
+    got = load_attempts(tmp_path / "parts")
+    first = priority()[0]
+    assert list(got) == [first]
+    opts = ExperimentOptions(hours=hours, progress=lambda m: None)
+    here = _json(run_plan([plan()[first]], hours * 3600.0, opts)[0])
+    apart = {k: v for k, v in got[first].items() if k != "cpu_s"}
+    assert main(["fig51-hunt", "--committed", str(_dump(tmp_path / "a", here, "fig51-hunt")),
+                 "--against", str(_dump(tmp_path / "b", apart, "fig51-hunt")), "--rel",
+                 "0"]) == 0
+    assert "reproduced" in capsys.readouterr().out
+    result = run_fig51_hunt(opts, got)
+    assert len(result["attempts"]) == 1 and len(result["not_run"]) == n - 1
+    assert f"NOT RUN at {hours:.2f} h ({n - 1} of {n}" in result["summary"]
