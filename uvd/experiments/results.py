@@ -278,9 +278,9 @@ def _note_fig51_hunt(result: dict) -> str | None:
     return fig + (
         f"*Not reproduced (measured), {len(att)} attempts of {h:g} h:* no cause, alone"
         + (" or together" if any(a["cause"] == "all" for a in att) else "") + ", from "
-        + " or ".join(sorted({"the plant's" if a["init"] == "plant" else "Table 5.2's"
-                              for a in att})) + " values, drives m₄ or m₅ below zero with "
-        "the other masses and drags bounded"
+        + " or ".join(w for i, w in (("plant", "the plant's"), ("table-5.2", "Table 5.2's"))
+                      if any(a["init"] == i for a in att))
+        + " values, drives m₄ or m₅ below zero with the other masses and drags bounded"
         + (f" (lowest: m₄ {m4:.1f}, m₅ {m5:.1f}; the lowest attempt, {low['cause']} from "
            f"{low['init']} at ε {low['eps']:.3g}, is not selective)" if min(m4, m5) < 0 else
            f" (lowest minima over all attempts: m₄ {m4:.1f}, m₅ {m5:.1f})")
