@@ -222,13 +222,9 @@ def load_attempts(out: Path) -> dict[int, dict]:
     return {int(f.stem): json.loads(f.read_text()) for f in sorted(out.glob("[0-9][0-9].json"))}
 
 
-def run_fig51_hunt(opts: ExperimentOptions, attempts: dict[int, dict] | None = None) -> dict:
-    """The hunt; ``attempts`` given (by plan index, :func:`load_attempts` of parts run apart)
-    are taken instead of running them — the plan's others are listed as not run."""
-    seconds = (HOURS if opts.hours is None else float(opts.hours)) * 3600.0
-    items = plan()
-    if attempts is None:
-        attempts = dict(enumerate(run_plan(items, seconds, opts)))
+def _not_run(attempts: dict[int, dict], items: list, seconds: float) -> list[str]:
+    """The plan's attempts missing from ``attempts``; an attempt not the plan's, or of another
+    duration, is an error."""
     for i, a in attempts.items():
         if not 0 <= i < len(items) or (a["cause"], a["init"]) != items[i][:2]:
             raise ValueError(f"fig51-hunt: attempt {i} ({a['cause']} from {a['init']}) is not "
@@ -236,9 +232,19 @@ def run_fig51_hunt(opts: ExperimentOptions, attempts: dict[int, dict] | None = N
         if a["series"]["t"] and abs(a["series"]["t"][-1] - seconds) > 60.0:
             raise ValueError(f"fig51-hunt: attempt {i} ran {a['series']['t'][-1]:.0f} s, not "
                              f"{seconds:.0f} s")
-    not_run = [f"{items[i][0]} from {items[i][1]}"
-               + (f" (eps {items[i][2]['eps']:.3g})" if "eps" in items[i][2] else "")
-               for i in range(len(items)) if i not in attempts]
+    return [f"{items[i][0]} from {items[i][1]}"
+            + (f" (eps {items[i][2]['eps']:.3g})" if "eps" in items[i][2] else "")
+            for i in range(len(items)) if i not in attempts]
+
+
+def run_fig51_hunt(opts: ExperimentOptions, attempts: dict[int, dict] | None = None) -> dict:
+    """The hunt; ``attempts`` given (by plan index, :func:`load_attempts` of parts run apart)
+    are taken instead of running them — the plan's others are listed as not run."""
+    seconds = (HOURS if opts.hours is None else float(opts.hours)) * 3600.0
+    items = plan()
+    if attempts is None:
+        attempts = dict(enumerate(run_plan(items, seconds, opts)))
+    not_run = _not_run(attempts, items, seconds)
     attempts = [attempts[i] for i in sorted(attempts)]
     found = [a for a in attempts if a["selective_drift"]]
     on_plant: dict = {}
