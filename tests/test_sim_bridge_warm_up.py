@@ -17,14 +17,15 @@ from sim_bridge import plant
 from sim_bridge.bridge import SimBridge
 from uvd.commands.sim_bridge import bridge_config
 from uvd.runtime.config import load_config
-assert not plant._thrusters_then_rigid_body.signatures
+# the kernel every live step calls (Plant.step → steps_held, 31-speed's one compiled call)
+assert not plant._steps_held.signatures
 b = SimBridge(bridge_config(load_config({str(ROOT / "config" / "sim.toml")!r})), hold=True)
 assert b.held and b.plant.steps == 0  # the real plant did not move
-n_warm = len(plant._thrusters_then_rigid_body.signatures)
+n_warm = len(plant._steps_held.signatures)
 # the live plant's first step (released from the cradle) needs no other compiled version: the
 # warm-up steps a copy, and a copy's arrays must be the same types as the original's
 b.plant.step(np.zeros(len(b.plant.thrusters.specs)))
-print(n_warm, len(plant._thrusters_then_rigid_body.signatures), b.warm_up_s)
+print(n_warm, len(plant._steps_held.signatures), b.warm_up_s)
 """
 
 
