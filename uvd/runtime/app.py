@@ -72,14 +72,14 @@ from uvd.rtthreads import (
     thread_table,
 )
 from uvd.runtime.clock import Clock
-from uvd.runtime.commands import CommandQueue
+from uvd.runtime.commands import CommandQueue, CommandResult
 from uvd.runtime.config import Config, ConfigValidationError, load_config
 from uvd.runtime.cycle import CycleConfig
 from uvd.runtime.failsafe import Decision, FailsafeEvent, Health
 from uvd.runtime.lifecycle import Transition
-from uvd.runtime.loop import FixedRateLoop, RealtimeReport, apply_realtime
+from uvd.runtime.loop import CpuLatencyRequest, FixedRateLoop, RealtimeReport, apply_realtime
 from uvd.runtime.notify import SdNotifier, WatchdogPinger
-from uvd.runtime.schema import reloadable_changes
+from uvd.runtime.schema import reloadable_changes, with_values
 from uvd.runtime.supervisor import Supervisor
 from uvd.telemetry._worker import run_in_daemon_thread
 from uvd.telemetry.sink import TelemetryHub, TelemetrySink
@@ -320,6 +320,17 @@ class App:
         self.notifier.ready(self.supervisor.status_text())
         return self.last_reload
 
+    def set_params(self, values: dict[str, Any]) -> CommandResult:
+        """A ``SetParams`` command at a cycle boundary: reloadable keys changed exactly as a
+        SIGHUP reload changes them; refused as a whole when a key is unknown, needs a restart
+        or its value is bad."""
+        new, errors = with_values(self.config, values, reload_only=True)
+        if errors:
+            return CommandResult(False, "; ".join(f"{k}: {r}" for k, r in errors))
+        merged, applied, _ = reloadable_changes(self.config, new)
+        self.apply_config(merged, applied)
+        return CommandResult(True)
+
     def apply_config(self, merged: Config, applied: list[str]) -> None:
         """Take a configuration whose changes from the running one are all reloadable (a
         SIGHUP reload, a ``SetParams`` command at a cycle boundary): thresholds, overrun
@@ -375,12 +386,18 @@ class App:
                                       initializer=helper_initializer(lambda: self._helper_prio))
         aloop.set_default_executor(executor)
         installed = self._install_signals(aloop)
+        cpu_latency = None
         if self.realtime:
             self.realtime_report = apply_realtime(self.config.loop.sched_fifo_priority,
                                                   self.config.loop.cpu_affinity)
             for m in self.realtime_report.messages:
                 log.warning("%s", m)
             self._promote_helpers("start")
+            if self.config.loop.sched_fifo_priority > 0:
+                # keep idle CPUs from halting (a halted vCPU wakes in hundreds of µs)
+                cpu_latency = CpuLatencyRequest(0).open()
+                if cpu_latency.message:
+                    log.warning("%s", cpu_latency.message)
         try:
             async with asyncio.TaskGroup() as tg:
                 self._tg = tg
@@ -394,6 +411,8 @@ class App:
             for sig in installed:
                 aloop.remove_signal_handler(sig)
             sys.setswitchinterval(old_switch)
+            if cpu_latency is not None:
+                cpu_latency.close()
             executor.shutdown(wait=False, cancel_futures=True)
             self.loop.close()
             if self.thread_policy is not None:  # a run inside a longer-lived process (tests)

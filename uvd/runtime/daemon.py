@@ -34,9 +34,7 @@ from uvd.runtime.cycle import CycleInputs, CycleResult
 from uvd.runtime.hardware import Hardware
 from uvd.runtime.interfaces import InputParts
 from uvd.runtime.lifecycle import State
-from uvd.runtime.loop import CpuLatencyRequest
 from uvd.runtime.reporting import Estimates, cycle_record
-from uvd.runtime.schema import reloadable_changes, with_values
 from uvd.runtime.startup import kept_params, prepare, start_record
 from uvd.runtime.supervisor import Supervisor
 from uvd.runtime.triggers import OperatorHeartbeat
@@ -152,7 +150,7 @@ class Daemon:
         """Apply one command at this cycle boundary; its result is published as a
         ``"command"`` record (what a replay applies again at the same cycle)."""
         try:
-            res = self._set_params(c) if isinstance(c, SetParams) else \
+            res = self.app.set_params(c.values) if isinstance(c, SetParams) else \
                 self.supervisor.apply(c, t_ns)
         except Exception as exc:  # noqa: BLE001 - a bad command never breaks the cycle
             res = CommandResult(False, f"{type(exc).__name__}: {exc}")
@@ -163,34 +161,15 @@ class Daemon:
             log.warning("fault sample %s: %s", "accepted" if res.ok else "refused", res.reason)
         return res
 
-    def _set_params(self, c: SetParams) -> CommandResult:
-        """Reloadable keys changed exactly as a SIGHUP reload changes them; refused as a
-        whole when a key is unknown, needs a restart or its value is bad."""
-        old = self.app.config
-        new, errors = with_values(old, c.values, reload_only=True)
-        if errors:
-            return CommandResult(False, "; ".join(f"{k}: {r}" for k, r in errors))
-        merged, applied, _ = reloadable_changes(old, new)
-        self.app.apply_config(merged, applied)
-        return CommandResult(True)
-
     # -- running --
 
     async def run(self) -> int:
         """Run until stopped (SIGTERM/SIGINT or :meth:`stop`); returns the exit code. After
         the App's bounded shutdown, a port or bus it had no time left to close is closed here
         (a daemon run inside a longer-lived process — tests, tools — leaves none locked)."""
-        cpu_latency = None
-        if self.config.loop.sched_fifo_priority > 0 and self.app.realtime:
-            # keep idle CPUs from halting (a halted vCPU wakes in hundreds of µs)
-            cpu_latency = CpuLatencyRequest(0).open()
-            if cpu_latency.message:
-                log.warning("%s", cpu_latency.message)
         try:
             return await self.app.run()
         finally:
-            if cpu_latency is not None:
-                cpu_latency.close()
             await self.hardware.close_now()
 
     def stop(self, reason: str = "requested") -> None:
