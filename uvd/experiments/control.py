@@ -72,7 +72,8 @@ EPS = 0.1           # single-step AMBC about known values (Theorem 5.2.2's bound
 EPS_STEP1 = 2.0     # ε of step 1 (quasi-static: the position error carries g and b)
 KD_STEP2 = 1000.0   # step 2 of §5.3.5 as the text gives it; PDC's too in pdc-vs-ambc's kd1000 rows
 EPS_STEP2 = 2.0     # ε of step 2
-EPS_STEP2_KD100 = 0.5  # ε of step 2 at k_d = 100 (pdc-vs-ambc's thesis row): 2 diverges there
+EPS_STEP2_KD100 = 0.5  # ε of step 2 at k_d = 100 (pdc-vs-ambc's thesis rows): 2 diverged there on
+#                        earlier code (this code: row thesis-eps2 does not; docs/experiments.md)
 KD_FULL = 1000.0    # ambc-full (and its PDC): from zero, k_d = 100 tracks worse than PDC
 EPS_FULL = 2.0
 # Per-entry gains of the full model: a force/torque row of W_MBC has 6 mass and 36 drag entries
@@ -615,7 +616,8 @@ PDC_VS_AMBC_ROWS = (
      "lag_compensation": False, "ff_preview": False, "vehicle": "jhu-rov",
      "title": "idealised: the headline's settings on the decoupled plant jhu-rov (Tables "
               "5.4/5.5), exactly the model structure two-step AMBC adapts; eps = 0.5 in step 2 "
-              "(not reported; eps = 2 diverges after ~150 min at k_d = 100, row thesis-eps2)"},
+              "(not reported; chosen when eps = 2 diverged after ~150 min at k_d = 100 on earlier "
+              "code; on this code row thesis-eps2 does not diverge: docs/experiments.md)"},
     {"name": "thesis-eps2", "kd": KD, "eps2": EPS_STEP2, "lag_compensation": False,
      "ff_preview": False, "vehicle": "jhu-rov",
      "title": "thesis-decoupled-plant with eps = 2 in step 2 (our two-step's eps)"},
