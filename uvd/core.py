@@ -469,7 +469,9 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     reference = state.reference
     ref = reference.at(t_s)
     if cfg.ff_preview_s > 0.0:
-        ref = replace(ref, preview=reference.at(t_s + cfg.ff_preview_s))
+        # positional (Reference's field order): dataclasses.replace costs ~5 µs a cycle
+        ref = Reference(ref.H, ref.v, ref.vdot, ref.open_loop_wrench, ref.closed_loop,
+                        reference.at(t_s + cfg.ff_preview_s))
 
     armed = inputs.armed
     mode = inputs.mode if armed else _ZERO_MODE

@@ -50,7 +50,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
-from scipy.signal import savgol_filter
 
 from uvd.errors import ParameterError
 from uvd.model.params import (
@@ -97,6 +96,9 @@ def differentiate(t: np.ndarray, x: np.ndarray, filt: DiffFilter = DiffFilter()
     if len(t) < w:
         raise ValueError(f"run of {len(t)} samples is shorter than the {w}-sample "
                          "differentiation window")
+    # imported here: scipy.signal costs ~1-2 s of start-up to every ``uvd`` command (the
+    # experiment registry imports this module), and only identification differentiates
+    from scipy.signal import savgol_filter
     xs = savgol_filter(x, w, filt.polyorder, deriv=0, axis=0, mode="interp")
     xd = savgol_filter(x, w, filt.polyorder, deriv=1, delta=dt, axis=0, mode="interp")
     return xs, xd
