@@ -617,7 +617,8 @@ PDC_VS_AMBC_ROWS = (
      "title": "idealised: the headline's settings on the decoupled plant jhu-rov (Tables "
               "5.4/5.5), exactly the model structure two-step AMBC adapts; eps = 0.5 in step 2 "
               "(not reported; chosen when eps = 2 diverged after ~150 min at k_d = 100 on earlier "
-              "code; on this code row thesis-eps2 does not diverge: docs/experiments.md)"},
+              "code; row thesis-eps2, eps = 2 on this code, did not diverge in its one run: "
+              "docs/experiments.md)"},
     {"name": "thesis-eps2", "kd": KD, "eps2": EPS_STEP2, "lag_compensation": False,
      "ff_preview": False, "vehicle": "jhu-rov",
      "title": "thesis-decoupled-plant with eps = 2 in step 2 (our two-step's eps)"},
