@@ -831,7 +831,7 @@ def pdc_vs_ambc_result(rows: dict[str, dict]) -> dict:
         f"noise): k_p={KP:g}, k_d={KD:g} give heading/yaw-rate MAE "
         f"{one['heading']['position_mae']:.4f} rad / {one['heading']['velocity_mae']:.4f} "
         f"rad/s (thesis {THESIS_TABLE_5_6['PDC'][3]:.3f} / {THESIS_TABLE_5_6['PDC'][11]:.4f}); "
-        f"the thesis's pair is reproduced at a yaw k_p of {fit['kp']:.0f} (k_d {KD:g}: "
+        f"the thesis's pair is fitted (grid) by a yaw k_p of {fit['kp']:.0f} (k_d {KD:g}: "
         f"{fit['position_mae']:.4f} / {fit['velocity_mae']:.4f}); x, y, z, roll, pitch at "
         f"k_p={KP:g}: position MAE ratios to Table 5.6 " + ", ".join(
             f"{a} {one[a]['ratio'][0]:.2f}" for a in ("x", "y", "z", "roll", "pitch")))
