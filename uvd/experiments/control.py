@@ -617,7 +617,8 @@ PDC_VS_AMBC_ROWS = (
      "title": "idealised: the headline's settings on the decoupled plant jhu-rov (Tables "
               "5.4/5.5), exactly the model structure two-step AMBC adapts; eps = 0.5 in step 2 "
               "(not reported; chosen when eps = 2 diverged after ~150 min at k_d = 100 on earlier "
-              "code; on this code row thesis-eps2 does not diverge: docs/experiments.md)"},
+              "code; row thesis-eps2, eps = 2 on this code, did not diverge in its one run: "
+              "docs/experiments.md)"},
     {"name": "thesis-eps2", "kd": KD, "eps2": EPS_STEP2, "lag_compensation": False,
      "ff_preview": False, "vehicle": "jhu-rov",
      "title": "thesis-decoupled-plant with eps = 2 in step 2 (our two-step's eps)"},
@@ -830,7 +831,7 @@ def pdc_vs_ambc_result(rows: dict[str, dict]) -> dict:
         f"noise): k_p={KP:g}, k_d={KD:g} give heading/yaw-rate MAE "
         f"{one['heading']['position_mae']:.4f} rad / {one['heading']['velocity_mae']:.4f} "
         f"rad/s (thesis {THESIS_TABLE_5_6['PDC'][3]:.3f} / {THESIS_TABLE_5_6['PDC'][11]:.4f}); "
-        f"the thesis's pair is reproduced at a yaw k_p of {fit['kp']:.0f} (k_d {KD:g}: "
+        f"the thesis's pair is fitted (grid) by a yaw k_p of {fit['kp']:.0f} (k_d {KD:g}: "
         f"{fit['position_mae']:.4f} / {fit['velocity_mae']:.4f}); x, y, z, roll, pitch at "
         f"k_p={KP:g}: position MAE ratios to Table 5.6 " + ", ".join(
             f"{a} {one[a]['ratio'][0]:.2f}" for a in ("x", "y", "z", "roll", "pitch")))

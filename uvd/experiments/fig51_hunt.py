@@ -55,8 +55,8 @@ CAUSES: tuple[tuple[str, str, dict], ...] = (
     ("none", "ambc-6dof-unstable's plant, nothing added", {}),
     ("mounting-bias+", "INS mounted +1° in roll and pitch",
      {"tank": TankEffects(mounting_bias_rad=(_DEG, _DEG, 0.0))}),
-    ("mounting-bias-", "INS mounted -1° in roll and pitch (the sign of a bias decides the sign "
-                       "of the unexcited direction's drift, issue 32)",
+    ("mounting-bias-", "INS mounted -1° in roll and pitch (issue 32's hypothesis: the sign of a "
+                       "bias decides the sign of the unexcited direction's drift)",
      {"tank": TankEffects(mounting_bias_rad=(-_DEG, -_DEG, 0.0))}),
     ("latency", "INS, DVL and depth frames 1 sample late (100, 167, 143 ms)",
      {"tank": TankEffects(latency_samples=(1, 1, 1))}),
