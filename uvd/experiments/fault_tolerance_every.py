@@ -82,8 +82,14 @@ def note(result: dict) -> str | None:
         veh = result["vehicles"]
     except (KeyError, TypeError):
         return None
+    # the allocation's DOF names against the bound's tracked ones
+    tracked = {"surge": "x", "sway": "y", "heave": "z", "roll": "roll", "pitch": "pitch",
+               "yaw": "heading"}
     parts = []
     for label, v in veh.items():
+        lost = sorted({k for k, r in v["dead"].items() if not r["meets_bound"]
+                       and any(tracked.get(g) in v["bound_dofs"] for g in r["given_up"])})
+        coupled = sorted({k for k, r in v["dead"].items() if not r["meets_bound"]} - set(lost))
         ok = [k for k, r in v["dead"].items() if r["meets_bound"]]
         miss = [k for k, r in v["dead"].items() if not r["meets_bound"]]
         text = (f"{label}: {len(ok)} of {v['thrusters']} thrusters meet the bound "
@@ -94,6 +100,14 @@ def note(result: dict) -> str | None:
                 f"{v['dead'][k]['ratio_after'][v['dead'][k]['worst_kept']]:.2f}×, given up: "
                 f"{', '.join(v['dead'][k]['given_up']) or 'none'}, worst saturation "
                 f"{max(v['dead'][k]['saturated_fraction_after']):.0%})" for k in miss)
+        if lost:
+            text += (f". Thrusters {', '.join(lost)}: the remaining ones no longer reach a DOF "
+                     "the bound covers (it is given up by [control] dof_priority), so no "
+                     "allocation can meet it — under-actuation, not the priorities")
+        if coupled:
+            text += (f". Thrusters {', '.join(coupled)}: every DOF of the bound is still "
+                     "allocated, the DOF given up lies outside it, and the misses come with "
+                     "the remaining thrusters at their limit in the share of cycles shown")
         parts.append(text)
     return "**Reading.** " + ". ".join(parts) + "."
 
