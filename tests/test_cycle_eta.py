@@ -45,6 +45,9 @@ def test_the_operator_kills_and_restores_a_thruster_through_the_cycle():
         before = _run(sim, 2.0)
         res = sim.command(cmd.SetThrusterEta(4, 0.0, source="test"))
         assert res.ok and res.reason == "thruster 4 eta 0 (test); given up: pitch"
+        fdc_like = sim.command(cmd.SetThrusterEta(3, 0.475901, source="uvd-fdc"))
+        assert fdc_like.reason.startswith("thruster 3 eta 0.476 (uvd-fdc)")  # text rounded
+        assert sim.command(cmd.SetThrusterEta(3, 1.0)).ok
         during = _run(sim, 3.0)
         assert sim.command(cmd.SetThrusterEta(4, 1.0)).ok
         after = _run(sim, 1.0)
@@ -59,8 +62,8 @@ def test_the_operator_kills_and_restores_a_thruster_through_the_cycle():
 
 
 @pytest.mark.parametrize("c, why", [
-    (cmd.SetThrusterEta(7, 0.0), "thruster 7 is not one of 1…6"),
-    (cmd.SetThrusterEta(0, 0.0), "thruster 0 is not one of 1…6"),
+    (cmd.SetThrusterEta(7, 0.0), "thruster 7 is not one of 1..6"),
+    (cmd.SetThrusterEta(0, 0.0), "thruster 0 is not one of 1..6"),
     (cmd.SetThrusterEta(2, 1.5), "eta 1.5 is not in [0, 1]"),
     (cmd.SetThrusterEta(2, math.nan), "eta nan is not in [0, 1]"),
     (cmd.SetThrusterEta("x", 0.5), "thruster must be an integer and eta a number"),

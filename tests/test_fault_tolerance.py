@@ -28,3 +28,25 @@ def test_the_amplifier_arm_is_the_cycles_own_source():
     assert bow["reallocated_s"] is None and bow["events"] == []  # pitch would be lost
     with pytest.raises(ValueError, match="η 0 only"):
         run_arm("sim.toml", 4, 0.5, "amplifier")
+
+
+def test_every_thruster_reading_separates_under_actuation_from_saturation():
+    """fault-tolerance-every's page text, from a JSON of two misses: a thruster whose loss gives
+    up a DOF the bound covers (no allocation can meet it) and one that gives up a DOF outside
+    it (the miss is the remaining thrusters' saturation), and one that meets the bound."""
+    from uvd.experiments.fault_tolerance_every import note
+
+    def row(worst, ratio, given_up, ok):
+        return {"worst_kept": worst, "ratio_after": {worst: ratio}, "given_up": given_up,
+                "saturated_fraction_after": [0.28, 0.0], "meets_bound": ok}
+    res = {"vehicles": {"six": {"thrusters": 3, "bound": 2.0,
+                                "bound_dofs": ["z", "roll", "pitch", "heading"],
+                                "dead": {"1": row("z", 3.5, ["surge"], False),
+                                         "2": row("pitch", 7.0, ["pitch"], False),
+                                         "3": row("z", 1.1, [], True)}}}}
+    text = note(res)
+    assert "six: 1 of 3 thrusters meet the bound" in text
+    assert "thruster 1 (z 3.50×, given up: surge, worst saturation 28%)" in text
+    assert "Thrusters 2: the remaining ones no longer reach" in text
+    assert "Thrusters 1: every DOF of the bound is still allocated" in text
+    assert note({}) is None

@@ -77,3 +77,114 @@ def test_a_malformed_fault_sample_is_named():
     with pytest.raises(ValueError, match="relative_change is 'x'"):
         fault_report("k", json.dumps({"kind": "thruster", "channel": "thruster1", "t_ns": 5,
                                       "confidence": 1.0, "relative_change": "x"}).encode())
+
+
+def _sample_from_the_schema(thruster: int, eta: float) -> bytes:
+    """A uvd-fdc fault sample built from docs/zenoh.md's schema file alone (no uvd import): the
+    required fields it names, the thruster convention its descriptions give (channel
+    ``thruster<i>``, relative_change η − 1), checked against it before it is put."""
+    from pathlib import Path
+
+    import jsonschema
+    path = Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas" / "uvd.fault.v1.json"
+    schema = json.loads(path.read_text())
+    sample = {"vehicle": "rov7", "kind": "thruster", "t_ns": 5_000_000_000,
+              "channel": f"thruster{thruster}", "magnitude": -12.0,
+              "relative_change": eta - 1.0, "confidence": 3.0,
+              "explanation": {"coef": [1.0 - eta], "since_t_ns": 1_000_000_000}}
+    assert set(schema["required"]) <= set(sample)
+    jsonschema.validate(sample, schema)
+    return json.dumps(sample).encode()
+
+
+def test_a_sample_built_from_the_documented_schema_is_decided_by_accept(tmp_path):
+    """The fdc client's sample, written against uvd.fault.v1 only, goes through the router to
+    the daemon's Zenoh face; the FaultReport it becomes is then decided by the cycle of a JHU
+    ROV in each ``accept`` mode: advisory tells and leaves η, auto sets thruster 4's η 0.5,
+    confirm (the default) refuses it while the daemon's own residual has no evidence yet."""
+    from tests.test_fdc_source import _cfg, _run, _sim
+    router, endpoint, cfg = fleet(tmp_path, {"faults": {"fdc": {"enabled": True}}})
+    from uvd.links.zenoh import zenoh_sink
+    from uvd.telemetry.sink import TelemetryHub
+    queue = cmd.CommandQueue()
+    sink = zenoh_sink(cfg, TelemetryHub(), commands=queue)
+    got: list = []
+    try:
+        asyncio.run(sink.open())
+        fdc = zenoh.open(_client("fdc", tmp_path, endpoint, "fdc-secret"))
+        time.sleep(0.5)  # the daemon's subscription travels to the router
+        fdc.put("uvd/rov7/fault/thruster", _sample_from_the_schema(4, 0.5))
+        assert _wait(lambda: got.extend(p.command for p in queue.drain()) or got, 5.0)
+        fdc.close()
+    finally:
+        asyncio.run(sink.aclose())
+        router.close()
+    (report,) = got
+    assert report == cmd.FaultReport("thruster", "thruster4", -0.5, 5_000_000_000, 3.0,
+                                     1_000_000_000)
+    for accept, ok, eta in [("advisory", True, None), ("auto", True, [1, 1, 1, 0.5, 1, 1]),
+                            ("confirm", False, None)]:
+        sim = _sim(_cfg(accept))
+        _run(sim, 0.5)
+        res = sim.command(report)
+        data = sim.supervisor.data
+        assert res.ok is ok, (accept, res.reason)
+        assert (None if data.thruster_eta is None else data.thruster_eta.tolist()) == eta
+        assert {"advisory": "advisory, not acted on", "auto": "accepted (auto)",
+                "confirm": "unconfirmed"}[accept] in res.reason
+
+
+def test_the_fdc_client_reads_hold_reason_from_the_estimates(tmp_path):
+    """A JHU ROV in lockstep with AID on loses thruster 4 (pitch given up); the estimate records
+    its cycle produces go out on the daemon's Zenoh face, and the fdc client — a plain
+    subscriber through the router, checking each sample against uvd.zestimate.v1 — reads which
+    DOF's rows are held, and "" again once the thruster is back."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    import jsonschema
+
+    from uvd.lockstep import Lockstep, LockstepConfig
+    from uvd.runtime.build import make_cycle, start_pose
+    from uvd.runtime.config import DEFAULT_CONFIG, load_config
+    from uvd.telemetry.records import estimate_records
+    schema = json.loads((Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
+                         / "uvd.zestimate.v1.json").read_text())
+    vcfg = load_config(DEFAULT_CONFIG)
+    vcfg = replace(vcfg, estimation=replace(vcfg.estimation, aid=True))
+    vehicle = vcfg.load_vehicle()
+    H0, v0 = start_pose(vcfg)
+    sim = Lockstep(vehicle, make_cycle(vcfg, vehicle),
+                   LockstepConfig(control_rate_hz=vcfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
+                   armed=True)
+
+    def records(seconds):
+        for _ in range(round(seconds / sim.dt_control)):
+            sim.advance()
+        return estimate_records(sim.core_cfg, sim.state, sim.t_ns)
+
+    router, endpoint, cfg = fleet(tmp_path)
+    from uvd.links.zenoh import zenoh_sink
+    from uvd.telemetry.sink import TelemetryHub
+    sink = zenoh_sink(cfg, TelemetryHub())
+    seen: list[dict] = []
+    try:
+        asyncio.run(sink.open())
+        fdc = zenoh.open(_client("fdc", tmp_path, endpoint, "fdc-secret"))
+        fdc.declare_subscriber("uvd/rov7/estimate/**",
+                               lambda s: seen.append(json.loads(s.payload.to_bytes())))
+        time.sleep(0.5)  # the subscription travels to the router
+        assert sim.command(cmd.SetThrusterEta(4, 0.0, source="test")).ok
+        asyncio.run(sink.write(records(1.0)))
+        assert _wait(lambda: len(seen) >= 1, 5.0), "no estimate reached the fdc client"
+        assert sim.command(cmd.SetThrusterEta(4, 1.0)).ok
+        asyncio.run(sink.write(records(1.0)))
+        assert _wait(lambda: len(seen) >= 2, 5.0)
+        fdc.close()
+    finally:
+        asyncio.run(sink.aclose())
+        router.close()
+    for s in seen:
+        jsonschema.validate(s, schema)
+    assert seen[0]["hold_reason"].startswith("pitch given up"), seen[0]["hold_reason"]
+    assert seen[1]["hold_reason"] == ""

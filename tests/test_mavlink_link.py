@@ -284,3 +284,29 @@ def test_bench_loop_fuzz_control_sends_to_a_bare_receiver(tmp_path):
     f = json.loads(out.read_text())["mavlink_fuzz"]
     assert f["blocks"] == 3 and f["fuzzed"]["n"] >= 150
     assert f["sent"] == 600 and f["link_counters"] == {"control": True, "datagrams": 600}
+
+
+def test_statustext_is_plain_ascii_as_pymavlink_decodes_it():
+    """A refusal naming "1…6" and a told η with "±" reach the station in plain ASCII, whole:
+    pymavlink decodes each STATUSTEXT's 50 bytes, and nothing is garbled or split mid-character."""
+    refused = "thruster 9 is not one of 1…6"
+    told = "uvd-fdc: thruster 4 eta 0.48 (confidence 3.2); residual η 0.47 ± 0.03 → accepted"
+
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        asyncio.run(link.write([
+            {"type": "command", "command": "SetThrusterEta", "ok": False, "reason": refused}]))
+        first = st.wait("STATUSTEXT", lambda m: "refused" in m.text)  # 52 bytes: 2 chunks
+        rest = st.wait("STATUSTEXT", lambda m: m.id == first.id and m.chunk_seq == 1)
+        assert first.text + rest.text == "SetThrusterEta refused: thruster 9 is not one of 1..6"
+        asyncio.run(link.write([
+            {"type": "command", "command": "FaultReport", "ok": True, "reason": told}]))
+        parts = [st.wait("STATUSTEXT", lambda m, i=i: m.chunk_seq == i and m.id > first.id)
+                 for i in range(2)]
+        text = "".join(p.text for p in parts)
+        assert text == ("uvd-fdc: thruster 4 eta 0.48 (confidence 3.2); residual eta 0.47 "
+                        "+/- 0.03 -> accepted")
+        assert all(p.severity == mav.MAV_SEVERITY_WARNING for p in parts)
+        assert text.isascii()
+
+    run_link(scenario)

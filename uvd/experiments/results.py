@@ -364,6 +364,7 @@ def _note_of(module: str):
 
 
 NOTES = {"fault-tolerance": _note_of("fault_tolerance"),
+         "fault-tolerance-every": _note_of("fault_tolerance_every"),
          "fault-tolerance-hil": _note_of("fault_tolerance_hil"),
          "aid-6dof": _note_aid_6dof, "aid-rot": _note_aid_rot,
          "ambc-6dof-unstable": _note_ambc_6dof_unstable,

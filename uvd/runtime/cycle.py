@@ -510,13 +510,13 @@ def _set_eta(config: CycleConfig, state: CycleState, c: Any
     except (TypeError, ValueError):
         return CommandResult(False, "thruster must be an integer and eta a number"), state, ()
     if not 1 <= i <= n:
-        return CommandResult(False, f"thruster {i} is not one of 1…{n}"), state, ()
+        return CommandResult(False, f"thruster {i} is not one of 1..{n}"), state, ()
     if not 0.0 <= e <= 1.0:  # NaN fails too
         return CommandResult(False, f"eta {c.eta!r} is not in [0, 1]"), state, ()
     eta = np.ones(n) if state.thruster_eta is None else state.thruster_eta.copy()
     eta[i - 1] = e
     given_up = config.core.accommodation_for(eta)[0].given_up
-    return CommandResult(True, f"thruster {i} eta {e:g} ({c.source or 'operator'}); "
+    return CommandResult(True, f"thruster {i} eta {e:.3g} ({c.source or 'operator'}); "
                                f"given up: {', '.join(given_up) or 'none'}"), \
         state._replace(thruster_eta=None if (eta == 1.0).all() else eta), ()
 

@@ -169,7 +169,7 @@ def _parse(c: Any, n: int) -> tuple[int, float] | str:
     i = int(m.group(1))
     rc = c.relative_change
     if not 1 <= i <= n:
-        return f"thruster {i} is not one of 1…{n}"
+        return f"thruster {i} is not one of 1..{n}"
     if isinstance(rc, bool) or not isinstance(rc, (int, float)) or not math.isfinite(rc):
         return f"relative_change {rc!r} is not a finite number"
     return i, min(1.0, max(0.0, 1.0 + float(rc)))

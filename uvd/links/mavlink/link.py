@@ -37,6 +37,7 @@ import select
 import socket
 import threading
 import time
+import unicodedata
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -135,6 +136,22 @@ class _Out:
 #: vehicle's order), param2 η ∈ [0, 1] (1 clears it) — MAV_CMD_USER_1, as no standard command
 #: carries it (docs/mavlink.md)
 MAV_CMD_THRUSTER_ETA = 31010
+
+
+#: what the operator's texts hold beyond ASCII, spelled in ASCII for STATUSTEXT
+_ASCII = str.maketrans({"…": "..", "η": "eta", "±": "+/-", "σ": "sigma", "θ": "theta",
+                        "→": "->", "×": "x", "—": "-", "–": "-", "≤": "<=", "≥": ">=",
+                        "µ": "u", "μ": "u", "°": "deg", "²": "^2", "³": "^3"})
+
+
+def ascii_text(text: str) -> str:
+    """``text`` in plain ASCII for a STATUSTEXT (50 bytes of char[] that ground stations read
+    as ASCII: a UTF-8 "…" shows garbled, and a chunk boundary can split a multi-byte one). The
+    characters of :data:`_ASCII` are spelled out ("1…6" → "1..6", "η" → "eta"), accents dropped,
+    anything else "?"."""
+    s = unicodedata.normalize("NFKD", str(text).translate(_ASCII))
+    return "".join(ch for ch in s if not unicodedata.combining(ch)).encode(
+        "ascii", "replace").decode("ascii")
 
 
 class MavlinkLink:
@@ -640,8 +657,9 @@ class MavlinkLink:
                 self.counters["send_errors"] += 1
 
     def _statustext(self, severity: str, text: str) -> None:
-        """One STATUSTEXT, in 50-character chunks sharing an id when longer (MAVLink 2)."""
-        data = text.encode("utf-8", "replace")
+        """One STATUSTEXT, in 50-character chunks sharing an id when longer (MAVLink 2); the
+        text in plain ASCII (:func:`ascii_text`), which every ground station shows as sent."""
+        data = ascii_text(text).encode("ascii")
         chunks = [data[i:i + 50] for i in range(0, len(data), 50)] or [b""]
         self._text_id = self._text_id % 65535 + 1
         tid = self._text_id if len(chunks) > 1 else 0
