@@ -74,3 +74,16 @@ def pytest_collection_modifyitems(items):
             item.add_marker(pytest.mark.xdist_group(REAL_TIME_GROUP))
         if item.path.stem in SERIAL_MODULES:
             item.add_marker(pytest.mark.serial)
+
+
+def pytest_collection_finish(session):
+    """Under ``--dist loadgroup``, stop at once if xdist did not take the real-time group: the
+    grouping lives in the node ids, and a pytest that changes how they are stored silently
+    undoes it (pytest 9.2 with pytest-xdist 3.8, pytest-xdist#1386; pyproject.toml pins below)."""
+    if not session.config.getvalue("loadgroup"):
+        return
+    lost = [i.nodeid for i in session.items
+            if i.path.stem in REAL_TIME_MODULES and not i.nodeid.endswith(f"@{REAL_TIME_GROUP}")]
+    if lost:
+        raise pytest.UsageError(f"--dist loadgroup: xdist did not group {len(lost)} real-time "
+                                f"tests (e.g. {lost[0]}); see tests/conftest.py")
