@@ -48,13 +48,14 @@ def shared_data():
 #: worker runs the rest). A new module of that kind belongs here.
 REAL_TIME_GROUP = "real-time"
 REAL_TIME_MODULES = frozenset(f"test_{name}" for name in (
-    "amplifier_eta", "can_bench", "can_bus", "can_contract", "can_logging", "cli",
-    "daemon_estimation", "daemon_faults", "demo_failsafe", "demo_fault", "demo_spread",
-    "demo_steal", "drivers_bench", "drivers_emulators", "eta_cli", "failsafe_scenario", "fdc",
-    "fdc_zenoh", "hil_process", "ins_age", "mavlink", "mavlink_link", "recording",
-    "replay_realtime", "runtime_bench", "runtime_lifecycle", "runtime_loop",
-    "runtime_telemetry", "runtime_threads", "runtime_zero_thrust", "sensor_sync_hil",
-    "sim_bridge_faults", "zenoh", "zenoh_bench",
+    "amplifier_eta", "can_bench", "can_bus", "can_contract", "can_fuzz", "can_logging", "cli",
+    "daemon_config", "daemon_estimation", "daemon_faults", "demo_failsafe", "demo_fault",
+    "demo_spread", "demo_steal", "drivers_bench", "drivers_emulators", "drivers_transport",
+    "eta_cli", "failsafe_scenario", "fdc", "fdc_zenoh", "hil_process", "ins_age", "leak_input",
+    "links", "mavlink", "mavlink_link", "notify", "recording", "replay_realtime",
+    "runtime_app", "runtime_bench", "runtime_lifecycle", "runtime_loop", "runtime_telemetry",
+    "runtime_threads", "runtime_zero_thrust", "sensor_sync_hil", "sim_bridge_faults", "zenoh",
+    "zenoh_bench", "zenoh_security",
 ))
 
 
