@@ -81,7 +81,7 @@ def pytest_collection_finish(session):
     """Under ``--dist loadgroup``, stop at once if xdist did not take the real-time group: the
     grouping lives in the node ids, and a pytest that changes how they are stored silently
     undoes it (pytest 9.2 with pytest-xdist 3.8, pytest-xdist#1386; pyproject.toml pins below)."""
-    if not session.config.getvalue("loadgroup"):
+    if not getattr(session.config.option, "loadgroup", False):  # set on xdist workers only
         return
     lost = [i.nodeid for i in session.items
             if i.path.stem in REAL_TIME_MODULES and not i.nodeid.endswith(f"@{REAL_TIME_GROUP}")]
