@@ -38,3 +38,53 @@ def shared_data():
     """``shared_data("bluerov-exjobb")``: the folder of unlicensed recordings, or a skip that
     names it (:func:`shared_recordings`)."""
     return shared_recordings
+
+
+#: Modules whose tests run the daemon's loop, ``sim-bridge``, ``uvd demo`` or a link in real
+#: time and bound what they see in wall-clock time (lateness, failsafe delays, heartbeats, a
+#: datagram flood, bus rates), or load the machine on purpose (test_fdc's busy processes).
+#: ``make test`` runs the suite on two xdist workers with ``--dist loadgroup``; these go to one
+#: group, so they run one after another on one worker and never beside each other (the other
+#: worker runs the rest). A new module of that kind belongs here.
+REAL_TIME_GROUP = "real-time"
+REAL_TIME_MODULES = frozenset(f"test_{name}" for name in (
+    "amplifier_eta", "can_bench", "can_bus", "can_contract", "can_fuzz", "can_logging", "cli",
+    "daemon_config", "daemon_estimation", "daemon_faults", "demo_failsafe", "demo_fault",
+    "demo_spread", "demo_steal", "drivers_bench", "drivers_emulators", "drivers_transport",
+    "eta_cli", "failsafe_scenario", "fdc", "fdc_zenoh", "hil_process", "ins_age", "leak_input",
+    "links", "mavlink", "mavlink_link", "notify", "recording", "replay_realtime",
+    "runtime_app", "runtime_bench", "runtime_lifecycle", "runtime_loop", "runtime_telemetry",
+    "runtime_threads", "runtime_zero_thrust", "sensor_sync_hil", "sim_bridge_faults", "zenoh",
+    "zenoh_bench", "zenoh_security",
+))
+
+
+#: Modules that ``make test`` runs alone, after the two workers are done (marker ``serial``):
+#: test_mavlink floods the link's UDP socket with 10 000 datagrams and counts ≥ 9 000 read; its
+#: receiver process, descheduled by a CPU-bound test on the other worker, let the socket's
+#: buffer overflow (4989 read, under -n 2 at load 2–3.5).
+SERIAL_MODULES = frozenset({"test_mavlink"})
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups (its own modifyitems)
+def pytest_collection_modifyitems(items):
+    """Put the tests of :data:`REAL_TIME_MODULES` in the xdist group :data:`REAL_TIME_GROUP`,
+    and mark those of :data:`SERIAL_MODULES` ``serial``."""
+    for item in items:
+        if item.path.stem in REAL_TIME_MODULES:
+            item.add_marker(pytest.mark.xdist_group(REAL_TIME_GROUP))
+        if item.path.stem in SERIAL_MODULES:
+            item.add_marker(pytest.mark.serial)
+
+
+def pytest_collection_finish(session):
+    """Under ``--dist loadgroup``, stop at once if xdist did not take the real-time group: the
+    grouping lives in the node ids, and a pytest that changes how they are stored silently
+    undoes it (pytest 9.2 with pytest-xdist 3.8, pytest-xdist#1386; pyproject.toml pins below)."""
+    if not getattr(session.config.option, "loadgroup", False):  # set on xdist workers only
+        return
+    lost = [i.nodeid for i in session.items
+            if i.path.stem in REAL_TIME_MODULES and not i.nodeid.endswith(f"@{REAL_TIME_GROUP}")]
+    if lost:
+        raise pytest.UsageError(f"--dist loadgroup: xdist did not group {len(lost)} real-time "
+                                f"tests (e.g. {lost[0]}); see tests/conftest.py")
