@@ -29,8 +29,9 @@ demo: $(STAMP)
 # Both cores (pytest-xdist): the real-time tests form one xdist group (tests/conftest.py), so
 # they run one after another on one worker while the other worker runs the rest; then the
 # tests marked serial run alone, also when the first part failed (each prints its own count).
-# Bytecode is written even if PYTHONDONTWRITEBYTECODE is set: otherwise every worker re-rewrites the asserts of every test
-# module and each of the suite's hundreds of subprocesses recompiles uvd (collection 17 s → 4 s).
+# Bytecode is written even if PYTHONDONTWRITEBYTECODE is set: otherwise every worker re-rewrites
+# the asserts of every test module and each of the suite's hundreds of subprocesses recompiles
+# uvd (collection 17 s → 4 s).
 TEST_WORKERS ?= 2
 test: $(STAMP)
 	export PYTHONDONTWRITEBYTECODE=; \
