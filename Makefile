@@ -28,13 +28,16 @@ demo: $(STAMP)
 
 # Both cores (pytest-xdist): the real-time tests form one xdist group (tests/conftest.py), so
 # they run one after another on one worker while the other worker runs the rest; then the
-# tests marked serial run alone. Each pytest prints its own count. Bytecode is written even if
-# PYTHONDONTWRITEBYTECODE is set: otherwise every worker re-rewrites the asserts of every test
-# module and each of the suite's hundreds of subprocesses recompiles uvd (collection 17 s → 4 s).
+# tests marked serial run alone, also when the first part failed (each prints its own count).
+# Bytecode is written even if PYTHONDONTWRITEBYTECODE is set: otherwise every worker re-rewrites
+# the asserts of every test module and each of the suite's hundreds of subprocesses recompiles
+# uvd (collection 17 s → 4 s).
 TEST_WORKERS ?= 2
 test: $(STAMP)
-	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup -m "not serial"
-	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -m serial
+	export PYTHONDONTWRITEBYTECODE=; \
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup -m "not serial"; parallel=$$?; \
+	$(PY) -m pytest -q -m serial; serial=$$?; \
+	test $$parallel -eq 0 -a $$serial -eq 0
 
 bench: $(STAMP)
 	$(PY) -m uvd.bench.all
