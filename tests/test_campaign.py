@@ -235,3 +235,17 @@ def test_fdc_summary_counts_hours_at_risk_and_keeps_false_alarms_apart():
         "workers": 2, "wall_seconds": 1.0, "load_average_before": [1.0],
         "load_average_after": [2.0], "summary_text": text, "figures": ["a.png"]}}))
     assert "6 of 10 runs (**partial**" in page and "![a.png](results/campaign-fdc-x/a.png)" in page
+
+
+def test_a_row_half_written_by_a_dead_campaign_is_removed_and_a_live_writers_is_kept(tmp_path):
+    rows = tmp_path / "rows"
+    rows.mkdir()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait(timeout=30)  # its pid now names no process (reaped)
+    stale = rows / f"abc.tmp{dead.pid}"
+    live = rows / f"def.tmp{os.getpid()}"
+    stale.write_bytes(b"half a row")
+    live.write_bytes(b"being written")
+    store = RowStore(tmp_path)
+    assert store.stale_removed == 1 and not stale.exists() and live.exists()
+    assert store.done() == set()  # neither counts as a finished run

@@ -80,6 +80,20 @@ class RowStore:
         self.directory = Path(directory)
         self.rows_dir = self.directory / "rows"
         self.rows_dir.mkdir(parents=True, exist_ok=True)
+        self.stale_removed = self._remove_stale_tmp()
+
+    def _remove_stale_tmp(self) -> int:
+        """Remove the half-written rows (``<key>.tmp<pid>``) of a writer no longer alive — a
+        campaign killed between writing a row and renaming it; that run is not done and runs
+        again. A live writer's file is left alone. Returns how many were removed."""
+        removed = 0
+        for p in self.rows_dir.glob("*.tmp*"):
+            pid = p.suffix[len(".tmp"):]
+            if pid.isdigit() and _alive(int(pid)):
+                continue
+            p.unlink(missing_ok=True)
+            removed += 1
+        return removed
 
     def done(self) -> set[str]:
         """The keys of the runs already written."""
@@ -117,3 +131,14 @@ class RowStore:
         path = self.directory / name
         pq.write_table(self.table(keys), path)
         return path
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (signal 0 delivers nothing, only checks)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, another user's
+        return True
+    return True
