@@ -119,3 +119,11 @@ def test_fig51_hunt_attempt_run_in_a_part_equals_the_command_s_bit_for_bit(tmp_p
     result = run_fig51_hunt(opts, got)
     assert len(result["attempts"]) == 1 and len(result["not_run"]) == n - 1
     assert f"NOT RUN at {hours:.2f} h ({n - 1} of {n}" in result["summary"]
+
+
+def test_a_wall_time_quoted_in_a_summary_is_not_compared_its_figures_are():
+    a = {"summary": "120 simulated min; lockstep 53.3 s wall\nwall: LS 0.5 s, xval 2.2 s\nerr 0.25"}
+    later = {"summary": a["summary"].replace("53.3", "61.8").replace("0.5 s", "2.7 s")}
+    assert reproduced(compare(a, later))
+    moved = {"summary": a["summary"].replace("err 0.25", "err 0.26")}
+    assert not reproduced(compare(a, moved))

@@ -6,8 +6,9 @@ default duration), into a temporary folder; :func:`compare` then walks the commi
 ``docs/results/NAME.json`` and the new one side by side. A number counts as reproduced within
 ``--rel`` (1e-9 relative by default: the last bits the compiled kernels may round differently
 on another processor, docs/experiments.md "Reproducibility"); anything else — a string, a
-flag, a key or a list length — must be equal. Timings (keys naming wall or CPU time) are not
-compared. Exit status 1 when any experiment does not reproduce; the figures go to stdout.
+flag, a key or a list length — must be equal. Timings (keys naming wall or CPU time, and
+phrases of a text that quote a wall time) are not compared. Exit status 1 when any experiment
+does not reproduce; the figures go to stdout.
 
 ``--against DIR`` compares JSON files already written (e.g. by ``make results --out DIR``)
 instead of running.
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import subprocess
 import sys
 import tempfile
@@ -32,6 +34,17 @@ TIMING_KEYS = frozenset({"wall_seconds", "sim_wall_s", "cpu_s", "rows_cpu_s",
 
 def _timing(key: str) -> bool:
     return key in TIMING_KEYS or "wall" in key
+
+
+#: a phrase of a text that quotes a wall time ("lockstep 53.3 s wall", "wall: LS 0.5 s, …"):
+#: up to the next ";" or line end
+_WALL_PHRASE = re.compile(r"[^;\n]*\bwall\b[^;\n]*")
+
+
+def _untimed(text: str) -> str:
+    """``text`` without its phrases that quote a wall time (the summaries print how long
+    their run took; that is not what it computed)."""
+    return _WALL_PHRASE.sub("", text)
 
 
 def _number(x) -> bool:
@@ -86,6 +99,8 @@ def _walk(a, b, rel: float, path: str, out: dict) -> None:
             return
         for i, (x, y) in enumerate(zip(a, b, strict=True)):
             _walk(x, y, rel, f"{path}[{i}]", out)
+    elif isinstance(a, str) and isinstance(b, str) and _untimed(a) == _untimed(b):
+        return  # equal but for a wall time quoted in the text
     elif type(a) is not type(b) or a != b:
         what = "differs" if type(a) is type(b) else f"{type(a).__name__} vs {type(b).__name__}"
         out["unequal"].append([path, what])
