@@ -1045,7 +1045,8 @@ def run_ambc_full(opts: ExperimentOptions) -> dict:
         f"position_ratio {out['position_ratio']:.3f}, velocity_ratio "
         f"{out['velocity_ratio']:.3f}",
         f"|theta-hat - theta| / |theta|: start {rel_err[0]:.3f}, end {rel_err[-1]:.3f}; "
-        f"per block {out['final_block_relative_error']}",
+        "per block " + ", ".join(f"{k} {v:.3f}"
+                                 for k, v in out['final_block_relative_error'].items()),
         f"min eigenvalue of M-hat over the run: {lam.min():.2f}",
     ])
     return out
