@@ -366,18 +366,34 @@ class EmulatedAmplifier(EmulatedNode):
         self.state = cia402.SWITCH_ON_DISABLED  # transition 1 is automatic
 
     def tick(self, now: int) -> None:
+        # Both the command timeout and the consumed heartbeat may have run out by a late tick
+        # (the emulator's thread delayed on a loaded machine): the one that ran out first
+        # faults the drive, as on a drive whose timers run on their own.
+        timeout_at = self._command_deadline()
+        hb_at = (self.consumer_seen_ns + self.consumer[1] * 1_000_000
+                 if self.consumer is not None and self.consumer_seen_ns else None)
+        if timeout_at is not None and now > timeout_at and (hb_at is None or timeout_at <= hb_at):
+            self._command_timeout(now)
         super().tick(now)
-        if self.state == cia402.OPERATION_ENABLED and self.command_timeout_ms:
-            last = max(self.last_rpdo_ns, self.armed_ns)
-            elapsed = now - last
-            if elapsed > self.command_timeout_ms * 1_000_000:
-                ms = elapsed / 1e6
-                self.last_timeout_ms = ms
-                self.last_timeout_ns = now
-                self.counters["timeouts"] += 1
-                # manufacturer bytes: milliseconds since the last command (u16)
-                self.fault(cia402.FAULT_CODES["command_timeout"], now,
-                           data=struct.pack("<H", min(int(round(ms)), 0xFFFF)))
+        timeout_at = self._command_deadline()
+        if timeout_at is not None and now > timeout_at:
+            self._command_timeout(now)
+
+    def _command_deadline(self) -> int | None:
+        """When the command timeout runs out (ns), while operation is enabled."""
+        if self.state != cia402.OPERATION_ENABLED or not self.command_timeout_ms:
+            return None
+        return max(self.last_rpdo_ns, self.armed_ns) + self.command_timeout_ms * 1_000_000
+
+    def _command_timeout(self, now: int) -> None:
+        """No command within the timeout: FAULT, EMCY 0x8250 with the milliseconds since the
+        last command in its manufacturer bytes (u16)."""
+        ms = (now - max(self.last_rpdo_ns, self.armed_ns)) / 1e6
+        self.last_timeout_ms = ms
+        self.last_timeout_ns = now
+        self.counters["timeouts"] += 1
+        self.fault(cia402.FAULT_CODES["command_timeout"], now,
+                   data=struct.pack("<H", min(int(round(ms)), 0xFFFF)))
 
     # -- output --
     def thrust_command_n(self) -> float:
