@@ -188,10 +188,16 @@ class EmulatedNode:
             self.silent_until_ns = 0
         if self.hb_period_ms and now - self._last_hb_ns >= self.hb_period_ms * 1_000_000:
             self.heartbeat(now)
-        if self.consumer is not None and self.consumer_seen_ns and \
-                now - self.consumer_seen_ns > self.consumer[1] * 1_000_000:
+        hb_at = self._heartbeat_deadline()
+        if hb_at is not None and now > hb_at:
             self.consumer_seen_ns = 0  # re-armed by the next heartbeat
             self.on_heartbeat_lost(now)
+
+    def _heartbeat_deadline(self) -> int | None:
+        """When the consumed heartbeat runs out (ns), while one is being watched."""
+        if self.consumer is None or not self.consumer_seen_ns:
+            return None
+        return self.consumer_seen_ns + self.consumer[1] * 1_000_000
 
     def on_heartbeat_lost(self, now: int) -> None:
         """The consumed heartbeat (the daemon's) is late: EMCY 0x8130."""
@@ -370,8 +376,7 @@ class EmulatedAmplifier(EmulatedNode):
         # (the emulator's thread delayed on a loaded machine): the one that ran out first
         # faults the drive, as on a drive whose timers run on their own.
         timeout_at = self._command_deadline()
-        hb_at = (self.consumer_seen_ns + self.consumer[1] * 1_000_000
-                 if self.consumer is not None and self.consumer_seen_ns else None)
+        hb_at = self._heartbeat_deadline()
         if timeout_at is not None and now > timeout_at and (hb_at is None or timeout_at <= hb_at):
             self._command_timeout(now)
         super().tick(now)
