@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 
 from uvd.estimation.aid import INITP_6DOF, aid6_init, aid_hold_dofs, held_indices
-from uvd.lockstep import Lockstep, LockstepConfig
+from uvd.lockstep import of_config
 from uvd.runtime import commands as cmd
-from uvd.runtime.build import make_cycle, start_pose
 from uvd.runtime.config import DEFAULT_CONFIG, load_config
 from uvd.telemetry.records import estimate_records
 
@@ -40,11 +39,7 @@ def test_every_dof_actuated_holds_nothing():
 def test_aid_holds_the_pitch_rows_while_the_others_adapt():
     cfg = load_config(DEFAULT_CONFIG)  # the JHU ROV, six thrusters
     cfg = replace(cfg, estimation=replace(cfg.estimation, aid=True))
-    vehicle = cfg.load_vehicle()
-    H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, make_cycle(cfg, vehicle),
-                   LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
-                   armed=False)
+    sim = of_config(cfg, armed=False)
     sim.advance()
     assert sim.command(cmd.Arm()).ok
     for _ in range(20):

@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 
 from uvd.control.ambc import drag_index, mass_index
-from uvd.lockstep import Lockstep, LockstepConfig
+from uvd.lockstep import of_config
 from uvd.runtime import commands as cmd
-from uvd.runtime.build import make_cycle, start_pose
 from uvd.runtime.config import DEFAULT_CONFIG, load_config
 
 
@@ -21,11 +20,7 @@ def _sim(**control):
     cfg = load_config(DEFAULT_CONFIG)  # the JHU ROV, six thrusters
     if control:
         cfg = replace(cfg, control=replace(cfg.control, **control))
-    vehicle = cfg.load_vehicle()
-    H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, make_cycle(cfg, vehicle),
-                   LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
-                   armed=False)
+    sim = of_config(cfg, armed=False)
     sim.advance()  # standby: the arming checks need a health snapshot
     assert sim.command(cmd.Arm()).ok
     return sim

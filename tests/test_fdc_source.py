@@ -13,9 +13,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from uvd.lockstep import Lockstep, LockstepConfig
+from uvd.lockstep import of_config
 from uvd.runtime import commands as cmd
-from uvd.runtime.build import make_cycle, start_pose
 from uvd.runtime.config import DEFAULT_CONFIG, ConfigValidationError, load_config
 from uvd.runtime.fdc_source import FaultsSection, FdcSourceSection
 from uvd.runtime.schema import with_values
@@ -28,11 +27,7 @@ def _cfg(accept="confirm", enabled=True):
 
 
 def _sim(cfg):
-    vehicle = cfg.load_vehicle()
-    H0, v0 = start_pose(cfg)
-    return Lockstep(vehicle, make_cycle(cfg, vehicle),
-                    LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
-                    armed=True)
+    return of_config(cfg)
 
 
 def _run(sim, seconds):

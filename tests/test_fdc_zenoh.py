@@ -144,19 +144,14 @@ def test_the_fdc_client_reads_hold_reason_from_the_estimates(tmp_path):
 
     import jsonschema
 
-    from uvd.lockstep import Lockstep, LockstepConfig
-    from uvd.runtime.build import make_cycle, start_pose
+    from uvd.lockstep import of_config
     from uvd.runtime.config import DEFAULT_CONFIG, load_config
     from uvd.telemetry.records import estimate_records
     schema = json.loads((Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
                          / "uvd.zestimate.v1.json").read_text())
     vcfg = load_config(DEFAULT_CONFIG)
     vcfg = replace(vcfg, estimation=replace(vcfg.estimation, aid=True))
-    vehicle = vcfg.load_vehicle()
-    H0, v0 = start_pose(vcfg)
-    sim = Lockstep(vehicle, make_cycle(vcfg, vehicle),
-                   LockstepConfig(control_rate_hz=vcfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
-                   armed=True)
+    sim = of_config(vcfg)
 
     def records(seconds):
         for _ in range(round(seconds / sim.dt_control)):

@@ -156,15 +156,10 @@ def test_operator_loss_in_lockstep_holds_depth_through_the_one_cycle():
     """The same plug-in trigger and cycle in lockstep: the station heard until 1 s after
     arming, then silent; with the sim's 5 s timeout the cycle holds depth from the first cycle
     past 6 s (no surge, sway or yaw thrust), and the event says why."""
-    from uvd.lockstep import Lockstep, LockstepConfig
+    from uvd.lockstep import of_config
     from uvd.runtime import commands as cmd
-    from uvd.runtime.build import make_cycle, start_pose
     cfg = sim_config()
-    vehicle = cfg.load_vehicle()
-    H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, make_cycle(cfg, vehicle),
-                   LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0), H0=H0, v0=v0,
-                   armed=False)
+    sim = of_config(cfg, armed=False)
     sim.advance()
     assert sim.command(cmd.Arm()).ok
     t_arm = sim.t_ns

@@ -83,6 +83,24 @@ def lockstep_config(cfg, seed: int = 0) -> LockstepConfig:
                           instruments=inst, ins_trigger=cfg.loop.trigger == "ins")
 
 
+def of_config(cfg, lcfg: LockstepConfig | None = None, *, armed: bool = True,
+              **supervisor_args) -> Lockstep:
+    """A daemon configuration's very cycle (:func:`uvd.runtime.build.make_cycle`: the same
+    core, failsafes and lifecycle) in lockstep, from its start pose
+    (:func:`uvd.runtime.build.start_pose`).
+
+    ``lcfg`` defaults to the configuration's control rate with seed 0 and no frame noise;
+    :func:`lockstep_config` gives the daemon's instruments (``uvd demo``'s reference run).
+    ``armed=False`` starts in STANDBY (arm with :meth:`Lockstep.command`)."""
+    from uvd.runtime.build import make_cycle, start_pose
+    vehicle = cfg.load_vehicle()
+    H0, v0 = start_pose(cfg)
+    if lcfg is None:
+        lcfg = LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=0)
+    return Lockstep(vehicle, make_cycle(cfg, vehicle), lcfg, H0=H0, v0=v0, armed=armed,
+                    **supervisor_args)
+
+
 @dataclass
 class LockstepLog:
     """Per-cycle records (arrays of length n_cycles)."""

@@ -96,12 +96,8 @@ def lockstep_sim(cfg, seed: int):
     """The same configuration in lockstep simulation: the daemon's very cycle
     (:func:`uvd.runtime.build.make_cycle`: the same core, failsafes and lifecycle), armed from
     the start."""
-    from uvd.lockstep import Lockstep, lockstep_config
-    from uvd.runtime.build import make_cycle, start_pose
-
-    vehicle = cfg.load_vehicle()
-    H0, v0 = start_pose(cfg)
-    return Lockstep(vehicle, make_cycle(cfg, vehicle), lockstep_config(cfg, seed), H0=H0, v0=v0)
+    from uvd.lockstep import lockstep_config, of_config
+    return of_config(cfg, lockstep_config(cfg, seed))
 
 
 def lockstep_run(cfg, duration_s: float, seed: int):
