@@ -250,14 +250,24 @@ def test_signing_refuses_unsigned_wrong_and_forged_and_params_survive_a_restart(
     signed_cfg.write_text(dump_toml(data))
     port = bridge["port"]
 
+    def set_kp(d, sink):  # unsigned: the daemon keeps the parameter in its params_file
+        s = Station(port)
+        try:
+            s.heartbeat()
+            assert s.param_set("CTL_KP_1", 370.0) == 370.0
+        finally:
+            s.close()
+
+    run_daemon(cfg, set_kp)  # this test's own "before the restart" (it runs alone too)
+
     def scenario(d, sink):
         s = Station(port, signing_key=bridge["key"])
         plain = Station(port)  # unsigned
         wrong = Station(port, signing_key=hashlib.sha256(b"not the key").digest())
         try:
             s.heartbeat()
-            assert s.param_read("CTL_KP_1") == 360.0  # set before the restart
-            assert d.app.config.control.kp[0] == 360.0
+            assert s.param_read("CTL_KP_1") == 370.0  # set before the restart
+            assert d.app.config.control.kp[0] == 370.0
             plain.heartbeat()  # telemetry goes out to an unsigned station too
             assert plain.arm().result == mav.MAV_RESULT_DENIED
             # a station with the wrong key cannot read the vehicle's signed replies (pymavlink
