@@ -155,12 +155,19 @@ def _run(args) -> int:
         sw = sweep_gain_factors(cfg, cfg.load_vehicle(), args.aid_sweep)
         f["aid_sweep"] = sw
         for r in sw["grid"]:
-            print(f"#   translation ×{r['translation']:<5g} rotation ×{r['rotation']:<5g} "
-                  f"error {r['error']:.3f}{'  frozen' if r['frozen'] else ''}")
-        print(f"# mean |ln(estimate/truth)| of M's diagonal and b₃ after {args.aid_sweep:g} s: "
-              f"{sw['best_error']:.3f} (×1, ×1: {sw['error_at_1_1']:.3f}); "
-              f"{sw['record_cpu_s']:.0f} s + {sw['replay_cpu_s']:.0f} s CPU")
+            rate = "§4.6 per DOF" if r["rate"] is None else f"{r['rate']:g} /s each"
+            print(f"#   translation ×{r['translation']:<3g} rotation ×{r['rotation']:<3g} "
+                  f"rate {rate:<13} error {r['error']:.3f} (M, b₃: {r['mass_b3_error']:.3f})"
+                  f"{'  frozen' if r['frozen'] else ''}")
+        print(f"# mean |ln(estimate/truth)| of the decoupled parameters (M's, D's diagonals, g, "
+              f"b₃) after {args.aid_sweep:g} s: {sw['best_error']:.3f} (×1, ×1 §4.6 per DOF: "
+              f"{sw['error_at_1_1']:.3f}); {sw['record_cpu_s']:.0f} s + "
+              f"{sw['replay_cpu_s']:.0f} s CPU")
         print(f"gain_factors = {_toml_list(sw['best'])}")
+        if sw["best_scale"] is not None:
+            print(f"# each decoupled parameter at {sw['best_rate']:g} /s for its excitation "
+                  "(m1..m6, d1..d6, g, b1, b2, b3):")
+            print(f"decoupled_gain_scale = {_toml_list(sw['best_scale'])}")
     if args.json is not None:
         write_json(args.json, f)
     return 0

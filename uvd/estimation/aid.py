@@ -85,6 +85,8 @@ __all__ = [
     "AID3Gains", "AID3Params", "AID3State", "aid3_init", "aid3_step", "aid3_params",
     "aid3_estimator",
     "aid_unfreeze", "aid_hold_dofs", "held_indices", "INITP_6DOF", "INITP_ROT",
+    "DECOUPLED_NAMES", "decoupled_gains", "decoupled_excitation", "excitation_gain_scale",
+    "entry_scale_of",
 ]
 
 _INTERP = ("linear", "hold")
@@ -180,8 +182,16 @@ def _drag_law(theta_out, base0, n, g2dt, s, v, dv):
 
 
 @numba.njit(cache=True)
-def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, g4, s, adapt,
-                 theta_out, vhat_out, diag):
+def _entry_scale(theta, w, theta_out):
+    """θ̂⁺ = θ̂ + diag(w)(θ̂⁺ − θ̂): each entry's update times its own gain multiplier wₖ > 0
+    (:class:`AID6Gains` ``entry_scale``; ones: the laws as they are)."""
+    for k in range(theta.shape[0]):
+        theta_out[k] = theta[k] + w[k] * (theta_out[k] - theta[k])
+
+
+@numba.njit(cache=True)
+def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, g4, s, w,
+                 adapt, theta_out, vhat_out, diag):
     """One Euler step of (4.23)–(4.27).
 
     The model and regressor terms use the signals (v, Rᵀe₃ = r, u); v̂ is propagated with
@@ -236,6 +246,7 @@ def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, 
     theta_out[238] += g4 * s[3] * dt * (e2 * r3 - e3 * r2)
     theta_out[239] += g4 * s[4] * dt * (e3 * r1 - e1 * r3)
     theta_out[240] += g4 * s[5] * dt * (e1 * r2 - e2 * r1)
+    _entry_scale(theta, w, theta_out)
     _sym_from_upper(theta_out, 6, M)
     lo, hi = min_max_eig(M)
     diag[0], diag[1] = lo, hi
@@ -243,8 +254,8 @@ def _aid6_kernel(theta, vhat, v_prev, v, r, u, v_now, fresh, dt, a, g1, g2, g3, 
 
 
 @numba.njit(cache=True)
-def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3, s, adapt,
-                 theta_out, what_out, diag):
+def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3, s, ws,
+                 adapt, theta_out, what_out, diag):
     """One Euler step of (4.10)–(4.13); the 3-DOF analogue of :func:`_aid6_kernel`."""
     I = np.empty((3, 3))
     _sym_from_upper(theta, 3, I)
@@ -280,6 +291,7 @@ def _aid3_kernel(theta, what, w_prev, w, r, tau, w_now, fresh, dt, a, g1, g2, g3
     theta_out[33] -= g3 * s[0] * dt * (r2 * e3 - r3 * e2)
     theta_out[34] -= g3 * s[1] * dt * (r3 * e1 - r1 * e3)
     theta_out[35] -= g3 * s[2] * dt * (r1 * e2 - r2 * e1)
+    _entry_scale(theta, ws, theta_out)
     _sym_from_upper(theta_out, 3, I)
     lo, hi = min_max_eig(I)
     diag[0], diag[1] = lo, hi
@@ -340,13 +352,14 @@ def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, dt, ada
     for i in range(3):
         rs[i] = 0.5 * (r_prev[i] + r_out[i]) if midpoint else r_prev[i]
     sc = cfg[8:8 + n]
+    we = cfg[8 + n:8 + n + p]
     if n == 6:
         status = _aid6_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[0],
-                              cfg[1], cfg[2], cfg[3], cfg[4], sc, adapt, theta_out, vhat_out,
-                              diag)
+                              cfg[1], cfg[2], cfg[3], cfg[4], sc, we, adapt, theta_out,
+                              vhat_out, diag)
     else:
         status = _aid3_kernel(theta, vhat, v_prev, vs, rs, u, v_out, midpoint, dt, cfg[0],
-                              cfg[1], cfg[2], cfg[3], sc, adapt, theta_out, vhat_out, diag)
+                              cfg[1], cfg[2], cfg[3], sc, we, adapt, theta_out, vhat_out, diag)
     if status != 0:
         for i in range(n):
             vhat_out[i] = v_out[i]
@@ -367,19 +380,22 @@ def _drive(n_v, theta, vhat, v_prev, r_prev, u_prev, H, v_in, u_in, cfg, dt, ada
 
 
 def _cfg_template(params, n_v: int) -> np.ndarray:
-    """[a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint, s₁ … s_n]: :func:`_drive`'s ``cfg``
-    (s: the gains' per-DOF scales), built once per parameter set (writable like every array
-    handed to the kernel — one compiled specialisation — and never written)."""
+    """[a, γ₁, γ₂, γ₃, γ₄, pd_floor, linear, midpoint, s₁ … s_n, w₁ … w_p]: :func:`_drive`'s
+    ``cfg`` (s: the gains' per-DOF scales, w: the per-entry multipliers, ones when not given),
+    built once per parameter set (writable like every array handed to the kernel — one
+    compiled specialisation — and never written)."""
     gn = params.gains
+    p = N_THETA_UV if n_v == 6 else N_THETA_UVR
+    w = gn.entry_scale if gn.entry_scale else (1.0,) * p
     return np.array([gn.a, gn.gamma1, gn.gamma2, gn.gamma3, gn.gamma4 if n_v == 6 else 0.0,
                      params.pd_floor, params.input_interp == "linear",
-                     params.sampling == "midpoint", *gn.dof_scale], dtype=float)
+                     params.sampling == "midpoint", *gn.dof_scale, *w], dtype=float)
 
 
 # inputs of the gap step (dt = 0: only the sample is copied); never written by the kernel, and
 # writable like the arrays of the normal step so both share one compiled specialisation
 _ZEROS = {6: np.zeros(6), 3: np.zeros(3)}
-_GAP_CFG = np.zeros(14)
+_GAP_CFG = np.zeros(14 + N_THETA_UV)
 
 
 def _step(n_v, vs, u_applied, params, st, dt, state_cls, what):
@@ -437,6 +453,11 @@ class AID6Gains:
     γ₁√(sᵢsⱼ), row r of every D̂ᵢ at γ₂s_r, ĝ at γ₃ times the mean of s₁…s₃, b̂ₖ at γ₄s₃₊ₖ.
     Any positive diagonal gain keeps V̇ = −a∆vᵀM∆v of (4.33): V's parameter terms are
     weighted by the inverse gains, which cancel entry by entry.
+
+    ``entry_scale`` (241 numbers > 0 in the order of θ_UV (2.48), or empty: ones) multiplies
+    each entry's rate once more — the most general diagonal gain, so each parameter can be
+    given a rate for its own excitation (:func:`excitation_entry_scale`); V̇ is unchanged
+    by the same argument.
     """
 
     a: float = 10.0
@@ -445,13 +466,15 @@ class AID6Gains:
     gamma3: float = 2000.0
     gamma4: float = 2000.0
     dof_scale: tuple[float, ...] = (1.0,) * 6
+    entry_scale: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        _check_gains(self, ("a", "gamma1", "gamma2", "gamma3", "gamma4"), 6)
+        _check_gains(self, ("a", "gamma1", "gamma2", "gamma3", "gamma4"), 6, N_THETA_UV)
 
 
-def _check_gains(g, names, n: int) -> None:
-    """Every gain of ``names`` and each of the ``n`` per-DOF scales finite and > 0."""
+def _check_gains(g, names, n: int, p: int) -> None:
+    """Every gain of ``names``, each of the ``n`` per-DOF scales and each of the ``p``
+    per-entry scales (if given) finite and > 0."""
     for name in names:
         x = getattr(g, name)
         if not (math.isfinite(x) and x > 0.0):
@@ -460,6 +483,11 @@ def _check_gains(g, names, n: int) -> None:
     if len(sc) != n or not all(math.isfinite(x) and x > 0.0 for x in sc):
         raise ValueError(f"AID dof_scale must be {n} finite numbers > 0, got {g.dof_scale!r}")
     object.__setattr__(g, "dof_scale", sc)
+    we = tuple(float(x) for x in g.entry_scale)
+    if we and (len(we) != p or not all(math.isfinite(x) and x > 0.0 for x in we)):
+        raise ValueError(f"AID entry_scale must be empty or {p} finite numbers > 0, got "
+                         f"{len(we)} numbers")
+    object.__setattr__(g, "entry_scale", we)
 
 
 def _check_params(p) -> None:
@@ -690,16 +718,18 @@ def aid6_estimator(theta0: np.ndarray | UVParams | None = None,
 @dataclass(frozen=True)
 class AID3Gains:
     """Gains of Theorem 4.2.1: a (1/s), γ₁, γ₂, γ₃ (> 0); defaults are §4.5's.
-    ``dof_scale``: per roll, pitch, yaw, as :class:`AID6Gains`'s (b̂ₖ at γ₃sₖ)."""
+    ``dof_scale``: per roll, pitch, yaw, as :class:`AID6Gains`'s (b̂ₖ at γ₃sₖ);
+    ``entry_scale``: 36 per-entry multipliers in the order of θ_UVR (2.41), or empty."""
 
     a: float = 10.0
     gamma1: float = 5000.0
     gamma2: float = 10000.0
     gamma3: float = 1000.0
     dof_scale: tuple[float, ...] = (1.0,) * 3
+    entry_scale: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        _check_gains(self, ("a", "gamma1", "gamma2", "gamma3"), 3)
+        _check_gains(self, ("a", "gamma1", "gamma2", "gamma3"), 3, N_THETA_UVR)
 
 
 @dataclass(frozen=True)
@@ -835,3 +865,86 @@ def scaled_initp(params: UVParams) -> UVParams:
     D = np.stack([np.diag(-100.0 * d / JHU_DRAGS)] * 6)
     return UVParams(M=np.diag(100.0 * m / JHU_MASSES), D=D, g=0.0,
                     b=np.array([0.0, 0.0, 100.0 * rb]))
+
+
+# ---------------------------------------------------------------------------------------------
+# a gain per decoupled parameter from its excitation
+# ---------------------------------------------------------------------------------------------
+#: the 16 decoupled parameters of §5.3.1 (θ_UV[DECOUPLED_INDEX]), named as in the tables
+DECOUPLED_NAMES = ("m1", "m2", "m3", "m4", "m5", "m6", "d1", "d2", "d3", "d4", "d5", "d6",
+                   "g", "b1", "b2", "b3")
+
+
+def decoupled_gains(gains: AID6Gains) -> np.ndarray:
+    """The rate γₖ each of the 16 decoupled parameters adapts at under ``gains`` (without
+    ``entry_scale``): M̂ⱼⱼ at γ₁sⱼ (4.24), D̂ⱼ(j, j) at γ₂sⱼ (4.25), ĝ at γ₃ mean(s₁…s₃)
+    (4.26), b̂ₖ at γ₄s₃₊ₖ (4.27) — as the compiled kernel applies them."""
+    s = np.asarray(gains.dof_scale, dtype=float)
+    return np.r_[gains.gamma1 * s, gains.gamma2 * s, gains.gamma3 * s[:3].mean(),
+                 gains.gamma4 * s[3:]]
+
+
+def decoupled_excitation(H: np.ndarray, v: np.ndarray, dt: np.ndarray, M: np.ndarray,
+                         window_s: float = 0.5) -> np.ndarray:
+    """Excitation of each decoupled parameter over a run: eₖ = mean over the samples of
+    𝒲ₖᵀ M⁻¹ 𝒲ₖ, 𝒲ₖ the column of W_UV (2.49) that multiplies θₖ (θ_UV[DECOUPLED_INDEX]).
+
+    Near θ̂ = θ the observer error of (4.23) is ∆v ≈ M⁻¹𝒲θ̃/a (a ≫ the motion's
+    frequencies), so (4.24)–(4.27) move θ̃ₖ alone at the rate γₖeₖ/a (1/s): eₖ says how
+    strongly the run excites θₖ. v̇ is a Savitzky–Golay derivative of v over ``window_s``
+    (a plain difference of a 50 Hz noisy rate is mostly noise).
+
+    Parameters
+    ----------
+    H : (n, 4, 4) poses; v : (n, 6) body velocities [ν; ω]; dt : (n,) periods (s, the first
+        is ignored); M : (6, 6) the inertia used for M⁻¹ (the vehicle file's first guess).
+    Returns (16,) in the order of :data:`DECOUPLED_NAMES`.
+    """
+    from scipy.signal import savgol_filter
+
+    from uvd.model.params import DECOUPLED_INDEX
+    from uvd.model.regressors import W_UV
+
+    v = np.asarray(v, dtype=float)
+    step = float(np.median(np.asarray(dt, dtype=float)[1:]))
+    win = max(5, int(round(window_s / step)) | 1)
+    if v.shape[0] < win:
+        raise ValueError(f"decoupled_excitation: {v.shape[0]} samples, fewer than the "
+                         f"{win} of the derivative's window")
+    vd = savgol_filter(v, win, 2, deriv=1, delta=step, axis=0)
+    Minv = np.linalg.inv(np.asarray(M, dtype=float))
+    e = np.zeros(DECOUPLED_INDEX.shape[0])
+    for k in range(v.shape[0]):
+        W = W_UV(v[k], vd[k], np.asarray(H[k])[:3, :3])[:, DECOUPLED_INDEX]
+        e += np.einsum("ik,ij,jk->k", W, Minv, W)
+    return e / v.shape[0]
+
+
+def excitation_gain_scale(excitation: np.ndarray, gains: AID6Gains, rate: float,
+                          w_max: float = 1e6) -> np.ndarray:
+    """Multipliers wₖ of the 16 decoupled parameters' gains that make each adapt at ``rate``
+    (1/s) for its own excitation: wₖ = rate·a / (γₖ eₖ) (:func:`decoupled_excitation`,
+    :func:`decoupled_gains`), within [1/w_max, w_max]; 1 where eₖ = 0 (not excited).
+
+    Why: §4.6's gains, even scaled per DOF, give parameters whose regressor is large a rate
+    far above the motion's frequencies — on a BlueROV2 Heavy under RefTraj1, b̂₁, b̂₂
+    (regressor r₃ = cos φ cos θ ≈ 1) adapt at 1–2.5 /s against b̂₃'s 0.03 /s (r₁, r₂ ≈ 0.08),
+    so they follow b̂₃'s torque error as a time-varying signal within a second and b̂₃ does
+    not converge (docs/real-vehicles.md) — and parameters whose regressor is small (the
+    drags) far below. One rate for all makes them adapt alike; a diagonal Γ keeps (4.33)."""
+    e = np.asarray(excitation, dtype=float)
+    g = decoupled_gains(gains)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where(e > 0, rate * gains.a / (g * e), 1.0)
+    return np.clip(w, 1.0 / w_max, w_max)
+
+
+def entry_scale_of(decoupled_scale) -> tuple[float, ...]:
+    """``entry_scale`` (241) of :class:`AID6Gains` from multipliers of the 16 decoupled
+    parameters (every other entry 1)."""
+    from uvd.model.params import DECOUPLED_INDEX
+
+    w = np.ones(N_THETA_UV)
+    w[DECOUPLED_INDEX] = _positive(decoupled_scale, DECOUPLED_INDEX.shape[0],
+                                   "decoupled gain scale")
+    return tuple(float(x) for x in w)

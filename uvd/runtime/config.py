@@ -251,6 +251,13 @@ class EstimationSection:
         doc="with scale_to_vehicle: [translation, rotation] multipliers of the per-DOF gain "
             "scales — the thesis's 22-35 min runs against a short one; `uvd tune --aid-sweep` "
             "suggests them from a logarithmic sweep in simulation (§4.5's rule)")
+    decoupled_gain_scale: tuple[float, ...] = setting(
+        (), gt=0,
+        doc="16 multipliers of the gains of the decoupled parameters m1..m6, d1..d6, g, "
+            "b1, b2, b3 (θ_UV's M and D_i diagonals, g, b), each from its excitation in a "
+            "simulation of this configuration so that each adapts at one rate "
+            "(uvd.estimation.aid.excitation_gain_scale); `uvd tune --aid-sweep` prints "
+            "them. Empty = ones (not a MAVLink parameter)")
     publish_every_s: float = setting(
         1.0, unit="s", min=0.01, max=3600.0, reload=True,
         doc="how often the estimate goes to the telemetry sinks as an \"estimate\" record "
@@ -296,9 +303,18 @@ class EstimationSection:
         if vehicle is not None and self.scale_to_vehicle:
             gains = scaled_aid_gains(np.diag(vehicle.params.M), base=gains,
                                      factors=self.gain_factors)
+        if self.decoupled_gain_scale:
+            from dataclasses import replace
+
+            from uvd.estimation.aid import entry_scale_of
+            gains = replace(gains, entry_scale=entry_scale_of(self.decoupled_gain_scale))
         return AID6Params(gains=gains)
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        n = len(self.decoupled_gain_scale)
+        if n not in (0, 16):
+            return [("decoupled_gain_scale", f"16 numbers (m1..m6, d1..d6, g, b1, b2, b3) or "
+                                             f"none, got {n}")]
         try:
             self.aid_params()
         except ValueError as exc:
