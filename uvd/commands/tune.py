@@ -155,9 +155,10 @@ def _run(args) -> int:
         sw = sweep_gain_factors(cfg, cfg.load_vehicle(), args.aid_sweep)
         f["aid_sweep"] = sw
         for r in sw["grid"]:
-            rate = "§4.6 per DOF" if r["rate"] is None else f"{r['rate']:g} /s each"
+            b = r["band"]
+            band = "§4.6 per DOF" if b is None else f"{b[0]:g}–{b[1]:g} /s"
             print(f"#   translation ×{r['translation']:<3g} rotation ×{r['rotation']:<3g} "
-                  f"rate {rate:<13} error {r['error']:.3f} (M, b₃: {r['mass_b3_error']:.3f})"
+                  f"rates {band:<12} error {r['error']:.3f} (M, b₃: {r['mass_b3_error']:.3f})"
                   f"{'  frozen' if r['frozen'] else ''}")
         print(f"# mean |ln(estimate/truth)| of the decoupled parameters (M's, D's diagonals, g, "
               f"b₃) after {args.aid_sweep:g} s: {sw['best_error']:.3f} (×1, ×1 §4.6 per DOF: "
@@ -165,8 +166,9 @@ def _run(args) -> int:
               f"{sw['replay_cpu_s']:.0f} s CPU")
         print(f"gain_factors = {_toml_list(sw['best'])}")
         if sw["best_scale"] is not None:
-            print(f"# each decoupled parameter at {sw['best_rate']:g} /s for its excitation "
-                  "(m1..m6, d1..d6, g, b1, b2, b3):")
+            lo, hi = sw["best_band"]
+            print(f"# each decoupled parameter's rate for its excitation within {lo:g}–{hi:g} "
+                  "/s (m1..m6, d1..d6, g, b1, b2, b3):")
             print(f"decoupled_gain_scale = {_toml_list(sw['best_scale'])}")
     if args.json is not None:
         write_json(args.json, f)

@@ -920,23 +920,28 @@ def decoupled_excitation(H: np.ndarray, v: np.ndarray, dt: np.ndarray, M: np.nda
     return e / v.shape[0]
 
 
-def excitation_gain_scale(excitation: np.ndarray, gains: AID6Gains, rate: float,
-                          w_max: float = 1e6) -> np.ndarray:
-    """Multipliers wₖ of the 16 decoupled parameters' gains that make each adapt at ``rate``
-    (1/s) for its own excitation: wₖ = rate·a / (γₖ eₖ) (:func:`decoupled_excitation`,
-    :func:`decoupled_gains`), within [1/w_max, w_max]; 1 where eₖ = 0 (not excited).
+def excitation_gain_scale(excitation: np.ndarray, gains: AID6Gains,
+                          band: tuple[float, float]) -> np.ndarray:
+    """Multipliers wₖ of the 16 decoupled parameters' gains that bring each one's rate for
+    its own excitation, ρₖ = γₖeₖ/a (1/s; :func:`decoupled_excitation`,
+    :func:`decoupled_gains`), into ``band`` = (ρ_lo, ρ_hi): wₖ = clip(ρₖ, ρ_lo, ρ_hi)/ρₖ;
+    1 where eₖ = 0 (not excited at all: nothing to scale by).
 
-    Why: §4.6's gains, even scaled per DOF, give parameters whose regressor is large a rate
-    far above the motion's frequencies — on a BlueROV2 Heavy under RefTraj1, b̂₁, b̂₂
-    (regressor r₃ = cos φ cos θ ≈ 1) adapt at 1–2.5 /s against b̂₃'s 0.03 /s (r₁, r₂ ≈ 0.08),
-    so they follow b̂₃'s torque error as a time-varying signal within a second and b̂₃ does
-    not converge (docs/real-vehicles.md) — and parameters whose regressor is small (the
-    drags) far below. One rate for all makes them adapt alike; a diagonal Γ keeps (4.33)."""
+    Why (measured on a BlueROV2 Heavy under RefTraj1, docs/real-vehicles.md): §4.6's gains,
+    even scaled per DOF, give parameters with a large regressor a rate far above the motion's
+    frequencies — b̂₁, b̂₂ (regressor r₃ = cos φ cos θ ≈ 1) 1–2.5 /s against b̂₃'s 0.03 /s
+    (r₁, r₂ ≈ 0.08) — so they follow b̂₃'s torque error as a time-varying signal within a
+    second and b̂₃ does not converge; and parameters with a small regressor (the drags)
+    0.00001–0.001 /s, hours. ρ_hi below the motion's frequencies keeps the first from
+    following the motion, ρ_lo gives the second a rate a run can show. A diagonal Γ keeps
+    V̇ = −a∆vᵀM∆v (4.33)."""
+    lo, hi = (float(x) for x in band)
+    if not (0.0 < lo <= hi and math.isfinite(hi)):
+        raise ValueError(f"excitation_gain_scale: band must be 0 < lo <= hi, got {band!r}")
     e = np.asarray(excitation, dtype=float)
-    g = decoupled_gains(gains)
+    rate = decoupled_gains(gains) * e / gains.a
     with np.errstate(divide="ignore", invalid="ignore"):
-        w = np.where(e > 0, rate * gains.a / (g * e), 1.0)
-    return np.clip(w, 1.0 / w_max, w_max)
+        return np.where(rate > 0, np.clip(rate, lo, hi) / rate, 1.0)
 
 
 def entry_scale_of(decoupled_scale) -> tuple[float, ...]:

@@ -104,18 +104,18 @@ def decoupled_error(theta: np.ndarray, truth) -> float:
     return float(np.mean(np.abs(np.log(r))))
 
 
-#: rates (1/s) each decoupled parameter is given for its own excitation
-#: (:func:`uvd.estimation.aid.excitation_gain_scale`); None: §4.6's per-DOF gains alone
-RATES = (None, 0.01, 0.03, 0.1, 0.3)
+#: bands (ρ_lo, ρ_hi) (1/s) each decoupled parameter's rate for its own excitation is brought
+#: into (:func:`uvd.estimation.aid.excitation_gain_scale`); None: §4.6's per-DOF gains alone
+BANDS = (None, (0.01, 0.1), (0.01, 0.3), (0.03, 0.1), (0.03, 0.3))
 
-#: the gain factors swept with each rate
+#: the gain factors swept with each band
 SWEEP_FACTORS = (1.0, 3.0, 10.0)
 
 
 def sweep_gain_factors(cfg, vehicle, duration_s: float = 120.0, seed: int = 1,
-                       factors=SWEEP_FACTORS, rates=RATES) -> dict:
+                       factors=SWEEP_FACTORS, bands=BANDS) -> dict:
     """The sweep of the module docstring; returns the grid's scores, the best pair, the best
-    rate and its 16 multipliers (``[estimation] decoupled_gain_scale``), the excitation, and
+    band and its 16 multipliers (``[estimation] decoupled_gain_scale``), the excitation, and
     the CPU seconds of the lockstep run and of the replays."""
     from dataclasses import replace
 
@@ -140,12 +140,13 @@ def sweep_gain_factors(cfg, vehicle, duration_s: float = 120.0, seed: int = 1,
     for kt in factors:
         for kr in factors:
             gains = scaled_aid_gains(masses, base=base, factors=(kt, kr))
-            for rate in rates:
-                w = None if rate is None else excitation_gain_scale(exc, gains, rate)
+            for band in bands:
+                w = None if band is None else excitation_gain_scale(exc, gains, band)
                 g = gains if w is None else replace(gains, entry_scale=entry_scale_of(w))
                 st = replay_aid(rec, theta0, AID6Params(gains=g))
                 bad = st.frozen
-                grid.append({"translation": kt, "rotation": kr, "rate": rate,
+                grid.append({"translation": kt, "rotation": kr,
+                             "band": None if band is None else list(band),
                              "error": float("inf") if bad else decoupled_error(st.theta,
                                                                                vehicle.params),
                              "mass_b3_error": float("inf") if bad else convergence_error(
@@ -155,8 +156,8 @@ def sweep_gain_factors(cfg, vehicle, duration_s: float = 120.0, seed: int = 1,
     best = min(grid, key=lambda r: r["error"])
     return {"duration_s": duration_s, "seed": seed, "cycles": int(rec["dt"].shape[0]),
             "excitation": exc.tolist(), "grid": grid,
-            "best": [best["translation"], best["rotation"]], "best_rate": best["rate"],
+            "best": [best["translation"], best["rotation"]], "best_band": best["band"],
             "best_scale": best["scale"], "best_error": best["error"],
             "error_at_1_1": next((r["error"] for r in grid if r["translation"] == 1.0
-                                  and r["rotation"] == 1.0 and r["rate"] is None), None),
+                                  and r["rotation"] == 1.0 and r["band"] is None), None),
             "record_cpu_s": c1 - c0, "replay_cpu_s": time.process_time() - c1}
