@@ -60,19 +60,23 @@ def _reference_step6(theta, vhat, v, r, u, dt, g, v_prev, v_now=None):
     gdot = -g.gamma3 * np.mean(s[:3]) * dv[:3] @ r
     bdot = g.gamma4 * s[3:] * (J(dv[3:]) @ r)
     new = UVParams(M=M + dt * Mdot, D=D + dt * Ddot, g=gg + dt * gdot, b=b + dt * bdot)
+    if g.entry_scale:  # one more multiplier per entry of θ_UV: the most general diagonal Γ
+        return theta + np.asarray(g.entry_scale) * (new.theta - theta), vhat_new
     return new.theta, vhat_new
 
 
 @settings(max_examples=60, deadline=None)
 @given(M=spd(6, floor=50.0), R=rotation(), v=vec(6, 0.3), vhat=vec(6, 0.3), u=vec(6, 50.0),
-       dseed=st.integers(0, 2**31 - 1), per_dof=st.booleans())
-def test_aid6_step_is_the_theorem(M, R, v, vhat, u, dseed, per_dof):
-    """One compiled step equals the dense (4.23)–(4.27) — with the scalar γ's and with a
-    diagonal gain per DOF; M̂ stays exactly symmetric."""
+       dseed=st.integers(0, 2**31 - 1), per_dof=st.booleans(), per_entry=st.booleans())
+def test_aid6_step_is_the_theorem(M, R, v, vhat, u, dseed, per_dof, per_entry):
+    """One compiled step equals the dense (4.23)–(4.27) — with the scalar γ's, with a
+    diagonal gain per DOF and with one more multiplier per entry (``entry_scale``); M̂ stays
+    exactly symmetric."""
     rng = np.random.default_rng(dseed)
     D = rng.normal(size=(6, 6, 6)) * 100.0
     theta0 = UVParams(M=M, D=D, g=rng.normal() * 10, b=rng.normal(size=3) * 50).theta
-    gains = AID6Gains(dof_scale=tuple(np.exp(rng.normal(size=6))) if per_dof else (1.0,) * 6)
+    gains = AID6Gains(dof_scale=tuple(np.exp(rng.normal(size=6))) if per_dof else (1.0,) * 6,
+                      entry_scale=tuple(np.exp(rng.normal(size=241))) if per_entry else ())
     prm = AID6Params(gains=gains, input_interp="hold", sampling="euler")
     st0 = replace(aid6_init(theta0), v_hat=vhat, v_prev=v, r_prev=R[2].copy(),
                   u_prev=np.zeros(6))

@@ -207,12 +207,19 @@ def test_aid_sweep_prints_gain_factors_from_a_simulated_run(capsys, tmp_path):
     out = capsys.readouterr().out
     sw = json.loads(out_json.read_text())["aid_sweep"]
     # 150 cycles at 50 Hz less those the INS outage left without navigation
-    assert 100 < sw["cycles"] < 150 and len(sw["grid"]) == 25
+    # factors {1, 3, 10}² × {§4.6 per DOF, four bands of per-parameter rates}
+    assert 100 < sw["cycles"] < 150 and len(sw["grid"]) == 45
+    assert len(sw["excitation"]) == 16
     err = [np.inf if r["error"] is None else r["error"] for r in sw["grid"]]  # JSON: inf → null
     assert all(r["error"] is None for r in sw["grid"] if r["frozen"])  # a frozen AID: inf
     best = sw["grid"][int(np.argmin(err))]
     assert sw["best"] == [best["translation"], best["rotation"]]
-    assert np.isfinite(sw["best_error"]) and sw["best_error"] <= sw["error_at_1_1"]
+    assert sw["best_band"] == best["band"] and sw["best_scale"] == best["scale"]
+    assert (sw["error_at_1_1"] is None or np.isfinite(sw["best_error"])
+            and sw["best_error"] <= sw["error_at_1_1"])
     line = next(x for x in out.splitlines() if x.startswith("gain_factors = "))
     assert json.loads(line.split("=", 1)[1]) == sw["best"]
+    if sw["best_scale"] is not None:
+        line = next(x for x in out.splitlines() if x.startswith("decoupled_gain_scale = "))
+        assert np.allclose(json.loads(line.split("=", 1)[1]), sw["best_scale"], rtol=1e-3)
     assert "each DOF's scaled by its mass" in out
