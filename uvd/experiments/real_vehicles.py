@@ -373,7 +373,8 @@ def aid_demo_series(run_dir: Path) -> dict:
     return {"run": str(run_dir), "t": (np.array(ts) - ts[0]).tolist(), "M_diag": ms,
             "D_diag": ds, "g_b": bs, "frozen": frozen,
             "settings": {"scale_to_vehicle": e.scale_to_vehicle,
-                         "gain_factors": list(e.gain_factors), "gains": list(e.gains)},
+                         "gain_factors": list(e.gain_factors), "gains": list(e.gains),
+                         "decoupled_gain_scale": list(e.decoupled_gain_scale)},
             "M_diag_truth": np.diag(truth.M).tolist(),
             "D_diag_truth": [float(truth.D[i][i, i]) for i in range(6)],
             "g_b_truth": [float(truth.g), *map(float, truth.b)]}
