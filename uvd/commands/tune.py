@@ -11,8 +11,9 @@ axis (default ω: the delay-limited bandwidth, ζ = 0.8), printed as the ``[cont
 paste — with the AMBC adaptation gains and mass floor scaled from the thesis's on the JHU ROV
 (:func:`uvd.control.tuning.scaled_adaptation_gains`) and AID's gains scaled likewise, per DOF
 (:func:`uvd.estimation.aid.scaled_aid_gains`). ``--aid-sweep S`` also chooses AID's
-``gain_factors`` as §4.5 chose its gains, by a logarithmic sweep over an S-second simulation
-of the configuration (:mod:`uvd.experiments.aid_gains`; minutes).
+``gain_factors`` and ``decoupled_gain_scale`` (a gain per decoupled parameter from its
+excitation) as §4.5 chose its gains, by a logarithmic sweep over an S-second simulation of the
+configuration (:mod:`uvd.experiments.aid_gains`; minutes).
 """
 
 from __future__ import annotations

@@ -6,13 +6,18 @@ same for the configured vehicle and reference: one lockstep run of the configura
 vehicle, controller, reference, instruments and their noise, failsafes; ``seed`` other than
 the demo's so the gains are not chosen on the run they are judged on; an INS outage halfway,
 :data:`OUTAGE_S`, so the run holds a failsafe and a re-arm) records what AID sees each cycle
-(R, v = [ν; ω], the applied wrench u, dt); AID (Theorem 4.3.1) is then replayed over that record
-for every pair of per-DOF gain factors (translation, rotation) on a logarithmic grid, with the
-gains and INITP of ``[estimation] scale_to_vehicle``
-(:func:`uvd.estimation.aid.scaled_aid_gains`, :func:`~uvd.estimation.aid.scaled_initp`).
-Each pair is scored by how far the final M̂'s diagonal and b̂₃ are from the plant's (the vehicle
-file's) values: the mean of |ln(θ̂ᵢ/θᵢ)| over those seven numbers (∞ when one is ≤ 0 or AID
-froze). The best pair is ``[estimation] gain_factors``. Used by ``uvd tune --aid-sweep S``.
+(R, v = [ν; ω], the applied wrench u, dt), and the excitation of each of the 16 decoupled
+parameters over it (:func:`uvd.estimation.aid.decoupled_excitation`); AID (Theorem 4.3.1) is
+then replayed over that record for every pair of per-DOF gain factors (translation, rotation) on
+a logarithmic grid, each with §4.6's per-DOF gains alone and with each band of rates
+(:data:`BANDS`) the decoupled parameters' gains are scaled into for their excitation
+(:func:`uvd.estimation.aid.excitation_gain_scale`), with the gains and INITP of
+``[estimation] scale_to_vehicle`` (:func:`uvd.estimation.aid.scaled_aid_gains`,
+:func:`~uvd.estimation.aid.scaled_initp`). Each is scored by how far the final decoupled
+parameters are from the plant's (the vehicle file's) values: the mean of |ln(θ̂ᵢ/θᵢ)| over the
+14 whose truth is not zero (:func:`decoupled_error`; ∞ when one has the wrong sign or AID
+froze). The best gives ``[estimation] gain_factors`` and ``decoupled_gain_scale``. Used by
+``uvd tune --aid-sweep S``.
 """
 
 from __future__ import annotations
