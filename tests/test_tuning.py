@@ -207,8 +207,8 @@ def test_aid_sweep_prints_gain_factors_from_a_simulated_run(capsys, tmp_path):
     out = capsys.readouterr().out
     sw = json.loads(out_json.read_text())["aid_sweep"]
     # 150 cycles at 50 Hz less those the INS outage left without navigation
-    # factors {1, 3, 10}² × {§4.6 per DOF, four bands of per-parameter rates}
-    assert 100 < sw["cycles"] < 150 and len(sw["grid"]) == 45
+    # factors {1, 3, 10}² × {§4.6 per DOF, six bands of per-parameter rates}
+    assert 100 < sw["cycles"] < 150 and len(sw["grid"]) == 63
     assert len(sw["excitation"]) == 16
     err = [np.inf if r["error"] is None else r["error"] for r in sw["grid"]]  # JSON: inf → null
     assert all(r["error"] is None for r in sw["grid"] if r["frozen"])  # a frozen AID: inf

@@ -111,7 +111,7 @@ def decoupled_error(theta: np.ndarray, truth) -> float:
 
 #: bands (ρ_lo, ρ_hi) (1/s) each decoupled parameter's rate for its own excitation is brought
 #: into (:func:`uvd.estimation.aid.excitation_gain_scale`); None: §4.6's per-DOF gains alone
-BANDS = (None, (0.01, 0.1), (0.01, 0.3), (0.03, 0.1), (0.03, 0.3))
+BANDS = (None, (0.003, 0.1), (0.003, 0.3), (0.01, 0.1), (0.01, 0.3), (0.03, 0.1), (0.03, 0.3))
 
 #: the gain factors swept with each band
 SWEEP_FACTORS = (1.0, 3.0, 10.0)
