@@ -73,14 +73,12 @@ def test_decoupled_excitation_of_a_roll_only_motion():
     assert names["d4"] > 0 and names["g"] > 0
 
 
-def _lockstep_aid(cfg, vehicle, seconds: float, seed: int):
+def _lockstep_aid(cfg, seconds: float, seed: int):
     """θ̂ of the daemon's own AID (the cycle ``make_cycle`` builds from ``cfg``) after
-    ``seconds`` of lockstep simulation, and θ̂(t₀)."""
-    from uvd.lockstep import Lockstep, lockstep_config
-    from uvd.runtime.build import make_cycle, start_pose
+    ``seconds`` of lockstep simulation with the daemon's instruments, and θ̂(t₀)."""
+    from uvd.lockstep import lockstep_config, of_config
 
-    H0, v0 = start_pose(cfg)
-    sim = Lockstep(vehicle, make_cycle(cfg, vehicle), lockstep_config(cfg, seed), H0=H0, v0=v0)
+    sim = of_config(cfg, lockstep_config(cfg, seed))
     theta0 = np.array(sim.state.est[0].theta)
     for _ in range(int(round(seconds / sim.dt_control))):
         sim.advance()
@@ -124,7 +122,7 @@ def test_tuned_aid_gains_move_theta_toward_the_truth_on_the_bluerov2():
 
     tuned = configured(gain_factors=tuple(sw["best"]),
                        decoupled_gain_scale=tuple(sw["best_scale"]))
-    theta0, theta = _lockstep_aid(tuned, vehicle, 120.0, seed=0)
+    theta0, theta = _lockstep_aid(tuned, 120.0, seed=0)
     e0, e1 = err13(theta0), err13(theta)
     assert 1.5 < e0 < 2.0
     assert e1 <= e0 / 3, (e0, e1)
@@ -132,6 +130,6 @@ def test_tuned_aid_gains_move_theta_toward_the_truth_on_the_bluerov2():
     assert abs(np.log(theta[237] / truth.g)) < np.log(1.2), theta[237]
 
     old = configured(gain_factors=(10.0, 3.0))
-    _, theta_old = _lockstep_aid(old, vehicle, 120.0, seed=0)
+    _, theta_old = _lockstep_aid(old, 120.0, seed=0)
     assert err13(theta_old) > e0 / 3
     assert abs(np.log(theta_old[240] / b3)) > np.log(1.2)
