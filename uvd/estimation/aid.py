@@ -184,9 +184,11 @@ def _drag_law(theta_out, base0, n, g2dt, s, v, dv):
 @numba.njit(cache=True)
 def _entry_scale(theta, w, theta_out):
     """θ̂⁺ = θ̂ + diag(w)(θ̂⁺ − θ̂): each entry's update times its own gain multiplier wₖ > 0
-    (:class:`AID6Gains` ``entry_scale``; ones: the laws as they are)."""
+    (:class:`AID6Gains` ``entry_scale``; an entry with wₖ = 1 is left bit for bit as the law
+    wrote it, so the default gives the same bits as without this step)."""
     for k in range(theta.shape[0]):
-        theta_out[k] = theta[k] + w[k] * (theta_out[k] - theta[k])
+        if w[k] != 1.0:
+            theta_out[k] = theta[k] + w[k] * (theta_out[k] - theta[k])
 
 
 @numba.njit(cache=True)
