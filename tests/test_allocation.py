@@ -9,10 +9,12 @@ from hypothesis import strategies as st
 from uvd.control.allocation import (
     DEFAULT_DOF_PRIORITY,
     DOF_NAMES,
+    PRIORITY_TIE,
     Allocator,
     accommodate,
     allocate,
     allocate_kernel,
+    allocate_prioritised,
     applied_wrench,
     speed_command,
     thrust_from_measured_speed,
@@ -190,3 +192,69 @@ def test_effectiveness_out_of_range_is_refused_by_name(eta):
 def test_a_priority_that_is_not_the_six_dofs_is_refused():
     with pytest.raises(ValueError, match="DOF priority must name each"):
         accommodate(ALLOC, np.ones(6), ("heave", "roll", "pitch", "yaw", "surge", "surge"))
+
+
+# --- saturation resolved by DOF priority (allocate_prioritised) -----------------------------
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.data(), u=wrench, which=st.sampled_from(["jhu", "blue"]),
+       prio=st.permutations(DOF_NAMES))
+def test_prioritised_allocation_keeps_limits_is_exact_unsaturated_and_favours_priority(
+        data, u, which, prio):
+    """Never beyond a limit; exactly the unconstrained B⁺u (bit for bit, allocate_kernel's)
+    when that is within the limits; the DOF wrench fractions it returns are the ones produced;
+    and, compared with plain scaling in priority order, the first DOF where they differ gets
+    more from it (so the DOF of highest priority is never worse off)."""
+    alloc = ALLOC if which == "jhu" else BLUE
+    eta = data.draw(_eta(alloc.n_thrusters))
+    acc = accommodate(alloc, eta, prio)
+    B_eta = alloc.B * eta[None, :]
+    fmax = alloc.max_thrust_n
+    f, sat, s = allocate_prioritised(alloc, u, prio, B_pinv=acc.B_pinv)
+    f0, sat0, c = allocate_kernel(acc.B_pinv, fmax, u)
+    assert np.all(np.abs(f) <= fmax)
+    if c == 1.0:
+        assert np.array_equal(f, f0) and np.array_equal(sat, sat0) and np.all(s == 1.0)
+        return
+    np.testing.assert_array_equal(sat, np.abs(f) >= fmax * (1 - 1e-12))
+    # the fractions it reports are the wrench produced on each DOF asked for
+    asked = acc.actuated & (u != 0.0)
+    scale = 1.0 + np.abs(u).max()
+    np.testing.assert_allclose((B_eta @ f)[asked], s[asked] * u[asked], atol=1e-8 * scale)
+    np.testing.assert_allclose((B_eta @ f0)[asked], c * u[asked], atol=1e-8 * scale)
+    # in priority order, the first DOF where it and plain scaling differ gets more from it
+    for d in (DOF_NAMES.index(x) for x in prio):
+        if asked[d] and abs(u[d]) * abs(s[d] - c) > PRIORITY_TIE * np.abs(u).max():
+            assert s[d] > c, (prio, s, c)
+            break
+
+
+def test_a_saturated_yaw_no_longer_scales_depth_and_attitude():
+    """The JHU ROV without its aft-port thruster: the aft-starboard one alone gives yaw, and a
+    yaw moment beyond its limit made plain scaling shrink the verticals' heave, roll and pitch
+    with it. By priority they are met in full, yaw gets what its thruster can give, sway in
+    full on the lateral thruster."""
+    eta = np.array([0.0, 1, 1, 1, 1, 1])
+    acc = accommodate(ALLOC, eta)
+    u = np.array([0.0, 50.0, 40.0, 5.0, 10.0, 150.0])  # yaw 150 N m > 0.35 m × 300 N
+    B_eta = ALLOC.B * eta[None, :]
+    f0, _, c = allocate_kernel(acc.B_pinv, ALLOC.max_thrust_n, u)
+    f, sat, s = allocate_prioritised(ALLOC, u, B_pinv=acc.B_pinv)
+    assert c == pytest.approx(0.7)
+    np.testing.assert_allclose((B_eta @ f0)[1:], c * u[1:], atol=1e-9)  # plain: all × 0.7
+    np.testing.assert_allclose((B_eta @ f)[1:5], u[1:5], atol=1e-9)  # sway, heave, roll, pitch
+    assert (B_eta @ f)[5] == pytest.approx(105.0) and s[5] == pytest.approx(0.7)
+    assert sat.tolist() == [False, True, False, False, False, False]
+
+
+def test_the_lower_priority_dof_gives_way_to_the_higher_on_a_shared_thruster():
+    """Without the lateral thruster (sway given up) surge and yaw share the two aft thrusters;
+    yaw comes first, surge gets the thrust it leaves — plain scaling shrank both."""
+    eta = np.array([1.0, 1, 0, 1, 1, 1])
+    acc = accommodate(ALLOC, eta)
+    u = np.array([500.0, 0, 0, 0, 0, 70.0])  # aft-port 0.5·500 + 70/0.7 = 350 N > 300 N
+    B_eta = ALLOC.B * eta[None, :]
+    f, _, s = allocate_prioritised(ALLOC, u, B_pinv=acc.B_pinv)
+    _, _, c = allocate_kernel(acc.B_pinv, ALLOC.max_thrust_n, u)
+    assert (B_eta @ f)[5] == pytest.approx(70.0) and s[5] == 1.0
+    assert s[0] == pytest.approx((300.0 - 100.0) / 250.0) and s[0] < c == pytest.approx(300 / 350)

@@ -6,6 +6,9 @@ and the thruster law both ways (App. A.1).
   Moore–Penrose B⁺). Weights let a weak or worn thruster be spared.
 * If any |fᵢ| exceeds its limit the *whole* vector is scaled by the largest ratio, which keeps
   the wrench's direction (u_applied = s u, 0 < s ≤ 1); the thrusters at their limit are reported.
+  With a thruster's effectiveness set (a fault, :func:`accommodate`), saturation is resolved by
+  DOF priority instead (:func:`allocate_prioritised`): depth and attitude take the thrust first,
+  the lower-priority DOFs what is left.
 * Thrust → amplifier command through the thruster model: the propeller-speed set-point
   ω* = sign(f)√(|f|/k) of the steady-state law f = k ω|ω| (App. A.1).
 * The inverse, which the thesis uses as the applied input: thrust estimated from measured
@@ -225,6 +228,99 @@ def allocate_kernel(B_pinv, f_max, u):
             f[j] = min(max(f[j] * scale, -f_max[j]), f_max[j])
             sat[j] = ratio[j] >= worst * (1.0 - 1e-12)
     return f, sat, scale
+
+
+#: :func:`allocate_prioritised_kernel`: two allocations whose wrench on a DOF differs by less
+#: than this times the largest |uᵢ| give that DOF the same (rounding)
+PRIORITY_TIE = 1e-9
+
+
+@numba.njit(cache=True)
+def allocate_prioritised_kernel(B_pinv, f_max, u, order):
+    """Allocation that spends the thrust left, under saturation, on the DOFs in priority order.
+
+    ``order``: the DOF indices (0–5 of u) highest priority first (:func:`dof_priority_indices`).
+    When f = B⁺u is within every limit it is returned exactly as :func:`allocate_kernel` does
+    (nothing saturates, nothing is given). Otherwise the wrench is built up one DOF at a time in
+    ``order``: f ← f + s_d B⁺[:, d] u_d with s_d ∈ [0, 1] the largest that keeps every thruster
+    within ±f_max — depth and attitude take the thrust first, a lower-priority DOF gets what they
+    leave — and a second pass in the same order raises each s_d as far as the thrust a later DOF
+    freed on a shared thruster allows. Because B B⁺ is the identity on the DOFs B⁺ reaches, DOF
+    d then gets s_d u_d; plain scaling gives every DOF the common fraction
+    c = 1/max_i(|fᵢ|/f_max,i). In a geometry where a lower-priority DOF's thrust would relieve a
+    higher one's thruster, the fill can leave a DOF of higher priority below c: so the two are
+    compared in ``order`` on the DOFs asked for (u_d ≠ 0 and reached by B⁺), and the one that
+    gives the first DOF where they differ (by more than :data:`PRIORITY_TIE` × max|uᵢ| in
+    wrench) the larger fraction is returned — never worse than plain scaling for the DOF of
+    highest priority where they differ (lexicographically, in ``order``).
+
+    Returns (f, saturated, s): the thrusts (within ±f_max), the thrusters at their limit, and the
+    fraction s_d ∈ [0, 1] of each DOF's wrench produced (1 for a DOF not asked for, u_d = 0;
+    0 for one B⁺ does not reach, a DOF given up).
+    """
+    n = B_pinv.shape[0]
+    f0, sat0, c = allocate_kernel(B_pinv, f_max, u)
+    s = np.ones(6)
+    if c == 1.0:
+        return f0, sat0, s
+    asked = np.zeros(6, dtype=np.bool_)
+    for d in range(6):
+        for j in range(n):
+            if u[d] != 0.0 and B_pinv[j, d] != 0.0:
+                asked[d] = True
+        if u[d] != 0.0 and not asked[d]:
+            s[d] = 0.0  # a DOF B⁺ does not reach (given up): none of it is asked
+    f = np.zeros(n)
+    for d in range(6):
+        if asked[d]:
+            s[d] = 0.0
+    for _ in range(2):  # the second pass: what a later DOF's thrust freed on a shared thruster
+        for d in order:
+            if not asked[d] or s[d] >= 1.0:
+                continue
+            t = 1.0 - s[d]
+            for j in range(n):
+                g = B_pinv[j, d] * u[d]
+                if g > 0.0:
+                    t = min(t, (f_max[j] - f[j]) / g)
+                elif g < 0.0:
+                    t = min(t, (-f_max[j] - f[j]) / g)
+            if t > 0.0:
+                s[d] += t
+                for j in range(n):
+                    f[j] = min(max(f[j] + t * B_pinv[j, d] * u[d], -f_max[j]), f_max[j])
+    tie = 0.0  # a difference in wrench below PRIORITY_TIE × max|u| is none (rounding)
+    for d in range(6):
+        tie = max(tie, abs(u[d]))
+    tie *= PRIORITY_TIE
+    for d in order:  # the first DOF asked for where fill and plain scaling differ decides
+        if asked[d] and abs(u[d]) * abs(s[d] - c) > tie:
+            if s[d] < c:
+                for i in range(6):
+                    if asked[i]:
+                        s[i] = c
+                return f0, sat0, s
+            break
+    sat = np.zeros(n, dtype=np.bool_)
+    for j in range(n):
+        sat[j] = abs(f[j]) >= f_max[j] * (1.0 - 1e-12)
+    return f, sat, s
+
+
+def allocate_prioritised(alloc: Allocator, u: np.ndarray, priority=DEFAULT_DOF_PRIORITY,
+                         B_pinv: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(f, saturated mask, per-DOF fraction s) for the wrench u, saturation resolved by DOF
+    priority (:func:`allocate_prioritised_kernel`); ``B_pinv`` replaces the allocator's (an
+    :class:`Accommodation`'s). A non-finite u gives a non-finite f, as :func:`allocate`."""
+    P = np.ascontiguousarray(alloc.B_pinv if B_pinv is None else B_pinv, dtype=float)
+    u = np.asarray(u, dtype=float)
+    if not np.isfinite(u).all():
+        f = P @ u
+        return f, np.zeros(f.shape, dtype=bool), np.ones(6)
+    order = np.asarray(dof_priority_indices(priority), dtype=np.int64)
+    return allocate_prioritised_kernel(P, np.asarray(alloc.max_thrust_n, dtype=float),
+                                       np.ascontiguousarray(u), order)
 
 
 def allocate(alloc: Allocator, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
