@@ -84,3 +84,26 @@ def test_a_priority_that_is_not_the_six_dofs_is_refused_at_configuration():
         core.CoreConfig(nav=base.nav, controller=base.controller, reference=base.reference,
                         allocator=base.allocator, k_thrust=base.k_thrust,
                         dof_priority=("heave",))
+
+
+def test_with_a_fault_saturation_is_resolved_by_dof_priority():
+    """A wrench beyond the thrusters left: healthy, the one direction-keeping scale; with η
+    set, allocation by priority — depth and attitude in full, yaw what its one thruster gives
+    (the operator's manual wrench, so the asked wrench is known)."""
+    from uvd.control.allocation import accommodate, allocate_kernel, allocate_prioritised
+    cfg = _cfg()
+    u = np.array([0.0, 50.0, 40.0, 5.0, 10.0, 150.0])
+    eta = np.array([0.0, 1, 1, 1, 1, 1])
+    out, _ = _step(cfg, eta, mode=core.Mode.MANUAL, manual_wrench=u)
+    acc = accommodate(cfg.allocator, eta, cfg.dof_priority)
+    f, sat, _ = allocate_prioritised(cfg.allocator, u, cfg.dof_priority, B_pinv=acc.B_pinv)
+    np.testing.assert_array_equal(out.thrust_n, f)
+    np.testing.assert_array_equal(out.saturated, sat)
+    np.testing.assert_allclose(out.u_cmd[1:5], u[1:5], atol=1e-9)  # sway, heave, roll, pitch
+    assert out.u_cmd[5] == pytest.approx(105.0)
+    # healthy but for a wrench past every limit: the plain scale, bit for bit
+    big = 10 * u
+    healthy, _ = _step(cfg, None, mode=core.Mode.MANUAL, manual_wrench=big)
+    f0, _, c = allocate_kernel(cfg.allocator.B_pinv, cfg.allocator.max_thrust_n, big)
+    assert c < 1.0
+    np.testing.assert_array_equal(healthy.thrust_n, f0)

@@ -28,10 +28,13 @@ Disarmed, every mode commands zero. ``CoreInputs.thruster_eta`` — each thruste
 effectiveness η ∈ [0, 1] (1 healthy, 0.5 half thrust, 0 dead) — shapes allocation in every mode
 (:func:`uvd.control.allocation.accommodate`): a weak thruster's column scaled, a dead one
 removed; when the thrusters left cannot reach every DOF, those of lowest priority
-(``CoreConfig.dof_priority``) are given up (``CoreOutputs.given_up``), taken out of the
-reference's closed loop — so the controller neither commands nor adapts on them (AMBC's error
-is masked by the closed loop in (5.28), and its spec's ``hold_dofs`` keeps those DOFs'
-parameters, which other rows' Coriolis terms would still move) — and the wrench the
+(``CoreConfig.dof_priority``) are given up (``CoreOutputs.given_up``), and a command beyond
+a thruster's limit is resolved by that priority too — depth and attitude take the thrust
+first, the rest gets what is left (:func:`uvd.control.allocation.allocate_prioritised`;
+healthy, the direction-keeping scaling of the thesis experiments). Given-up DOFs are taken
+out of the reference's closed loop — so the controller neither commands nor adapts on them
+(AMBC's error is masked by the closed loop in (5.28), and its spec's ``hold_dofs`` keeps those
+DOFs' parameters, which other rows' Coriolis terms would still move) — and the wrench the
 estimators see is B diag(η) f, what the thrusters really give. The estimators (AID) run in
 every mode: they identify the vehicle whatever drives it — except on a DOF given up, whose
 parameters an estimator's ``hold_dofs`` holds (AID: :func:`uvd.estimation.aid.aid_hold_dofs`,
@@ -81,6 +84,7 @@ from uvd.control.allocation import (
     Allocator,
     accommodate,
     allocate_kernel,
+    allocate_prioritised_kernel,
     dof_priority_indices,
     lag_compensate,
 )
@@ -141,6 +145,8 @@ class CoreConfig:
             B, np.ascontiguousarray(alloc.B_pinv, dtype=np.float64),
             np.ascontiguousarray(alloc.max_thrust_n, dtype=np.float64), k, n))
         object.__setattr__(self, "_vertical", alloc.vertical())
+        object.__setattr__(self, "_priority", np.array(dof_priority_indices(self.dof_priority),
+                                                       dtype=np.int64))
         object.__setattr__(self, "_restricted", {})  # mask bytes → contiguous B⁺ of the subset
         object.__setattr__(self, "_accommodated", {})  # η bytes → (Accommodation, B diag(η))
 
@@ -311,12 +317,14 @@ def _applied_wrench(B, k, omega, u):
 
 
 @numba.njit(cache=True)
-def _command(B, B_pinv, f_max, u_ctrl, ol, use_ol, f_out, sat_out, u_cmd):
+def _command(B, B_pinv, f_max, u_ctrl, ol, use_ol, f_out, sat_out, u_cmd, order, prioritise):
     """Wrench → thrusters, as :func:`uvd.control.allocation.allocate` with the core's checks.
 
     u = u_ctrl (+ ol): not finite ⇒ u = 0 and status non-finite. f = B⁺u, scaled by the
-    largest |fᵢ|/f_max,i when above 1 (flags at the limit); f not finite ⇒ f = 0, no flags,
-    status non-finite. Writes f, the saturation flags and B f into ``f_out``, ``sat_out``,
+    largest |fᵢ|/f_max,i when above 1 (flags at the limit) — or, ``prioritise`` (a thruster's
+    effectiveness set), saturation resolved by the DOF priority ``order``
+    (:func:`uvd.control.allocation.allocate_prioritised_kernel`); f not finite ⇒ f = 0, no
+    flags, status non-finite. Writes f, the saturation flags and B f into ``f_out``, ``sat_out``,
     ``u_cmd``; returns the status."""
     status = _OK
     u = np.empty(6)
@@ -328,7 +336,10 @@ def _command(B, B_pinv, f_max, u_ctrl, ol, use_ol, f_out, sat_out, u_cmd):
             for m in range(6):
                 u[m] = 0.0
             break
-    f, sat, _scale = allocate_kernel(B_pinv, f_max, u)
+    if prioritise:
+        f, sat, _fractions = allocate_prioritised_kernel(B_pinv, f_max, u, order)
+    else:
+        f, sat, _scale = allocate_kernel(B_pinv, f_max, u)
     n = f.shape[0]
     for j in range(n):
         if not np.isfinite(f[j]):
@@ -535,7 +546,8 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     else:  # the vertical thrusters at their effectiveness
         acc, B = cfg.accommodation_for(np.where(mask, eta, 0.0))
         pinv = acc.B_pinv
-    code = _command(B, pinv, f_max, u_ctrl, ol, ol is not _ZERO6, thrust, saturated, u_cmd)
+    code = _command(B, pinv, f_max, u_ctrl, ol, ol is not _ZERO6, thrust, saturated, u_cmd,
+                    cfg._priority, eta is not None)
     if ctrl_new is not None:
         if code == _OK:
             ctrl = ctrl_new  # the controller's new state only with a finite command
