@@ -107,3 +107,25 @@ def test_with_a_fault_saturation_is_resolved_by_dof_priority():
     f0, _, c = allocate_kernel(cfg.allocator.B_pinv, cfg.allocator.max_thrust_n, big)
     assert c < 1.0
     np.testing.assert_array_equal(healthy.thrust_n, f0)
+
+
+def test_the_adaptive_controller_judges_saturation_on_the_allocation_in_use():
+    """AMBC's freeze on saturation watches the thrust commanded: with the aft-port thruster
+    dead, a 150 N m yaw moment is 429 N on the aft-starboard one alone — saturated — though
+    the healthy B⁺ would split it in 214 N each (not saturated)."""
+    from uvd.control.ambc import ambc_params, ambc_spec
+    from uvd.control.trajectory import setpoint
+    from uvd.estimation.navigation import NavConfig
+    alloc = Allocator.from_vehicle(VEHICLE)
+    spec = ambc_spec(ambc_params("decoupled", allocator=alloc), np.zeros(16))
+    cfg = core.CoreConfig(nav=NavConfig(ins_timeout_s=0.25), controller=spec,
+                          reference=setpoint([0.0, 0.0, 1.0, 0.0, 0.0, 0.5]), allocator=alloc,
+                          k_thrust=VEHICLE.k_thrust)
+    healthy, st_h = _step(cfg, None)
+    assert healthy.u_cmd[5] == pytest.approx(150.0) and not st_h.ctrl.saturated
+    eta = np.array([0.0, 1, 1, 1, 1, 1])
+    dead, st_d = _step(cfg, eta)
+    assert dead.saturated[1] and st_d.ctrl.saturated
+    np.testing.assert_array_equal(cfg.controller_params_for(eta).B_pinv,
+                                  cfg.accommodation_for(eta)[0].B_pinv)
+    assert cfg.controller_params_for(eta) is cfg.controller_params_for(eta.copy())  # cached

@@ -149,6 +149,7 @@ class CoreConfig:
                                                        dtype=np.int64))
         object.__setattr__(self, "_restricted", {})  # mask bytes → contiguous B⁺ of the subset
         object.__setattr__(self, "_accommodated", {})  # η bytes → (Accommodation, B diag(η))
+        object.__setattr__(self, "_ctrl_params", {})  # η bytes → the controller's params
 
     def pinv_for(self, mask: np.ndarray | None) -> np.ndarray:
         """B⁺ of the thrusters in ``mask`` (all: None), computed once per mask."""
@@ -171,6 +172,21 @@ class CoreConfig:
             acc = accommodate(self.allocator, eta, self.dof_priority)
             got = (acc, np.ascontiguousarray(self._glue[0] * eta[None, :]))
             self._accommodated[key] = got
+        return got
+
+
+    def controller_params_for(self, eta: np.ndarray):
+        """The controller's params while the allocation is the one for ``eta`` (its spec's
+        ``with_allocation``: AMBC's saturation freeze judged on the thrust really commanded),
+        computed once per η; its own params when it has no such hook."""
+        spec = self.controller
+        if spec.with_allocation is None:
+            return spec.params
+        key = eta.tobytes()
+        got = self._ctrl_params.get(key)
+        if got is None:
+            got = spec.with_allocation(spec.params, self.accommodation_for(eta)[0].B_pinv)
+            self._ctrl_params[key] = got
         return got
 
 
@@ -507,8 +523,9 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     if (mode is _CONTROL or mode is _PDC) and armed:
         if sensed.nav_ok:
             if mode is _CONTROL:
-                u_new, ctrl_new = cfg.controller.step(sensed.vs, ref, cfg.controller.params,
-                                                      state.ctrl, dt)
+                params = cfg.controller.params if eta is None else \
+                    cfg.controller_params_for(eta)
+                u_new, ctrl_new = cfg.controller.step(sensed.vs, ref, params, state.ctrl, dt)
                 if given_up and cfg.controller.hold_dofs is not None:
                     # the parameters of a DOF no thruster reaches stay where they were
                     ctrl_new = cfg.controller.hold_dofs(ctrl_new, state.ctrl, actuated)

@@ -439,7 +439,8 @@ def with_theta(ctrl: AMBCState, theta: np.ndarray) -> AMBCState:
 __all__ = [
     "AMBCParams", "AMBCState", "MBCParams", "MBCState", "RobustAdaptation",
     "ROBUST_DAEMON_DEFAULT", "adaptation_gains", "ambc_hold_dofs", "ambc_init", "ambc_params",
-    "ambc_step", "C_APPENDIX_B2", "epsilon_bound", "gravity_index", "hold_theta_dofs",
+    "ambc_step", "ambc_with_allocation", "C_APPENDIX_B2", "epsilon_bound", "gravity_index",
+    "hold_theta_dofs",
     "lyapunov_V1", "lyapunov_V2", "mass_index", "drag_index", "mbc_step", "params_of",
     "theta_of", "with_theta",
 ]
@@ -487,7 +488,17 @@ def ambc_hold_dofs(new: AMBCState, old: AMBCState, actuated: np.ndarray) -> AMBC
     return new if theta is new.theta else replace(new, theta=theta)
 
 
+def ambc_with_allocation(params: AMBCParams, B_pinv: np.ndarray) -> AMBCParams:
+    """AMBC's ``with_allocation`` hook (:class:`~uvd.control.types.ControllerSpec`): the robust
+    freezes (saturation, thrust reversals) judged on the allocation ``B_pinv`` the core uses —
+    with a thruster dead, its accommodated inverse — not the healthy B⁺. Params without an
+    allocation (no robust freezes on thrust) are returned as they are."""
+    if params.B_pinv.shape[0] == 0:
+        return params
+    return replace(params, B_pinv=np.array(B_pinv, dtype=float))
+
+
 def ambc_spec(params: AMBCParams, theta0: np.ndarray, name: str = "ambc") -> ControllerSpec:
     """AMBC (Theorem 5.2.2) as the core runs it, starting from θ̂(t₀) = ``theta0``."""
     return ControllerSpec(name, ambc_step, params, ambc_init(params, theta0), ambc_diagnostics,
-                          ambc_hold_dofs)
+                          ambc_hold_dofs, ambc_with_allocation)

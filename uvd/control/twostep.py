@@ -29,6 +29,7 @@ from uvd.control.ambc import (
     ambc_init,
     ambc_params,
     ambc_step,
+    ambc_with_allocation,
     gravity_index,
     m_hat_min_eig,
 )
@@ -176,7 +177,13 @@ def two_step_diagnostics(ctrl: TwoStepState) -> Diagnostics:
 def two_step_spec(params: TwoStepParams, name: str = "two-step-ambc") -> ControllerSpec:
     """Two-step AMBC (§5.2.6) as the core runs it."""
     return ControllerSpec(name, two_step_step, params, two_step_init(params),
-                          two_step_diagnostics, two_step_hold_dofs)
+                          two_step_diagnostics, two_step_hold_dofs, two_step_with_allocation)
+
+
+def two_step_with_allocation(params: TwoStepParams, B_pinv) -> TwoStepParams:
+    """``with_allocation`` of two-step AMBC: both steps' (:func:`ambc_with_allocation`)."""
+    return replace(params, step1=ambc_with_allocation(params.step1, B_pinv),
+                   step2=ambc_with_allocation(params.step2, B_pinv))
 
 
 def two_step_hold_dofs(new: TwoStepState, old: TwoStepState, actuated) -> TwoStepState:

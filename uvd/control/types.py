@@ -90,7 +90,9 @@ class ControllerSpec:
     hook and, for an adaptive one, ``hold_dofs(new, old, actuated) -> state``: the new state
     with the parameters of the DOFs not ``actuated`` ((6,) bool) kept at the old state's
     (the core calls it when a thruster's effectiveness leaves DOFs unreached; None: nothing
-    adapts)."""
+    adapts) and, for one that watches the thrusters (AMBC's freeze on saturation),
+    ``with_allocation(params, B_pinv) -> params``: its params for the allocation the core uses
+    while a thruster's effectiveness is set (None: the controller does not look at it)."""
 
     name: str
     step: Callable[..., tuple[np.ndarray, Any]]
@@ -98,6 +100,7 @@ class ControllerSpec:
     init_state: Any
     diagnostics: Callable[[Any], Diagnostics] = no_diagnostics
     hold_dofs: Callable[[Any, Any, np.ndarray], Any] | None = None
+    with_allocation: Callable[[Any, np.ndarray], Any] | None = None
 
 
 @dataclass(frozen=True)
