@@ -50,3 +50,18 @@ def test_every_thruster_reading_separates_under_actuation_from_saturation():
     assert "Thrusters 2: the remaining ones no longer reach" in text
     assert "Thrusters 1: every DOF of the bound is still allocated" in text
     assert note({}) is None
+
+
+def test_a_supervised_run_names_the_dof_given_up_holds_its_adaptation_and_fires_nothing():
+    """fault-tolerance-every's runs go through the daemon's cycle: the JHU ROV's aft-port
+    thruster dead, the command event names surge given up, no failsafe fires, and two-step
+    AMBC's θ̂ rows of surge (m₁, d₁) stay at their value at the fault while others adapt."""
+    from uvd.experiments.fault_tolerance_every import adaptation_held, theta_rows
+    r = run_arm("sim.toml", 1, 0.0, "told", t_fault_s=5.0, duration_s=20.0, supervised=True)
+    assert r["told"] == "thruster 1 eta 0 (schedule); given up: surge"
+    assert r["given_up"] == ["surge"] and r["failsafe_events"] == []
+    held = adaptation_held(r)
+    assert held["rows"] == [0, 6] and held["held"] and held["max_change_given_up"] == 0.0
+    assert held["max_change_others"] > 0.0
+    assert theta_rows(16, ["pitch"]) == [4, 10, 12, 13, 14, 15]
+    assert theta_rows(241, ["sway"]) == list(range(241)) and theta_rows(16, []) == []

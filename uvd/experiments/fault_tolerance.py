@@ -62,19 +62,25 @@ ARMS = ("none", "told", "amplifier")
 
 def run_arm(config_name: str, k: int, eta_k: float, arm: str, *, t_fault_s: float = T_FAULT_S,
             duration_s: float = DURATION_S, seed: int = 0,
-            controller: str | None = None) -> dict[str, Any]:
+            controller: str | None = None, supervised: bool = False) -> dict[str, Any]:
     """One lockstep run of ``config_name`` with thruster ``k`` at ``eta_k`` from
     ``t_fault_s``. ``arm``: "fault-free"; "none" (the cycle is not told); "told" (the
     schedule's source: ``SetThrusterEta(k, η)`` applied at the first cycle at or after the
     fault, as the operator's command is); "amplifier" (η 0 only: the drive faults —
     :meth:`~uvd.lockstep.Lockstep.amplifier_fault` — and the cycle's own amplifier source
     decides under ``[failsafe] amplifier_fault = "reallocate"``). ``controller`` replaces
-    ``[control] controller`` (the analysis of the JHU ROV's aft-port case)."""
+    ``[control] controller`` (the analysis of the JHU ROV's aft-port case). ``supervised``:
+    the daemon's cycle (:func:`uvd.runtime.build.make_cycle`: its failsafes and lifecycle, as
+    ``uvd demo``'s lockstep run), armed from the start, instead of the thesis experiments'
+    :func:`~uvd.runtime.cycle.unsupervised` one; the result then has the failsafe events and
+    lifecycle transitions (``failsafe_events``), the told command's text (``told``) and the
+    controller's θ̂ at the fault and at the end (``theta_at_fault``, ``theta_end``; None
+    without adaptation)."""
     from dataclasses import replace
 
     from uvd.lockstep import Lockstep, lockstep_config, run, tracking_errors
     from uvd.runtime import commands as cmd
-    from uvd.runtime.build import build_core, start_pose
+    from uvd.runtime.build import build_core, make_cycle, start_pose
     from uvd.runtime.config import load_config
     from uvd.runtime.cycle import unsupervised
 
@@ -85,15 +91,21 @@ def run_arm(config_name: str, k: int, eta_k: float, arm: str, *, t_fault_s: floa
         cfg = replace(cfg, control=replace(cfg.control, controller=controller))
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
-    cyc = unsupervised(build_core(cfg, vehicle))
+    cyc = make_cycle(cfg, vehicle) if supervised else unsupervised(build_core(cfg, vehicle))
     cyc = replace(cyc, thresholds=replace(cyc.thresholds, amplifier_fault="reallocate"))
     sim = Lockstep(vehicle, cyc, lockstep_config(cfg, seed), H0=H0, v0=v0)
     fault_ns = int(round(t_fault_s * 1e9))
     step = sim.advance
     seen: dict[str, Any] = {"given_up": set(), "faulted": False, "reallocated_s": None,
-                            "events": []}
+                            "events": [], "told": None, "theta_at_fault": None}
+
+    def theta():
+        th = cyc.core.controller.diagnostics(sim.state.ctrl).theta
+        return None if th is None else [float(x) for x in th]
 
     def advance():
+        if sim.t_ns >= fault_ns and seen["theta_at_fault"] is None:
+            seen["theta_at_fault"] = theta()  # what the cycles before the fault committed
         if arm != "fault-free" and sim.t_ns >= fault_ns and not seen["faulted"]:
             seen["faulted"] = True
             if arm == "amplifier":
@@ -101,7 +113,9 @@ def run_arm(config_name: str, k: int, eta_k: float, arm: str, *, t_fault_s: floa
             else:
                 sim.plant.thrusters.health[k - 1] = eta_k
             if arm == "told":
-                assert sim.command(cmd.SetThrusterEta(k, eta_k, source="schedule")).ok
+                res = sim.command(cmd.SetThrusterEta(k, eta_k, source="schedule"))
+                assert res.ok, res.reason
+                seen["told"] = res.reason  # the command event's text: thruster, η, given up
         t = sim.t_ns * 1e-9
         out = step()
         r = sim.last_result
@@ -121,7 +135,11 @@ def run_arm(config_name: str, k: int, eta_k: float, arm: str, *, t_fault_s: floa
     # the measured reasons of what follows a fault (the aft-port analysis): how often each
     # live thruster's command sits at its limit, and how far the vehicle left the reference
     sat = log.saturated[after_sel]
-    return {"before": before, "after": after, "given_up": sorted(seen["given_up"]),
+    extra = {}
+    if supervised:
+        extra = {"failsafe_events": sim.supervisor.failsafe_events(), "told": seen["told"],
+                 "theta_at_fault": seen["theta_at_fault"], "theta_end": theta()}
+    return {**extra, "before": before, "after": after, "given_up": sorted(seen["given_up"]),
             "cycles_not_ok": int(sum(s != "ok" for s in log.status)),
             "fault_s": float(log.t[i_fault]) if i_fault < log.t.size else None,
             "detected_s": seen["reallocated_s"], "reallocated_s": seen["reallocated_s"],

@@ -6,20 +6,28 @@ for the JHU ROV (``config/sim.toml``, six thrusters) and the BlueROV2-heavy
 (``config/sim-bluerov2.toml``, eight), the fault-free run and then each thruster ``k`` dead
 (η 0) from ``T`` with the ``told`` arm (the schedule's source: ``SetThrusterEta(k, 0)`` at
 the first cycle at or after the fault, allocation with η, the DOFs it can no longer reach
-given up by ``[control] dof_priority``), each by :func:`~uvd.experiments.fault_tolerance.run_arm`.
+given up by ``[control] dof_priority``), each by :func:`~uvd.experiments.fault_tolerance.run_arm`
+through the daemon's supervised cycle (``supervised=True``: its failsafes and lifecycle, armed
+from the start, as ``uvd demo``'s lockstep run).
 
 Per thruster: each DOF's position MAE from ``T + settle`` to the end over the fault-free run's
-over the same span, the DOFs given up, the cycles not ``ok`` (these runs are unsupervised —
-no failsafe acts, so this count is what a supervised daemon would have seen as its triggers'
-material: 0 means no failsafe could have cascaded), each thruster's share of cycles at its
-limit after the fault, and whether the issue's bound holds: the JHU ROV's depth and attitude
-(z, roll, pitch, heading) within 2×, the BlueROV2-heavy's position and attitude (all six)
-within 1.5×.
+over the same span, the DOFs given up as the operator is told them (the ``SetThrusterEta``
+command event's text, "thruster 1 eta 0 (schedule); given up: surge"), the failsafe events and
+lifecycle transitions the supervised cycle had (count and kinds; a cascade would show here),
+the cycles not ``ok``, whether the adaptive controller's θ̂ rows of the DOFs given up stayed
+where they were at the fault (m, d of each such DOF, and g, b when heave, roll or pitch is
+given up, :func:`uvd.control.ambc.hold_theta_dofs`; the largest change of those rows and of the
+others from the fault to the end), each thruster's share of cycles at its limit after the
+fault, and whether the issue's bound holds: the JHU ROV's depth and attitude (z, roll, pitch,
+heading) within 2×, the BlueROV2-heavy's position and attitude (all six) within 1.5×.
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import Any
+
+import numpy as np
 
 from uvd.experiments import Experiment, ExperimentOptions
 from uvd.experiments.fault_tolerance import DOFS, DURATION_S, SETTLE_S, T_FAULT_S, _fmt, run_arm
@@ -29,51 +37,114 @@ CASES = (("jhu-rov", "sim.toml", 6, ("z", "roll", "pitch", "heading"), 2.0),
          ("bluerov2-heavy", "sim-bluerov2.toml", 8, DOFS, 1.5))
 
 
+def theta_rows(n_theta: int, given_up) -> list[int]:
+    """The θ̂ entries of the DOFs ``given_up`` (allocation names): decoupled (16) mᵢ and dᵢ of
+    each, and g, b when heave, roll or pitch is among them; full (241) every entry (M and the
+    drags couple every DOF) — what :func:`uvd.control.ambc.hold_theta_dofs` must hold."""
+    from uvd.control.allocation import DOF_NAMES
+    from uvd.control.ambc import drag_index, gravity_index, mass_index
+    if not given_up:
+        return []
+    if n_theta != 16:
+        return list(range(n_theta))
+    idx = [int(mass_index("decoupled")[DOF_NAMES.index(d)]) for d in given_up]
+    idx += [int(drag_index("decoupled")[DOF_NAMES.index(d)]) for d in given_up]
+    if {"heave", "roll", "pitch"} & set(given_up):
+        idx += [int(i) for i in gravity_index("decoupled")]
+    return sorted(idx)
+
+
+def adaptation_held(r: dict) -> dict[str, Any] | None:
+    """From a supervised run: the largest |Δθ̂| from the fault to the end over the given-up
+    DOFs' rows and over the others (None: the controller does not adapt)."""
+    a, b = r.get("theta_at_fault"), r.get("theta_end")
+    if a is None or b is None:
+        return None
+    d = np.abs(np.asarray(b) - np.asarray(a))
+    rows = theta_rows(d.size, r["given_up"])
+    rest = np.setdiff1d(np.arange(d.size), rows)
+    return {"rows": rows, "max_change_given_up": float(d[rows].max()) if rows else None,
+            "max_change_others": float(d[rest].max()) if rest.size else None,
+            "held": bool(rows) and float(d[rows].max()) == 0.0}
+
+
+def _events(r: dict) -> dict[str, Any]:
+    """The supervised cycle's failsafe events and lifecycle transitions, counted by kind."""
+    ev = r.get("failsafe_events") or []
+    kinds = Counter(f"{e.get('kind')} {e.get('trigger')}" if e.get("type") == "failsafe"
+                    else f"{e.get('from')}->{e.get('to')}" for e in ev)
+    return {"count": len(ev), "kinds": dict(kinds)}
+
+
+def _told_given_up(text: str | None) -> str:
+    """The DOFs given up as the command event names them ("…; given up: surge")."""
+    return "-" if not text or "given up: " not in text else text.split("given up: ", 1)[1]
+
+
 def _run(opts: ExperimentOptions) -> dict[str, Any]:
     duration = DURATION_S if opts.hours is None else opts.hours * 3600.0
     out: dict[str, Any] = {}
     lines = [f"fault-tolerance-every: each thruster dead (η 0, told) from t = {T_FAULT_S:g} s, "
-             f"RefTraj1, lockstep, {duration:g} s; MAE after (from T + {SETTLE_S:g} s) / "
-             "fault-free's over the same span"]
+             f"RefTraj1, lockstep through the supervised cycle, {duration:g} s; MAE after (from "
+             f"T + {SETTLE_S:g} s) / fault-free's over the same span"]
     for label, config_name, n, keep, bound in CASES:
         opts.progress(f"{label}: fault-free")
-        free = run_arm(config_name, 1, 1.0, "fault-free", duration_s=duration, seed=opts.seed)
+        free = run_arm(config_name, 1, 1.0, "fault-free", duration_s=duration, seed=opts.seed,
+                       supervised=True)
+        free["failsafes"] = _events(free)
         rows = {}
         lines.append("")
         lines.append(f"{label} (bound: {', '.join(keep)} within {bound:g}x); fault-free MAE "
-                     "after T  " + "  ".join(f"{d} {_fmt(d, free['after'][d])}" for d in DOFS))
+                     "after T  " + "  ".join(f"{d} {_fmt(d, free['after'][d])}" for d in DOFS)
+                     + f"; failsafe events {free['failsafes']['count']}")
         lines.append("   k  " + "  ".join(f"{d:>7s}" for d in DOFS)
-                     + "  bound  given up         not ok  worst saturation")
+                     + "  bound  given up (event)  failsafes  not ok  θ̂ given up   "
+                       "worst saturation")
         for k in range(1, n + 1):
             opts.progress(f"{label}: thruster {k} dead")
-            r = run_arm(config_name, k, 0.0, "told", duration_s=duration, seed=opts.seed)
+            r = run_arm(config_name, k, 0.0, "told", duration_s=duration, seed=opts.seed,
+                        supervised=True)
             ratio = {d: r["after"][d] / free["after"][d] for d in DOFS}
             worst = max(keep, key=lambda d: ratio[d])
             sat = r["saturated_fraction_after"]
             j = max(range(n), key=lambda i: sat[i])
+            held, fs = adaptation_held(r), _events(r)
+            told = _told_given_up(r["told"])
             rows[str(k)] = {"ratio_after": ratio, "after": r["after"],
-                            "given_up": r["given_up"], "cycles_not_ok": r["cycles_not_ok"],
+                            "given_up": r["given_up"], "told": r["told"],
+                            "failsafes": fs, "failsafe_events": r["failsafe_events"],
+                            "adaptation": held, "cycles_not_ok": r["cycles_not_ok"],
                             "saturated_fraction_after": sat,
                             "max_abs_error_after": r["max_abs_error_after"],
                             "worst_kept": worst, "meets_bound": ratio[worst] <= bound}
+            if held is None:
+                th = "no adaptation"
+            elif not held["rows"]:
+                th = "none given up"
+            else:
+                th = "held" if held["held"] else f"moved {held['max_change_given_up']:.3g}"
+            fs_text = "none" if not fs["count"] else ", ".join(
+                f"{c} {kd}" for kd, c in sorted(fs["kinds"].items()))
             lines.append(f"  {k:2d}  " + "  ".join(f"{ratio[d]:6.2f}x" for d in DOFS)
                          + f"  {'yes' if ratio[worst] <= bound else 'NO ':5s}"
-                         + f"  {', '.join(r['given_up']) or 'none':15s}"
-                         + f"  {r['cycles_not_ok']:6d}  thruster {j + 1} {sat[j]:.0%}")
+                         + f"  {told:17s}  {fs_text:9s}  {r['cycles_not_ok']:6d}  {th:12s}"
+                         + "  " + (f"thruster {j + 1} {sat[j]:.0%}" if sat[j] > 0 else "none"))
         out[label] = {"thrusters": n, "bound": bound, "bound_dofs": list(keep),
                       "fault-free": free, "dead": rows}
     return {"vehicles": out, "t_fault_s": T_FAULT_S, "duration_s": duration,
-            "settle_s": SETTLE_S, "summary": "\n".join(lines),
+            "settle_s": SETTLE_S, "supervised": True, "summary": "\n".join(lines),
             "thesis_reference": THESIS_REFERENCE}
 
 
 THESIS_REFERENCE = (
     "beyond the thesis (issue 33's acceptance across thrusters): every thruster of the JHU ROV "
     "(six, `config/sim.toml`) and of the BlueROV2-heavy (eight, `config/sim-bluerov2.toml`) "
-    "dead in turn from 60 s of RefTraj1 in lockstep, η 0 told at the fault "
-    "(`SetThrusterEta(k, 0)`, the schedule's source); each DOF's position MAE from 70 s to the "
-    "end over the fault-free run's. Bounds: JHU ROV depth and attitude within 2×, BlueROV2 "
-    "position and attitude within 1.5×.")
+    "dead in turn from 60 s of RefTraj1 in lockstep through the daemon's supervised cycle "
+    "(failsafes and lifecycle on), η 0 told at the fault (`SetThrusterEta(k, 0)`, the "
+    "schedule's source; its command event names the DOFs given up); each DOF's position MAE "
+    "from 70 s to the end over the fault-free run's; the failsafe events of each run; whether "
+    "the adaptive controller's θ̂ rows of the given-up DOFs stayed at their value at the fault. "
+    "Bounds: JHU ROV depth and attitude within 2×, BlueROV2 position and attitude within 1.5×.")
 
 
 def note(result: dict) -> str | None:
@@ -108,6 +179,16 @@ def note(result: dict) -> str | None:
             text += (f". Thrusters {', '.join(coupled)}: every DOF of the bound is still "
                      "allocated, the DOF given up lies outside it, and the misses come with "
                      "the remaining thrusters at their limit in the share of cycles shown")
+        if result.get("supervised"):
+            fired = sum(r["failsafes"]["count"] for r in v["dead"].values())
+            text += (f". Supervised cycle: {fired} failsafe events or lifecycle transitions "
+                     f"over the {v['thrusters']} runs")
+            held = [r["adaptation"] for r in v["dead"].values()
+                    if r["adaptation"] is not None and r["adaptation"]["rows"]]
+            if held:
+                n_held = sum(h["held"] for h in held)
+                text += (f"; the adaptive controller's θ̂ rows of the DOF given up unchanged "
+                         f"from the fault to the end in {n_held} of {len(held)} runs")
         parts.append(text)
     return "**Reading.** " + ". ".join(parts) + "."
 
