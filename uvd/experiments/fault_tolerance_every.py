@@ -76,6 +76,10 @@ def _events(r: dict) -> dict[str, Any]:
     return {"count": len(ev), "kinds": dict(kinds)}
 
 
+def _share(x: float) -> str:
+    return f"{x:.0%}" if x > 0 else "none"
+
+
 def _told_given_up(text: str | None) -> str:
     """The DOFs given up as the command event names them ("…; given up: surge")."""
     return "-" if not text or "given up: " not in text else text.split("given up: ", 1)[1]
@@ -170,15 +174,20 @@ def note(result: dict) -> str | None:
                 f"thruster {k} ({v['dead'][k]['worst_kept']} "
                 f"{v['dead'][k]['ratio_after'][v['dead'][k]['worst_kept']]:.2f}×, given up: "
                 f"{', '.join(v['dead'][k]['given_up']) or 'none'}, worst saturation "
-                f"{max(v['dead'][k]['saturated_fraction_after']):.0%})" for k in miss)
+                f"{_share(max(v['dead'][k]['saturated_fraction_after']))})" for k in miss)
         if lost:
             text += (f". Thrusters {', '.join(lost)}: the remaining ones no longer reach a DOF "
                      "the bound covers (it is given up by [control] dof_priority), so no "
                      "allocation can meet it — under-actuation, not the priorities")
         if coupled:
+            xy = [v["dead"][k]["ratio_after"][d] for k in coupled for d in ("x", "y")
+                  if d in v["dead"][k]["ratio_after"]]
             text += (f". Thrusters {', '.join(coupled)}: every DOF of the bound is still "
                      "allocated, the DOF given up lies outside it, and the misses come with "
                      "the remaining thrusters at their limit in the share of cycles shown")
+            if xy:
+                text += (f" and the horizontal position {min(xy):.1f}–{max(xy):.1f}× its "
+                         "fault-free error")
         if result.get("supervised"):
             fired = sum(r["failsafes"]["count"] for r in v["dead"].values())
             text += (f". Supervised cycle: {fired} failsafe events or lifecycle transitions "
