@@ -296,6 +296,8 @@ def note(result: dict) -> str | None:
     a_w, p_w = worst(told, keep), worst(pdc, keep)
     sat_t, sat_p = told["saturated_fraction_after"], pdc["saturated_fraction_after"]
     err = told["max_abs_error_after"]
+    weak = aft["faults"]["0.5"]["told"]
+    w_w = worst(weak)
     return (
         f"**Reading.** BlueROV2-heavy, thruster 4 dead: the amplifier's fault accommodated by "
         f"the cycle keeps every DOF within {b_amp[1]:.2f}× of the fault-free run ({b_amp[0]}; "
@@ -308,11 +310,14 @@ def note(result: dict) -> str | None:
         f"vehicle leaves RefTraj1 (largest error x {err['x']:.2f} m, y {err['y']:.2f} m); the "
         f"remaining aft thruster (2) is at its limit in {sat_t[1]:.0%} of the cycles after "
         f"the fault and the lateral (3) in {sat_t[2]:.0%}. Not the "
-        f"allocation's priorities — heave, roll, pitch and yaw are all kept — and not the "
+        f"allocation's priorities — heave, roll, pitch and yaw are all kept, and a command "
+        f"beyond a thruster's limit is resolved in that order — and not the "
         f"adaptive controller alone: with PD control (no model, no adaptation) the same fault "
         f"gives {p_w[0]} {p_w[1]:.2f}× of PDC's own fault-free run (thruster 2 at its limit in "
         f"{sat_p[1]:.0%} of the cycles, 3 in {sat_p[2]:.0%}); depth z "
         f"{told['ratio_after']['z']:.2f}× with the configured controller, "
         f"{pdc['ratio_after']['z']:.2f}× with PDC. We read it "
-        f"as the vehicle's under-actuation on this trajectory, not a defect of uvd's; no fix "
-        f"was made.")
+        f"as the vehicle's under-actuation on this trajectory. The same thruster weak "
+        f"(η 0.5, told), every DOF still reached: every DOF within {w_w[1]:.2f}× "
+        f"({w_w[0]}), thruster 1 at its limit in {weak['saturated_fraction_after'][0]:.0%} of "
+        f"the cycles after the fault.")
