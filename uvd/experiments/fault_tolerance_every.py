@@ -117,7 +117,8 @@ def _run(opts: ExperimentOptions) -> dict[str, Any]:
             rows[str(k)] = {"ratio_after": ratio, "after": r["after"],
                             "given_up": r["given_up"], "told": r["told"],
                             "failsafes": fs, "failsafe_events": r["failsafe_events"],
-                            "adaptation": held, "cycles_not_ok": r["cycles_not_ok"],
+                            "adaptation": held, "theta_at_fault": r["theta_at_fault"],
+                            "theta_end": r["theta_end"], "cycles_not_ok": r["cycles_not_ok"],
                             "saturated_fraction_after": sat,
                             "max_abs_error_after": r["max_abs_error_after"],
                             "worst_kept": worst, "meets_bound": ratio[worst] <= bound}
