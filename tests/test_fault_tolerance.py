@@ -50,6 +50,20 @@ def test_every_thruster_reading_separates_under_actuation_from_saturation():
     assert "Thrusters 2: the remaining ones no longer reach" in text
     assert "Thrusters 1: every DOF of the bound is still allocated" in text
     assert note({}) is None
+    # the drive's own fault: accommodated with its event, or the failsafe that disarms
+    told = "thruster 1 eta 0 (amplifier); given up: surge"
+    res["vehicles"]["six"]["dead"]["1"]["amplifier"] = {
+        "accommodated": [told], "disarmed": False,
+        "failsafes": {"count": 1, "kinds": {"accommodated amplifier_fault": 1}}}
+    res["vehicles"]["six"]["dead"]["2"]["amplifier"] = {
+        "accommodated": [], "disarmed": True,
+        "failsafes": {"count": 2, "kinds": {"fired amplifier_fault": 1,
+                                            "FAILSAFE->STANDBY": 1}}}
+    text = note(res)
+    assert f"accommodated for thrusters 1, each told by an `accommodated` event naming what " \
+           f"was given up ({told}), 0 other events" in text
+    assert "for thrusters 2 not (depth and attitude would not stay actuated): the daemon " \
+           "disarms — 1 FAILSAFE->STANDBY, 1 fired amplifier_fault" in text
 
 
 def test_a_supervised_run_names_the_dof_given_up_holds_its_adaptation_and_fires_nothing():

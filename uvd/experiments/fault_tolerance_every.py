@@ -20,6 +20,12 @@ given up, :func:`uvd.control.ambc.hold_theta_dofs`; the largest change of those 
 others from the fault to the end), each thruster's share of cycles at its limit after the
 fault, and whether the issue's bound holds: the JHU ROV's depth and attitude (z, roll, pitch,
 heading) within 2×, the BlueROV2-heavy's position and attitude (all six) within 1.5×.
+
+Then each thruster's drive faults at ``T`` instead (the ``amplifier`` arm: the cycle's own
+amplifier source under ``[failsafe] amplifier_fault = "reallocate"``), supervised too: the
+``accommodated`` event it tells ("thruster 1 eta 0 (amplifier); given up: surge"), or — where
+depth and attitude would not stay actuated — the failsafe that disarms instead, with every
+event and transition counted.
 """
 
 from __future__ import annotations
@@ -134,11 +140,42 @@ def _run(opts: ExperimentOptions) -> dict[str, Any]:
                          + f"  {'yes' if ratio[worst] <= bound else 'NO ':5s}"
                          + f"  {told:17s}  {fs_text:9s}  {r['cycles_not_ok']:6d}  {th:12s}"
                          + "  " + (f"thruster {j + 1} {sat[j]:.0%}" if sat[j] > 0 else "none"))
+        lines += _amplifier_arm(config_name, n, keep, bound, free, rows, duration, opts)
         out[label] = {"thrusters": n, "bound": bound, "bound_dofs": list(keep),
                       "fault-free": free, "dead": rows}
     return {"vehicles": out, "t_fault_s": T_FAULT_S, "duration_s": duration,
             "settle_s": SETTLE_S, "supervised": True, "summary": "\n".join(lines),
             "thesis_reference": THESIS_REFERENCE}
+
+
+def _amplifier_arm(config_name: str, n: int, keep, bound: float, free: dict, rows: dict,
+                   duration: float, opts: ExperimentOptions) -> list[str]:
+    """Each thruster's drive faulting at ``T`` instead (the cycle's amplifier source under
+    ``[failsafe] amplifier_fault = "reallocate"``): the ``accommodated`` event it tells, or,
+    where depth and attitude would not stay actuated, the failsafe that acts instead. Adds
+    ``rows[k]["amplifier"]``; returns the table's lines."""
+    lines = ["  amplifier source (thruster k's drive faults at T, [failsafe] amplifier_fault = "
+             "\"reallocate\"): the event, the failsafes"]
+    for k in range(1, n + 1):
+        opts.progress(f"thruster {k}: its amplifier faults")
+        r = run_arm(config_name, k, 0.0, "amplifier", duration_s=duration, seed=opts.seed,
+                    supervised=True)
+        ratio = {d: r["after"][d] / free["after"][d] for d in DOFS}
+        worst = max(keep, key=lambda d: ratio[d])
+        fs = _events(r)
+        disarmed = any(e.get("type") == "lifecycle" and e.get("to") == "STANDBY"
+                       for e in r["failsafe_events"])
+        rows[str(k)]["amplifier"] = {
+            "accommodated": r["events"], "given_up": r["given_up"], "failsafes": fs,
+            "failsafe_events": r["failsafe_events"], "disarmed": disarmed,
+            "ratio_after": ratio, "worst_kept": worst, "meets_bound": ratio[worst] <= bound,
+            "cycles_not_ok": r["cycles_not_ok"]}
+        what = "; ".join(f"accommodated: {t}" for t in r["events"]) or "not accommodated"
+        kinds = ", ".join(f"{c} {kd}" for kd, c in sorted(fs["kinds"].items()))
+        lines.append(f"  {k:2d}  " + ("disarmed" if disarmed else
+                                       f"{worst} {ratio[worst]:.2f}x") + f"  {what}  "
+                     f"[{fs['count']} event{'' if fs['count'] == 1 else 's'}: {kinds}]")
+    return lines
 
 
 THESIS_REFERENCE = (
@@ -189,10 +226,26 @@ def note(result: dict) -> str | None:
             if xy:
                 text += (f" and the horizontal position {min(xy):.1f}–{max(xy):.1f}× its "
                          "fault-free error")
+        amp = {k: r["amplifier"] for k, r in v["dead"].items() if "amplifier" in r}
+        if amp:
+            acc = [k for k, a in amp.items() if a["accommodated"]]
+            off = [k for k, a in amp.items() if a["disarmed"]]
+            text += (". The drive's own fault instead (the amplifier source): accommodated "
+                     f"for thrusters {', '.join(acc) or 'none'}")
+            if acc:
+                extra = sum(amp[k]["failsafes"]["count"] - len(amp[k]["accommodated"])
+                            for k in acc)
+                text += (", each told by an `accommodated` event naming what was given up "
+                         f"({amp[acc[0]]['accommodated'][0]}), {extra} other events")
+            if off:
+                kinds = amp[off[0]]["failsafes"]["kinds"]
+                text += (f"; for thrusters {', '.join(off)} not (depth and attitude would not "
+                         "stay actuated): the daemon disarms — "
+                         + ", ".join(f"{c} {kd}" for kd, c in sorted(kinds.items())))
         if result.get("supervised"):
             fired = sum(r["failsafes"]["count"] for r in v["dead"].values())
-            text += (f". Supervised cycle: {fired} failsafe events or lifecycle transitions "
-                     f"over the {v['thrusters']} runs")
+            text += (f". Supervised cycle, η told: {fired} failsafe events or lifecycle "
+                     f"transitions over the {v['thrusters']} runs")
             held = [r["adaptation"] for r in v["dead"].values()
                     if r["adaptation"] is not None and r["adaptation"]["rows"]]
             if held:
