@@ -127,3 +127,20 @@ def test_a_wall_time_quoted_in_a_summary_is_not_compared_its_figures_are():
     assert reproduced(compare(a, later))
     moved = {"summary": a["summary"].replace("err 0.25", "err 0.26")}
     assert not reproduced(compare(a, moved))
+
+
+def test_lines_printed_in_arrival_order_compare_as_a_multiset_latencies_not_at_all():
+    """fdc-fleet: uvd-fdc's printed lines (its vehicles come "up" in the order their first
+    samples arrive) and its wall-clock latency through Zenoh; a changed line still counts."""
+    a = {"fdc_output": ["uvd-fdc: watching", "sim1: up", "sim0: up", "FAULT sim0: thruster"],
+         "latency_ms": {"p50": 3.2}, "runs": {"sim0": {"latency_s": 60.0}}}
+    b = copy.deepcopy(a)
+    b["fdc_output"][:3] = ["sim0: up", "uvd-fdc: watching", "sim1: up"]
+    b["latency_ms"]["p50"] = 6.8
+    assert reproduced(compare(a, b))
+    for change in (lambda d: d["fdc_output"].__setitem__(3, "FAULT sim0: buoyancy"),
+                   lambda d: d["fdc_output"].pop(),
+                   lambda d: d["runs"]["sim0"].update(latency_s=70.0)):
+        c = copy.deepcopy(b)
+        change(c)
+        assert not reproduced(compare(a, c)), change

@@ -7,8 +7,9 @@ default duration), into a temporary folder; :func:`compare` then walks the commi
 ``--rel`` (1e-9 relative by default: the last bits the compiled kernels may round differently
 on another processor, docs/experiments.md "Reproducibility"); anything else — a string, a
 flag, a key or a list length — must be equal. Timings (keys naming wall or CPU time, and
-phrases of a text that quote a wall time) are not compared. Exit status 1 when any experiment
-does not reproduce; the figures go to stdout.
+phrases of a text that quote a wall time) are not compared; lines another process printed in
+the order samples reached it (:data:`ARRIVAL_ORDER_KEYS`) are compared whatever their order.
+Exit status 1 when any experiment does not reproduce; the figures go to stdout.
 
 ``--against DIR`` compares JSON files already written (e.g. by ``make results --out DIR``)
 instead of running.
@@ -29,7 +30,12 @@ from pathlib import Path
 REL = 1e-9
 #: keys not compared: how long a run took, not what it computed
 TIMING_KEYS = frozenset({"wall_seconds", "sim_wall_s", "cpu_s", "rows_cpu_s",
-                         "real_time_factor", "recordings"})
+                         "real_time_factor", "recordings",
+                         # fdc-fleet: sample → uvd-fdc through Zenoh, on the wall clock
+                         "latency_ms"})
+#: lists of lines another process printed as its samples arrived (fdc-fleet's uvd-fdc: the
+#: vehicles' "up" lines in the order their first samples came): compared as multisets
+ARRIVAL_ORDER_KEYS = frozenset({"fdc_output"})
 
 
 def _timing(key: str) -> bool:
@@ -91,6 +97,10 @@ def _walk(a, b, rel: float, path: str, out: dict) -> None:
             if k not in a or k not in b:
                 out["unequal"].append([f"{path}.{k}", "only in the "
                                        + ("re-run" if k not in a else "committed JSON")])
+                continue
+            if k in ARRIVAL_ORDER_KEYS and isinstance(a[k], list) and isinstance(b[k], list):
+                _walk(sorted(a[k], key=str), sorted(b[k], key=str), rel, f"{path}.{k}(sorted)",
+                      out)
                 continue
             _walk(a[k], b[k], rel, f"{path}.{k}", out)
     elif isinstance(a, list) and isinstance(b, list):
