@@ -88,6 +88,7 @@ from uvd.control.allocation import (
     dof_priority_indices,
     lag_compensate,
 )
+from uvd.control.given_up import slide_reference
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.types import ControllerSpec, EstimatorSpec, Reference, VehicleState
 from uvd.estimation.navigation import NavConfig, NavMemory, NavState, nav_init, nav_step
@@ -522,15 +523,19 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     ol = _ZERO6
     if (mode is _CONTROL or mode is _PDC) and armed:
         if sensed.nav_ok:
+            # surge or sway given up: the controller's reference slides horizontally along it
+            # to the vehicle, so what cannot be corrected ends as drift, not depth error (the
+            # outputs keep the trajectory's reference: what tracking is measured against)
+            ref_c = ref if not given_up else slide_reference(ref, sensed.vs, actuated)
             if mode is _CONTROL:
                 params = cfg.controller.params if eta is None else \
                     cfg.controller_params_for(eta)
-                u_new, ctrl_new = cfg.controller.step(sensed.vs, ref, params, state.ctrl, dt)
+                u_new, ctrl_new = cfg.controller.step(sensed.vs, ref_c, params, state.ctrl, dt)
                 if given_up and cfg.controller.hold_dofs is not None:
                     # the parameters of a DOF no thruster reaches stay where they were
                     ctrl_new = cfg.controller.hold_dofs(ctrl_new, state.ctrl, actuated)
             else:
-                u_new = pdc_step(sensed.vs, ref, cfg.pd, PDState(), dt)[0]
+                u_new = pdc_step(sensed.vs, ref_c, cfg.pd, PDState(), dt)[0]
             u_ctrl = _as_vec(u_new, 6)
             if ref.open_loop_wrench is not None:
                 ol = _as_vec(ref.open_loop_wrench, 6)

@@ -1,0 +1,96 @@
+"""A horizontal DOF given up: the controller's reference slides horizontally along it, so the
+drift it cannot correct is not turned into depth error (issue 33, uvd.control.given_up)."""
+
+import numpy as np
+import pytest
+
+from tests.test_core import _cfg, _samples
+from uvd import core
+from uvd.control.given_up import slide_reference
+from uvd.control.trajectory import setpoint
+from uvd.control.types import Reference, VehicleState
+from uvd.geometry import euler_to_R
+
+PITCH, ROLL, HEADING = np.radians(10.0), np.radians(-7.0), 0.6
+
+
+def _H(p, roll, pitch, heading):
+    H = np.eye(4)
+    H[:3, :3] = euler_to_R(roll, pitch, heading)
+    H[:3, 3] = p
+    return H
+
+
+def _case():
+    ref = Reference(_H([1.0, 2.0, 3.0], ROLL, PITCH, HEADING),
+                    np.array([0.3, -0.2, 0.1, 0.01, 0.02, 0.03]), np.arange(6.0))
+    vs = VehicleState(_H([2.5, 2.6, 3.4], 0.0, 0.05, 0.5), np.array([0.4, 0.3, -0.2, 0, 0, 0]))
+    return ref, vs
+
+
+@pytest.mark.parametrize("given", [(0,), (1,), (0, 1)])
+def test_what_is_left_of_the_error_is_on_the_kept_axes_and_the_slide_is_horizontal(given):
+    ref, vs = _case()
+    act = np.ones(6, dtype=bool)
+    act[list(given)] = False
+    out = slide_reference(ref, vs, act)
+    R = ref.H[:3, :3]
+    moved = out.H[:3, 3] - ref.H[:3, 3]
+    assert moved[2] == 0.0 and np.linalg.norm(moved) > 0.1  # horizontal, and it moved
+    body = R.T @ (vs.H[:3, 3] - out.H[:3, 3])  # the controller's error, desired frame
+    np.testing.assert_allclose(body[list(given)], 0.0, atol=1e-12)
+    # velocity alike: the linear velocity error has nothing along the given-up axes
+    dv = R.T @ (vs.H[:3, :3] @ vs.v[:3]) - out.v[:3]
+    np.testing.assert_allclose(dv[list(given)], 0.0, atol=1e-12)
+    assert (out.v[:3] - ref.v[:3]) @ (R.T @ [0.0, 0.0, 1.0]) == pytest.approx(0.0, abs=1e-12)
+    # attitude, angular velocity, acceleration untouched
+    np.testing.assert_array_equal(out.H[:3, :3], R)
+    np.testing.assert_array_equal(out.v[3:], ref.v[3:])
+    np.testing.assert_array_equal(out.vdot, ref.vdot)
+
+
+def test_a_vehicle_at_the_right_depth_drifted_along_the_given_up_axis_has_no_error_left():
+    ref, _ = _case()
+    a = ref.H[:3, 0].copy()
+    a[2] = 0.0  # the horizontal direction of the desired surge axis
+    vs = VehicleState(_H(ref.H[:3, 3] + 1.5 * a, ROLL, PITCH, HEADING), np.zeros(6))
+    out = slide_reference(ref, vs, [False, True, True, True, True, True])
+    np.testing.assert_allclose(out.H[:3, 3], vs.H[:3, 3], atol=1e-12)
+
+
+@pytest.mark.parametrize("act", [[True] * 6, [True, True, True, True, False, True],
+                                 [False, True, False, True, True, True]])
+def test_nothing_horizontal_given_up_or_heave_given_up_leaves_the_reference(act):
+    ref, vs = _case()
+    assert slide_reference(ref, vs, act) is ref
+
+
+def test_a_surge_axis_near_vertical_or_a_non_finite_state_leaves_the_reference():
+    ref, vs = _case()
+    steep = Reference(_H([0, 0, 1.0], 0.0, np.radians(85.0), 0.0), ref.v, ref.vdot)
+    assert slide_reference(steep, vs, [False] + [True] * 5) is steep
+    bad = VehicleState(vs.H, np.full(6, np.nan))
+    assert slide_reference(ref, bad, [False] + [True] * 5) is ref
+
+
+def test_the_core_does_not_push_a_pitched_vehicle_off_depth_for_drift_it_cannot_correct():
+    """JHU ROV, aft-starboard thruster dead (surge given up); the reference 1 m ahead in world
+    x at the vehicle's depth, pitch and heading: the error is drift along the given-up axis
+    only. The controller (PDC) gets the slid reference: no heave, sway or torque asked; the
+    trajectory's reference is what the outputs report (tracking is measured against it)."""
+    target = [1.0, 0.0, 1.0, 0.0, float(PITCH), 0.0]
+    cfg = _cfg()
+    cfg = core.CoreConfig(nav=cfg.nav, controller=cfg.controller, reference=setpoint(target),
+                          allocator=cfg.allocator, k_thrust=cfg.k_thrust)
+    s = _samples(0, depth=1.0)
+    s["ins"] = type(s["ins"])(t_ns=0, roll=0.0, pitch=float(PITCH), heading=0.0,
+                              omega_body=np.zeros(3))
+    eta = np.array([1, 0.0, 1, 1, 1, 1])
+    out, _ = core.step(cfg, core.CoreInputs(t_ns=0, thruster_eta=eta, **s),
+                       core.core_init(cfg), 0.1)
+    assert out.status == "ok" and out.given_up == ("surge",)
+    np.testing.assert_allclose(out.u_cmd[1:], 0.0, atol=1e-9)
+    assert out.reference.H[0, 3] == pytest.approx(1.0)  # the trajectory's, not the slid one
+    # the same vehicle healthy: surge is asked for the error
+    healthy, _ = core.step(cfg, core.CoreInputs(t_ns=0, **s), core.core_init(cfg), 0.1)
+    assert healthy.u_cmd[0] > 1.0
