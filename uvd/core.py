@@ -34,7 +34,10 @@ first, the rest gets what is left (:func:`uvd.control.allocation.allocate_priori
 healthy, the direction-keeping scaling of the thesis experiments). Given-up DOFs are taken
 out of the reference's closed loop — so the controller neither commands nor adapts on them
 (AMBC's error is masked by the closed loop in (5.28), and its spec's ``hold_dofs`` keeps those
-DOFs' parameters, which other rows' Coriolis terms would still move) — and the wrench the
+DOFs' parameters, which other rows' Coriolis terms would still move); a horizontal DOF given
+up also slides the controller's reference horizontally along it to the vehicle
+(:func:`uvd.control.given_up.slide_reference`: drift it cannot correct is not read as depth or
+attitude error; ``CoreOutputs.reference`` stays the trajectory's) — and the wrench the
 estimators see is B diag(η) f, what the thrusters really give. The estimators (AID) run in
 every mode: they identify the vehicle whatever drives it — except on a DOF given up, whose
 parameters an estimator's ``hold_dofs`` holds (AID: :func:`uvd.estimation.aid.aid_hold_dofs`,
