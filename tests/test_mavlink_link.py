@@ -310,3 +310,52 @@ def test_statustext_is_plain_ascii_as_pymavlink_decodes_it():
         assert text.isascii()
 
     run_link(scenario)
+
+
+def test_a_receiver_that_cannot_finish_is_killed_and_the_stop_does_not_raise():
+    """A receiver that does not run (stopped here; starved of the CPU at SCHED_IDLE on a busy
+    machine alike) is killed after the timeout; stop_receiver returns, it never raises."""
+    import collections
+    import os
+    import signal
+    import socket
+
+    from uvd.links.mavlink.receiver import spawn_receiver, stop_receiver
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    proc, pair = spawn_receiver(sock)
+    try:
+        os.kill(proc.pid, signal.SIGSTOP)
+        t0 = time.monotonic()
+        stop_receiver(proc, pair, collections.Counter(), timeout_s=0.2)
+        assert proc.returncode == -signal.SIGKILL and time.monotonic() - t0 < 6.0
+    finally:
+        sock.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5.0)
+
+
+def test_a_receiver_never_reaped_after_its_kill_is_counted_not_raised():
+    """The branch seen only on a saturated machine (the killed SCHED_IDLE receiver not reaped
+    within the wait): a process whose wait always times out — no real receiver can be made to
+    do that on demand — is counted as not reaped; stop_receiver returns."""
+    import collections
+    import socket
+    import subprocess
+
+    class Unreaped:
+        pid, killed = 2**22 + 1, False  # above the kernel's pid_max: sched_* raise OSError
+
+        def wait(self, timeout=None):
+            raise subprocess.TimeoutExpired("receiver", timeout)
+
+        def kill(self):
+            self.killed = True
+
+    from uvd.links.mavlink.receiver import stop_receiver
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    theirs.close()
+    counters, proc = collections.Counter(), Unreaped()
+    stop_receiver(proc, ours, counters, timeout_s=0.05)
+    assert proc.killed and counters["receiver_not_reaped"] == 1
