@@ -112,10 +112,7 @@ def _run(opts: ExperimentOptions) -> dict[str, Any]:
                        "worst saturation")
         for k in range(1, n + 1):
             opts.progress(f"{label}: thruster {k} dead")
-            r = run_arm(config_name, k, 0.0, "told", duration_s=duration, seed=opts.seed,
-                        supervised=True)
-            ratio = {d: r["after"][d] / free["after"][d] for d in DOFS}
-            worst = max(keep, key=lambda d: ratio[d])
+            r, ratio, worst = _dead(config_name, k, "told", duration, opts.seed, free, keep)
             sat = r["saturated_fraction_after"]
             j = max(range(n), key=lambda i: sat[i])
             held, fs = adaptation_held(r), _events(r)
@@ -148,6 +145,15 @@ def _run(opts: ExperimentOptions) -> dict[str, Any]:
             "thesis_reference": THESIS_REFERENCE}
 
 
+def _dead(config_name: str, k: int, source: str, duration: float, seed: int, free: dict,
+          keep) -> tuple[dict, dict, str]:
+    """Thruster ``k`` dead from ``T`` (η 0 from ``source``), supervised: the run, each DOF's
+    MAE ratio to the fault-free run after ``T`` and the worst DOF of the bound ``keep``."""
+    r = run_arm(config_name, k, 0.0, source, duration_s=duration, seed=seed, supervised=True)
+    ratio = {d: r["after"][d] / free["after"][d] for d in DOFS}
+    return r, ratio, max(keep, key=lambda d: ratio[d])
+
+
 def _amplifier_arm(config_name: str, n: int, keep, bound: float, free: dict, rows: dict,
                    duration: float, opts: ExperimentOptions) -> list[str]:
     """Each thruster's drive faulting at ``T`` instead (the cycle's amplifier source under
@@ -158,10 +164,7 @@ def _amplifier_arm(config_name: str, n: int, keep, bound: float, free: dict, row
              "\"reallocate\"): the event, the failsafes"]
     for k in range(1, n + 1):
         opts.progress(f"thruster {k}: its amplifier faults")
-        r = run_arm(config_name, k, 0.0, "amplifier", duration_s=duration, seed=opts.seed,
-                    supervised=True)
-        ratio = {d: r["after"][d] / free["after"][d] for d in DOFS}
-        worst = max(keep, key=lambda d: ratio[d])
+        r, ratio, worst = _dead(config_name, k, "amplifier", duration, opts.seed, free, keep)
         fs = _events(r)
         disarmed = any(e.get("type") == "lifecycle" and e.get("to") == "STANDBY"
                        for e in r["failsafe_events"])
