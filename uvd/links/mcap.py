@@ -264,6 +264,9 @@ class McapRecorder:
         if self._buf.pending > self.max_pending:  # the disk is stalled: the worker took nothing
             self.stalled_dropped += len(records)
             return
+        # the raw bytes first: a cycle's record follows the bytes its samples came from in
+        # the file, so a file cut anywhere (a crash) holds every sample its cycles name
+        self._drain_raw()
         t0 = time.perf_counter()
         for r in records:
             self._take(r)
