@@ -188,6 +188,7 @@ class CanEmulators:
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
         now = self.clock()
         with self.lock:
+            self._advance(now)
             for node in self._nodes():
                 node.on_nmt(bytes(data), now)
 
@@ -196,6 +197,7 @@ class CanEmulators:
         wait_s = time.time() - timestamp if timestamp else 0.0  # kernel receive -> here
         with self.lock:
             self.counters["sync_rx"] += 1
+            self._advance(now)  # the targets held until this SYNC, then the new ones
             omega = self.bank.omega
             for amp in self.amps:
                 amp.omega = float(omega[amp.index])
@@ -224,16 +226,24 @@ class CanEmulators:
         """Advance everything to ``now`` (the tick thread calls it; tests may too)."""
         with self.lock:
             self.counters["ticks"] += 1
-            dt = max(0.0, (now - self._last_tick_ns) / 1e9)
-            self._last_tick_ns = now
+            self._advance(now)
             if self._bus_off_until and now >= self._bus_off_until:
                 self._end_bus_off(now)
             for node in self._nodes():
                 node.tick(now)
-            if dt > 0:
-                cmd = np.array([a.thrust_command_n() for a in self.amps])
-                self.bank.step(cmd, min(dt, 0.05))
-                np.maximum(self.peak_omega, np.abs(self.bank.omega), out=self.peak_omega)
+
+    def _advance(self, now: int) -> None:
+        """The propellers from the last advance to ``now`` under the commands held since
+        (the caller holds the lock). Called at every tick and every SYNC, so a command
+        applied at a SYNC acts from that SYNC however late the ticks come on a loaded
+        machine; the lag's step is exact over any interval (``ThrusterBank.step``)."""
+        dt = (now - self._last_tick_ns) / 1e9
+        if dt <= 0.0:
+            return
+        self._last_tick_ns = now
+        cmd = np.array([a.thrust_command_n() for a in self.amps])
+        self.bank.step(cmd, dt)
+        np.maximum(self.peak_omega, np.abs(self.bank.omega), out=self.peak_omega)
 
     # -- fault injection --
     def amp(self, node_id: int) -> EmulatedAmplifier:
@@ -250,7 +260,9 @@ class CanEmulators:
         if code is None:
             raise KeyError(f"unknown fault {name!r}; known: {sorted(cia402.FAULT_CODES)}")
         with self.lock:
-            self.amp(node_id).fault(code, self.clock(), persistent=persistent)
+            now = self.clock()
+            self._advance(now)
+            self.amp(node_id).fault(code, now, persistent=persistent)
         return code
 
     def silence(self, node_id: int, seconds: float | None = None) -> None:
