@@ -235,6 +235,46 @@ def test_the_receiver_process_forwards_only_good_mavlink_and_counts_the_rest():
         st.sock.close()
 
 
+def test_datagrams_the_kernel_drops_while_the_receiver_waits_are_counted():
+    """A receiver kept from the CPU (stopped here; a saturated machine alike) while 400
+    datagrams arrive at a small buffer: each one is either judged or counted dropped by the
+    kernel (``kernel_dropped``, reported with the next datagram) — none lost uncounted."""
+    import os
+    import signal
+
+    from uvd.links.mavlink.receiver import read_forwarded, spawn_receiver
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8192)
+    sock.bind(("127.0.0.1", 0))
+    proc, pair = spawn_receiver(sock)
+    st = Peer()
+    try:
+        good = st.enc.heartbeat_encode(6, 8, 0, 0, 0).pack(st.enc)
+        st.sock.sendto(good, sock.getsockname())  # the receiver is up and reading
+        counts, deadline = collections.Counter(), time.monotonic() + 10.0
+        while counts["datagrams"] < 1 and time.monotonic() < deadline:
+            read_forwarded(pair, counts)
+            time.sleep(0.02)
+        os.kill(proc.pid, signal.SIGSTOP)
+        for _ in range(400):
+            st.sock.sendto(b"\x00garbage", sock.getsockname())
+        os.kill(proc.pid, signal.SIGCONT)
+        time.sleep(0.2)
+        st.sock.sendto(good, sock.getsockname())  # carries the drop count
+        while counts["datagrams"] + counts["kernel_dropped"] < 402 \
+                and time.monotonic() < deadline:
+            read_forwarded(pair, counts)
+            time.sleep(0.02)
+        assert counts["kernel_dropped"] > 0, counts  # the buffer did overflow
+        assert counts["datagrams"] + counts["kernel_dropped"] == 402, counts
+        assert counts["bad_datagrams"] == counts["datagrams"] - 2, counts
+    finally:
+        pair.close()
+        assert proc.wait(timeout=5.0) == 0
+        sock.close()
+        st.sock.close()
+
+
 def test_a_receiver_that_dies_is_replaced_and_commands_go_on():
     def scenario(link, st):
         st.wait("HEARTBEAT")
@@ -313,7 +353,7 @@ def test_statustext_is_plain_ascii_as_pymavlink_decodes_it():
 
 
 def test_a_receiver_that_cannot_finish_is_killed_and_the_stop_does_not_raise():
-    """A receiver that does not run (stopped here; starved of the CPU at SCHED_IDLE on a busy
+    """A receiver that does not run (stopped here; kept from the CPU on a saturated
     machine alike) is killed after the timeout; stop_receiver returns, it never raises."""
     import collections
     import os
@@ -337,7 +377,7 @@ def test_a_receiver_that_cannot_finish_is_killed_and_the_stop_does_not_raise():
 
 
 def test_a_receiver_never_reaped_after_its_kill_is_counted_not_raised():
-    """The branch seen only on a saturated machine (the killed SCHED_IDLE receiver not reaped
+    """The branch seen only on a saturated machine (the killed receiver, then at SCHED_IDLE, not reaped
     within the wait): a process whose wait always times out — no real receiver can be made to
     do that on demand — is counted as not reaped; stop_receiver returns."""
     import collections
