@@ -377,9 +377,9 @@ def test_a_receiver_that_cannot_finish_is_killed_and_the_stop_does_not_raise():
 
 
 def test_a_receiver_never_reaped_after_its_kill_is_counted_not_raised():
-    """The branch seen only on a saturated machine (the killed receiver, then at SCHED_IDLE, not reaped
-    within the wait): a process whose wait always times out — no real receiver can be made to
-    do that on demand — is counted as not reaped; stop_receiver returns."""
+    """The branch seen only on a saturated machine (the killed receiver, then at SCHED_IDLE,
+    not reaped within the wait): a process whose wait always times out — no real receiver can
+    be made to do that on demand — is counted as not reaped; stop_receiver returns."""
     import collections
     import socket
     import subprocess
