@@ -416,15 +416,13 @@ def _guard(f, f_max):
     return code
 
 
-_ALL_ACTUATED = np.ones(6, dtype=bool)
-_ALL_ACTUATED.setflags(write=False)
 
 
 def sense(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float) -> Sensed:
     """Navigation, the applied wrench and the estimators of one cycle (pure)."""
     B, _, _, k_thr, n_thr = cfg._glue
     eta = _eta_of(inputs.thruster_eta, n_thr)
-    actuated = _ALL_ACTUATED
+    actuated = None  # every DOF (the hooks' cheap path: a reduction costs ~2.6 µs)
     if eta is not None:
         acc, B = cfg.accommodation_for(eta)  # the wrench a thrust f really gives: B diag(η) f
         actuated = acc.actuated
@@ -449,11 +447,10 @@ def sense(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float) -> S
         # the time since the estimators last ran, not one period: after a navigation outage
         # an estimator sees the gap (AID re-synchronises v̂ = v after one, Theorem 4.3.1's t₀)
         dt_est = dt if est_t_ns is None else (inputs.t_ns - est_t_ns) * 1e-9
-        est = tuple(e.step(vs, u_applied, e.params, s, dt_est)
-                    for e, s in zip(cfg.estimators, state.est, strict=True))
         # a DOF no thruster reaches any more: the estimator's parameters of it are held
-        est = tuple(n if e.hold_dofs is None else e.hold_dofs(n, s, actuated)
-                    for e, n, s in zip(cfg.estimators, est, state.est, strict=True))
+        est = tuple(e.step(vs, u_applied, e.params, s, dt_est) if e.hold_dofs is None
+                    else e.hold_dofs(e.step(vs, u_applied, e.params, s, dt_est), s, actuated)
+                    for e, s in zip(cfg.estimators, state.est, strict=True))
         est_t_ns = inputs.t_ns
     return Sensed(nav, nav_mem, nav_ok, vs, est, est_t_ns, u_applied, speeds)
 

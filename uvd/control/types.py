@@ -108,8 +108,9 @@ class EstimatorSpec:
     """An estimator as the core runs it: ``step(VehicleState, u_applied, params, state, dt)
     -> state``, with its ``diagnostics(state)`` hook and, when it adapts per DOF,
     ``hold_dofs(new, old, actuated) -> state``: the new state with the parameters of the DOFs
-    not ``actuated`` ((6,) bool) kept at the old state's and the reason in its diagnostics'
-    ``hold_reason`` (the core calls it after every step; None: nothing held)."""
+    not ``actuated`` ((6,) bool; None: every DOF, the healthy path) kept at the old state's
+    and the reason in its diagnostics' ``hold_reason`` (the core calls it after every step;
+    None: nothing held)."""
 
     name: str
     step: Callable[..., Any]

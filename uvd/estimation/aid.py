@@ -609,13 +609,15 @@ def held_indices(n_v: int, given_up: tuple[int, ...]) -> np.ndarray:
     return out
 
 
-def aid_hold_dofs(new: _AIDState, old: _AIDState, actuated: np.ndarray) -> _AIDState:
+def aid_hold_dofs(new: _AIDState, old: _AIDState, actuated: np.ndarray | None
+                  ) -> _AIDState:
     """AID's ``hold_dofs`` hook (:class:`~uvd.control.types.EstimatorSpec`): the parameters
     of the DOFs not ``actuated`` ((6,) bool; the core's allocation gave them up) stay at
     ``old``'s — their laws (4.24)–(4.27) ((4.11)–(4.13) for 3-DOF) are not integrated on
     those rows (:func:`held_indices`) — while the other rows adapt; v̂ (4.23) still runs on
-    the whole model. ``hold_reason`` names them ("" when every DOF is actuated)."""
-    if actuated.all():
+    the whole model. ``hold_reason`` names them ("" when every DOF is actuated: ``actuated``
+    all true, or None)."""
+    if actuated is None or actuated.all():
         return new if not new.hold_reason else replace(new, hold_reason="")
     given_up = tuple(int(j) for j in np.flatnonzero(~np.asarray(actuated, dtype=bool)))
     n_v = 6 if new.theta.shape[0] == N_THETA_UV else 3
