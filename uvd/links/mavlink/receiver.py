@@ -7,8 +7,8 @@ of garbage (the fuzz of issue 21: 10 000 datagrams) then makes the control loop 
 lock at its wake-ups — measured with ``uvd bench loop --mavlink-fuzz 10000``: lateness p99
 +27 % to +2183 % under normal scheduling with the parsing in a thread of the daemon. Here the
 daemon's link thread only reads what this process forwards, so garbage costs the daemon
-nothing but the kernel's share of a CPU; and at ``SCHED_BATCH``, nice 19, this process takes
-little of a CPU from a loop under normal scheduling and nothing from one at SCHED_FIFO.
+nothing but the kernel's share of a CPU; at ``SCHED_BATCH`` this process never preempts the
+loop when a datagram wakes it, and takes nothing from a loop at SCHED_FIFO.
 
 Wire between the two (an ``AF_UNIX`` ``SOCK_SEQPACKET`` pair, one message each, never
 blocking: what the daemon does not take in time is dropped and counted):
@@ -21,9 +21,9 @@ blocking: what the daemon does not take in time is dropped and counted):
   datagram to arrive reports them), at most every 0.25 s.
 
 The daemon creates and binds the UDP socket (so the port is known at once and telemetry goes
-out from it) and hands it over by file descriptor. This process runs at ``SCHED_BATCH``, nice 19
-(:func:`_leave_realtime`: a flood must not compete with the loop for a CPU, and the link must
-not starve on a busy machine), and ends
+out from it) and hands it over by file descriptor. This process runs at ``SCHED_BATCH``
+(:func:`_leave_realtime`: a flood must not preempt the loop, and the link must not starve on
+a busy machine), and ends
 when the daemon shuts its end of the pair (after a last count report) or dies.
 """
 
@@ -136,10 +136,10 @@ def stop_receiver(proc: subprocess.Popen, pair: socket.socket, counters: collect
     exits; one that does not within ``timeout_s`` is killed. Never raises: a receiver that has
     not gone 5 s after its kill is counted (``receiver_not_reaped``) and left to the system.
 
-    It runs at nice 19, which a machine busy with other work slows (measured at ``SCHED_IDLE``,
-    its earlier policy: a fresh clone's tests beside two CPU-bound processes, load ~4.5 on 2
-    cores — neither its exit within 1 s nor its exit after SIGKILL within 1 s, and the close
-    raised ``TimeoutExpired``): it is given normal scheduling first so that it can finish."""
+    A machine busy with other work slows it (measured at ``SCHED_IDLE``, its earlier policy:
+    a fresh clone's tests beside two CPU-bound processes, load ~4.5 on 2 cores — neither its
+    exit within 1 s nor its exit after SIGKILL within 1 s, and the close raised
+    ``TimeoutExpired``): it is given ``SCHED_OTHER`` first, so that it can finish."""
     with contextlib.suppress(OSError, AttributeError):  # gone already; no sched_* here
         os.sched_setscheduler(proc.pid, os.SCHED_OTHER, os.sched_param(0))
     deadline = time.monotonic() + timeout_s
@@ -163,20 +163,19 @@ def stop_receiver(proc: subprocess.Popen, pair: socket.socket, counters: collect
 # ----------------------------------------------------------------------------- the process
 
 def _leave_realtime(avoid_cpus: set[int]) -> None:
-    """``SCHED_BATCH`` at nice 19, on every CPU but ``avoid_cpus`` (it may have inherited the
-    loop's SCHED_FIFO and CPU set). A batch task never preempts a running one when a datagram
-    wakes it, and at nice 19 the kernel gives it a weight of 15 against a normal task's 1024:
-    a flood costs a loop under normal scheduling at most ~1.5 % of a CPU, and a loop at
-    SCHED_FIFO nothing. It is never starved: on a machine saturated by other work it still
-    gets its share, so the operator's heartbeats and commands get through. (It ran at
-    ``SCHED_IDLE``, weight 3 and below every normal task, until a fresh clone's tests beside
-    two busy processes showed the link deaf: no station heard within 10 s, 419 of 10 000
-    datagrams judged.) Off the loop's CPUs it does not even cost the loop a context switch
-    (when the loop has CPUs of its own)."""
+    """``SCHED_BATCH`` at normal weight, on every CPU but ``avoid_cpus`` (it may have
+    inherited the loop's SCHED_FIFO and CPU set). A batch task never preempts a running one
+    when a datagram wakes it, so a flood does not cut into the loop's cycles on a wake-up; a
+    loop at SCHED_FIFO always comes first. At normal weight it gets its share of a machine
+    busy with other work like any ordinary task, so the operator's heartbeats and commands
+    get through. Measured before (fresh clones' tests beside two to four CPU-bound
+    processes, load ~4 on 2 cores): at ``SCHED_IDLE`` (weight 3) the link was deaf — no
+    station heard in 10 s, 419 of 10 000 datagrams judged; at nice 19 (weight 15) the
+    receiver could not even start within 5 s (its imports at ~0.7 % of a CPU). Off the
+    loop's CPUs it does not even cost the loop a context switch (when the loop has CPUs of
+    its own)."""
     with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-    with contextlib.suppress(OSError, AttributeError):
-        os.setpriority(os.PRIO_PROCESS, 0, 19)
     cpus = set(range(os.cpu_count() or 1))
     for want in (cpus - avoid_cpus, cpus):
         try:
