@@ -416,8 +416,6 @@ def _guard(f, f_max):
     return code
 
 
-
-
 def sense(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float) -> Sensed:
     """Navigation, the applied wrench and the estimators of one cycle (pure)."""
     B, _, _, k_thr, n_thr = cfg._glue

@@ -171,7 +171,7 @@ def _leave_realtime(avoid_cpus: set[int]) -> None:
     get through. Measured before (fresh clones' tests beside two to four CPU-bound
     processes, load ~4 on 2 cores): at ``SCHED_IDLE`` (weight 3) the link was deaf — no
     station heard in 10 s, 419 of 10 000 datagrams judged; at nice 19 (weight 15) the
-    receiver could not even start within 5 s (its imports at ~0.7 % of a CPU). Off the
+    receiver neither reported nor exited within 5 s beside a results re-run. Off the
     loop's CPUs it does not even cost the loop a context switch (when the loop has CPUs of
     its own)."""
     with contextlib.suppress(OSError, AttributeError):
