@@ -445,10 +445,12 @@ def sense(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float) -> S
         # the time since the estimators last ran, not one period: after a navigation outage
         # an estimator sees the gap (AID re-synchronises v̂ = v after one, Theorem 4.3.1's t₀)
         dt_est = dt if est_t_ns is None else (inputs.t_ns - est_t_ns) * 1e-9
-        # a DOF no thruster reaches any more: the estimator's parameters of it are held
-        est = tuple(e.step(vs, u_applied, e.params, s, dt_est) if e.hold_dofs is None
-                    else e.hold_dofs(e.step(vs, u_applied, e.params, s, dt_est), s, actuated)
-                    for e, s in zip(cfg.estimators, state.est, strict=True))
+        stepped = []
+        for e, s in zip(cfg.estimators, state.est, strict=True):
+            n = e.step(vs, u_applied, e.params, s, dt_est)
+            # a DOF no thruster reaches any more: the estimator's parameters of it are held
+            stepped.append(n if e.hold_dofs is None else e.hold_dofs(n, s, actuated))
+        est = tuple(stepped)
         est_t_ns = inputs.t_ns
     return Sensed(nav, nav_mem, nav_ok, vs, est, est_t_ns, u_applied, speeds)
 
