@@ -302,3 +302,28 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path, busy_m
 def test_a_malformed_thruster_matrix_is_refused_by_name(B):
     with pytest.raises(ValueError, match="thruster matrix: 6 × N finite"):
         VehicleDetector("v", FAST, B=B)
+
+
+def test_the_lockstep_watch_feeds_the_detector_the_numbers_of_the_state_payload():
+    """uvd.experiments.fdc.watch hands the detector a cycle's v, R and thrust as arrays instead
+    of the JSON of its whole state payload: the detector must get the very same numbers."""
+    from uvd.experiments.fdc import SimVehicle
+    from uvd.fdc.residual import state_sample
+    from uvd.links.zenoh import state_payload
+
+    v = SimVehicle("thruster-50", 0.2, seed=3)  # thruster 4 at 50 % from cycle 120 on
+    n = v.B.shape[1]
+    compared = 0
+    for _ in range(3):  # the first cycle's estimate, then two every v.every cycles
+        v.next_estimates()
+        records = v.cycles
+        assert len(records) == len(v.outs) > 0
+        for (t_ns, out), rec in zip(v.outs, records, strict=True):
+            assert rec["t_ns"] == t_ns
+            via_json = json.loads(json.dumps(state_payload(rec)))
+            direct = state_sample(out.nav.v, out.nav.H[:3, :3], out.thrust_n, n)
+            for a, b in zip(state_sample(via_json["v"], via_json["R"], via_json["thrust"], n),
+                            direct, strict=True):
+                assert a.tobytes() == b.tobytes()
+            compared += 1
+    assert compared == 1 + 2 * v.every and v.t_fault_ns is not None

@@ -76,8 +76,15 @@ class SimVehicle:
         self.every = int(round(EVERY_S * self.rate))
         self.t_fault_ns: int | None = None
         self.B = vehicle.B
-        #: the ``"cycle"`` hub records since the last estimate (:meth:`next_estimates`)
-        self.cycles: list[dict] = []
+        #: (t_ns, :class:`uvd.core.CoreOutputs`) of each cycle since the last estimate
+        #: (:meth:`next_estimates`)
+        self.outs: list = []
+
+    @property
+    def cycles(self) -> list[dict]:
+        """The ``"cycle"`` hub records of :attr:`outs`, as the daemon publishes them."""
+        from uvd.experiments._control_runner import lockstep_cycle_record
+        return [lockstep_cycle_record(t_ns, self.sim.dt_control, out) for t_ns, out in self.outs]
 
     @property
     def next_k(self) -> int:
@@ -90,11 +97,10 @@ class SimVehicle:
         the two-step AMBC's own θ̂: :func:`uvd.telemetry.records.estimate_records`), stamped
         with the simulated clock."""
         from sim_bridge.plant import PlantFault
-        from uvd.experiments._control_runner import lockstep_cycle_record
         from uvd.telemetry.records import estimate_records
 
         sim = self.sim
-        self.cycles = []
+        self.outs = []
         while True:
             if self.k == self.k_fault:
                 self.t_fault_ns = sim.t_ns
@@ -105,7 +111,7 @@ class SimVehicle:
                 else:
                     sim.plant.set_fault(PlantFault(**args))
             out = sim.advance()
-            self.cycles.append(lockstep_cycle_record(sim.t_ns, sim.dt_control, out))
+            self.outs.append((sim.t_ns, out))
             self.k += 1
             if (self.k - 1) % self.every == 0:
                 return estimate_records(self.sim.core_cfg, sim.state, sim.t_ns)
@@ -141,7 +147,7 @@ def watch(v: SimVehicle, minutes: float, progress=None) -> dict:
     """Run ``v`` for ``minutes`` simulated minutes under uvd-fdc's detector (every state
     payload, AID's estimates); its :meth:`SimVehicle.outcome` and the detector's baseline."""
     from uvd.fdc.detector import VehicleDetector
-    from uvd.links.zenoh import estimate_payload, fault_report, state_payload
+    from uvd.links.zenoh import estimate_payload, fault_report
 
     fault = v.fault
     det = VehicleDetector(v.vehicle_name, B=v.B)
@@ -151,9 +157,14 @@ def watch(v: SimVehicle, minutes: float, progress=None) -> dict:
     while v.next_k < n:
         records = v.next_estimates()
         found = []
-        for c in v.cycles:
+        for t_ns, out in v.outs:
+            # the state payload's fields the detector reads (uvd.state.v1: ``t_ns``, ``v``,
+            # ``R``, ``thrust``), as the arrays whose numbers its JSON carries — the payload's
+            # other fields and the JSON conversion cost a cycle ~25 % of its CPU here
+            # (tests/test_fdc.py checks that both give the detector the same numbers)
+            nav = out.nav
             found += [d.as_dict() for d in det.update_state(
-                {"t_ns": c["t_ns"], **state_payload(c)})]
+                {"t_ns": t_ns, "v": nav.v, "R": nav.H[:3, :3], "thrust": out.thrust_n})]
         for rec in records:  # AID's (uvd-fdc does not judge a controller's θ̂)
             if rec["source"] == "estimator":
                 payload = {"t_ns": rec["t_ns"], **estimate_payload(rec)}
