@@ -467,6 +467,38 @@ def test_identify_and_xval_on_real_bags(tmp_path, capsys):
     assert all(math.isfinite(v) for v in x["runs"][0]["mae"].values())
 
 
+def test_identify_with_linear_damping_on_real_bags(tmp_path, capsys):
+    """--linear-damping: the file carries a dissipative [linear_damping] that xval reads and
+    says it simulates; with AID (the thesis's model has no such term) it is refused by name."""
+    import json
+
+    from uvd.cli import main
+    from uvd.io.params import linear_damping_from_toml
+
+    _need(EXJOBB)
+    out = tmp_path / "p.toml"
+    rc = main(["identify", "--log", str(EXJOBB / "all_2_2016-04-18-14-56-58.bag"),
+               str(EXJOBB / "all_3_2016-04-18-15-04-50.bag"), "--profile",
+               "bluerov-exjobb-april", "--method", "ls-consistent", "--linear-damping",
+               "--out", str(out), "--json", str(tmp_path / "s.json"), "--quiet"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "linear damping K_p, M_q, N_r" in text
+    d = np.diag(linear_damping_from_toml(out))
+    s = json.loads((tmp_path / "s.json").read_text())
+    assert s["linear_damping"] == pytest.approx(d.tolist()) and np.all(d < 0)
+    assert s["physical"]["drag_dissipative"] and s["model"] == "rot-lin"
+    rc = main(["xval", "--params", str(out), "--log",
+               str(EXJOBB / "all_4_2016-04-18-15-06-06.bag"), "--profile",
+               "bluerov-exjobb-april"])
+    assert rc == 0 and "with its linear damping" in capsys.readouterr().out
+    rc = main(["identify", "--log", str(EXJOBB / "all_3_2016-04-18-15-04-50.bag"), "--profile",
+               "bluerov-exjobb-april", "--method", "aid", "--linear-damping", "--out",
+               str(tmp_path / "a.toml"), "--quiet"])
+    assert rc == 2 and not (tmp_path / "a.toml").exists()
+    assert "--linear-damping: only with --profile" in capsys.readouterr().err
+
+
 def test_identify_refuses_without_vehicle(tmp_path, capsys):
     from uvd.cli import main
 

@@ -51,6 +51,11 @@ def register(sub) -> None:
     p.add_argument("--window", type=float, default=None, metavar="S",
                    help="ls: Savitzky-Golay window in seconds (default 2.1; 1.0 with "
                         "--profile)")
+    p.add_argument("--linear-damping", action="store_true",
+                   help="with --profile and an LS method: also identify a linear rotational "
+                        "damping diag(K_p, M_q, N_r) beside (2.40)'s quadratic one, written as "
+                        "the parameter file's [linear_damping] (outside the thesis's model; "
+                        "docs/real-vehicles.md)")
     p.add_argument("--json", type=Path, metavar="OUT", help="also write a summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=_run)
@@ -154,6 +159,10 @@ def _run(args) -> int:
 
     if not args.out.parent.is_dir():  # before minutes of identification, not after
         raise ConfigError(f"--out {args.out}: cannot write: no folder {args.out.parent}")
+    if args.linear_damping and (not args.profile or args.method == "aid"):
+        raise ConfigError("--linear-damping: only with --profile (the rotational model of "
+                          "another system's recordings) and --method ls or ls-consistent "
+                          "(AID identifies the thesis's model, which has no linear damping)")
     if args.profile:
         return _run_logs(args)
     if len(args.log) != 1:
@@ -274,7 +283,8 @@ def _run_logs(args) -> int:
                   quiet=args.quiet) as pr:
         try:
             res = identify_rotational(runs, args.method, theta0=theta0, gains=gains,
-                                      window_s=window, progress=pr.update)
+                                      window_s=window, progress=pr.update,
+                                      linear_damping=args.linear_damping)
         except ValueError as exc:
             raise ConfigError(f"{args.method}: {exc}") from exc
     rot = res.pop("params")
@@ -282,7 +292,9 @@ def _run_logs(args) -> int:
     cpu_s = time.process_time() - t_start
     lam = np.linalg.eigvalsh(np.asarray(rot.I))
     sym = [np.linalg.eigvalsh(0.5 * (c + c.T)).max() for c in np.asarray(rot.C)]
-    phys = {"inertia_positive": bool(lam[0] > 0), "drag_dissipative": bool(max(sym) < 0),
+    d_lin = res.get("linear_damping")
+    phys = {"inertia_positive": bool(lam[0] > 0),
+            "drag_dissipative": bool(max(sym) < 0) and (d_lin is None or max(d_lin) < 0),
             "restoring_b3_positive": bool(rot.b[2] > 0)}
     title = (f"{args.method} of the rotational model (2.40) from {len(args.log)} recording(s) "
              f"({n} samples, profile {profile.name}, vehicle {vehicle.name}); translation = the "
@@ -292,6 +304,10 @@ def _run_logs(args) -> int:
              "logs = [" + ", ".join(repr(str(p)) for p in args.log) + "]",
              'dofs = ["roll", "pitch", "yaw"]', "", "[refused]"]
     extra += [f"{d} = {r!r}" for d, r in refused.items()]
+    if d_lin is not None:
+        extra += ["", "[linear_damping]", "# K_p, M_q, N_r (N m s/rad), identified beside (2.40)'s "
+                  "quadratic damping (--linear-damping)",
+                  f"rotational = [{', '.join(repr(float(x)) for x in d_lin)}]"]
     try:
         save_params(params, args.out, title=title, extra="\n".join(extra) + "\n")
     except OSError as exc:
@@ -301,6 +317,9 @@ def _run_logs(args) -> int:
           f"{lam[0]:.4g}; quadratic drag diag "
           f"{np.array2string(np.array([rot.C[i][i, i] for i in range(3)]), precision=4)}; "
           f"b {np.array2string(np.asarray(rot.b), precision=4)} N m")
+    if d_lin is not None:
+        print(f"linear damping K_p, M_q, N_r {np.array2string(np.asarray(d_lin), precision=4)} "
+              "N m s/rad")
     print("physically meaningful: " + ", ".join(f"{k} {'yes' if v else 'NO'}"
                                                  for k, v in phys.items()))
     bound = [b for b in res.get("active_bounds", []) if b not in res.get("unobserved", [])]

@@ -33,6 +33,14 @@ solver tolerance (and is the whole answer, applied to the unconstrained solution
 succeeds), so the result *always* has M positive definite and dissipative drag and passes
 :meth:`UVParams.validate`; :class:`LSResult` says whether the projection moved anything.
 
+**Linear damping** (model ``"rot-lin"``). (2.40) has quadratic rotational damping only; a real
+vehicle's is also linear at low rates (the published model of the LiU BlueROV, whose recordings
+docs/real-vehicles.md identifies, has K_p p, M_q q, N_r r beside its quadratic terms). With
+``"rot-lin"`` θ is θ_UVR followed by the diagonal D_L = diag(d_p, d_q, d_r) (N m s/rad) of a
+torque D_L ω on the side of the drag, τ = W_UVR θ_UVR − D_L ω, so d ≤ 0 is dissipative; the
+consistent fit constrains d ≤ −ε_D. Outside the thesis's θ_UVR: :attr:`LSResult.linear_damping`
+carries it apart, and :func:`uvd.estimation.xval.rot_xval_windows` simulates it.
+
 **Admissible is not identified.** The margins ε_M = ε_D = 10⁻³ are far below any vehicle's
 figures (the JHU ROV's smallest mass eigenvalue is 261.6 kg, its least dissipative drag
 eigenvalue −30.2). A consistent fit that ends on (or within ten times) a margin was decided by
@@ -156,6 +164,15 @@ def _inertia_batch(w: np.ndarray, wdot: np.ndarray) -> np.ndarray:
     return W
 
 
+#: θ's length by model: θ_UV, θ_UVR, θ_UVR and the diagonal linear damping
+N_THETA = {"6dof": N_THETA_UV, "rot": N_THETA_UVR, "rot-lin": N_THETA_UVR + 3}
+
+
+def _check_model(model: str) -> None:
+    if model not in N_THETA:
+        raise ValueError(f"model must be one of {', '.join(map(repr, N_THETA))}, got {model!r}")
+
+
 def _regressor_batch(model: str, n_theta: int, v, vdot, r) -> np.ndarray:
     Phi, A, drag, shared = _features(model, v, vdot, r)
     rows = A.shape[1]
@@ -185,7 +202,7 @@ class LSResult:
 
     Attributes
     ----------
-    params : UVParams (model "6dof") or RotParams (model "rot").
+    params : UVParams (model "6dof") or RotParams (models "rot", "rot-lin").
     theta : θ_UV (241,) or θ_UVR (36,).
     rank : numerical rank of the equilibrated regressor (of ``n_params``).
     condition : its 2-norm condition number σ_max/σ_min (inf if rank deficient).
@@ -197,6 +214,7 @@ class LSResult:
         (:func:`active_bounds`) — set by the constraint, not identified by the data.
     unobserved : the drag blocks without data (:func:`unobserved_drag`): 0 from ``ls``, −ε_D I
         from the consistent fit.
+    linear_damping : model "rot-lin": D_L (3 × 3, diagonal, N m s/rad); else None.
     """
 
     model: str
@@ -218,6 +236,7 @@ class LSResult:
     active_bounds: tuple[str, ...] = ()
     unobserved: tuple[str, ...] = ()
     notes: tuple[str, ...] = field(default_factory=tuple)
+    linear_damping: np.ndarray | None = None
 
     def summary(self) -> dict:
         return {"model": self.model, "rank": self.rank, "n_params": self.n_params,
@@ -227,7 +246,9 @@ class LSResult:
                 "solver_status": self.solver_status, "projected": self.projected,
                 "mass_min_eig": self.mass_min_eig, "drag_max_sym_eig": self.drag_max_sym_eig,
                 "active_bounds": list(self.active_bounds), "unobserved": list(self.unobserved),
-                "notes": list(self.notes)}
+                "notes": list(self.notes),
+                "linear_damping": (None if self.linear_damping is None
+                                   else np.diag(self.linear_damping).tolist())}
 
 
 def runs_dt(run) -> float:
@@ -253,11 +274,16 @@ def _features(model: str, x: np.ndarray, xd: np.ndarray, r: np.ndarray
         k, base0 = 6, 21
         shared = np.r_[0:21, 237:241]
     else:
-        W_sh = np.zeros((x.shape[0], 3, 9))
+        lin = model == "rot-lin"
+        W_sh = np.zeros((x.shape[0], 3, 12 if lin else 9))
         W_sh[:, :, :6] = _inertia_batch(x, xd)
         W_sh[:, :, 6:9] = _cross_mat_rows(r)
-        k, base0 = 3, 6
         shared = np.r_[0:6, 33:36]
+        if lin:  # row i: −d_i ω_i (the drag's sign: its features are −|ωᵢ|ω_c)
+            for i in range(3):
+                W_sh[:, i, 9 + i] = -x[:, i]
+            shared = np.r_[shared, 36:39]
+        k, base0 = 3, 6
     ax = np.abs(x)
     Phi = -(ax[:, :, None] * x[:, None, :]).reshape(x.shape[0], k * k)  # column k·i + c
     drag = np.array([[base0 + k * k * i + k * c + row for i in range(k) for c in range(k)]
@@ -276,12 +302,13 @@ def _reduce(model: str, run, filt: DiffFilter):
     Returns (R, z, residual², n, features…).
     """
     t = run.t
+    p = N_THETA[model]
     if model == "6dof":
         x = run.v
-        p, k = N_THETA_UV, 6
+        k = 6
     else:
         x = run.v[:, 3:]
-        p, k = N_THETA_UVR, 3
+        k = 3
     xs, xd = differentiate(t, x, filt)
     u = np.asarray(run.u, dtype=float)
     if run.input_interp == "hold":  # the wrench switches at t_k: take the mean of both sides
@@ -342,7 +369,9 @@ def _reduce(model: str, run, filt: DiffFilter):
 
 
 def _params_of(model: str, theta: np.ndarray) -> UVParams | RotParams:
-    return params_from_theta(theta) if model == "6dof" else RotParams.from_theta(theta)
+    if model == "6dof":
+        return params_from_theta(theta)
+    return RotParams.from_theta(theta[:N_THETA_UVR])
 
 
 def _blocks(model: str, theta: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -412,6 +441,9 @@ def project_consistent(model: str, theta: np.ndarray, eps_mass: float, eps_drag:
     else:
         theta[:6] = M[iu]
         theta[6:33] = np.concatenate([D.reshape(-1, order="F") for D in newD])
+    if model == "rot-lin" and np.any(theta[36:39] > -eps_drag):
+        theta[36:39] = np.minimum(theta[36:39], -eps_drag)
+        changed = True
     return theta, changed
 
 
@@ -428,10 +460,11 @@ def _solve_consistent(model: str, Rs: np.ndarray, z: np.ndarray, c: np.ndarray,
     weak to steer it."""
     import cvxpy as cp
 
+    p = N_THETA[model]
     if model == "6dof":
-        p, n, P, n_m, d0 = N_THETA_UV, 6, P_M, 21, 21
+        n, P, n_m, d0 = 6, P_M, 21, 21
     else:
-        p, n, P, n_m, d0 = N_THETA_UVR, 3, P_I, 6, 6
+        n, P, n_m, d0 = 3, P_I, 6, 6
     scale = float(np.linalg.norm(Rs, 2)) or 1.0
     x = cp.Variable(p, name="x")
     theta = cp.multiply(c, x)
@@ -445,6 +478,8 @@ def _solve_consistent(model: str, Rs: np.ndarray, z: np.ndarray, c: np.ndarray,
             continue
         D = cp.reshape(theta[block], (n, n), order="F")
         cons.append(-0.5 * (D + D.T) - eps_drag * I_n >> 0)
+    if model == "rot-lin":
+        cons.append(theta[36:39] <= -eps_drag)
     obj = cp.Minimize(cp.norm(cp.hstack([(Rs / scale) @ x - z / scale, 1e-7 * x]), 2))
     prob = cp.Problem(obj, cons)
     last = "not run"
@@ -491,8 +526,7 @@ def ls_reduce(run, model: str = "6dof", filt: DiffFilter = DiffFilter()) -> tupl
     """The reduced problem of a run (opaque; pass it to :func:`ls_identify` as ``reduced`` to
     solve the same data twice, e.g. unconstrained and consistent, for the price of one
     reduction)."""
-    if model not in ("6dof", "rot"):
-        raise ValueError(f"model must be '6dof' or 'rot', got {model!r}")
+    _check_model(model)
     return (model, filt, _reduce(model, run, filt))
 
 
@@ -502,8 +536,7 @@ def ls_reduce_runs(runs, model: str = "6dof", filt: DiffFilter = DiffFilter(),
     stretches of one): ‖𝒲θ − F‖² summed over the runs is ‖Rθ − z‖² + ρ² with [R z] the
     triangular factor of the runs' factors stacked. Each run is differentiated on its own (no
     filter window spans two runs). ``progress(done, total)`` after each run."""
-    if model not in ("6dof", "rot"):
-        raise ValueError(f"model must be '6dof' or 'rot', got {model!r}")
+    _check_model(model)
     runs = list(runs)
     if not runs:
         raise ValueError("no runs")
@@ -537,7 +570,8 @@ def ls_identify(run, model: str = "6dof", *, filt: DiffFilter = DiffFilter(),
     Parameters
     ----------
     run : :class:`uvd.estimation.runlog.RunLog` (or anything with t, R, v, u, input_interp).
-    model : "6dof" (θ_UV ∈ R²⁴¹) or "rot" (θ_UVR ∈ R³⁶; uses ω and τ only).
+    model : "6dof" (θ_UV ∈ R²⁴¹), "rot" (θ_UVR ∈ R³⁶; uses ω and τ only) or "rot-lin"
+        (θ_UVR and a diagonal linear damping, module docstring).
     filt : the differentiation filter.
     consistent : constrain M ⪰ ε_M I and sym(Dᵢ) ⪯ −ε_D I (see the module docstring).
     eps_mass, eps_drag : the margins ε_M (kg, kg m²) and ε_D (N s²/m², N m s²).
@@ -577,4 +611,5 @@ def ls_identify(run, model: str = "6dof", *, filt: DiffFilter = DiffFilter(),
                     n_samples=n, filter=filt.describe(runs_dt(run)), consistent=consistent,
                     solver=solver, solver_status=status, projected=projected,
                     mass_min_eig=lam_m, drag_max_sym_eig=lam_d, active_bounds=active,
-                    unobserved=unobserved, notes=tuple(notes))
+                    unobserved=unobserved, notes=tuple(notes),
+                    linear_damping=(np.diag(theta[36:39]) if model == "rot-lin" else None))

@@ -54,12 +54,17 @@ def aid_rotational(runs, theta0, gains, progress=None):
 
 
 def identify_rotational(runs, method: str, *, theta0=None, gains=None, window_s: float = 1.0,
-                        progress=None) -> dict:
+                        progress=None, linear_damping: bool = False) -> dict:
     """θ_UVR (2.41) from the runs by ``method`` (aid, ls, ls-consistent); returns a dict with
-    ``params`` (RotParams) and the method's figures."""
+    ``params`` (RotParams) and the method's figures. ``linear_damping`` (LS methods only):
+    identify a diagonal linear damping D_L beside θ_UVR (model ``"rot-lin"`` of
+    :mod:`uvd.estimation.ls`), returned as ``linear_damping`` = [d_p, d_q, d_r] (N m s/rad)."""
     from uvd.estimation.aid import aid3_params
     from uvd.estimation.ls import DiffFilter, ls_identify, ls_reduce_runs
 
+    if method == "aid" and linear_damping:
+        raise ValueError("AID identifies the thesis's model (2.40), which has no linear "
+                         "damping: linear damping is for the LS methods")
     if method == "aid":
         st, dw = aid_rotational(runs, theta0, gains, progress)
         w = np.vstack([r.v[:, 3:] for r in runs])
@@ -70,8 +75,9 @@ def identify_rotational(runs, method: str, *, theta0=None, gains=None, window_s:
                 "rate_estimate_error_last_quarter": rel,
                 "gains": [gains.a, gains.gamma1, gains.gamma2, gains.gamma3]}
     filt = DiffFilter(window_s=window_s)
-    red = ls_reduce_runs(runs, "rot", filt, progress)
-    res = ls_identify(runs, "rot", filt=filt, consistent=method == "ls-consistent",
+    model = "rot-lin" if linear_damping else "rot"
+    red = ls_reduce_runs(runs, model, filt, progress)
+    res = ls_identify(runs, model, filt=filt, consistent=method == "ls-consistent",
                       reduced=red)
     return {"params": res.params, **res.summary()}
 

@@ -48,6 +48,17 @@ PUBLISHED = {
                               what="(4) PEM, gyro + accelerometer outputs"),
 }
 WINDOW_S = 2.0
+#: uvd's estimates: (name, method, AID gains ("scaled", "slow" or None), linear damping
+#: identified beside (2.40) (the LS methods' model "rot-lin"), l_z6 of the thrust map the
+#: recordings' torques are computed with — the vehicle file's measured 0.11 m, or the published
+#: final set's 0 ("thruster 6 barely moved p in tests", README of the data); each is
+#: cross-validated on the held-out recordings with its own map
+UVD_ESTIMATES = (("uvd-ls", "ls", None, False, 0.11),
+                 ("uvd-ls-consistent", "ls-consistent", None, False, 0.11),
+                 ("uvd-aid", "aid", "scaled", False, 0.11),
+                 ("uvd-aid-slow", "aid", "slow", False, 0.11),
+                 ("uvd-ls-consistent-lin", "ls-consistent", None, True, 0.11),
+                 ("uvd-ls-consistent-lin-lz6-0", "ls-consistent", None, True, 0.0))
 
 
 def _bag(data: Path, stem: str) -> Path:
@@ -111,39 +122,45 @@ def run(data: Path, out: Path) -> dict:
         return out_runs
 
     t0 = time.process_time()
-    est_runs = [r for rs in runs_of(ESTIMATION, vehicle).values() for r in rs]
+    est_runs = {0.11: [r for rs in runs_of(ESTIMATION, vehicle).values() for r in rs]}
     t_read = time.process_time() - t0
-    held = runs_of(HELD_OUT, vehicle)
-    held_by_lz6 = {lz6: runs_of(HELD_OUT, _vehicle_lz6(lz6)) for lz6 in (0.0,)}
+    est_runs[0.0] = [r for rs in runs_of(ESTIMATION, _vehicle_lz6(0.0)).values() for r in rs]
+    held_by_lz6 = {0.11: runs_of(HELD_OUT, vehicle), 0.0: runs_of(HELD_OUT, _vehicle_lz6(0.0))}
     theta0 = rot_of(vehicle.params)
     scaled = scaled_aid_gains(np.diag(vehicle.params.M), rotational=True)
     slow = AID3Gains(a=scaled.a, gamma1=scaled.gamma1 * 1e-3, gamma2=scaled.gamma2 * 1e-3,
                      gamma3=scaled.gamma3 * 1e-3, dof_scale=scaled.dof_scale)
-    estimates, info = {}, {}
-    for name, method, gains in (("uvd-ls", "ls", None), ("uvd-ls-consistent", "ls-consistent",
-                                                         None),
-                                ("uvd-aid", "aid", scaled), ("uvd-aid-slow", "aid", slow)):
+    gains_of = {None: None, "scaled": scaled, "slow": slow}
+    estimates, info, lz6_of = {}, {}, {}
+    for name, method, gains, lin, lz6 in UVD_ESTIMATES:
         t1 = time.process_time()
-        res = identify_rotational(est_runs, method, theta0=theta0, gains=gains, window_s=1.0)
+        res = identify_rotational(est_runs[lz6], method, theta0=theta0, gains=gains_of[gains],
+                                  window_s=1.0, linear_damping=lin)
         rot = res.pop("params")
-        info[name] = {"cpu_s": time.process_time() - t1,
+        info[name] = {"cpu_s": time.process_time() - t1, "l_z6": lz6,
                       **{k: v for k, v in res.items() if isinstance(v, (int, float, str, bool,
                                                                           list))}}
-        estimates[name] = (rot, None)
-        (d / f"{name}.toml").write_text(params_to_toml(
+        d_lin = None if res.get("linear_damping") is None else np.diag(res["linear_damping"])
+        estimates[name], lz6_of[name] = (rot, d_lin), lz6
+        text = params_to_toml(
             embed_identified(vehicle.params, rot),
             title=f"uvd {method} on {', '.join(s for s, _ in ESTIMATION)} (rotational model "
-                  "2.40; translation: the vehicle file's first guess, not identified)"))
+                  f"2.40{' + linear damping' if lin else ''}; thrust map l_z6 = {lz6:g} m; "
+                  "translation: the vehicle file's first guess, not identified)")
+        if d_lin is not None:
+            text += ("\n[linear_damping]\n# K_p, M_q, N_r (N m s/rad), identified beside "
+                     "(2.40)'s quadratic damping\n"
+                     f"rotational = [{', '.join(repr(float(x)) for x in np.diag(d_lin))}]\n")
+        (d / f"{name}.toml").write_text(text)
     for key in PUBLISHED:
         text, rot, d_lin = published_toml(key, vehicle.params)
         (d / f"{key}.toml").write_text(text)
-        estimates[key] = (rot, d_lin)
+        estimates[key], lz6_of[key] = (rot, d_lin), PUBLISHED[key]["lz6"]
     # cross-validation on the held-out recordings
     xval: dict = {}
     sims: dict = {}
     for name, (rot, d_lin) in estimates.items():
-        lz6 = PUBLISHED[name]["lz6"] if name in PUBLISHED else 0.11
-        source = held_by_lz6[0.0] if lz6 == 0.0 else held
+        source = held_by_lz6[lz6_of[name]]
         xval[name] = {}
         for stem, rs in source.items():
             maes = []
@@ -249,7 +266,8 @@ def _figures(d: Path, r: dict, sims: dict) -> None:
     fig.savefig(d / "xval.png", dpi=100)
     plt.close(fig)
     # CROSS-style on all_4
-    show = [n for n in ("uvd-ls-consistent", "uvd-aid-slow", "published-final") if n in sims]
+    show = [n for n in ("uvd-ls-consistent", "uvd-ls-consistent-lin-lz6-0", "published-final")
+            if n in sims]
     if show:
         run = sims[show[0]][0]
         meas = states_of(run.R, run.v)
