@@ -14,6 +14,7 @@ from uvd.estimation.ls import (
     DiffFilter,
     _reduce,
     consistency_margins,
+    equation_error_rms,
     ls_identify,
     ls_reduce,
     project_consistent,
@@ -245,6 +246,12 @@ def test_rot_lin_recovers_a_linear_damping_beside_the_rotational_model():
     assert res.summary()["linear_damping"] == pytest.approx(list(np.diag(res.linear_damping)))
     resc = ls_identify(run, "rot-lin", filt=filt, consistent=True)
     assert np.allclose(np.diag(resc.linear_damping), d, rtol=0.01)
+    # the criterion on its own: LS's residual, for any θ (here the fit's own and the truth's)
+    assert equation_error_rms(run, "rot-lin", res.theta, filt) == pytest.approx(
+        res.residual_rms, rel=1e-9)
+    assert np.all(equation_error_rms(run, "rot-lin", np.r_[rot.theta, d], filt) < 0.02)
+    with pytest.raises(ValueError, match="39 entries"):
+        equation_error_rms(run, "rot-lin", rot.theta, filt)
     plain = ls_identify(run, "rot", filt=filt)
     assert plain.linear_damping is None
     assert np.all(plain.residual_rms > 20 * res.residual_rms)

@@ -72,7 +72,8 @@ from uvd.model.params import (
 
 __all__ = ["DiffFilter", "LSResult", "differentiate", "regressor_uv_batch",
            "regressor_uvr_batch", "ls_reduce", "ls_reduce_runs", "ls_identify", "ls_solve",
-           "project_consistent", "consistency_margins", "active_bounds", "unobserved_drag"]
+           "project_consistent", "consistency_margins", "active_bounds", "unobserved_drag",
+           "equation_error_rms"]
 
 _UPPER6 = [(i, j) for i in range(6) for j in range(i, 6)]
 _UPPER3 = [(i, j) for i in range(3) for j in range(i, 3)]
@@ -560,6 +561,24 @@ def ls_reduce_runs(runs, model: str = "6dof", filt: DiffFilter = DiffFilter(),
     us = np.vstack([q[8] for q in parts])
     return (model, filt, (Rf[:p, :p], Rf[:p, p], resid2, n, Phi, A, parts[0][6], parts[0][7],
                           us))
+
+
+def equation_error_rms(run, model: str, theta: np.ndarray, filt: DiffFilter = DiffFilter()
+                       ) -> np.ndarray:
+    """RMS of the equation error u − 𝒲θ per wrench component (N, N m) of ``theta`` on ``run``:
+    the criterion LS minimises, with the same differentiation and smoothing — so any estimate
+    (another method's, or one identified elsewhere) can be judged by it on data it was not
+    fitted to."""
+    _check_model(model)
+    theta = np.asarray(theta, dtype=float)
+    if theta.shape != (N_THETA[model],):
+        raise ValueError(f"theta of model {model!r} has {N_THETA[model]} entries, got "
+                         f"{theta.shape}")
+    _R, _z, _r2, n, Phi, A, drag, shared, us = _reduce(model, run, filt)
+    k = 6 if model == "6dof" else 3
+    return np.array([np.sqrt(np.mean((us[:, row] - Phi @ theta[drag[row]]
+                                      - A[:, row, :] @ theta[shared]) ** 2))
+                     for row in range(k)])
 
 
 def ls_identify(run, model: str = "6dof", *, filt: DiffFilter = DiffFilter(),
