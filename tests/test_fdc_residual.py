@@ -192,3 +192,12 @@ def test_a_malformed_state_or_theta_is_refused_and_the_detector_goes_on():
         det.update_state({"t_ns": int(round(t * 1e9)), "v": v.tolist(), "R": R.tolist(),
                           "thrust": f.tolist()})
     assert det.ready and det.explains and len(det.segments) >= 3
+
+
+@settings(max_examples=300, deadline=None)
+@given(a=st.lists(st.floats(-1e150, 1e150), min_size=3, max_size=3),
+       b=st.lists(st.floats(-1e150, 1e150), min_size=3, max_size=3))
+def test_the_cross_product_is_numpys_bit_for_bit(a, b):
+    from uvd.fdc.residual import _cross
+    a, b = np.array(a), np.array(b)
+    assert _cross(a, b).tobytes() == np.cross(a, b).tobytes()
