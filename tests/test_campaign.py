@@ -139,8 +139,8 @@ def test_two_runs_on_a_local_cluster_the_test_starts_one_raising(tmp_path):
 
     # mass_error −1 makes the plant's mass 0: PlantFault refuses it, inside the run
     spec = _spec({**TINY, "mass_error": [0.0, -1.0]})
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address="127.0.0.1:0") as cluster:
         out = run_campaign(spec, tmp_path, scheduler=cluster.scheduler_address)
     assert (out.total, out.ran, out.failed, out.skipped) == (2, 2, 1, 0)
     rows = RowStore(tmp_path).rows()
@@ -249,3 +249,21 @@ def test_a_row_half_written_by_a_dead_campaign_is_removed_and_a_live_writers_is_
     store = RowStore(tmp_path)
     assert store.stale_removed == 1 and not stale.exists() and live.exists()
     assert store.done() == set()  # neither counts as a finished run
+
+
+@DASK[0]
+def test_the_local_cluster_listens_on_loopback_only():
+    """Scheduler, worker and dashboard on 127.0.0.1 (the dashboard on a free port: 8787 may be
+    another cluster's)."""
+    from uvd.campaign.execute import _client
+
+    client, cluster = _client(1, None)
+    try:
+        client.wait_for_workers(1, timeout=60)
+        workers = list(client.scheduler_info()["workers"])
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        assert workers and all(w.startswith("tcp://127.0.0.1:") for w in workers)
+        assert client.dashboard_link.startswith("http://127.0.0.1:")
+    finally:
+        client.close()
+        cluster.close()

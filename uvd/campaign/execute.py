@@ -39,12 +39,18 @@ def default_workers() -> int:
         return os.cpu_count() or 1
 
 
+#: where a local cluster's scheduler, workers and dashboard listen
+LOOPBACK = "127.0.0.1"
+
+
 def _client(workers: int, scheduler: str | None):
     from dask.distributed import Client, LocalCluster
     if scheduler is not None:
         return Client(scheduler), None
+    # loopback only; the dashboard on a free port (None does not switch it off, and 8787 may
+    # be another cluster's: distributed then warns and takes another anyway)
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=40)
+                           host=LOOPBACK, dashboard_address=f"{LOOPBACK}:0", silence_logs=40)
     return Client(cluster), cluster
 
 
