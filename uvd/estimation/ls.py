@@ -240,6 +240,9 @@ class LSResult:
     linear_damping: np.ndarray | None = None
 
     def summary(self) -> dict:
+        """The figures as plain values; ``linear_damping`` (its diagonal) only for "rot-lin"."""
+        lin = {} if self.linear_damping is None else {
+            "linear_damping": np.diag(self.linear_damping).tolist()}
         return {"model": self.model, "rank": self.rank, "n_params": self.n_params,
                 "condition": self.condition, "n_samples": self.n_samples,
                 "residual_rms": self.residual_rms.tolist(), "filter": self.filter,
@@ -247,9 +250,7 @@ class LSResult:
                 "solver_status": self.solver_status, "projected": self.projected,
                 "mass_min_eig": self.mass_min_eig, "drag_max_sym_eig": self.drag_max_sym_eig,
                 "active_bounds": list(self.active_bounds), "unobserved": list(self.unobserved),
-                "notes": list(self.notes),
-                "linear_damping": (None if self.linear_damping is None
-                                   else np.diag(self.linear_damping).tolist())}
+                "notes": list(self.notes), **lin}
 
 
 def runs_dt(run) -> float:
