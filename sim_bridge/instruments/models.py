@@ -149,6 +149,11 @@ class Instruments:
         self._last_dvl: DvlSample | None = None
         self._last_dr_ns: int | None = None
         self._last_ins: InsSample | None = None
+        #: the INS frame's six standard deviations (heading, roll, pitch, ω) when all six are
+        #: drawn in one call (:meth:`_ins_noise`); None: one draw per nonzero std (:meth:`_n`)
+        stds = (config.heading_std_rad, config.roll_pitch_std_rad, config.roll_pitch_std_rad,
+                config.rate_std_rad_s, config.rate_std_rad_s, config.rate_std_rad_s)
+        self._ins_stds = np.array(stds) if config.noise and all(stds) else None
 
     def set_epoch(self, t_ns: int | None) -> None:
         """Start every instrument's schedule again at ``t_ns``: frame f of each falls due at
@@ -190,6 +195,24 @@ class Instruments:
             return 0.0 if size is None else np.zeros(size)
         return self._draw.normal(0.0, std, size)
 
+    def _ins_noise(self) -> tuple[float, float, float, np.ndarray]:
+        """The noise of an INS frame: (heading, roll, pitch, ω (3,)), drawn in that order.
+
+        With every std nonzero the six come from one ``standard_normal(6)``, scaled: numpy's
+        ``normal(0, s)`` is ``0 + s·z`` of the very same standard-normal stream, so this is
+        bit for bit the six :meth:`_n` draws (the ``+ 0.0`` turns a −0.0 into 0.0 as that
+        sum does; tests/test_instruments.py compares the two) at a quarter of the calls."""
+        stds = self._ins_stds
+        if stds is None:
+            c = self.config
+            return (self._n(c.heading_std_rad), self._n(c.roll_pitch_std_rad),
+                    self._n(c.roll_pitch_std_rad), self._n(c.rate_std_rad_s, 3))
+        z = self._draw.standard_normal(6)
+        z *= stds
+        z += 0.0
+        h, r, p = z[:3].tolist()
+        return h, r, p, z[3:]
+
     def sample(self, t_ns: int, H: np.ndarray, v: np.ndarray
                ) -> tuple[InsSample | None, DvlSample | None, DepthSample | None]:
         """Samples due at t_ns from the true pose H (4×4) and body velocity v = [ν; ω]."""
@@ -200,10 +223,9 @@ class Instruments:
         if self._ins.due(t_ns):
             self._frame("ins", self._ins)
             roll, pitch, heading = R_to_euler(H[:3, :3])
-            heading = wrap_angle(heading + self._n(c.heading_std_rad))
-            ins = InsSample(t_ns=t_ns, roll=roll + self._n(c.roll_pitch_std_rad),
-                            pitch=pitch + self._n(c.roll_pitch_std_rad), heading=heading,
-                            omega_body=v[3:] + self._n(c.rate_std_rad_s, 3))
+            n_heading, n_roll, n_pitch, n_omega = self._ins_noise()
+            ins = InsSample(t_ns, roll + n_roll, pitch + n_pitch,
+                            wrap_angle(heading + n_heading), v[3:] + n_omega)
             self._last_ins = ins
         if self._dvl.due(t_ns):
             self._frame("dvl", self._dvl)
