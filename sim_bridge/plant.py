@@ -74,6 +74,7 @@ class Plant:
         self.fault = PlantFault()  # none
         self._H_next = np.empty((4, 4))
         self._v_next = np.empty(6)
+        self._no_trace = (np.empty((0, 4, 4)), np.empty((0, 6)))
 
     def set_fault(self, fault: PlantFault | None) -> None:
         """From now on the vehicle's true parameters are ``fault.apply(vehicle.params)``
@@ -94,13 +95,19 @@ class Plant:
         """Advance one step of 1/rate_hz with the thruster commands (N) held."""
         self.steps_held(thrust_command_n, 1)
 
-    def steps_held(self, thrust_command_n: np.ndarray, n: int) -> None:
+    def steps_held(self, thrust_command_n: np.ndarray, n: int,
+                   trace: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Advance ``n`` steps of 1/rate_hz with the thruster commands (N) held (zero-order
-        hold): one compiled call, the very arithmetic of ``n`` calls of :meth:`step`."""
+        hold): one compiled call, the very arithmetic of ``n`` calls of :meth:`step`.
+
+        ``trace`` = (H (≥ n, 4, 4), v (≥ n, 6)): the state after step i + 1 is also written
+        into ``H[i]``, ``v[i]`` (what the instruments sample inside the period, as
+        :meth:`uvd.lockstep.Lockstep.advance` does)."""
         m = self.model
+        H_trace, v_trace = self._no_trace if trace is None else trace
         _steps_held(n, self.thrusters.kernel_args(thrust_command_n, self.dt), self.B, m.M,
                     m.M_inv, m.D_flat, m.g, m.b, self.H, self.v, self.dt, self.u, self._H_next,
-                    self._v_next)
+                    self._v_next, H_trace, v_trace)
         if n % 2:  # the state ended in the second pair of buffers
             self.H, self._H_next = self._H_next, self.H
             self.v, self._v_next = self._v_next, self.v
@@ -136,13 +143,20 @@ def _thrusters_then_rigid_body(thr_args, B, M, M_inv, D_flat, g, b, H, v, dt, u,
 
 
 @numba.njit(cache=True)
-def _steps_held(n, thr_args, B, M, M_inv, D_flat, g, b, H, v, dt, u, H_next, v_next):
+def _steps_held(n, thr_args, B, M, M_inv, D_flat, g, b, H, v, dt, u, H_next, v_next, H_trace,
+                v_trace):
     """``n`` plant steps with the command held, alternating between the two state buffers
-    (after an odd ``n`` the state is in ``H_next``, ``v_next``)."""
+    (after an odd ``n`` the state is in ``H_next``, ``v_next``); the state after step i + 1
+    also into ``H_trace[i]``, ``v_trace[i]`` for i below their length."""
     for i in range(n):
         if i % 2 == 0:
             _thrusters_then_rigid_body(thr_args, B, M, M_inv, D_flat, g, b, H, v, dt, u,
                                        H_next, v_next)
+            H_new, v_new = H_next, v_next
         else:
             _thrusters_then_rigid_body(thr_args, B, M, M_inv, D_flat, g, b, H_next, v_next,
                                        dt, u, H, v)
+            H_new, v_new = H, v
+        if i < H_trace.shape[0]:
+            H_trace[i] = H_new
+            v_trace[i] = v_new

@@ -263,10 +263,15 @@ class TankPlant:
         p.steps += 1
         p.t = p.steps * p.dt
 
-    def steps_held(self, thrust_command_n: np.ndarray, n: int) -> None:
-        """``n`` calls of :meth:`step` (the command shaper runs at every one)."""
-        for _ in range(n):
+    def steps_held(self, thrust_command_n: np.ndarray, n: int,
+                   trace: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """``n`` calls of :meth:`step` (the command shaper runs at every one); ``trace`` as
+        :meth:`sim_bridge.plant.Plant.steps_held`'s."""
+        p = self.plant
+        for i in range(n):
             self.step(thrust_command_n)
+            if trace is not None and i < trace[0].shape[0]:
+                trace[0][i], trace[1][i] = p.H, p.v
 
 
 def mounted(ins: InsSample, R_b: np.ndarray) -> InsSample:

@@ -230,3 +230,40 @@ def test_lockstep_on_the_ins_frame_hands_same_instant_frames_to_the_next_cycle()
     # depth (every 100 ms, always an INS instant) likewise, keeping its own stamp
     assert same[100][1] == 100 and late[100][1] == 0 and late[120][1] == 100
     assert [late[t][1] for t in range(120, 600, 100)] == [100, 200, 300, 400, 500]
+
+
+@pytest.mark.parametrize("frame_seed", [None, 3])
+def test_an_ins_frames_six_normals_in_one_draw_are_the_six_draws_bit_for_bit(frame_seed):
+    """``Instruments._ins_noise`` draws heading, roll, pitch and ω in one
+    ``standard_normal(6)`` (scaled); the twin below draws them one ``normal(0, s)`` at a time,
+    as before. Every sample of 20 s on a turning, moving pose is the same to the bit."""
+    cfg = InstrumentConfig(ins_rate_hz=50.0)
+    fast = Instruments(cfg, np.random.default_rng(5), frame_seed=frame_seed)
+    slow = Instruments(cfg, np.random.default_rng(5), frame_seed=frame_seed)
+    assert fast._ins_stds is not None
+    slow._ins_stds = None  # the per-draw path (also a zero std's)
+    for k in range(2001):
+        t = k * 0.01
+        H = make_H(euler_to_R(0.3 * math.sin(t), -0.2 * t, 3.0 * t),
+                   np.array([0.1 * t, 0.0, 2.0]))
+        v = np.array([0.2, 0.0, 0.01, 0.01 * math.cos(t), -0.2, 3.0])
+        for a, b in zip(fast.sample(k * 10_000_000, H, v), slow.sample(k * 10_000_000, H, v),
+                        strict=True):
+            assert (a is None) == (b is None)
+            if a is not None:
+                for name in a.__slots__:
+                    assert np.asarray(getattr(a, name)).tobytes() == \
+                        np.asarray(getattr(b, name)).tobytes(), (k, name)
+    assert (fast.dr_north, fast.dr_east) == (slow.dr_north, slow.dr_east)
+    # numpy's normal(0, s) is 0 + s·z: a z of −0.0 gives +0.0, and so does the scaled draw
+    z = np.array([-0.0, 1.0])
+    z *= np.array([1e-3, 1e-3])
+    z += 0.0
+    assert not np.signbit(z[0]) and np.signbit(0.0 + 1e-3 * -0.0) == np.signbit(z[0])
+
+
+def test_a_zero_std_keeps_the_per_draw_path():
+    """A zero std draws nothing for that value (the stream of the others as before)."""
+    assert Instruments(InstrumentConfig(heading_std_rad=0.0),
+                       np.random.default_rng(0))._ins_stds is None
+    assert Instruments(InstrumentConfig(noise=False), np.random.default_rng(0))._ins_stds is None

@@ -175,3 +175,31 @@ def test_an_entanglement_fault_raises_drag_so_the_same_thrust_settles_slower():
         assert plant.v[0] == pytest.approx(math.sqrt(F / -(scale * d1)), rel=1e-3)
     with pytest.raises(ValueError, match="PlantFault"):
         PlantFault(mass_scale=0.0)
+
+
+@pytest.mark.parametrize("tank", [False, True])
+def test_steps_held_traces_the_state_of_every_step_as_single_steps_make_it(tank):
+    """``steps_held(cmd, n, trace)``: one call, the state after each step in the trace — bit
+    for bit what n calls of ``step`` pass through (the lockstep's instruments sample it), the
+    tank's plant (its own step) included; the trace's shorter than n: only its rows."""
+    from sim_bridge.tank import TankEffects, TankPlant
+
+    def plant():
+        p = Plant(load_vehicle("jhu-rov"), H0=make_H(np.eye(3), np.array([0.0, 0.0, 2.0])),
+                  v0=np.array([0.3, 0.0, 0.05, 0.0, 0.01, 0.1]))
+        return TankPlant(p, TankEffects(tether_n=5.0)) if tank else p
+
+    cmd = np.array([20.0, -15.0, 5.0, 3.0, -8.0, 1.0])
+    a, b = plant(), plant()
+    trace = (np.full((7, 4, 4), np.nan), np.full((7, 6), np.nan))
+    for n in (7, 3):
+        a.steps_held(cmd, n, trace)
+        for i in range(n):
+            b.step(cmd)
+            assert trace[0][i].tobytes() == b.H.tobytes()
+            assert trace[1][i].tobytes() == b.v.tobytes()
+        assert a.H.tobytes() == b.H.tobytes() and a.v.tobytes() == b.v.tobytes()
+    short = (np.empty((2, 4, 4)), np.empty((2, 6)))
+    a.steps_held(cmd, 4, short)
+    b.steps_held(cmd, 4)
+    assert a.H.tobytes() == b.H.tobytes() and short[0][1].tobytes() != a.H.tobytes()

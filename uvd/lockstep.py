@@ -170,6 +170,8 @@ class Lockstep:
         self.substeps = int(round(cfg.plant_rate_hz / cfg.control_rate_hz))
         self.dt_control = 1.0 / cfg.control_rate_hz
         self.plant_dt_ns = int(round(1e9 / cfg.plant_rate_hz))
+        #: the plant's state after each step of a period (Plant.steps_held's trace)
+        self._trace = (np.empty((self.substeps, 4, 4)), np.empty((self.substeps, 6)))
         north, east = self.plant.H[0, 3], self.plant.H[1, 3]
         self.instruments.dr_north, self.instruments.dr_east = north, east
         #: the running cycle: its configuration and its state (``supervisor.data``)
@@ -224,25 +226,39 @@ class Lockstep:
             CycleInputs(self.t_ns, ins, dvl, depth, act, extra=self.extra), self.dt_control)
         out = r.out
         self.thrust_cmd = out.thrust_n
-        newest = [None, None, None]
-        left, step_ns = self.substeps, self.plant_dt_ns
-        while left:
-            # the plant runs compiled up to the next step at which a sample falls due (before
-            # it the instruments return nothing and change nothing: Instruments.next_due_ns)
-            n = min(left, max(1, -((self.t_ns - self.instruments.next_due_ns) // step_ns)))
-            self.plant.steps_held(self.thrust_cmd, n)
-            self.t_ns += n * step_ns
-            left -= n
-            if self.t_ns < self.instruments.next_due_ns:
-                continue
-            got = self.instruments.sample(self.t_ns, self.plant.H, self.plant.v)
-            for i, s in enumerate(got):
-                if s is not None:
-                    newest[i] = s
+        newest = self._sample_period(out.thrust_n)
         if self.cfg.ins_trigger:
             self._defer_coincident(newest)
         self._pending = newest
         return out
+
+    def _sample_period(self, thrust: np.ndarray) -> list:
+        """One control period of the plant with ``thrust`` held, in one compiled call that
+        keeps the state after every step (``self._trace``); the instruments then sample it at
+        the steps where their samples fall due (:attr:`Instruments.next_due_ns`: before it
+        they return nothing and change nothing), in time order. Returns the newest sample of
+        each instrument ([ins, dvl, depth], None where none came)."""
+        n, step_ns, t0 = self.substeps, self.plant_dt_ns, self.t_ns
+        H_trace, v_trace = trace = self._trace
+        self.plant.steps_held(thrust, n, trace)
+        instruments = self.instruments
+        newest = [None, None, None]
+        i = 0  # the step whose state was sampled last (0: none)
+        while True:
+            # the first step after i at or after the next due time
+            i = max(i + 1, -((t0 - instruments.next_due_ns) // step_ns))
+            if i > n:
+                break
+            self.t_ns = t0 + i * step_ns  # the faults' clock (SensorFaults)
+            ins, dvl, depth = instruments.sample(self.t_ns, H_trace[i - 1], v_trace[i - 1])
+            if ins is not None:
+                newest[0] = ins
+            if dvl is not None:
+                newest[1] = dvl
+            if depth is not None:
+                newest[2] = depth
+        self.t_ns = t0 + n * step_ns
+        return newest
 
     def _defer_coincident(self, newest: list) -> None:
         """``ins_trigger``: the next cycle runs on the INS frame of its instant ``t_ns``; a DVL

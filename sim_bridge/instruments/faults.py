@@ -66,9 +66,10 @@ class FaultyInstruments(Instruments):
 
     def sample(self, t_ns, H, v):
         got = ins, dvl, depth = super().sample(t_ns, H, v)
-        f = self.faults
-        if not any(m != "ok" for m in f.mode.values()):
+        mode = self.faults.mode
+        if mode["ins"] == mode["dvl"] == mode["depth"] == "ok":
             return got  # no fault injected: the samples as made
+        f = self.faults
         out = []
         for name, s in (("ins", ins), ("dvl", dvl), ("depth", depth)):
             mode = f.get(name) if s is not None else "ok"

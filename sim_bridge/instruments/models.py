@@ -100,14 +100,11 @@ class _Periodic:
         self.k = 0
         self.next_ns = offset_ns
 
-    def due(self, t_ns: int) -> bool:
-        if t_ns >= self.next_ns:
-            # skip the due times already passed (a coarse caller never gets a burst)
-            self.k = max(self.k + 1,
-                         math.floor((t_ns - self.offset_ns) * self.rate_hz / 1e9) + 1)
-            self.next_ns = self.offset_ns + round(self.k * 1e9 / self.rate_hz)
-            return True
-        return False
+    def fire(self, t_ns: int) -> None:
+        """A due time at or before ``t_ns`` (≥ :attr:`next_ns`) fired: on to the next one,
+        skipping the due times already passed (a coarse caller never gets a burst)."""
+        self.k = max(self.k + 1, math.floor((t_ns - self.offset_ns) * self.rate_hz / 1e9) + 1)
+        self.next_ns = self.offset_ns + round(self.k * 1e9 / self.rate_hz)
 
 
 #: key of each instrument's noise in the frame-keyed streams (module docstring)
@@ -149,6 +146,11 @@ class Instruments:
         self._last_dvl: DvlSample | None = None
         self._last_dr_ns: int | None = None
         self._last_ins: InsSample | None = None
+        #: the INS frame's six standard deviations (heading, roll, pitch, ω) when all six are
+        #: drawn in one call (:meth:`_ins_noise`); None: one draw per nonzero std (:meth:`_n`)
+        stds = (config.heading_std_rad, config.roll_pitch_std_rad, config.roll_pitch_std_rad,
+                config.rate_std_rad_s, config.rate_std_rad_s, config.rate_std_rad_s)
+        self._ins_stds = np.array(stds) if config.noise and all(stds) else None
 
     def set_epoch(self, t_ns: int | None) -> None:
         """Start every instrument's schedule again at ``t_ns``: frame f of each falls due at
@@ -178,9 +180,8 @@ class Instruments:
         return min(self._ins.next_ns, self._dvl.next_ns, self._depth.next_ns)
 
     def _frame(self, name: str, periodic: _Periodic) -> None:
-        """Point the noise at the frame that just fell due (the one stream, or its own)."""
-        if self.frame_seed is None:
-            return
+        """With ``frame_seed``, point the noise at the frame that just fell due (its own
+        generator; without, the one stream draws on)."""
         k = periodic.k - 1  # the index of the due time that fired (_Periodic.due)
         self._draw = np.random.default_rng(
             (self.frame_seed, _NOISE_KEY[name], int(self._before_epoch), k))
@@ -190,33 +191,57 @@ class Instruments:
             return 0.0 if size is None else np.zeros(size)
         return self._draw.normal(0.0, std, size)
 
+    def _ins_noise(self) -> tuple[float, float, float, np.ndarray]:
+        """The noise of an INS frame: (heading, roll, pitch, ω (3,)), drawn in that order.
+
+        With every std nonzero the six come from one ``standard_normal(6)``, scaled: numpy's
+        ``normal(0, s)`` is ``0 + s·z`` of the very same standard-normal stream, so this is
+        bit for bit the six :meth:`_n` draws (the ``+ 0.0`` turns a −0.0 into 0.0 as that
+        sum does; tests/test_instruments.py compares the two) at a quarter of the calls."""
+        stds = self._ins_stds
+        if stds is None:
+            c = self.config
+            return (self._n(c.heading_std_rad), self._n(c.roll_pitch_std_rad),
+                    self._n(c.roll_pitch_std_rad), self._n(c.rate_std_rad_s, 3))
+        z = self._draw.standard_normal(6)
+        z *= stds
+        z += 0.0
+        h, r, p = z[:3].tolist()
+        return h, r, p, z[3:]
+
     def sample(self, t_ns: int, H: np.ndarray, v: np.ndarray
                ) -> tuple[InsSample | None, DvlSample | None, DepthSample | None]:
         """Samples due at t_ns from the true pose H (4×4) and body velocity v = [ν; ω]."""
-        if t_ns < self._ins.next_ns and t_ns < self._dvl.next_ns and t_ns < self._depth.next_ns:
+        ins_p, dvl_p, depth_p = self._ins, self._dvl, self._depth
+        if t_ns < ins_p.next_ns and t_ns < dvl_p.next_ns and t_ns < depth_p.next_ns:
             return None, None, None
         c = self.config
+        keyed = self.frame_seed is not None
         ins = dvl = depth = None
-        if self._ins.due(t_ns):
-            self._frame("ins", self._ins)
+        if t_ns >= ins_p.next_ns:
+            ins_p.fire(t_ns)
+            if keyed:
+                self._frame("ins", ins_p)
             roll, pitch, heading = R_to_euler(H[:3, :3])
-            heading = wrap_angle(heading + self._n(c.heading_std_rad))
-            ins = InsSample(t_ns=t_ns, roll=roll + self._n(c.roll_pitch_std_rad),
-                            pitch=pitch + self._n(c.roll_pitch_std_rad), heading=heading,
-                            omega_body=v[3:] + self._n(c.rate_std_rad_s, 3))
+            n_heading, n_roll, n_pitch, n_omega = self._ins_noise()
+            ins = InsSample(t_ns, roll + n_roll, pitch + n_pitch,
+                            wrap_angle(heading + n_heading), v[3:] + n_omega)
             self._last_ins = ins
-        if self._dvl.due(t_ns):
-            self._frame("dvl", self._dvl)
+        if t_ns >= dvl_p.next_ns:
+            dvl_p.fire(t_ns)
+            if keyed:
+                self._frame("dvl", dvl_p)
             altitude = c.dvl_altitude_m - float(H[2, 3])
             vel = v[:3] + self._n(c.dvl_std_m_s, 3)
             if c.dvl_resolution_m_s > 0.0:
                 vel = np.round(vel / c.dvl_resolution_m_s) * c.dvl_resolution_m_s
-            dvl = DvlSample(t_ns=t_ns, velocity_body=vel, bottom_lock=True,
-                            altitude_m=altitude)
+            dvl = DvlSample(t_ns, vel, True, altitude)
             self._dead_reckon(t_ns, H, dvl)
-        if self._depth.due(t_ns):
-            self._frame("depth", self._depth)
-            depth = DepthSample(t_ns=t_ns, depth_m=float(H[2, 3]) + self._n(c.depth_std_m))
+        if t_ns >= depth_p.next_ns:
+            depth_p.fire(t_ns)
+            if keyed:
+                self._frame("depth", depth_p)
+            depth = DepthSample(t_ns, float(H[2, 3]) + self._n(c.depth_std_m))
         return ins, dvl, depth
 
     def _dead_reckon(self, t_ns: int, H: np.ndarray, dvl: DvlSample) -> None:

@@ -44,35 +44,48 @@ def _eta(H, out):
     out[3], out[4], out[5] = R_euler(H[:3, :3])
 
 
+#: the (n, 6) records of a run, in the order of ``_record``'s ``rows`` (ControlRun's fields)
+_ROWS = ("eta_true", "eta_nav", "eta_ref", "v_true", "dpsi_true", "dv_true", "dpsi_meas",
+         "dv_meas", "u_cmd", "u_applied")
+
+
 @numba.njit(cache=True)
-def _record(k, H, v, H_nav, H_ref, v_ref, vdot_ref, err, eta_true, eta_nav, eta_ref, v_true,
-            dpsi_true, dv_true):
-    """One cycle's true/measured/reference pose and true error coordinates, into row k."""
-    _eta(H, eta_true[k])
-    _eta(H_nav, eta_nav[k])
-    _eta(H_ref, eta_ref[k])
+def _record(k, H, v, H_nav, H_ref, v_ref, vdot_ref, dpsi_meas, dv_meas, u_cmd, u_applied,
+            thrust_n, saturated, err, rows, thrust, sat):
+    """Cycle k's records into row k, in one compiled call: the true, measured and reference
+    pose, the true velocity and error coordinates, the controller's (Δψ, Δv), the commanded
+    and applied wrench into ``rows`` ((10, n, 6), the order of :data:`_ROWS`), the thrusts
+    into ``thrust`` and whether any saturated into ``sat``."""
+    _eta(H, rows[0, k])
+    _eta(H_nav, rows[1, k])
+    _eta(H_ref, rows[2, k])
     _kernels.error_state(H, v, H_ref, v_ref, vdot_ref, err)
     for i in range(6):
-        v_true[k, i] = v[i]
-        dpsi_true[k, i] = err[0, i]
-        dv_true[k, i] = err[1, i]
+        rows[3, k, i] = v[i]
+        rows[4, k, i] = err[0, i]
+        rows[5, k, i] = err[1, i]
+        rows[6, k, i] = dpsi_meas[i]
+        rows[7, k, i] = dv_meas[i]
+        rows[8, k, i] = u_cmd[i]
+        rows[9, k, i] = u_applied[i]
+    any_saturated = False
+    for j in range(thrust_n.shape[0]):
+        thrust[k, j] = thrust_n[j]
+        any_saturated = any_saturated or saturated[j]
+    sat[k] = any_saturated
 
 
-
-def errors_of(ctrl: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(Δψ, Δv) the controller saw last (PD, MBC, AMBC and two-step states all carry them)."""
-    inner = getattr(ctrl, "ambc", ctrl)
-    return inner.dpsi, inner.dv
+def _inner(ctrl: Any) -> Any:
+    """The adaptive controller's state inside a controller's (two-step AMBC's ``ambc``)."""
+    return getattr(ctrl, "ambc", ctrl)
 
 
 def theta_of_ctrl(ctrl: Any) -> np.ndarray | None:
-    inner = getattr(ctrl, "ambc", ctrl)
-    return getattr(inner, "theta", None)
+    return getattr(_inner(ctrl), "theta", None)
 
 
 def theta_dot_of_ctrl(ctrl: Any) -> np.ndarray | None:
-    inner = getattr(ctrl, "ambc", ctrl)
-    return getattr(inner, "theta_dot", None)
+    return getattr(_inner(ctrl), "theta_dot", None)
 
 
 @dataclass
@@ -200,9 +213,7 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     attach(sim, tank)
     n = int(round(duration_s * control_rate_hz))
     nthr = vehicle.n_thrusters
-    rec = {k: np.empty((n, 6)) for k in ("eta_true", "eta_nav", "eta_ref", "v_true", "dpsi_true",
-                                         "dv_true", "dpsi_meas", "dv_meas", "u_cmd",
-                                         "u_applied")}
+    rows = np.empty((len(_ROWS), n, 6))  # each rows[i] a contiguous (n, 6) record
     thrust = np.empty((n, nthr))
     sat = np.zeros(n, dtype=bool)
     rates = np.zeros((n, len(rate_indices)))
@@ -216,10 +227,6 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
     dt = 1.0 / control_rate_hz
     t_wall = time.perf_counter()
     next_report = progress_every_s
-    e_true, e_nav, e_ref = rec["eta_true"], rec["eta_nav"], rec["eta_ref"]
-    v_true, dpsi_true, dv_true = rec["v_true"], rec["dpsi_true"], rec["dv_true"]
-    dpsi_meas, dv_meas, u_cmd, u_app = (rec["dpsi_meas"], rec["dv_meas"], rec["u_cmd"],
-                                        rec["u_applied"])
     plant = sim.plant
     box = None if record is None else _BlackBox(record, vehicle, label, dt)
     for k in range(n):
@@ -231,23 +238,20 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
         if box is not None:
             box.cycle(k, out, omega)
         ref = out.reference
-        _record(k, H, v, out.nav.H, ref.H, ref.v, ref.vdot, err, e_true, e_nav, e_ref, v_true,
-                dpsi_true, dv_true)
-        dpsi_meas[k], dv_meas[k] = errors_of(sim.state.ctrl)
-        u_cmd[k] = out.u_cmd
-        u_app[k] = out.u_applied
-        thrust[k] = out.thrust_n
-        sat[k] = out.saturated.any()
+        ctrl = sim.state.ctrl
+        inner = _inner(ctrl)  # its (Δψ, Δv): what the controller saw (every state has them)
+        _record(k, H, v, out.nav.H, ref.H, ref.v, ref.vdot, inner.dpsi, inner.dv, out.u_cmd,
+                out.u_applied, out.thrust_n, out.saturated, err, rows, thrust, sat)
         if out.status != "ok":
             not_ok += 1
-        if getattr(getattr(sim.state.ctrl, "ambc", sim.state.ctrl), "frozen", False):
+        if getattr(inner, "frozen", False):
             frozen += 1
         if ridx.size:
-            td = theta_dot_of_ctrl(sim.state.ctrl)
+            td = theta_dot_of_ctrl(ctrl)
             if td is not None and td.shape[0] > ridx.max():
                 rates[k] = td[ridx]
         if k % theta_every == 0 or k == n - 1:
-            theta = theta_of_ctrl(sim.state.ctrl)
+            theta = theta_of_ctrl(ctrl)
             if theta is not None:
                 th_t.append((k + 1) * dt)
                 th.append(theta.copy())
@@ -267,7 +271,8 @@ def run_control(vehicle: Vehicle, controller: core.ControllerSpec, reference, du
                       theta_t=np.array(th_t), theta=np.array(th) if th else np.zeros((0, 0)),
                       rates=rates, H0=np.array(H0), v0=np.array(v0), final_ctrl=sim.state.ctrl,
                       wall_s=time.perf_counter() - t_wall,
-                      extra={"frozen_fraction": frozen / max(n, 1)}, **rec)
+                      extra={"frozen_fraction": frozen / max(n, 1)},
+                      **dict(zip(_ROWS, rows, strict=True)))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -5,9 +5,10 @@ The pose is never parameterised by Euler angles: each step writes H(t+h) = H(t)�
 classical RK4 tableau. With the exact A⁻¹ this is a 4th-order method (Munthe-Kaas 1998);
 ``tests/test_plant.py`` measures the order. The wrench u is held over the step.
 
-The kernel is compiled with numba (``cache=True``): a step is ~3 µs instead of ~80 µs of
-small-matrix numpy calls, which is what lets the plant run hundreds of times faster than real
-time. It is pure arithmetic — no I/O, no clock — and agrees with :func:`uvd.model.dynamics.uv_accel`
+The kernel is compiled with numba (``cache=True``): a step is ~2.2 µs instead of ~80 µs of
+small-matrix numpy calls (its scratch is two arrays allocated once a step: ~40 small ones made
+it ~3 µs), which is what lets the plant run hundreds of times faster than real time. It is
+pure arithmetic — no I/O, no clock — and agrees with :func:`uvd.model.dynamics.uv_accel`
 (tested).
 """
 
@@ -20,13 +21,12 @@ from uvd.model.dynamics import UVModel
 
 
 @numba.njit(cache=True, fastmath=False)
-def _accel(M, M_inv, D_flat, g, b, R, v, u, out):
-    """v̇ of (2.44) into ``out``."""
-    x = M @ v
+def _accel(M, M_inv, D_flat, g, b, R, v, u, out, x, rhs):
+    """v̇ of (2.44) into ``out`` (``x``, ``rhs``: (6,) scratch)."""
+    np.dot(M, v, x)
     p1, p2, p3, h1, h2, h3 = x[0], x[1], x[2], x[3], x[4], x[5]
     n1, n2, n3, w1, w2, w3 = v[0], v[1], v[2], v[3], v[4], v[5]
     r1, r2, r3 = R[2, 0], R[2, 1], R[2, 2]
-    rhs = np.empty(6)
     rhs[0] = p2 * w3 - p3 * w2 + g * r1
     rhs[1] = p3 * w1 - p1 * w3 + g * r2
     rhs[2] = p1 * w2 - p2 * w1 + g * r3
@@ -85,35 +85,30 @@ def _B12(y):
 
 
 @numba.njit(cache=True)
-def _dexpinv(psi, x, out):
-    """A⁻¹(ψ) x by (B.2): x + ½ad x + B₁ ad² x + B₂ ad⁴ x."""
+def _dexpinv(psi, x, out, t):
+    """A⁻¹(ψ) x by (B.2): x + ½ad x + B₁ ad² x + B₂ ad⁴ x (``t``: (4, 6) scratch)."""
     y = np.sqrt(psi[3] ** 2 + psi[4] ** 2 + psi[5] ** 2)
     B1, B2 = _B12(y)
-    t1 = np.empty(6)
-    t2 = np.empty(6)
-    t3 = np.empty(6)
-    t4 = np.empty(6)
-    _ad(psi, x, t1)
-    _ad(psi, t1, t2)
-    _ad(psi, t2, t3)
-    _ad(psi, t3, t4)
+    _ad(psi, x, t[0])
+    _ad(psi, t[0], t[1])
+    _ad(psi, t[1], t[2])
+    _ad(psi, t[2], t[3])
     for i in range(6):
-        out[i] = x[i] + 0.5 * t1[i] + B1 * t2[i] + B2 * t4[i]
+        out[i] = x[i] + 0.5 * t[0, i] + B1 * t[1, i] + B2 * t[3, i]
 
 
 @numba.njit(cache=True)
-def _mm3(A, B):
-    """3 × 3 product without BLAS call overhead."""
-    C = np.empty((3, 3))
+def _mm3(A, B, C):
+    """C = A B for 3 × 3 matrices, without BLAS call overhead."""
     for i in range(3):
         for j in range(3):
             C[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
-    return C
 
 
 @numba.njit(cache=True)
-def _exp_so3(q1, q2, q3, R):
-    """Rodrigues; also returns (sinc, cosc, sinc3) coefficients for the SE(3) V matrix."""
+def _exp_so3(q1, q2, q3, R, K, K2):
+    """Rodrigues into R, with K = q̂ and K² into ``K``, ``K2``; returns the (cosc, sinc3)
+    coefficients of the SE(3) V matrix."""
     t2 = q1 * q1 + q2 * q2 + q3 * q3
     t = np.sqrt(t2)
     if t < 1e-4:
@@ -124,71 +119,68 @@ def _exp_so3(q1, q2, q3, R):
         A = np.sin(t) / t
         Bc = (1.0 - np.cos(t)) / t2
         C = (t - np.sin(t)) / (t2 * t)
-    K = np.empty((3, 3))
     K[0, 0], K[0, 1], K[0, 2] = 0.0, -q3, q2
     K[1, 0], K[1, 1], K[1, 2] = q3, 0.0, -q1
     K[2, 0], K[2, 1], K[2, 2] = -q2, q1, 0.0
-    K2 = _mm3(K, K)
+    _mm3(K, K, K2)
     for i in range(3):
         for j in range(3):
             R[i, j] = A * K[i, j] + Bc * K2[i, j] + (1.0 if i == j else 0.0)
-    return K, K2, Bc, C
+    return Bc, C
 
 
 @numba.njit(cache=True)
 def _rkmk4(M, M_inv, D_flat, g, b, H, v, u, h, H_out, v_out):
-    """One RKMK4 step of (2.44) from (H, v) with u held; writes (H_out, v_out)."""
-    R0 = np.empty((3, 3))
+    """One RKMK4 step of (2.44) from (H, v) with u held; writes (H_out, v_out). Its scratch
+    is one (17, 6) and one (5, 3, 3) array (no allocation inside the stages)."""
+    w = np.empty((17, 6))
+    m = np.empty((5, 3, 3))
+    a1, a2, a3, a4, K2, K3, K4, psi, vs = w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7], w[8]
+    x, rhs, t = w[9], w[10], w[11:15]
+    dp = w[15]
+    R0, Rq, K, Ksq, Rs = m[0], m[1], m[2], m[3], m[4]
     for i in range(3):
         for j in range(3):
             R0[i, j] = H[i, j]
-    a1 = np.empty(6)
-    a2 = np.empty(6)
-    a3 = np.empty(6)
-    a4 = np.empty(6)
-    K2 = np.empty(6)
-    K3 = np.empty(6)
-    K4 = np.empty(6)
-    psi = np.empty(6)
-    vs = np.empty(6)
-    Rq = np.empty((3, 3))
-    _accel(M, M_inv, D_flat, g, b, R0, v, u, a1)
+    _accel(M, M_inv, D_flat, g, b, R0, v, u, a1, x, rhs)
     # stage 2
     for i in range(6):
         psi[i] = 0.5 * h * v[i]
         vs[i] = v[i] + 0.5 * h * a1[i]
-    _exp_so3(psi[3], psi[4], psi[5], Rq)
-    _dexpinv(psi, vs, K2)
-    _accel(M, M_inv, D_flat, g, b, _mm3(R0, Rq), vs, u, a2)
+    _exp_so3(psi[3], psi[4], psi[5], Rq, K, Ksq)
+    _dexpinv(psi, vs, K2, t)
+    _mm3(R0, Rq, Rs)
+    _accel(M, M_inv, D_flat, g, b, Rs, vs, u, a2, x, rhs)
     # stage 3
     for i in range(6):
         psi[i] = 0.5 * h * K2[i]
         vs[i] = v[i] + 0.5 * h * a2[i]
-    _exp_so3(psi[3], psi[4], psi[5], Rq)
-    _dexpinv(psi, vs, K3)
-    _accel(M, M_inv, D_flat, g, b, _mm3(R0, Rq), vs, u, a3)
+    _exp_so3(psi[3], psi[4], psi[5], Rq, K, Ksq)
+    _dexpinv(psi, vs, K3, t)
+    _mm3(R0, Rq, Rs)
+    _accel(M, M_inv, D_flat, g, b, Rs, vs, u, a3, x, rhs)
     # stage 4
     for i in range(6):
         psi[i] = h * K3[i]
         vs[i] = v[i] + h * a3[i]
-    _exp_so3(psi[3], psi[4], psi[5], Rq)
-    _dexpinv(psi, vs, K4)
-    _accel(M, M_inv, D_flat, g, b, _mm3(R0, Rq), vs, u, a4)
+    _exp_so3(psi[3], psi[4], psi[5], Rq, K, Ksq)
+    _dexpinv(psi, vs, K4, t)
+    _mm3(R0, Rq, Rs)
+    _accel(M, M_inv, D_flat, g, b, Rs, vs, u, a4, x, rhs)
     # combine
     for i in range(6):
         psi[i] = h / 6.0 * (v[i] + 2.0 * K2[i] + 2.0 * K3[i] + K4[i])
         v_out[i] = v[i] + h / 6.0 * (a1[i] + 2.0 * a2[i] + 2.0 * a3[i] + a4[i])
-    K, Ksq, Bc, C = _exp_so3(psi[3], psi[4], psi[5], Rq)
+    Bc, C = _exp_so3(psi[3], psi[4], psi[5], Rq, K, Ksq)
     # SE(3) exp: translation V ξ with V = I + Bc K + C K²
-    dp = np.empty(3)
     for i in range(3):
         dp[i] = psi[i]
         for j in range(3):
             dp[i] += (Bc * K[i, j] + C * Ksq[i, j]) * psi[j]
-    Rn = _mm3(R0, Rq)
+    _mm3(R0, Rq, Rs)
     for i in range(3):
         for j in range(3):
-            H_out[i, j] = Rn[i, j]
+            H_out[i, j] = Rs[i, j]
         H_out[i, 3] = H[i, 3] + R0[i, 0] * dp[0] + R0[i, 1] * dp[1] + R0[i, 2] * dp[2]
         H_out[3, i] = 0.0
     H_out[3, 3] = 1.0
@@ -197,7 +189,7 @@ def _rkmk4(M, M_inv, D_flat, g, b, H, v, u, h, H_out, v_out):
 @numba.njit(cache=True)
 def _accel_checked(M, M_inv, D_flat, g, b, R, v, u):
     out = np.empty(6)
-    _accel(M, M_inv, D_flat, g, b, R, v, u, out)
+    _accel(M, M_inv, D_flat, g, b, R, v, u, out, np.empty(6), np.empty(6))
     return out
 
 
