@@ -204,7 +204,7 @@ class LSResult:
     Attributes
     ----------
     params : UVParams (model "6dof") or RotParams (models "rot", "rot-lin").
-    theta : θ_UV (241,) or θ_UVR (36,).
+    theta : θ_UV (241,), θ_UVR (36,), or θ_UVR and D_L's diagonal (39,) ("rot-lin").
     rank : numerical rank of the equilibrated regressor (of ``n_params``).
     condition : its 2-norm condition number σ_max/σ_min (inf if rank deficient).
     residual_rms : RMS of u − 𝒲θ per wrench component (N, N m).
