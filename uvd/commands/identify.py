@@ -247,7 +247,7 @@ def _run_logs(args) -> int:
     )
     from uvd.io.logprofile import load_profile
     from uvd.io.logrun import load_log_runs
-    from uvd.io.params import params_from_toml, save_params
+    from uvd.io.params import linear_damping_toml, params_from_toml, save_params
     from uvd.io.vehicle import load_vehicle
     from uvd.jsonio import write_json
     from uvd.progress import Progress
@@ -304,12 +304,12 @@ def _run_logs(args) -> int:
              "logs = [" + ", ".join(repr(str(p)) for p in args.log) + "]",
              'dofs = ["roll", "pitch", "yaw"]', "", "[refused]"]
     extra += [f"{d} = {r!r}" for d, r in refused.items()]
+    text = "\n".join(extra) + "\n"
     if d_lin is not None:
-        extra += ["", "[linear_damping]", "# K_p, M_q, N_r (N m s/rad), identified beside (2.40)'s "
-                  "quadratic damping (--linear-damping)",
-                  f"rotational = [{', '.join(repr(float(x)) for x in d_lin)}]"]
+        text += linear_damping_toml(d_lin, "K_p, M_q, N_r (N m s/rad), identified beside (2.40)'s "
+                                    "quadratic damping (--linear-damping)")
     try:
-        save_params(params, args.out, title=title, extra="\n".join(extra) + "\n")
+        save_params(params, args.out, title=title, extra=text)
     except OSError as exc:
         raise ConfigError(f"--out {args.out}: cannot write: {exc.strerror or exc}") from exc
     print(title)

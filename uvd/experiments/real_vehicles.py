@@ -72,7 +72,7 @@ def published_toml(key: str, vehicle_params) -> tuple[str, object, np.ndarray]:
     """(TOML text, RotParams, D_L) of a published column inside the vehicle's θ_UV."""
     from uvd.estimation.realdata import embed_identified
     from uvd.estimation.xval import rot_from_lumped
-    from uvd.io.params import params_to_toml
+    from uvd.io.params import linear_damping_toml, params_to_toml
 
     c = PUBLISHED[key]
     rot, d_lin = rot_from_lumped(c["A"], c["B"], c["C"], c["Kp"], c["Kpp"], c["Mq"], c["Mqq"],
@@ -80,9 +80,8 @@ def published_toml(key: str, vehicle_params) -> tuple[str, object, np.ndarray]:
     p = embed_identified(vehicle_params, rot)
     text = params_to_toml(p, title=f"Aili & Ekelund 2016, {c['what']}, converted by "
                                    "uvd.estimation.xval.rot_from_lumped (W = 6.621 kg x 9.82)")
-    text += ("\n[linear_damping]\n# K_p, M_q, N_r (N m s/rad): the published model's linear "
-             "damping, which (2.40) has not\n"
-             f"rotational = [{c['Kp']!r}, {c['Mq']!r}, {c['Nr']!r}]\n")
+    text += linear_damping_toml((c["Kp"], c["Mq"], c["Nr"]), "K_p, M_q, N_r (N m s/rad): the "
+                                "published model's linear damping, which (2.40) has not")
     return text, rot, d_lin
 
 
@@ -106,7 +105,7 @@ def run(data: Path, out: Path) -> dict:
     from uvd.estimation.xval import rot_xval_windows
     from uvd.io.logprofile import load_profile
     from uvd.io.logrun import load_log_runs
-    from uvd.io.params import params_to_toml
+    from uvd.io.params import linear_damping_toml, params_to_toml
     from uvd.io.vehicle import load_vehicle
 
     d = out / "real-vehicles"
@@ -148,9 +147,8 @@ def run(data: Path, out: Path) -> dict:
                   f"2.40{' + linear damping' if lin else ''}; thrust map l_z6 = {lz6:g} m; "
                   "translation: the vehicle file's first guess, not identified)")
         if d_lin is not None:
-            text += ("\n[linear_damping]\n# K_p, M_q, N_r (N m s/rad), identified beside "
-                     "(2.40)'s quadratic damping\n"
-                     f"rotational = [{', '.join(repr(float(x)) for x in np.diag(d_lin))}]\n")
+            text += linear_damping_toml(np.diag(d_lin), "K_p, M_q, N_r (N m s/rad), identified "
+                                        "beside (2.40)'s quadratic damping")
         (d / f"{name}.toml").write_text(text)
     for key in PUBLISHED:
         text, rot, d_lin = published_toml(key, vehicle.params)

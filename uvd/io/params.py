@@ -109,6 +109,13 @@ def save_params(p: UVParams, path: str | Path, *, title: str = "", extra: str = 
         raise
 
 
+def linear_damping_toml(diag, comment: str) -> str:
+    """The ``[linear_damping]`` table :func:`linear_damping_from_toml` reads, as TOML text
+    (a leading blank line, then ``# comment`` and ``rotational = [K_p, M_q, N_r]``)."""
+    values = ", ".join(repr(float(x)) for x in diag)
+    return f"\n[linear_damping]\n# {comment}\nrotational = [{values}]\n"
+
+
 def linear_damping_from_toml(path: str | Path):
     """The optional ``[linear_damping]`` table of a parameter file: ``rotational = [K_p, M_q,
     N_r]`` (N m s/rad, negative = dissipative) — the linear term of a published model that
