@@ -182,7 +182,7 @@ class Instruments:
     def _frame(self, name: str, periodic: _Periodic) -> None:
         """With ``frame_seed``, point the noise at the frame that just fell due (its own
         generator; without, the one stream draws on)."""
-        k = periodic.k - 1  # the index of the due time that fired (_Periodic.due)
+        k = periodic.k - 1  # the index of the due time that fired (_Periodic.fire)
         self._draw = np.random.default_rng(
             (self.frame_seed, _NOISE_KEY[name], int(self._before_epoch), k))
 
