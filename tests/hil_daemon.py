@@ -13,7 +13,7 @@ import os
 import time
 from pathlib import Path
 
-from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
+from sim_bridge.bridge import BridgeProcess, hil_scheduling, write_local_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.lifecycle import State
 from uvd.runtime.loop import drop_realtime
@@ -47,10 +47,10 @@ class ListSink:
 def running_bridge(run_dir: Path, changes: dict | None = None, duration_s: float = 300.0):
     """``sim-bridge`` on a fresh local configuration (``changes`` merged in); yields
     ``(config path, BridgeProcess)`` and stops the bridge in every case."""
-    # as the demo runs them: the devices at SCHED_FIFO 60, the daemon's loop at 50 (not pinned:
-    # several HIL set-ups may run at once) — the machine also runs other test suites, and a
+    # as the demo runs them: the devices at SCHED_FIFO 60, the daemon's loop at 50, not pinned
+    # (several HIL set-ups may run at once) — the machine also runs other test suites, and a
     # 200 ms stall of either side would trip the drives' command timeout mid-test
-    bridge_args, base = cpu_split(pin=False)
+    bridge_args, base = hil_scheduling()
     # no files, and no Zenoh on the demo's 7447 (a test that wants it names its own port)
     base["telemetry"] = {"jsonl": {"enabled": False}, "zenoh": {"enabled": False}}
     # nor MAVLink on the demo's 14551 (a test that wants it listens on port 0)

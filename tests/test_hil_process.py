@@ -21,7 +21,7 @@ import time
 import pytest
 
 from drivers.can.bus import open_bus
-from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
+from sim_bridge.bridge import BridgeProcess, hil_scheduling, write_local_config
 from uvd.runtime.config import load_config
 
 pytestmark = pytest.mark.timeout(150)
@@ -95,7 +95,7 @@ class BusObserver:
 
 
 def test_notify_and_sigterm_with_the_real_processes(tmp_path):
-    bridge_args, changes = cpu_split(pin=False)  # scheduled as in the demo
+    bridge_args, changes = hil_scheduling()  # scheduled as in the demo
     cfg_path = write_local_config(tmp_path, changes=changes)
     cfg = load_config(cfg_path)
     nodes = cfg.can.amplifiers.node_ids

@@ -76,13 +76,13 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
             base: Path | None = None, trigger: str = "fixed") -> dict[str, Any]:
     """Run the three processes and return the figures (see the module docstring); the INS
     sends at the loop's rate."""
-    from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
+    from sim_bridge.bridge import BridgeProcess, hil_scheduling, write_local_config
     from uvd.runtime.config import load_config
 
     run_dir = Path(tempfile.mkdtemp(prefix="uvd-latency-"))
     bridge = daemon = None
     try:
-        bridge_args, changes = cpu_split()
+        bridge_args, changes = hil_scheduling()
         changes["loop"]["sched_fifo_priority"] = sched_fifo
         if rate_hz is None:
             rate_hz = load_config(base).loop.rate_hz

@@ -337,7 +337,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
              false_alarm: bool = False) -> tuple[dict[str, Any], int]:
     """Run the demo; returns (figures, exit code). See the module docstring; ``fault`` a
     :class:`~uvd.commands.demo_fault.FaultSpec` (exit code 1 unless it was accommodated)."""
-    from sim_bridge.bridge import BridgeProcess, cpu_split, write_local_config
+    from sim_bridge.bridge import BridgeProcess, hil_scheduling, write_local_config
     from uvd.runtime.config import load_config
 
     tmp = None
@@ -351,10 +351,10 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
     try:
         # Real-time priority as on the vehicle (config/jhu-rov.toml): on a shared machine a
         # normally scheduled loop is sometimes descheduled for tens of ms. The simulated
-        # devices run above the daemon and on another CPU (sim_bridge.bridge.cpu_split):
-        # real ones are separate hardware. Refused without the privilege: both processes
-        # then say so and run with normal scheduling.
-        bridge_args, changes = cpu_split()
+        # devices run above the daemon (sim_bridge.bridge.hil_scheduling): real ones are
+        # separate hardware. Neither is pinned to a CPU (measured: pinned, the loop was later).
+        # Refused without the privilege: both processes say so and run normally scheduled.
+        bridge_args, changes = hil_scheduling()
         if record:
             changes["can"] = {"log": {"path": str(run_dir / "can.log")}}
             changes["recording"] = {"enabled": True, "dir": str(run_dir)}

@@ -40,13 +40,13 @@ def run_hil(config_name: str, k: int, *, fault: bool, t_fault_s: float = T_FAULT
             duration_s: float = DURATION_S, seed: int = 0, progress=print) -> dict[str, Any]:
     """One HIL run (module docstring); ``fault``: thruster ``k``'s drive faults at
     ``t_fault_s`` after the release."""
-    from sim_bridge.bridge import BridgeProcess, cpu_split, read_truth, write_local_config
+    from sim_bridge.bridge import BridgeProcess, hil_scheduling, read_truth, write_local_config
     from uvd.lockstep import hil_tracking
     from uvd.runtime.config import load_config
 
     with tempfile.TemporaryDirectory(prefix="uvd-ft-hil-") as tmp:
         run_dir = Path(tmp)
-        bridge_args, changes = cpu_split()
+        bridge_args, changes = hil_scheduling()
         changes["failsafe"] = {"amplifier_fault": "reallocate"}
         cfg_path = write_local_config(run_dir, base=_config_dir() / config_name,
                                       changes=changes)
