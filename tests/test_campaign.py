@@ -267,3 +267,21 @@ def test_the_local_cluster_listens_on_loopback_only():
     finally:
         client.close()
         cluster.close()
+
+
+def test_an_fdc_run_stops_at_its_first_alarm():
+    """A campaign's fdc run ends with the estimates' batch that brought the first alarm (every
+    figure is the first alarm's): a half-strength thruster 2 from minute 25.5 is named within
+    the 4.5 minutes watched, and the run stops there, simulated hours and all."""
+    from uvd.campaign.runs import execute
+    from uvd.experiments.fdc import EVERY_S
+    res = execute("fdc", {"vehicle": "jhu-rov", "seed": 3, "noise_scale": 1.0,
+                          "fault": "thruster", "fault_size": 0.5, "fault_thruster": 1,
+                          "onset_min": 25.5, "after_min": 4.5})
+    assert res["error"] is None, res["error"]
+    f = res["figures"]
+    assert f["detected"] and f["false_alarms"] == 0 and f["first_channel"] == "thruster2", f
+    simulated_s = f["simulated_h"] * 3600.0
+    assert simulated_s < 30.0 * 60.0  # stopped before the planned end
+    assert f["first_t_s"] - 1e-6 <= simulated_s <= f["first_t_s"] + EVERY_S + 1e-6, f
+    assert f["alarms"] >= 1

@@ -103,10 +103,12 @@ def run_fdc(inputs: dict) -> dict:
     v = SimVehicle(None if fault == "none" else fault, onset, inputs["seed"], config=config,
                    fault_args=args, expected_kind=kind,
                    instruments=_instruments(inputs["noise_scale"]))
-    r = watch(v, onset + after)
+    # stopped at the first alarm: every figure below is the first alarm's (the detector then
+    # holds the vehicle faulty), so the rest would be simulated for nothing
+    r = watch(v, onset + after, until_first=True)
     first = r["detections"][0] if r["detections"] else None
     minutes = onset + after
-    out: dict = {"simulated_h": minutes / 60.0, "alarms": len(r["detections"]),
+    out: dict = {"simulated_h": v.k / v.rate / 3600.0, "alarms": len(r["detections"]),
                  "first_kind": None if first is None else first["kind"],
                  "first_channel": None if first is None else first["channel"],
                  "first_t_s": None if first is None else first["t_ns"] * 1e-9,
@@ -116,7 +118,7 @@ def run_fdc(inputs: dict) -> dict:
         # detector holds the vehicle faulty) or the end
         end = minutes if first is None else first["t_ns"] * 1e-9 / 60.0
         out["monitored_h"] = max(0.0, end - start) / 60.0
-        out["false_alarms"] = len(r["detections"])
+        out["false_alarms"] = int(first is not None)  # the hours at risk end with the first
         return out
     before = r["false_alarm_before_fault"]
     out["monitored_h"] = (r["injected_at_s"] / 60.0 - start) / 60.0 if before is False else \

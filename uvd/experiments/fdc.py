@@ -143,9 +143,12 @@ def _run_one(fault: str | None, minutes_before: float, minutes_after: float, see
                  progress)
 
 
-def watch(v: SimVehicle, minutes: float, progress=None) -> dict:
+def watch(v: SimVehicle, minutes: float, progress=None, *, until_first: bool = False) -> dict:
     """Run ``v`` for ``minutes`` simulated minutes under uvd-fdc's detector (every state
-    payload, AID's estimates); its :meth:`SimVehicle.outcome` and the detector's baseline."""
+    payload, AID's estimates); its :meth:`SimVehicle.outcome` and the detector's baseline.
+    ``until_first``: stop after the estimates' batch (``v.every`` cycles) that brought the
+    first detection — every figure of :meth:`SimVehicle.outcome` but the list of detections
+    is the first one's (a campaign's runs: nothing after it is judged)."""
     from uvd.fdc.detector import VehicleDetector
     from uvd.links.zenoh import estimate_payload, fault_report
 
@@ -175,6 +178,8 @@ def watch(v: SimVehicle, minutes: float, progress=None) -> dict:
                                                  json.dumps(d).encode()))
                 d["verdict"] = {"ok": res.ok, "reason": res.reason}
         detections += found
+        if until_first and detections:
+            break
         if progress is not None and v.k // report != (v.k - v.every) // report:
             progress(f"  fdc {fault or 'fault-free'}: simulated {v.k / v.rate / 60:.0f} / "
                      f"{n / v.rate / 60:.0f} min")
