@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -81,6 +82,16 @@ def load_published(results_dir: Path) -> dict[str, dict]:
     return out
 
 
+def _run_walls(r: dict) -> str:
+    """The rows' own wall times (each run on its worker) and the code they ran on."""
+    walls = [float(w) for w in r.get("wall_per_run_s") or ()]
+    if not walls:
+        return ""
+    return (f"; every run's own wall time {sum(walls):.0f} s in all (median "
+            f"{statistics.median(walls):.0f} s, longest {max(walls):.0f} s), on code version "
+            f"`{r['code_version']}`")
+
+
 def render(published: dict[str, dict]) -> list[str]:
     """The campaigns' part of docs/RESULTS.md."""
     if not published:
@@ -104,7 +115,7 @@ def render(published: dict[str, dict]) -> list[str]:
                      + f"; this instalment {r['ran_now']} runs on {r['workers']} worker(s) in "
                      f"{r['wall_seconds']:.0f} s wall, load average "
                      f"{r['load_average_before'][0]:.1f} before and "
-                     f"{r['load_average_after'][0]:.1f} after.")
+                     f"{r['load_average_after'][0]:.1f} after" + _run_walls(r) + ".")
         lines.append("")
         lines.append("```")
         lines.append(r["summary_text"].rstrip())
