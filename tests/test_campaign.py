@@ -90,6 +90,9 @@ def test_every_builtin_campaign_is_valid():
     fa = found["fdc-false-alarms"]
     assert all(r["fault"] == "none" for r in fa.runs)
     assert {r["vehicle"] for r in fa.runs} == {"jhu-rov", "bluerov2-heavy"}
+    # the "varied trajectories": both of Table 5.1, on both vehicles
+    assert {(r["vehicle"], r["reference"]) for r in fa.runs} == {
+        (v, t) for v in ("jhu-rov", "bluerov2-heavy") for t in ("reftraj1", "reftraj2")}
     det = found["fdc-detection"]
     assert len(det.runs) >= 300
     assert {r["fault"] for r in det.runs} == {"thruster", "drag", "mass", "buoyancy"}
@@ -286,7 +289,7 @@ def test_an_fdc_run_stops_at_its_first_alarm():
     from uvd.experiments.fdc import EVERY_S
     res = execute("fdc", {"vehicle": "jhu-rov", "seed": 3, "noise_scale": 1.0,
                           "fault": "thruster", "fault_size": 0.5, "fault_thruster": 1,
-                          "onset_min": 25.5, "after_min": 4.5})
+                          "onset_min": 25.5, "after_min": 4.5, "reference": "reftraj1"})
     assert res["error"] is None, res["error"]
     f = res["figures"]
     assert f["detected"] and f["false_alarms"] == 0 and f["first_channel"] == "thruster2", f

@@ -42,6 +42,8 @@ FDC_AXES = {
                                          "detector learns its baseline from 5 to 25)"),
     "after_min": Axis(float, 30.0, None, "simulated minutes after onset_min"),
     "noise_scale": Axis(float, 1.0, None, "every instrument's noise σ times this"),
+    "reference": Axis(str, "reftraj1", ("reftraj1", "reftraj2"), "the trajectory tracked "
+                                                                 "(Table 5.1)"),
 }
 
 CONTROL_AXES = {
@@ -102,13 +104,14 @@ def run_fdc(inputs: dict) -> dict:
     args, kind = _fault_args(fault, inputs["fault_size"], thruster)
     v = SimVehicle(None if fault == "none" else fault, onset, inputs["seed"], config=config,
                    fault_args=args, expected_kind=kind,
-                   instruments=_instruments(inputs["noise_scale"]))
+                   instruments=_instruments(inputs["noise_scale"]),
+                   reference=inputs["reference"])
     # stopped at the first alarm: every figure below is the first alarm's (the detector then
     # holds the vehicle faulty), so the rest would be simulated for nothing
     r = watch(v, onset + after, until_first=True)
     first = r["detections"][0] if r["detections"] else None
-    minutes = onset + after
-    out: dict = {"simulated_h": v.k / v.rate / 3600.0, "alarms": len(r["detections"]),
+    minutes = v.k / v.rate / 60.0  # what was simulated (watch ends within one batch of the end)
+    out: dict = {"simulated_h": minutes / 60.0, "alarms": len(r["detections"]),
                  "first_kind": None if first is None else first["kind"],
                  "first_channel": None if first is None else first["channel"],
                  "first_t_s": None if first is None else first["t_ns"] * 1e-9,

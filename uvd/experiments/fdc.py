@@ -38,14 +38,16 @@ class SimVehicle:
 
     def __init__(self, fault: str | None, minutes_before: float, seed: int, *,
                  config=None, fault_args: dict | None = None, expected_kind: str | None = None,
-                 instruments=None, confirm: bool = False) -> None:
+                 instruments=None, confirm: bool = False, reference: str | None = None
+                 ) -> None:
         """``config`` a configuration file (the demo's, ``config/sim.toml``, by default);
         ``fault_args`` and ``expected_kind`` a fault other than :data:`FAULTS`' (then
         ``fault`` is only its label); ``instruments`` an
         :class:`~sim_bridge.instruments.models.InstrumentConfig` (Table A.1 by default);
         ``confirm``: the cycle keeps the daemon's own thrust evidence (``[faults.fdc]``
         ``accept = "confirm"``) and :func:`watch` applies each detection to it as the daemon
-        would (its verdict in the detection's ``"verdict"``)."""
+        would (its verdict in the detection's ``"verdict"``); ``reference`` another
+        ``[control] reference`` than the configuration's (``"reftraj2"``…)."""
         from sim_bridge.instruments.models import InstrumentConfig
         from uvd.estimation.aid import aid6_estimator
         from uvd.lockstep import Lockstep, LockstepConfig
@@ -53,8 +55,13 @@ class SimVehicle:
         from uvd.runtime.config import DEFAULT_CONFIG, load_config
         from uvd.runtime.cycle import unsupervised
         from uvd.runtime.fdc_source import FdcRule, FdcSourceSection
+        from uvd.runtime.schema import with_values
 
         cfg = load_config(DEFAULT_CONFIG if config is None else config)
+        if reference is not None:
+            cfg, errors = with_values(cfg, {"control.reference": reference})
+            if errors:
+                raise ValueError("; ".join(f"{k}: {why}" for k, why in errors))
         vehicle = cfg.load_vehicle()
         core_cfg = build_core(cfg, vehicle, estimators=(
             aid6_estimator(vehicle.params.theta, cfg.estimation.aid_params()),))
