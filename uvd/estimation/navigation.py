@@ -55,14 +55,14 @@ nothing here raises on bad input — non-finite samples are ignored.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba
 import numpy as np
 
 from drivers.frames import dvl_mount_to_body
-from uvd.model.lie import _exp_so3, euler_R, exp_so3
+from uvd.model.lie import _exp_so3, euler_R
 
 if TYPE_CHECKING:  # the sample types are plain dataclasses; only their attributes are read
     from drivers.samples import DepthSample, DvlSample, InsSample
@@ -70,8 +70,6 @@ if TYPE_CHECKING:  # the sample types are plain dataclasses; only their attribut
 __all__ = ["NavConfig", "NavState", "NavMemory", "nav_init", "nav_step", "nav_set_position"]
 
 _I3 = np.eye(3)
-_Z3 = np.zeros(3)
-_INF = float("inf")
 
 
 def _eye3() -> np.ndarray:
@@ -131,6 +129,11 @@ class NavConfig:
         has_arm = bool(np.any(r != 0.0))
         object.__setattr__(self, "_has_lever_arm", has_arm)
         object.__setattr__(self, "_mount_is_identity", bool(np.array_equal(R, _I3)) and not has_arm)
+        # the constants of the compiled step in one array (_C_* of _step)
+        object.__setattr__(self, "_kernel_cfg", np.array(
+            [self.ins_timeout_s, self.dvl_timeout_s, self.depth_timeout_s,
+             self.derive_rates_min_dt_s, *R.reshape(-1), *r, float(self._mount_is_identity),
+             float(has_arm), float(bool(self.propagate_ins))], dtype=np.float64))
 
     @property
     def has_lever_arm(self) -> bool:
@@ -143,9 +146,9 @@ class NavConfig:
         return self._mount_is_identity
 
 
-@dataclass(frozen=True)
-class NavState:
-    """Navigation output of one cycle.
+class NavState(NamedTuple):
+    """Navigation output of one cycle. Immutable (a named tuple: built every cycle, it costs a
+    fraction of a frozen dataclass).
 
     Attributes
     ----------
@@ -181,7 +184,6 @@ class NavState:
     bottom_lock: bool
 
 
-@dataclass(slots=True)
 class NavMemory:
     """Explicit memory of :func:`nav_step` (treat as opaque; a new one is returned each call).
 
@@ -215,38 +217,75 @@ class NavMemory:
         until two samples with measured rates arrived within ``ins_timeout_s``).
     """
 
-    t_ns: int | None = None
-    north_m: float = 0.0
-    east_m: float = 0.0
-    depth_m: float = 0.0
-    R: np.ndarray = field(default_factory=_eye3)
-    omega: np.ndarray = field(default_factory=_zeros3)
-    nu: np.ndarray = field(default_factory=_zeros3)
-    v_world_prev: np.ndarray | None = None
-    ins_t_ns: int | None = None
-    dvl_t_ns: int | None = None
-    depth_t_ns: int | None = None
-    rates_degraded: bool = False
-    bottom_lock: bool = False
-    att_prev_R: np.ndarray | None = None
-    att_prev_t_ns: int | None = None
-    dvl_raw: np.ndarray | None = None
-    omega_dot: np.ndarray = field(default_factory=_zeros3)
+    __slots__ = ("f", "i")
+
+    def __init__(self, f: np.ndarray, i: np.ndarray) -> None:
+        # stored as the compiled step reads and writes it: ``f`` (float64, the numbers in the
+        # order of _F_*) and ``i`` (int64, the stamps and flags of _I_*); the attributes above
+        # are read from them
+        self.f = f
+        self.i = i
+
+    def _stamp(self, k: int) -> int | None:
+        return int(self.i[k]) if self.i[k + _I_HAS] else None
+
+    def _vec(self, k: int, flag: int | None = None) -> np.ndarray | None:
+        if flag is not None and not self.i[flag]:
+            return None
+        return self.f[k:k + 3].copy()
+
+    t_ns = property(lambda self: self._stamp(_I_T))
+    ins_t_ns = property(lambda self: self._stamp(_I_INS_T))
+    dvl_t_ns = property(lambda self: self._stamp(_I_DVL_T))
+    depth_t_ns = property(lambda self: self._stamp(_I_DEPTH_T))
+    att_prev_t_ns = property(lambda self: self._stamp(_I_ATT_T))
+    north_m = property(lambda self: float(self.f[_F_NORTH]))
+    east_m = property(lambda self: float(self.f[_F_EAST]))
+    depth_m = property(lambda self: float(self.f[_F_DEPTH]))
+    R = property(lambda self: self.f[_F_R:_F_R + 9].reshape(3, 3).copy())
+    omega = property(lambda self: self._vec(_F_OMEGA))
+    nu = property(lambda self: self._vec(_F_NU))
+    v_world_prev = property(lambda self: self._vec(_F_VW, _I_HAS_VW))
+    att_prev_R = property(lambda self: None if not self.i[_I_HAS_ATT_R]
+                          else self.f[_F_ATT_R:_F_ATT_R + 9].reshape(3, 3).copy())
+    dvl_raw = property(lambda self: self._vec(_F_DVL_RAW, _I_HAS_DVL_RAW))
+    omega_dot = property(lambda self: self._vec(_F_OMEGA_DOT))
+    rates_degraded = property(lambda self: bool(self.i[_I_DEGRADED]))
+    bottom_lock = property(lambda self: bool(self.i[_I_LOCK]))
+
+
+# the layout of NavMemory's arrays: f (floats) and i (stamps, then whether each is set, flags)
+_F_NORTH, _F_EAST, _F_DEPTH, _F_R, _F_OMEGA, _F_NU, _F_VW, _F_ATT_R, _F_DVL_RAW, _F_OMEGA_DOT = (
+    0, 1, 2, 3, 12, 15, 18, 21, 30, 33)
+_NF = 36
+_I_T, _I_INS_T, _I_DVL_T, _I_DEPTH_T, _I_ATT_T = 0, 1, 2, 3, 4
+_I_HAS = 5  # i[k + _I_HAS]: stamp k is set (not None)
+_I_HAS_VW, _I_HAS_ATT_R, _I_HAS_DVL_RAW, _I_DEGRADED, _I_LOCK = 10, 11, 12, 13, 14
+_NI = 15
 
 
 def nav_init(cfg: NavConfig, north_m: float = 0.0, east_m: float = 0.0) -> NavMemory:
     """Initial memory: position (north_m, east_m), no sample seen, every source invalid."""
-    return NavMemory(north_m=float(north_m), east_m=float(east_m))
+    f = np.zeros(_NF)
+    f[_F_NORTH], f[_F_EAST] = float(north_m), float(east_m)
+    f[_F_R:_F_R + 9] = _I3.reshape(-1)
+    return NavMemory(f, np.zeros(_NI, dtype=np.int64))
 
 
 def nav_set_position(mem: NavMemory, north_m: float, east_m: float) -> NavMemory:
     """Memory with the dead-reckoned position replaced by an external fix (north, east, m)."""
-    return replace(mem, north_m=float(north_m), east_m=float(east_m))
+    f = mem.f.copy()
+    f[_F_NORTH], f[_F_EAST] = float(north_m), float(east_m)
+    return NavMemory(f, mem.i.copy())
 
 
-# ------------------------------------------------------------------ compiled small-matrix steps
-# Each replaces a few numpy calls on 3-vectors (≈1 µs each in the interpreter) with one compiled
-# call; same formulas (R @ ν, the assembly of H and v; Euler → R is uvd.model.lie.euler_R).
+# ------------------------------------------------------------------ the compiled step
+# nav_step is one compiled call (_step) behind thin Python that reads the samples' fields;
+# its helpers are the formulas of the module docstring (Euler → R is uvd.model.lie.euler_R,
+# the DVL mounting drivers.frames.dvl_mount_to_body, compiled as they are).
+
+_mount_to_body = numba.njit(cache=True)(dvl_mount_to_body)
+
 
 @numba.njit(cache=True)
 def _rotate(R, x):
@@ -270,35 +309,7 @@ def _carry(R, omega, omega_dot, age):
 
 
 @numba.njit(cache=True)
-def _assemble(R, north, east, depth, nu, omega):
-    """H = [[R, p], [0, 1]] with p = (north, east, depth), and v = [ν; ω]."""
-    H = np.empty((4, 4))
-    for i in range(3):
-        for j in range(3):
-            H[i, j] = R[i, j]
-        H[3, i] = 0.0
-    H[0, 3] = north
-    H[1, 3] = east
-    H[2, 3] = depth
-    H[3, 3] = 1.0
-    v = np.empty(6)
-    for i in range(3):
-        v[i] = nu[i]
-        v[3 + i] = omega[i]
-    return H, v
-
-
-_F64 = np.dtype(np.float64)
-
-
-def _vec3(w) -> np.ndarray:
-    """The first three entries of ``w`` as a new float64 array (w checked finite)."""
-    if type(w) is np.ndarray and w.ndim == 1 and w.dtype == _F64:
-        return w[:3].copy()
-    return np.array([float(w[0]), float(w[1]), float(w[2])])
-
-
-def _log_so3_vee(R: np.ndarray) -> np.ndarray:
+def _log_so3_vee(R):
     """vee(log R) for a small rotation (rates derived from successive attitudes)."""
     c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
     c = min(1.0, max(-1.0, c))
@@ -312,20 +323,175 @@ def _log_so3_vee(R: np.ndarray) -> np.ndarray:
     return (th / (2.0 * s)) * w
 
 
-def _finite3(a) -> bool:
-    return math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])
+@numba.njit(cache=True)
+def _finite3(a):
+    return np.isfinite(a[0]) and np.isfinite(a[1]) and np.isfinite(a[2])
 
 
-def _age_s(t_ns: int, stamp: int | None) -> float:
-    if stamp is None:
-        return _INF
+@numba.njit(cache=True)
+def _age_s(t_ns, stamp, has):
+    if not has:
+        return np.inf
     d = t_ns - stamp
     return d * 1e-9 if d > 0 else 0.0
 
 
-# nav_step is long (~135 lines) on purpose: it runs every cycle on the loop's path, and its
-# sources' rules share a dozen intermediate values; split into helpers they would be passed
-# around at ~0.1 µs a call for no gain in clarity (each rule is its own commented block).
+# _step is long (~150 lines) on purpose: its sources' rules share a dozen intermediate values;
+# split into helpers they would be passed around for no gain in clarity (each rule is its own
+# commented block, in the order of the module docstring).
+@numba.njit(cache=True)
+def _step(t_ns, mf, mi, f, i, H, v, ins_ok, roll, pitch, heading, w_ins, rates_valid, ins_tns,
+          dvl_seen, dvl_lock, vb, dvl_tns, depth_ok, depth_val, depth_tns, cf):
+    """One navigation cycle (:func:`nav_step`): reads the memory ``mf``, ``mi`` and writes the
+    next into ``f``, ``i`` (NavMemory's arrays), the pose into ``H`` and ``v``; returns the
+    ages, validities and flags of the NavState. ``cf``: :class:`NavConfig` as numbers (the
+    timeouts, the shortest attitude interval, the DVL's mounting R and lever arm, whether
+    the mounting is the identity, whether there is a lever arm, ``propagate_ins``)."""
+    ins_timeout, dvl_timeout, depth_timeout, min_dt = cf[0], cf[1], cf[2], cf[3]
+    mount_R = cf[4:13].reshape(3, 3)
+    lever = cf[13:16]
+    mount_identity, has_lever_arm, propagate = cf[16] != 0.0, cf[17] != 0.0, cf[18] != 0.0
+    f[:] = mf
+    i[:] = mi
+    R = mf[_F_R:_F_R + 9].reshape(3, 3).copy()
+    omega = mf[_F_OMEGA:_F_OMEGA + 3].copy()
+    rates_degraded = mi[_I_DEGRADED] != 0
+    omega_changed = False
+    has_ins_t = mi[_I_HAS + _I_INS_T] != 0
+    ins_t = mi[_I_INS_T]
+
+    # --- INS: attitude and rates ------------------------------------------------------------
+    if ins_ok and np.isfinite(roll) and np.isfinite(pitch) and np.isfinite(heading):
+        R_new = euler_R(roll, pitch, heading)
+        if _finite3(w_ins):
+            # the rate's slope from the previous measured rate, for carrying it forward
+            gap_s = (ins_tns - ins_t) * 1e-9 if has_ins_t else 0.0
+            if not rates_degraded and rates_valid and min_dt <= gap_s <= ins_timeout:
+                for k in range(3):
+                    f[_F_OMEGA_DOT + k] = (w_ins[k] - omega[k]) / gap_s
+            else:
+                f[_F_OMEGA_DOT:_F_OMEGA_DOT + 3] = 0.0
+            for k in range(3):
+                omega[k] = w_ins[k]
+            omega_changed = True
+            rates_degraded = not rates_valid
+        else:
+            rates_degraded = True
+            f[_F_OMEGA_DOT:_F_OMEGA_DOT + 3] = 0.0
+            if mi[_I_HAS_ATT_R] != 0 and mi[_I_HAS + _I_ATT_T] != 0:
+                dt = (ins_tns - mi[_I_ATT_T]) * 1e-9
+                if dt >= min_dt:
+                    att_prev_R = mf[_F_ATT_R:_F_ATT_R + 9].reshape(3, 3).copy()
+                    omega = _log_so3_vee(att_prev_R.T @ R_new) / dt
+                    omega_changed = True
+        R = R_new
+        f[_F_ATT_R:_F_ATT_R + 9] = R_new.reshape(9)
+        i[_I_HAS_ATT_R] = 1
+        i[_I_ATT_T], i[_I_HAS + _I_ATT_T] = ins_tns, 1
+        ins_t, has_ins_t = ins_tns, True
+        i[_I_INS_T], i[_I_HAS + _I_INS_T] = ins_tns, 1
+    f[_F_R:_F_R + 9] = R.reshape(9)
+    f[_F_OMEGA:_F_OMEGA + 3] = omega
+
+    # --- DVL: body velocity of the origin ---------------------------------------------------
+    new_dvl = False
+    bottom_lock = mi[_I_LOCK] != 0
+    if dvl_seen:
+        locked = dvl_lock and _finite3(vb)
+        bottom_lock = locked
+        if locked:
+            f[_F_DVL_RAW:_F_DVL_RAW + 3] = vb[:3]
+            i[_I_HAS_DVL_RAW] = 1
+            i[_I_DVL_T], i[_I_HAS + _I_DVL_T] = dvl_tns, 1
+            new_dvl = True
+    if i[_I_HAS_DVL_RAW] != 0 and (new_dvl or (omega_changed and has_lever_arm)):
+        # re-applied when ω changes so the lever-arm term uses the latest rate
+        if mount_identity:
+            f[_F_NU:_F_NU + 3] = f[_F_DVL_RAW:_F_DVL_RAW + 3]
+        else:
+            f[_F_NU:_F_NU + 3] = _mount_to_body(mount_R, lever,
+                                                f[_F_DVL_RAW:_F_DVL_RAW + 3], omega)
+    nu = f[_F_NU:_F_NU + 3]
+
+    # --- depth --------------------------------------------------------------------------------
+    if depth_ok and np.isfinite(depth_val):
+        f[_F_DEPTH] = depth_val
+        i[_I_DEPTH_T], i[_I_HAS + _I_DEPTH_T] = depth_tns, 1
+
+    # --- ages and validity -----------------------------------------------------------------
+    dvl_t = i[_I_DVL_T]
+    ins_age = _age_s(t_ns, ins_t, has_ins_t)
+    dvl_age = _age_s(t_ns, dvl_t, i[_I_HAS + _I_DVL_T] != 0)
+    depth_age = _age_s(t_ns, i[_I_DEPTH_T], i[_I_HAS + _I_DEPTH_T] != 0)
+    ins_valid = ins_age <= ins_timeout
+    dvl_valid = dvl_age <= dvl_timeout
+    depth_valid = depth_age <= depth_timeout
+
+    # --- dead reckoning (DVLNAV): each DVL sample's world velocity, held until the next ------
+    north, east = mf[_F_NORTH], mf[_F_EAST]
+    hold = dvl_valid and mi[_I_HAS_VW] != 0
+    has_t_prev = mi[_I_HAS + _I_T] != 0
+    t_prev = mi[_I_T]
+    if new_dvl and dvl_valid:
+        # rotated once, with the attitude at the sample's own time: the INS attitude propagated
+        # by its body rate over the (< one INS period) gap, R(t_dvl) ≈ R(t_ins) e^{J(ω)Δt}
+        R_dvl = R
+        if has_ins_t and dvl_t != ins_t and _finite3(omega):
+            gap_s = (dvl_t - ins_t) * 1e-9
+            if abs(gap_s) <= ins_timeout:
+                phi = np.empty(3)
+                for k in range(3):
+                    phi[k] = omega[k] * gap_s
+                R_dvl = R @ _exp_so3(phi)
+        v_new = _rotate(R_dvl, nu)
+        if has_t_prev and t_ns > t_prev:
+            t_split = min(max(dvl_t, t_prev), t_ns)  # the old velocity holds until the sample
+            if hold:
+                north += mf[_F_VW] * (t_split - t_prev) * 1e-9
+                east += mf[_F_VW + 1] * (t_split - t_prev) * 1e-9
+            north += v_new[0] * (t_ns - t_split) * 1e-9
+            east += v_new[1] * (t_ns - t_split) * 1e-9
+        f[_F_VW:_F_VW + 3] = v_new
+        hold = True
+    elif hold and has_t_prev and t_ns > t_prev:
+        north += mf[_F_VW] * (t_ns - t_prev) * 1e-9
+        east += mf[_F_VW + 1] * (t_ns - t_prev) * 1e-9
+    i[_I_HAS_VW] = 1 if hold else 0
+    f[_F_NORTH], f[_F_EAST] = north, east
+
+    if propagate and ins_valid and ins_age > 0.0 and not rates_degraded:
+        R_now, omega_now = _carry(R, omega, f[_F_OMEGA_DOT:_F_OMEGA_DOT + 3], ins_age)
+    else:
+        R_now, omega_now = R, omega
+    # H = [[R, p], [0, 1]] with p = (north, east, depth), and v = [ν; ω]
+    for r in range(3):
+        for c in range(3):
+            H[r, c] = R_now[r, c]
+        H[3, r] = 0.0
+        v[r] = nu[r]
+        v[3 + r] = omega_now[r]
+    H[0, 3], H[1, 3], H[2, 3], H[3, 3] = north, east, f[_F_DEPTH], 1.0
+
+    i[_I_T], i[_I_HAS + _I_T] = t_ns, 1
+    i[_I_DEGRADED] = 1 if rates_degraded else 0
+    i[_I_LOCK] = 1 if bottom_lock else 0
+    return (ins_age, dvl_age, depth_age, ins_valid, dvl_valid, depth_valid, rates_degraded,
+            bottom_lock)
+
+
+_F64 = np.dtype(np.float64)
+_NAN3 = np.full(3, np.nan)
+
+
+def _vec3(w) -> np.ndarray:
+    """``w`` as a writable contiguous float64 array of at least three entries (the first three
+    are read): the one array type the compiled step is specialised for."""
+    if type(w) is np.ndarray and w.dtype == _F64 and w.ndim == 1 and w.shape[0] >= 3 \
+            and w.flags.c_contiguous and w.flags.writeable:
+        return w
+    return np.array([float(w[0]), float(w[1]), float(w[2])])
+
+
 def nav_step(cfg: NavConfig, mem: NavMemory, t_ns: int, ins: InsSample | None,
              dvl: DvlSample | None, depth: DepthSample | None) -> tuple[NavState, NavMemory]:
     """One navigation cycle at time ``t_ns`` (see the module docstring for the rules).
@@ -344,120 +510,25 @@ def nav_step(cfg: NavConfig, mem: NavMemory, t_ns: int, ins: InsSample | None,
     -------
     (NavState, NavMemory)
     """
-    R = mem.R
-    omega = mem.omega
-    nu = mem.nu
-    ins_t = mem.ins_t_ns
-    dvl_t = mem.dvl_t_ns
-    depth_t = mem.depth_t_ns
-    depth_m = mem.depth_m
-    rates_degraded = mem.rates_degraded
-    bottom_lock = mem.bottom_lock
-    att_prev_R = mem.att_prev_R
-    att_prev_t = mem.att_prev_t_ns
-    dvl_raw = mem.dvl_raw
-    omega_dot = mem.omega_dot
-    omega_changed = False
-
-    # --- INS: attitude and rates ------------------------------------------------------------
-    if ins is not None and ins.valid and math.isfinite(ins.roll) and math.isfinite(ins.pitch) \
-            and math.isfinite(ins.heading):
-        R_new = euler_R(float(ins.roll), float(ins.pitch), float(ins.heading))
-        w = ins.omega_body
-        if _finite3(w):
-            w = _vec3(w)
-            # the rate's slope from the previous measured rate, for carrying it forward
-            gap_s = (ins.t_ns - ins_t) * 1e-9 if ins_t is not None else 0.0
-            if not rates_degraded and ins.rates_valid \
-                    and cfg.derive_rates_min_dt_s <= gap_s <= cfg.ins_timeout_s:
-                omega_dot = (w - omega) / gap_s
-            else:
-                omega_dot = _Z3
-            omega = w
-            omega_changed = True
-            rates_degraded = not ins.rates_valid
-        else:
-            rates_degraded = True
-            omega_dot = _Z3
-            if att_prev_R is not None and att_prev_t is not None:
-                dt = (ins.t_ns - att_prev_t) * 1e-9
-                if dt >= cfg.derive_rates_min_dt_s:
-                    omega = _log_so3_vee(att_prev_R.T @ R_new) / dt
-                    omega_changed = True
-        R = R_new
-        att_prev_R = R_new
-        att_prev_t = ins.t_ns
-        ins_t = ins.t_ns
-
-    # --- DVL: body velocity of the origin ---------------------------------------------------
-    new_dvl = False
-    if dvl is not None:
-        vb = dvl.velocity_body
-        locked = bool(dvl.bottom_lock) and dvl.good_beams >= cfg.min_good_beams \
-            and _finite3(vb)
-        bottom_lock = locked
-        if locked:
-            dvl_raw = _vec3(vb)
-            dvl_t = dvl.t_ns
-            new_dvl = True
-    if dvl_raw is not None and (new_dvl or (omega_changed and cfg._has_lever_arm)):
-        # re-applied when ω changes so the lever-arm term uses the latest rate
-        if cfg._mount_is_identity:
-            nu = dvl_raw
-        else:
-            nu = dvl_mount_to_body(cfg.dvl_mount_R, cfg.dvl_lever_arm_m, dvl_raw, omega)
-
-    # --- depth --------------------------------------------------------------------------------
-    if depth is not None and depth.valid and math.isfinite(depth.depth_m):
-        depth_m = float(depth.depth_m)
-        depth_t = depth.t_ns
-
-    # --- ages and validity -----------------------------------------------------------------
-    ins_age = _age_s(t_ns, ins_t)
-    dvl_age = _age_s(t_ns, dvl_t)
-    depth_age = _age_s(t_ns, depth_t)
-    ins_valid = ins_age <= cfg.ins_timeout_s
-    dvl_valid = dvl_age <= cfg.dvl_timeout_s
-    depth_valid = depth_age <= cfg.depth_timeout_s
-
-    # --- dead reckoning (DVLNAV): each DVL sample's world velocity, held until the next ------
-    north, east = mem.north_m, mem.east_m
-    v_hold = mem.v_world_prev if dvl_valid else None
-    t_prev = mem.t_ns
-    if new_dvl and dvl_valid:
-        # rotated once, with the attitude at the sample's own time: the INS attitude propagated
-        # by its body rate over the (< one INS period) gap, R(t_dvl) ≈ R(t_ins) e^{J(ω)Δt}
-        R_dvl = R
-        if ins_t is not None and dvl_t != ins_t and _finite3(omega):
-            gap_s = (dvl_t - ins_t) * 1e-9
-            if abs(gap_s) <= cfg.ins_timeout_s:
-                R_dvl = R @ exp_so3(omega * gap_s)
-        v_new = _rotate(R_dvl, nu)
-        if t_prev is not None and t_ns > t_prev:
-            t_split = min(max(dvl_t, t_prev), t_ns)  # the old velocity holds until the sample
-            if v_hold is not None:
-                north += float(v_hold[0]) * (t_split - t_prev) * 1e-9
-                east += float(v_hold[1]) * (t_split - t_prev) * 1e-9
-            north += float(v_new[0]) * (t_ns - t_split) * 1e-9
-            east += float(v_new[1]) * (t_ns - t_split) * 1e-9
-        v_hold = v_new
-    elif v_hold is not None and t_prev is not None and t_ns > t_prev:
-        north += float(v_hold[0]) * (t_ns - t_prev) * 1e-9
-        east += float(v_hold[1]) * (t_ns - t_prev) * 1e-9
-    v_world_prev = v_hold
-
-    if cfg.propagate_ins and ins_valid and ins_age > 0.0 and not rates_degraded:
-        R_now, omega_now = _carry(R, omega, omega_dot, ins_age)
+    t_ns = int(t_ns)
+    if ins is not None and ins.valid:
+        ins_args = (True, float(ins.roll), float(ins.pitch), float(ins.heading),
+                    _vec3(ins.omega_body), bool(ins.rates_valid), int(ins.t_ns))
     else:
-        R_now, omega_now = R, omega
-    H, v = _assemble(R_now, float(north), float(east), float(depth_m), nu, omega_now)
-
-    state = NavState(
-        int(t_ns), H, v, ins_valid and dvl_valid and depth_valid, ins_valid, dvl_valid,
-        depth_valid, ins_age, dvl_age, depth_age, rates_degraded, bottom_lock,
-    )
-    new_mem = NavMemory(
-        int(t_ns), north, east, depth_m, R, omega, nu, v_world_prev, ins_t, dvl_t, depth_t,
-        rates_degraded, bottom_lock, att_prev_R, att_prev_t, dvl_raw, omega_dot,
-    )
-    return state, new_mem
+        ins_args = (False, 0.0, 0.0, 0.0, _NAN3, False, 0)
+    if dvl is not None:
+        lock = bool(dvl.bottom_lock) and dvl.good_beams >= cfg.min_good_beams
+        dvl_args = (True, lock, _vec3(dvl.velocity_body) if lock else _NAN3, int(dvl.t_ns))
+    else:
+        dvl_args = (False, False, _NAN3, 0)
+    if depth is not None and depth.valid:
+        depth_args = (True, float(depth.depth_m), int(depth.t_ns))
+    else:
+        depth_args = (False, 0.0, 0)
+    f, i = np.empty(_NF), np.empty(_NI, dtype=np.int64)
+    H, v = np.empty((4, 4)), np.empty(6)
+    ins_age, dvl_age, depth_age, ins_valid, dvl_valid, depth_valid, degraded, lock = _step(
+        t_ns, mem.f, mem.i, f, i, H, v, *ins_args, *dvl_args, *depth_args, cfg._kernel_cfg)
+    state = NavState(t_ns, H, v, ins_valid and dvl_valid and depth_valid, ins_valid, dvl_valid,
+                     depth_valid, ins_age, dvl_age, depth_age, degraded, lock)
+    return state, NavMemory(f, i)
