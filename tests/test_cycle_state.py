@@ -59,3 +59,20 @@ def test_update_is_a_function_of_configuration_state_and_inputs():
     assert r4.out.mode == "pdc-fallback" and s4.operator_mode == "pdc"
     assert s4.pending_hold is None
     np.testing.assert_allclose(s4.core.reference.at(0.0).H[:3, 3], [1.0, 2.0, 3.0])
+
+
+def test_finite_sum_answers_as_the_reduction_does():
+    """The shortcut for three moderate entries never answers otherwise than np.add.reduce,
+    including sums that overflow and NaN/inf anywhere (the non-finite-input trigger's test)."""
+    import math
+
+    rng = np.random.default_rng(31)
+    big = [0.0, 1.0, -1.0, 1e300, -1e300, 9.9e299, 1e308, -1e308, 1.7e308, np.inf, -np.inf,
+           np.nan]
+    cases = [np.array(x, dtype=float) for x in
+             rng.choice(big, size=(3000, 3)).tolist() + rng.normal(0, 1e3, (300, 3)).tolist()]
+    cases += [np.array([1e308, 1e308, -1e308]), np.arange(4.0), np.array([1.0, 2.0]),
+              np.array([1.0, 2.0, 3.0])[::-1], (1.0, float("nan"), 0.0)]
+    with np.errstate(over="ignore", invalid="ignore"):  # the overflowing sums are the point
+        for x in cases:
+            assert cycle._finite_sum(x) == math.isfinite(float(np.add.reduce(x, axis=None))), x

@@ -11,6 +11,7 @@ import pytest
 
 from uvd.runtime.failsafe import (
     BUILTIN_NAMES,
+    NAV_HEALTH_FIELDS,
     Action,
     Health,
     Thresholds,
@@ -326,3 +327,8 @@ def test_helpers():
     fields = nav_health(nav(0.01, 0.2, 0.1, False, True, H))
     assert fields["depth_m"] == 4.5 and fields["bottom_lock"] is True
     Health(t_ns=1, **fields)  # they are Health fields
+    # the cycle builds Health positionally (uvd.runtime.cycle.update): the fields in this order
+    assert [f.name for f in dataclasses.fields(Health)] == [
+        "t_ns", *NAV_HEALTH_FIELDS, "nonfinite_inputs", "nonfinite_outputs", "m_hat_min_eig",
+        "theta_hat", "amplifiers_enabled", "amplifier_faults", "feedback_age_s", "bus_off",
+        "overrun_streak", "overrun_streak_exceeded", "cycle_failed", "leak", "extra", "armed"]
