@@ -48,7 +48,7 @@ def test_disarm_is_the_default_and_leaves_eta_alone():
 def test_reallocate_kills_the_thruster_and_hides_its_fault_from_the_arbiter():
     c = _cycle("reallocate")
     st = C.cycle_init(c, armed=True)
-    bus = replace(_status(1), faults=("node 1: overcurrent", "bus: send_failed"))
+    bus = _status(1)._replace(faults=("node 1: overcurrent", "bus: send_failed"))
     v = C.amplifier_source(c, st, bus, 10)
     np.testing.assert_array_equal(v.eta, [0, 1, 1, 1, 1, 1])
     assert v.faults == ("bus: send_failed",) and v.feedback_t_ns == 7

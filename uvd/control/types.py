@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -37,11 +37,12 @@ class Reference:
     preview: Reference | None = None
 
 
-@dataclass(frozen=True, slots=True)
-class Diagnostics:
+class Diagnostics(NamedTuple):
     """What a controller's or an estimator's state says about its health — the one hook
     (``ControllerSpec.diagnostics``, ``EstimatorSpec.diagnostics``) through which the cycle,
-    the failsafe arbiter and telemetry read it. ``None``: not applicable.
+    the failsafe arbiter and telemetry read it. ``None``: not applicable. Immutable (a named
+    tuple: the cycle reads the controller's every cycle, and a frozen dataclass of eleven
+    fields costs ~2 µs more to build).
 
     Attributes
     ----------

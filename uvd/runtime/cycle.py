@@ -104,9 +104,10 @@ def _modes() -> tuple[dict, dict, dict]:
     return operator, rank, action
 
 
-@dataclass(frozen=True, slots=True)
-class ActuatorStatus:
-    """What the read phase learned from the amplifiers this cycle.
+class ActuatorStatus(NamedTuple):
+    """What the read phase learned from the amplifiers this cycle (immutable: a named tuple,
+    as the cycle's other per-cycle values — built every cycle, it costs a fraction of a frozen
+    dataclass).
 
     Attributes
     ----------
@@ -140,8 +141,7 @@ class ActuatorStatus:
     healthy_feedback_t_ns: int | None = None
 
 
-@dataclass(frozen=True, slots=True)
-class CycleInputs:
+class CycleInputs(NamedTuple):
     """What the read phase gathered for one cycle (samples as :mod:`drivers.samples`).
 
     ``actuators`` is None when no amplifiers are fitted; ``leak`` None when no leak sensor
@@ -198,8 +198,7 @@ def inputs_from_record(t_ns: int, rec: Mapping[str, Any], ins=None, dvl=None, de
                        rec.get("extra"))
 
 
-@dataclass(frozen=True, slots=True)
-class CycleResult:
+class CycleResult(NamedTuple):
     """Everything the write phase needs from one update.
 
     ``state`` is the lifecycle's (ARMED, FAILSAFE, …); ``effects`` the failsafe events and
