@@ -48,8 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.samples import DepthSample, DvlSample, InsSample
-from uvd.geometry import R_to_euler, wrap_angle
-from uvd.model.lie import euler_R
+from uvd.geometry import R_to_euler, euler_to_R, wrap_angle
 
 _DEG = math.pi / 180.0
 
@@ -250,8 +249,7 @@ class Instruments:
         if self._last_dvl is not None and self._last_dr_ns is not None:
             dt = (t_ns - self._last_dr_ns) * 1e-9
             if self._last_ins is not None:
-                # uvd.geometry.euler_to_R compiled (~2 µs a DVL frame less, the same bits)
-                R = euler_R(self._last_ins.roll, self._last_ins.pitch, self._last_ins.heading)
+                R = euler_to_R(self._last_ins.roll, self._last_ins.pitch, self._last_ins.heading)
             else:
                 R = H[:3, :3]
             vw = R @ self._last_dvl.velocity_body
