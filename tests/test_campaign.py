@@ -244,9 +244,16 @@ def test_fdc_summary_counts_hours_at_risk_and_keeps_false_alarms_apart():
         "workers": 2, "wall_seconds": 1.0, "load_average_before": [1.0],
         "load_average_after": [2.0], "summary_text": text, "figures": [],
         "wall_per_run_s": [40.0, 10.0, 25.0], "code_version": "abc123"}}))
-    assert "3 of 3 runs;" in page and "**partial**" not in page
+    assert "3 of 3 runs; this instalment 3 runs" in page and "**partial**" not in page
     assert "own wall time 75 s in all (median 25 s, longest 40 s), on code version `abc123`" \
         in page
+    page = "\n".join(render({"fdc-x": {  # published again with nothing left to run
+        "description": "d", "runs_summarised": 3, "runs_in_campaign": 3, "ran_now": 0,
+        "workers": 0, "wall_seconds": 0.6, "load_average_before": [1.0],
+        "load_average_after": [2.0], "summary_text": text, "figures": [],
+        "wall_per_run_s": [40.0, 10.0, 25.0], "code_version": "abc123"}}))
+    assert "3 of 3 runs; every run from earlier instalments; every run's own wall time 75 s" \
+        in page and "this instalment" not in page
 
 
 def test_a_row_half_written_by_a_dead_campaign_is_removed_and_a_live_writers_is_kept(tmp_path):

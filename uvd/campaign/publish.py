@@ -112,10 +112,11 @@ def render(published: dict[str, dict]) -> list[str]:
                      f"{r['runs_in_campaign']} runs" + (" (**partial**: the rest of the "
                                                          "campaign was not run)" if partial
                                                          else "")
-                     + f"; this instalment {r['ran_now']} runs on {r['workers']} worker(s) in "
-                     f"{r['wall_seconds']:.0f} s wall, load average "
-                     f"{r['load_average_before'][0]:.1f} before and "
-                     f"{r['load_average_after'][0]:.1f} after" + _run_walls(r) + ".")
+                     + (f"; this instalment {r['ran_now']} runs on {r['workers']} worker(s) "
+                        f"in {r['wall_seconds']:.0f} s wall, load average "
+                        f"{r['load_average_before'][0]:.1f} before and "
+                        f"{r['load_average_after'][0]:.1f} after" if r["ran_now"] else
+                        "; every run from earlier instalments") + _run_walls(r) + ".")
         lines.append("")
         lines.append("```")
         lines.append(r["summary_text"].rstrip())
