@@ -622,7 +622,8 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
                state.nonfinite_out, diag.m_min_eig, diag.theta,
                bool(a is not None and a.enabled), amp.faults, fb_age,
                bool(a is not None and a.bus_off), inp.overrun_streak,
-               inp.overrun_streak_exceeded, False, inp.leak, inp.extra, state.lifecycle.armed)
+               inp.overrun_streak_exceeded, False,  # cycle_failed: the loop's, not the update's
+               inp.leak, inp.extra, state.lifecycle.armed)
     d, arbiter, step = _supervise(config, state, h)
     lifecycle = step.lifecycle
     effects = (*amp.effects, *d.events, *step.transitions)
