@@ -1,59 +1,7 @@
 # The Python nav_step of uvd/estimation/navigation.py as it was before the step became one
 # compiled call (55a1ac8), kept unchanged as the reference tests/test_navigation_kernel.py
 # holds the compiled step to, bit for bit. Not used by uvd.
-"""Navigation state: pose H ∈ SE(3) and body velocity v = [ν; ω] from INS, DVL and depth.
-
-Pure (numpy, plus the pure frame functions of :mod:`drivers.frames`; no I/O, no clock, no
-logging) and cheap enough to run every control cycle.
-One call of :func:`nav_step` per cycle takes the samples that arrived since the previous call
-(``None`` where none did) and returns a :class:`NavState` and the next :class:`NavMemory`.
-
-How the state is assembled (thesis App. A.1, Table A.1):
-
-* **Attitude R and ω** from the latest INS sample (PHINS III, 10 Hz): R = Rz(ψ)Ry(θ)Rx(φ)
-  (App. A), ω in the body frame. When the INS delivers no rates (``rates_valid=False``, e.g.
-  PHINS standard ASCII, which carries none) and its ``omega_body`` is not finite, ω is derived
-  here from successive attitudes, ω ≈ vee(log(R_prevᵀ R)) / Δt, and ``rates_degraded`` is set;
-  when the driver already derived them (finite ``omega_body``), they are used and flagged
-  degraded too.
-* **ν** from the latest DVL sample with bottom lock (6 Hz): ν = R_mount v_dvl − ω × r with the
-  configured mounting rotation and lever arm (:func:`drivers.frames.dvl_mount_to_body`; the
-  defaults make it the identity, which is what the lockstep instrument models deliver).
-* **x, y (north, east)** by dead reckoning, as the thesis's DVLNAV did: each locked DVL sample's
-  velocity is rotated into the world frame once, with the attitude at the sample's time (the
-  INS attitude propagated by its body rate across the gap between the two stamps), and that
-  world velocity is held until the next sample (the interval is split exactly at the sample's
-  time). Rotating the *held body* velocity by the *current* attitude instead would turn the
-  correlation of yaw rate and sway (RefTraj1 drives both at 0.21 rad/s) into a steady drift —
-  R(ω × ν)·age has a non-zero mean — where the world-frame hold only delays the position.
-* **z (depth)** from the latest valid depth sample (Digiquartz, 7 Hz).
-* **Carried to the cycle's time** (``propagate_ins``): the INS is not synchronised with the
-  control loop, so its latest sample is 0–100 ms old at a 10 Hz cycle, and that delay sits
-  inside the heading loop. With measured rates, R and ω are reported at the cycle's time t:
-  ω(t) = ω_k + ω̇ a and R(t) = R_k e^{J((ω_k + ω̇ a/2) a)}, a = t − t_k the sample's age and
-  ω̇ = (ω_k − ω_{k−1})/(t_k − t_{k−1}) from the last two samples (a first-order hold of the
-  rate, whose integral is the rotation). Only while the sample is valid, and never with rates
-  derived from attitude (differencing noisy attitudes twice would amplify the noise). An age
-  of 0 — the lockstep instruments, sampled on the tick — leaves the sample unchanged.
-
-Validity and ages: a source is valid when its latest usable sample is at most its timeout old
-(``NavConfig.*_timeout_s``); ages are seconds since the sample's ``t_ns`` (``inf`` before the
-first one). ``valid`` is the conjunction of INS, DVL and depth validity — what control needs.
-
-**Lost bottom lock.** A DVL sample without bottom lock (or with fewer good beams than
-``min_good_beams``) does not change ν; ``bottom_lock`` turns False at once. The last locked
-velocity is then *held* (zero-order hold) and dead reckoning continues with it for at most
-``dvl_timeout_s`` after the last locked sample — the DVL's normal dropout gap. After that the
-DVL is invalid: ``dvl_valid`` and ``valid`` become False, dead reckoning stops (north/east are
-frozen at their last value, not extrapolated), and ν keeps its last finite value only so
-nothing non-finite leaves this module; the consumer must act on ``valid``. Dead reckoning
-resumes with the next locked sample (the position is not corrected: a DVLNAV-style solution
-drifts, <0.5 % of distance travelled in Table A.1; use :func:`nav_set_position` to reset it
-from an external fix).
-
-Time going backwards or samples stamped after ``t_ns`` are treated as age 0 / no integration;
-nothing here raises on bad input — non-finite samples are ignored.
-"""
+"""The old Python navigation step (its rules: uvd/estimation/navigation.py's module docstring)."""
 
 from __future__ import annotations
 
@@ -65,7 +13,8 @@ import numba
 import numpy as np
 
 from drivers.frames import dvl_mount_to_body
-from uvd.model.lie import _exp_so3, euler_R, exp_so3
+from uvd.estimation.navigation import NavConfig, _carry, _eye3, _rotate, _zeros3
+from uvd.model.lie import euler_R, exp_so3
 
 if TYPE_CHECKING:  # the sample types are plain dataclasses; only their attributes are read
     from drivers.samples import DepthSample, DvlSample, InsSample
@@ -75,75 +24,6 @@ __all__ = ["NavConfig", "NavState", "NavMemory", "nav_init", "nav_step", "nav_se
 _I3 = np.eye(3)
 _Z3 = np.zeros(3)
 _INF = float("inf")
-
-
-def _eye3() -> np.ndarray:
-    return np.eye(3)
-
-
-def _zeros3() -> np.ndarray:
-    return np.zeros(3)
-
-
-@dataclass(frozen=True)
-class NavConfig:
-    """Constant configuration of :func:`nav_step`.
-
-    Attributes
-    ----------
-    ins_timeout_s, dvl_timeout_s, depth_timeout_s : float
-        Largest age (s) of a source's latest usable sample for it to count as valid. The DVL
-        one is also the longest time a lost bottom lock is bridged by holding the velocity.
-    dvl_mount_R : (3, 3) ndarray
-        Rotation DVL frame → body frame (identity: DVL axes along the body axes).
-    dvl_lever_arm_m : (3,) ndarray
-        Position of the DVL in the body frame, metres from the vehicle origin.
-    min_good_beams : int
-        Fewest good beams for a DVL sample to count as bottom lock (RDI 3-beam solution).
-    derive_rates_min_dt_s : float
-        Shortest attitude interval used to derive rates (shorter ones keep the previous ω).
-    propagate_ins : bool
-        Carry the INS attitude and rate to the cycle's time (module docstring). Off, the
-        latest sample is reported as it is, however old.
-    """
-
-    ins_timeout_s: float = 0.1
-    dvl_timeout_s: float = 1.0
-    depth_timeout_s: float = 0.5
-    dvl_mount_R: np.ndarray = field(default_factory=_eye3)
-    dvl_lever_arm_m: np.ndarray = field(default_factory=_zeros3)
-    min_good_beams: int = 3
-    derive_rates_min_dt_s: float = 1e-3
-    propagate_ins: bool = True
-
-    def __post_init__(self):
-        R = np.asarray(self.dvl_mount_R, dtype=float)
-        r = np.asarray(self.dvl_lever_arm_m, dtype=float)
-        if R.shape != (3, 3) or not np.allclose(R.T @ R, _I3, atol=1e-6) \
-                or np.linalg.det(R) < 0.0:
-            raise ValueError(f"NavConfig.dvl_mount_R must be a rotation matrix (3x3), got {R!r}")
-        if r.shape != (3,) or not np.all(np.isfinite(r)):
-            raise ValueError(f"NavConfig.dvl_lever_arm_m must be 3 finite numbers, got {r!r}")
-        for name in ("ins_timeout_s", "dvl_timeout_s", "depth_timeout_s"):
-            val = getattr(self, name)
-            if not (val > 0.0 and math.isfinite(val)):
-                raise ValueError(f"NavConfig.{name} must be a positive number, got {val!r}")
-        object.__setattr__(self, "dvl_mount_R", R)
-        object.__setattr__(self, "dvl_lever_arm_m", r)
-        # derived constants (not fields), computed once
-        has_arm = bool(np.any(r != 0.0))
-        object.__setattr__(self, "_has_lever_arm", has_arm)
-        object.__setattr__(self, "_mount_is_identity", bool(np.array_equal(R, _I3)) and not has_arm)
-
-    @property
-    def has_lever_arm(self) -> bool:
-        """True when the DVL is not at the origin (ν then depends on ω)."""
-        return self._has_lever_arm
-
-    @property
-    def mount_is_identity(self) -> bool:
-        """True when the DVL frame is the body frame at the origin (ν = v_dvl)."""
-        return self._mount_is_identity
 
 
 @dataclass(frozen=True)
@@ -248,29 +128,8 @@ def nav_set_position(mem: NavMemory, north_m: float, east_m: float) -> NavMemory
 
 
 # ------------------------------------------------------------------ compiled small-matrix steps
-# Each replaces a few numpy calls on 3-vectors (≈1 µs each in the interpreter) with one compiled
-# call; same formulas (R @ ν, the assembly of H and v; Euler → R is uvd.model.lie.euler_R).
-
-@numba.njit(cache=True)
-def _rotate(R, x):
-    """R x for a 3×3 R."""
-    y = np.empty(3)
-    for i in range(3):
-        y[i] = R[i, 0] * x[0] + R[i, 1] * x[1] + R[i, 2] * x[2]
-    return y
-
-
-@numba.njit(cache=True)
-def _carry(R, omega, omega_dot, age):
-    """(R(t), ω(t)) carried ``age`` seconds past the sample (R, ω) with ω(t) = ω + ω̇ t:
-    R e^{J(φ)} with φ = ∫ω = (ω + ω̇ age/2) age (module docstring)."""
-    phi = np.empty(3)
-    w = np.empty(3)
-    for i in range(3):
-        phi[i] = (omega[i] + 0.5 * omega_dot[i] * age) * age
-        w[i] = omega[i] + omega_dot[i] * age
-    return R @ _exp_so3(phi), w
-
+# (the configuration, R x and the carried attitude are navigation's own: unchanged by the
+# kernel; _assemble's formula follows)
 
 @numba.njit(cache=True)
 def _assemble(R, north, east, depth, nu, omega):
