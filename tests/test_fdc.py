@@ -84,6 +84,33 @@ def test_a_slow_wander_below_half_a_fault_never_alarms_and_a_fault_still_does():
     assert [d.kind for d in found] == ["flooding"] and found[0].t_ns * 1e-9 <= 20_005
 
 
+@pytest.mark.parametrize("lag_s,alarms", [(1200.0, False), (math.inf, True)])
+def test_a_steady_drift_is_followed_by_the_reference_and_a_step_is_still_found(lag_s, alarms):
+    """AID's m̂₃ and m̂₄ rose steadily (4.8 and 3.7 % an hour) over 4 fault-free hours of the
+    JHU ROV on RefTraj2 at twice Table A.1's noise, and a CUSUM against the first baseline
+    alarmed on it (uvd.fdc.detector, "The reference"). Against the reference 20 minutes
+    behind, a drift of 5 % an hour for 5.5 h (+28 %) raises nothing, while a mass step of 10 %
+    on top of it is found within a few samples; against the first baseline
+    (``reference_lag_s`` infinite) the same drift alarms."""
+    rng = np.random.default_rng(8)
+    det = VehicleDetector("v", CusumSettings(warmup_s=10.0, baseline_s=100.0,
+                                             reference_lag_s=lag_s))
+    found = []
+    for k in range(20_000):
+        drift = 0.05 * k / 3600.0
+        found += det.update(_payload(k * 1.0, rng, scale={"masses": 1 + drift}))
+        if found:
+            break
+    assert det.ready and bool(found) is alarms
+    if alarms:
+        assert found[0].kind == "flooding" and found[0].relative_change > 0.05
+        return
+    for k in range(20_000, 20_020):
+        found += det.update(_payload(k * 1.0, rng, scale={"masses": (1 + 0.05 * k / 3600) * 1.1}))
+    assert [d.kind for d in found] == ["flooding"] and found[0].t_ns * 1e-9 <= 20_005
+    assert found[0].relative_change == pytest.approx(0.1 + 0.017, abs=0.02)  # step + 20 min
+
+
 def test_a_change_from_a_baseline_of_zero_has_no_relative_change():
     """A channel whose baseline is exactly 0 (a daemon that does not estimate g) has no
     relative change: the detection says null, in strict JSON valid against uvd.fault.v1 — not

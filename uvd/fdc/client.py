@@ -115,6 +115,9 @@ def main(argv: list[str] | None = None) -> int:
                         "wall_time: same machine only)")
     p.add_argument("--warmup-s", type=float, default=CusumSettings.warmup_s)
     p.add_argument("--baseline-s", type=float, default=CusumSettings.baseline_s)
+    p.add_argument("--reference-lag-s", type=float, default=CusumSettings.reference_lag_s,
+                   help="deviations are taken from the median of the baseline_s of estimates "
+                        "that ended this long ago (it follows AID's slow drift, not a fault)")
     p.add_argument("--segment-s", type=float, default=CusumSettings.segment_s,
                    help="length of the commanded vs realised wrench residual's segments (the "
                         "baseline needs 10 of them to name a thruster)")
@@ -125,6 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     import zenoh
 
     settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s,
+                             reference_lag_s=args.reference_lag_s,
                              h=args.threshold, segment_s=args.segment_s)
     conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
