@@ -354,3 +354,29 @@ def test_the_lockstep_watch_feeds_the_detector_the_numbers_of_the_state_payload(
                 assert a.tobytes() == b.tobytes()
             compared += 1
     assert compared == 1 + 2 * v.every and v.t_fault_ns is not None
+
+
+@pytest.mark.parametrize("config,every", [("sim.toml", 1), ("sim-bluerov2.toml", 3)])
+def test_the_lockstep_watch_feeds_the_state_at_the_rate_the_daemon_publishes_it(
+        config, every, monkeypatch):
+    """uvd-fdc gets the state the daemon's Zenoh sink publishes, ``[telemetry.zenoh]
+    state_hz`` (20 Hz by the sink's own rule, uvd.links.zenoh.next_publication_ns), not
+    every cycle: each 100 ms cycle of the JHU ROV, every third 20 ms cycle of the BlueROV2."""
+    from uvd.experiments.fdc import SimVehicle, watch
+    from uvd.fdc.detector import VehicleDetector
+    from uvd.runtime.config import DEFAULT_CONFIG
+
+    fed = []
+    real = VehicleDetector.update_state
+
+    def spy(self, payload):
+        fed.append(payload["t_ns"])
+        return real(self, payload)
+
+    monkeypatch.setattr(VehicleDetector, "update_state", spy)
+    v = SimVehicle(None, 0.0, seed=1, config=DEFAULT_CONFIG.parent / config)
+    watch(v, 0.5)
+    cycle_ns = round(1e9 / v.rate)
+    assert v.k > 10 * every and len(fed) > 10  # watch ends within one batch of estimates
+    assert set(np.diff(fed)) == {every * cycle_ns}
+    assert len(fed) == len(range(0, v.k, every))

@@ -5,8 +5,9 @@ The demo's configuration (``config/sim.toml``: two-step AMBC tracking RefTraj1 o
 ``jhu-rov``) with online 6-DOF AID, started from the vehicle's own parameters (a vehicle
 identified before it dives); every 10 simulated seconds the estimate is turned into the Zenoh
 payload a fault-detection client receives (``uvd.links.zenoh.estimate_payload``) and
-fed to ``uvd-fdc``'s detector (:mod:`uvd.fdc.detector`), and so is every cycle's state payload
-(``state_payload``: velocity, attitude, per-thruster commands) with the vehicle's thruster
+fed to ``uvd-fdc``'s detector (:mod:`uvd.fdc.detector`), and so is each state payload the
+daemon would publish (``state_payload`` at ``[telemetry.zenoh] state_hz``, 20 Hz: velocity,
+attitude, per-thruster commands) with the vehicle's thruster
 matrix, from which the detector names a weak thruster. Each fault is injected into the plant
 after ``nominal`` simulated minutes (30) and watched for ``after`` minutes (30); one more run
 goes ``fault_free`` hours (4) without a fault. Figures: per fault the kind detected and the
@@ -83,6 +84,11 @@ class SimVehicle:
         self.every = int(round(EVERY_S * self.rate))
         self.t_fault_ns: int | None = None
         self.B = vehicle.B
+        #: the daemon's ``uvd/<vehicle>/state`` period (``[telemetry.zenoh] state_hz``): what
+        #: uvd-fdc receives of the cycles (the JHU ROV's every 100 ms cycle at 20 Hz; every
+        #: third 20 ms cycle of the BlueROV2)
+        hz = cfg.telemetry.zenoh.state_hz
+        self.state_period_ns = int(1e9 / hz) if hz > 0 else 0
         #: (t_ns, :class:`uvd.core.CoreOutputs`) of each cycle since the last estimate
         #: (:meth:`next_estimates`)
         self.outs: list = []
@@ -151,23 +157,28 @@ def _run_one(fault: str | None, minutes_before: float, minutes_after: float, see
 
 
 def watch(v: SimVehicle, minutes: float, progress=None, *, until_first: bool = False) -> dict:
-    """Run ``v`` for ``minutes`` simulated minutes under uvd-fdc's detector (every state
-    payload, AID's estimates); its :meth:`SimVehicle.outcome` and the detector's baseline.
+    """Run ``v`` for ``minutes`` simulated minutes under uvd-fdc's detector (the state
+    payloads the daemon publishes, at ``[telemetry.zenoh] state_hz``; AID's estimates); its
+    :meth:`SimVehicle.outcome` and the detector's baseline.
     ``until_first``: stop after the estimates' batch (``v.every`` cycles) that brought the
     first detection — every figure of :meth:`SimVehicle.outcome` but the list of detections
     is the first one's (a campaign's runs: nothing after it is judged)."""
     from uvd.fdc.detector import VehicleDetector
-    from uvd.links.zenoh import estimate_payload, fault_report
+    from uvd.links.zenoh import estimate_payload, fault_report, next_publication_ns
 
     fault = v.fault
     det = VehicleDetector(v.vehicle_name, B=v.B)
     n = int(round(minutes * 60.0 * v.rate))
     detections = []
     report = int(1800 * v.rate)
+    next_state = 0
     while v.next_k < n:
         records = v.next_estimates()
         found = []
         for t_ns, out in v.outs:
+            if not v.state_period_ns or t_ns < next_state:
+                continue  # as the daemon's Zenoh sink publishes the state: at state_hz
+            next_state = next_publication_ns(t_ns, v.state_period_ns)
             # the state payload's fields the detector reads (uvd.state.v1: ``t_ns``, ``v``,
             # ``R``, ``thrust``), as the arrays whose numbers its JSON carries: the payload's
             # other fields and its JSON conversion, built every cycle, were read by nothing

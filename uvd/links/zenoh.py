@@ -87,6 +87,12 @@ def _rpy(R) -> list[float]:
     return list(R_to_euler(np.asarray(R, dtype=float).reshape(3, 3)))
 
 
+def next_publication_ns(t_ns: int, period_ns: int) -> int:
+    """When a stream published at ``t_ns`` with ``period_ns`` (``state``, ``health``) is
+    next due: a period on, less a tenth, so that a cycle a little early is not skipped."""
+    return t_ns + period_ns - period_ns // 10
+
+
 class ZenohSink:
     """Publish the hub's records under ``uvd/<vehicle>/…`` (module docstring).
 
@@ -233,13 +239,12 @@ class ZenohSink:
             t_ns = int(r.get("t_ns") or time.monotonic_ns())
             if kind == "cycle":
                 if self.state_period_ns and t_ns >= self._next_state:
-                    self._next_state = t_ns + self.state_period_ns - self.state_period_ns // 10
+                    self._next_state = next_publication_ns(t_ns, self.state_period_ns)
                     key = f"{self.prefix}/state"
                     items.append((key, ENCODINGS["state"], self._stamp(key, t_ns,
                                                                        state_payload(r))))
                 if self.health_period_ns and t_ns >= self._next_health:
-                    self._next_health = t_ns + self.health_period_ns \
-                        - self.health_period_ns // 10
+                    self._next_health = next_publication_ns(t_ns, self.health_period_ns)
                     key = f"{self.prefix}/health"
                     items.append((key, ENCODINGS["health"], self._stamp(
                         key, t_ns, _health(r, self.dropped() if self.dropped else 0))))
