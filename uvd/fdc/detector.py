@@ -10,7 +10,8 @@ deviation σ the sum of log-likelihood ratios is
 
     S⁺ = max(0, S⁺ + (δ/σ²)(d − δ/2)),   S⁻ = max(0, S⁻ + (δ/σ²)(−d − δ/2)),
 
-d = x − μ the deviation from the baseline, and an alarm S > h comes at most once in about eʰ
+d = x − μ the deviation from the reference (the baseline's median μ, then one that follows
+AID's slow drift: "The reference" below), and an alarm S > h comes at most once in about eʰ
 fault-free samples (Lorden; h = 15: one in 3·10⁶ estimates, a year of one every 10 s).
 
 δ is the size of the fault to find, in the parameter's own units, not a multiple of the
@@ -43,6 +44,13 @@ Measured on those recordings (CUSUM replayed on AID's estimates every 10 s): the
 change at the edge of δ/2 that the old baseline's drift used to push over is missed (a
 buoyancy +5 N, a mass +5 % on RefTraj2 at noise 2×), and a slow leak that changes a
 parameter by less than δ/2 in half an hour is never found. σ and δ stay the baseline's.
+What it does not mend: on RefTraj1 at noise ≥ 1.85× b̂₃ rises ~3 % between minutes 55 and 85
+and falls back by minute 105, on two seeds alike (the trajectory's phase, its size growing
+with the noise: +0.7 % at 0.5×, +1.3 % at 1×); the first baseline alarmed on the rise
+(+2.6 %, 68–70 min), the reference that followed it alarms on the fall (−2.5 %, 104–109 min,
+confidence 1.01–1.05). b's δ (5 % of ‖b‖) is what finds a weak thruster (η 0.8 moves b̂₃
++10 %); 10 % trades that case for a mass₅ excursion of the same phase (−5.6 % at 117 min), so
+it is left at 5 %.
 
 σ. The estimates are autocorrelated, so n of them carry the information of n/τ independent
 ones, τ = 1 + 2 Σ ρₗ the integrated autocorrelation time (Sokal's window: the sum stops at the
