@@ -51,6 +51,7 @@ class SimVehicle:
         ``[control] reference`` than the configuration's (``"reftraj2"``…)."""
         from sim_bridge.instruments.models import InstrumentConfig
         from uvd.estimation.aid import aid6_estimator
+        from uvd.links.zenoh import publication_period_ns
         from uvd.lockstep import Lockstep, LockstepConfig
         from uvd.runtime.build import build_core, start_pose
         from uvd.runtime.config import DEFAULT_CONFIG, load_config
@@ -87,8 +88,7 @@ class SimVehicle:
         #: the daemon's ``uvd/<vehicle>/state`` period (``[telemetry.zenoh] state_hz``): what
         #: uvd-fdc receives of the cycles (the JHU ROV's every 100 ms cycle at 20 Hz; every
         #: third 20 ms cycle of the BlueROV2)
-        hz = cfg.telemetry.zenoh.state_hz
-        self.state_period_ns = int(1e9 / hz) if hz > 0 else 0
+        self.state_period_ns = publication_period_ns(cfg.telemetry.zenoh.state_hz)
         #: (t_ns, :class:`uvd.core.CoreOutputs`) of each cycle since the last estimate
         #: (:meth:`next_estimates`)
         self.outs: list = []

@@ -87,6 +87,11 @@ def _rpy(R) -> list[float]:
     return list(R_to_euler(np.asarray(R, dtype=float).reshape(3, 3)))
 
 
+def publication_period_ns(hz: float) -> int:
+    """The period of a stream published at ``hz`` (``state_hz``, ``health_hz``); 0: off."""
+    return int(1e9 / hz) if hz > 0 else 0
+
+
 def next_publication_ns(t_ns: int, period_ns: int) -> int:
     """When a stream published at ``t_ns`` with ``period_ns`` (``state``, ``health``) is
     next due: a period on, less a tenth, so that a cycle a little early is not skipped."""
@@ -126,8 +131,8 @@ class ZenohSink:
         self.vehicle = vehicle
         self.prefix = f"uvd/{vehicle}"
         self.config = config
-        self.state_period_ns = int(1e9 / state_hz) if state_hz > 0 else 0
-        self.health_period_ns = int(1e9 / health_hz) if health_hz > 0 else 0
+        self.state_period_ns = publication_period_ns(state_hz)
+        self.health_period_ns = publication_period_ns(health_hz)
         self.configuration = dict(configuration or {})
         self.dropped = dropped
         self._worker = DaemonWorker("uvd-sink-zenoh")
