@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 __all__ = ["FrozenModel", "Segment", "SegmentIntegrator", "Explanation", "explain",
@@ -111,31 +112,76 @@ class Segment:
         return self.t1 - self.t0
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b of 3-vectors: numpy.cross's very products and differences (bit for bit) without
-    its generality, which costs it ~10 µs a call — four of them a state sample."""
-    a0, a1, a2 = a
-    b0, b1, b2 = b
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+_R = 21  # integrands before the thrust commands: ad (6), drag (6), gravity (6), r (3)
 
 
-def _ad_T(v: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """ad_vᵀ x for v = [ν; ω], x = [p; h]: [p × ω; p × ν + h × ω] (transpose of (2.4))."""
-    nu, w, p, h = v[:3], v[3:], x[:3], x[3:]
-    return np.concatenate([_cross(p, w), _cross(p, nu) + _cross(h, w)])
+@numba.njit(cache=True)
+def _finite(v, R, f) -> bool:
+    """Every number of v, R and f is finite (one compiled call)."""
+    for x in v:
+        if not np.isfinite(x):
+            return False
+    for i in range(R.shape[0]):
+        for j in range(R.shape[1]):
+            if not np.isfinite(R[i, j]):
+                return False
+    for x in f:
+        if not np.isfinite(x):
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _integrands_into(out, M, D_flat, g, b, v, R, f):
+    """The segment's integrands at one sample, into ``out`` (21 + N): ad_vᵀ(Mv) (6, the
+    transpose of (2.4): [p × ω; p × ν + h × ω] for Mv = [p; h]), (Σᵢ|vᵢ|Dᵢ)v (6), G(R) (6:
+    [g r; b × r], r = Rᵀe₃ the third row of R), r (3) and f (N). One compiled call: the
+    formulas' own products, summed in index order."""
+    mv = np.zeros(6)
+    for i in range(6):
+        acc = 0.0
+        for j in range(6):
+            acc += M[i, j] * v[j]
+        mv[i] = acc
+    nu0, nu1, nu2, w0, w1, w2 = v[0], v[1], v[2], v[3], v[4], v[5]
+    p0, p1, p2, h0, h1, h2 = mv[0], mv[1], mv[2], mv[3], mv[4], mv[5]
+    out[0] = p1 * w2 - p2 * w1
+    out[1] = p2 * w0 - p0 * w2
+    out[2] = p0 * w1 - p1 * w0
+    out[3] = (p1 * nu2 - p2 * nu1) + (h1 * w2 - h2 * w1)
+    out[4] = (p2 * nu0 - p0 * nu2) + (h2 * w0 - h0 * w2)
+    out[5] = (p0 * nu1 - p1 * nu0) + (h0 * w1 - h1 * w0)
+    for i in range(6):
+        acc = 0.0
+        for j in range(6):
+            a = abs(v[j])
+            for k in range(6):
+                acc += D_flat[i, 6 * j + k] * (a * v[k])
+        out[6 + i] = acc
+    r0, r1, r2 = R[2, 0], R[2, 1], R[2, 2]
+    out[12] = g * r0
+    out[13] = g * r1
+    out[14] = g * r2
+    out[15] = b[1] * r2 - b[2] * r1
+    out[16] = b[2] * r0 - b[0] * r2
+    out[17] = b[0] * r1 - b[1] * r0
+    out[18] = r0
+    out[19] = r1
+    out[20] = r2
+    for i in range(f.shape[0]):
+        out[_R + i] = f[i]
 
 
 def state_sample(v, R, f, n_thrusters: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A state payload's v (6), R (3 × 3 or 9 numbers) and per-thruster commands f (N) as
-    arrays; a ValueError naming what is wrong otherwise."""
+    finite arrays; a ValueError naming what is wrong otherwise."""
     try:
         v = np.asarray(v, dtype=float)
         R = np.asarray(R, dtype=float).reshape(3, 3)
         f = np.asarray(f, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"state sample: v, R or thrust is not numbers ({exc})") from exc
-    if v.shape != (6,) or f.shape != (n_thrusters,) or not (
-            np.isfinite(v).all() and np.isfinite(R).all() and np.isfinite(f).all()):
+    if v.shape != (6,) or f.shape != (n_thrusters,) or not _finite(v, R, f):
         raise ValueError("state sample: v must be 6 finite numbers, R 3×3 finite, thrust "
                          f"{n_thrusters} finite numbers")
     return v, R, f
@@ -158,35 +204,26 @@ class SegmentIntegrator:
         self._prev = None   # (t, the integrands at t) of the previous sample
         self._acc = None
 
-    def _integrands(self, v: np.ndarray, R: np.ndarray, f: np.ndarray) -> tuple:
-        m = self.model
-        ad = _ad_T(v, m.M @ v)
-        drag = m.D_flat @ np.multiply.outer(np.abs(v), v).ravel()
-        r = R[2]
-        grav = np.concatenate([m.g * r, _cross(m.b, r)])
-        return (ad, drag, grav, r, f)
-
     def add(self, t: float, v, R, f) -> Segment | None:
-        v, R, f = state_sample(v, R, f, self.model.B.shape[1])
-        cur = self._integrands(v, R, f)
+        m = self.model
+        v, R, f = state_sample(v, R, f, m.B.shape[1])
+        cur = np.empty(_R + f.shape[0])
+        _integrands_into(cur, m.M, m.D_flat, m.g, m.b, v, R, f)
         if self._prev is None or not 0.0 < t - self._prev[0] <= self.max_gap_s:
             self._start, self._prev = (t, v), (t, cur)
-            self._acc = [np.zeros_like(x) for x in cur]
+            self._acc = np.zeros_like(cur)
             return None
-        h = 0.5 * (t - self._prev[0])
-        for acc, a, b in zip(self._acc, self._prev[1], cur, strict=True):
-            acc += h * (a + b)
+        self._acc += 0.5 * (t - self._prev[0]) * (self._prev[1] + cur)  # the trapezoid
         self._prev = (t, cur)
         if t - self._start[0] < self.length_s - 1e-9:
             return None
-        m = self.model
-        ad, drag, grav, r, F = self._acc
-        dv = v - self._start[1]
-        inertial = m.M @ dv - ad
+        acc = self._acc
+        ad, drag, grav, r, F = acc[:6], acc[6:12], acc[12:18], acc[18:_R], acc[_R:]
+        inertial = m.M @ (v - self._start[1]) - ad
         e = inertial - drag - grav - m.B @ F
         seg = Segment(self._start[0], t, e, F.copy(), r.copy(), drag.copy(), inertial)
         self._start = (t, v)
-        self._acc = [np.zeros_like(x) for x in cur]
+        self._acc = np.zeros_like(cur)
         return seg
 
 
