@@ -212,3 +212,26 @@ def test_a_malformed_state_or_theta_is_refused_and_the_detector_goes_on():
         det.update_state({"t_ns": int(round(t * 1e9)), "v": v.tolist(), "R": R.tolist(),
                           "thrust": f.tolist()})
     assert det.ready and det.explains and len(det.segments) >= 3
+
+
+def test_warm_compiles_what_a_client_s_json_samples_use():
+    """uvd-fdc calls warm() at start: a state payload decoded from JSON (lists) then needs no
+    new compiled specialisation (no ~1.5 s stall at the first sample or when the baseline
+    ends). In a fresh interpreter, so that no other test has compiled it already."""
+    import json
+    import subprocess
+    import sys
+    code = """
+from uvd.fdc import residual as r
+from tests.test_fdc_residual import THETA, B
+r.warm()
+before = (len(r._finite.signatures), len(r._integrands_into.signatures))
+integ = r.SegmentIntegrator(r.FrozenModel.from_theta(THETA, B))
+for t in (0.0, 0.1):
+    integ.add(t, [0.1] * 6, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], [1.0] * 6)
+print(json.dumps([before, (len(r._finite.signatures), len(r._integrands_into.signatures))]))
+"""
+    out = subprocess.run([sys.executable, "-c", "import json" + code], capture_output=True,
+                         text=True, timeout=120, check=True).stdout.splitlines()[-1]
+    before, after = json.loads(out)
+    assert before == after == [1, 1], out  # one specialisation each, compiled by warm()

@@ -127,6 +127,9 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     import zenoh
 
+    from uvd.fdc.residual import warm
+    warm()  # the residual's kernels before any sample waits on them
+
     settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s,
                              reference_lag_s=args.reference_lag_s,
                              h=args.threshold, segment_s=args.segment_s)

@@ -49,7 +49,7 @@ import numba
 import numpy as np
 
 __all__ = ["FrozenModel", "Segment", "SegmentIntegrator", "Explanation", "explain",
-           "explanations", "state_sample"]
+           "explanations", "state_sample", "warm"]
 
 
 @dataclass(frozen=True)
@@ -170,6 +170,15 @@ def _integrands_into(out, M, D_flat, g, b, v, R, f):
     out[20] = r2
     for i in range(f.shape[0]):
         out[_R + i] = f[i]
+
+
+def warm() -> None:
+    """Compile the kernels (or load them from numba's cache) for a state payload's arrays now,
+    rather than inside the first sample's handling (~1.5 s without a cache)."""
+    m = FrozenModel.from_theta(np.zeros(241), np.zeros((6, 1)))  # the arrays' own layouts
+    v, R, f = state_sample([0.0] * 6, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                           [0.0], 1)
+    _integrands_into(np.empty(_R + 1), m.M, m.D_flat, m.g, m.b, v, R, f)
 
 
 def state_sample(v, R, f, n_thrusters: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
