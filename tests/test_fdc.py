@@ -111,6 +111,32 @@ def test_a_steady_drift_is_followed_by_the_reference_and_a_step_is_still_found(l
     assert found[0].relative_change == pytest.approx(0.1 + 0.017, abs=0.02)  # step + 20 min
 
 
+def test_an_excursion_that_returns_to_the_baseline_is_not_a_fault_and_a_step_still_is():
+    """AID's b̂₃ of the JHU ROV on RefTraj1 at ~2× Table A.1's noise rises ~3 % in the first
+    hour and a half and comes back (uvd.fdc.detector, "The reference"): the reference follows
+    the rise, and the return, a deviation from the reference but none from the baseline, alarmed
+    in 5 of the 7 fdc-false-alarms runs of that kind. Here the masses rise 8 % over 2.7 h, slowly
+    enough for the reference, and fall back to the baseline in 10 minutes — beyond δ/2 from the
+    reference (checked), inside the interval between baseline and reference: nothing; a mass
+    step of −10 % afterwards is found within three samples."""
+    rng = np.random.default_rng(12)
+    det = VehicleDetector("v", CusumSettings(warmup_s=10.0, baseline_s=100.0,
+                                             reference_lag_s=1200.0))
+    found, below_ref = [], 0
+    for k in range(14_000):
+        up = 0.08 * min(max(k - 300, 0) / 9600.0, 1.0)
+        down = min(max(k - 9900, 0) / 600.0, 1.0)
+        p = _payload(k * 1.0, rng, scale={"masses": 1 + up * (1 - down)})
+        found += det.update(p)
+        if det.ready and p["masses"][2] - det.ref["mass3"] < -det.delta["mass3"] / 2:
+            below_ref += 1  # where a deviation from the reference alone would accumulate
+    assert det.ready and found == [] and below_ref > 300
+    for k in range(14_000, 14_020):
+        found += det.update(_payload(k * 1.0, rng, scale={"masses": 0.9}))
+    assert [d.kind for d in found] == ["lost-part"] and found[0].t_ns * 1e-9 <= 14_003
+    assert found[0].relative_change == pytest.approx(-0.1, abs=0.02)
+
+
 def test_a_change_from_a_baseline_of_zero_has_no_relative_change():
     """A channel whose baseline is exactly 0 (a daemon that does not estimate g) has no
     relative change: the detection says null, in strict JSON valid against uvd.fault.v1 — not
