@@ -13,8 +13,16 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from uvd.fdc.detector import CusumSettings, VehicleDetector, autocorrelation_time, channels_of
+from uvd.fdc.detector import (
+    CusumSettings,
+    VehicleDetector,
+    autocorrelation_time,
+    channels_of,
+    deviation,
+)
 from uvd.netports import free_port
 
 MU = {"masses": [640, 800, 1050, 96, 146, 108], "drags": [-1250, -1420, -3080, -726, -781, -467],
@@ -109,6 +117,19 @@ def test_a_steady_drift_is_followed_by_the_reference_and_a_step_is_still_found(l
         found += det.update(_payload(k * 1.0, rng, scale={"masses": (1 + 0.05 * k / 3600) * 1.1}))
     assert [d.kind for d in found] == ["flooding"] and found[0].t_ns * 1e-9 <= 20_005
     assert found[0].relative_change == pytest.approx(0.1 + 0.017, abs=0.02)  # step + 20 min
+
+
+@given(*(st.floats(-1e6, 1e6) for _ in range(3)))
+def test_the_deviation_is_the_distance_beyond_both_baseline_and_reference(x, mu, ref):
+    """0 between μ and the reference; outside, the signed distance to the nearer of them — so
+    never larger than either deviation alone, with their sign; x − μ when they coincide."""
+    d = deviation(x, mu, ref)
+    if min(mu, ref) <= x <= max(mu, ref):
+        assert d == 0.0
+    else:
+        assert d == min(x - mu, x - ref, key=abs)
+        assert np.sign(d) == np.sign(x - mu) == np.sign(x - ref) != 0
+    assert deviation(x, mu, mu) == x - mu
 
 
 def test_an_excursion_that_returns_to_the_baseline_is_not_a_fault_and_a_step_still_is():
