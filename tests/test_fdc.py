@@ -134,7 +134,7 @@ def test_the_deviation_is_the_distance_beyond_both_baseline_and_reference(x, mu,
 
 def test_an_excursion_that_returns_to_the_baseline_is_not_a_fault_and_a_step_still_is():
     """AID's b̂₃ of the JHU ROV on RefTraj1 at ~2× Table A.1's noise rises ~3 % in the first
-    hour and a half and comes back (uvd.fdc.detector, "The reference"): the reference follows
+    hour and a half and comes back (uvd.fdc.detector, "The interval"): the reference follows
     the rise, and the return, a deviation from the reference but none from the baseline, alarmed
     in 5 of the 7 fdc-false-alarms runs of that kind. Here the masses rise 8 % over 2.7 h, slowly
     enough for the reference, and fall back to the baseline in 10 minutes — beyond δ/2 from the
