@@ -256,6 +256,60 @@ def test_fdc_summary_counts_hours_at_risk_and_keeps_false_alarms_apart():
         in page and "this instalment" not in page
 
 
+
+def test_the_summary_says_what_each_fault_kind_was_named_as():
+    from uvd.campaign.summary import format_summary, named_as, summarize_fdc
+
+    def row(fault, detected, kind=None, right_thruster=None):
+        return {"error": None, "in_vehicle": "jhu-rov", "in_fault": fault, "in_fault_size": 0.5,
+                "out_simulated_h": 1.0, "out_false_alarms": 0, "out_monitored_h": 0.5,
+                "out_detected": detected, "out_right_kind": kind == {"mass": "flooding"}.get(
+                    fault, fault), "out_delay_s": 30.0 if detected else None,
+                "out_first_kind": kind, "out_right_thruster": right_thruster}
+    rows = [row("mass", True, "flooding"), row("mass", True, "thruster"),
+            row("mass", True, "flooding"), row("mass", True, "drag-decrease"),
+            row("mass", False), row("thruster", True, "thruster", True),
+            row("thruster", True, "thruster", False), row("thruster", True, "buoyancy", False)]
+    assert named_as(rows[:5]) == {"flooding": 2, "drag-decrease": 1, "thruster": 1}
+    assert list(named_as(rows[:5])) == ["flooding", "drag-decrease", "thruster"]
+    assert named_as(rows[5:]) == {"buoyancy": 1, "thruster": 1, "thruster (another)": 1}
+    s = summarize_fdc(rows)
+    assert s["faults"]["mass"]["right_kind"]["k"] == 2
+    assert s["faults"]["mass"]["named_as"] == {"flooding": 2, "drag-decrease": 1, "thruster": 1}
+    text = format_summary("fdc", s)
+    assert "    named as: flooding 2, drag-decrease 1, thruster 1" in text
+    assert "    named as: buoyancy 1, thruster 1, thruster (another) 1" in text
+
+
+@DASK[0]
+@DASK[1]
+def test_published_again_with_nothing_to_run_keeps_the_instalment_that_ran_the_rows(tmp_path):
+    """A re-summary of finished rows (a new figure of the summary) keeps how long the rows took;
+    a changed row set does not inherit it."""
+    import json
+
+    from uvd.campaign.publish import publish
+
+    spec_file = tmp_path / "c.toml"
+    spec_file.write_text('[campaign]\nname = "again"\nkind = "control"\n[axes]\n'
+                         'controller = "pdc"\nduration_h = 0.005\nwindow_min = 0.1\n'
+                         'seed = [0, 1]\n')
+    work, res = tmp_path / "work", tmp_path / "results"
+    first = publish(str(spec_file), work, res, workers=1, progress=lambda s: None)
+    assert first["ran_now"] == 2 and first["wall_seconds"] > 0
+    path = res / f"campaign-{first['campaign']}.json"
+    again = publish(str(spec_file), work, res, workers=1, progress=lambda s: None)
+    kept = json.loads(path.read_text())
+    for k in ("ran_now", "workers", "wall_seconds", "load_average_before"):
+        assert again[k] == kept[k] == first[k], k
+    assert kept["summary"] == first["summary"]
+    # the stored JSON summarised other rows (here: one run's wall time differs): not kept
+    kept["wall_per_run_s"][0] += 1.0
+    path.write_text(json.dumps(kept))
+    third = publish(str(spec_file), work, res, workers=1, progress=lambda s: None)
+    assert (third["ran_now"], third["workers"]) == (0, 0)  # its own: nothing ran
+
+
 def test_a_row_half_written_by_a_dead_campaign_is_removed_and_a_live_writers_is_kept(tmp_path):
     rows = tmp_path / "rows"
     rows.mkdir()

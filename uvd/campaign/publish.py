@@ -18,8 +18,9 @@ PUBLISHED = ("fdc-false-alarms", "fdc-detection", "control-model-error")
 
 def publish(name: str, work: Path, results_dir: Path, *, workers: int | None = None,
             limit: int | None = None, progress: Callable[[str], None] = print) -> dict:
-    """Run what is missing of campaign ``name`` (at most ``limit`` runs now) in ``work``, then
-    write ``results_dir/campaign-<name>.parquet`` (the rows so far, in run order), ``.json``
+    """Run what is missing of campaign ``name`` — a built-in one, or a campaign file, whose
+    ``[campaign] name`` then names what is written — at most ``limit`` runs now, in ``work``;
+    then write ``results_dir/campaign-<name>.parquet`` (the rows so far, in run order), ``.json``
     (the summary, the counts, wall time and the machine's load) and the figures in
     ``results_dir/campaign-<name>/``. Returns the JSON's content."""
     from uvd.campaign import builtin
@@ -29,8 +30,9 @@ def publish(name: str, work: Path, results_dir: Path, *, workers: int | None = N
     from uvd.campaign.summary import format_summary, summarize
 
     spec = builtin.resolve(name)
+    source, name = name, spec.name
     load0 = os.getloadavg()
-    progress(f"[results] uvd campaign {name} --out {work}"
+    progress(f"[results] uvd campaign {source} --out {work}"
              + (f" --limit {limit}" if limit else ""))
 
     def on_row(row: dict, done: int, todo: int) -> None:
@@ -54,9 +56,32 @@ def publish(name: str, work: Path, results_dir: Path, *, workers: int | None = N
            "code_version": code_version(), "summary": summary,
            "summary_text": format_summary(spec.kind, summary),
            "figures": [f.name for f in figs]}
-    (results_dir / f"campaign-{name}.json").write_text(json.dumps(out, indent=1,
-                                                                  default=float) + "\n")
+    path = results_dir / f"campaign-{name}.json"
+    out.update(_instalment_kept(path, out))
+    path.write_text(json.dumps(out, indent=1, default=float) + "\n")
     return out
+
+
+#: the figures of the instalment that ran a campaign's runs (what docs/RESULTS.md quotes)
+_INSTALMENT = ("ran_now", "workers", "wall_seconds", "load_average_before", "load_average_after")
+
+
+def _instalment_kept(path: Path, out: dict) -> dict:
+    """Published again with nothing run now (a new summary or figures of the same rows): the
+    instalment figures of the JSON already there, when it summarised the very same rows (the
+    code version, the count and every run's own wall time alike) — so a re-summary keeps how
+    long the rows took instead of recording its own second. Else nothing."""
+    if out["ran_now"] or not path.exists():
+        return {}
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    same = all(old.get(k) == out[k] for k in ("code_version", "runs_summarised",
+                                                 "wall_per_run_s"))
+    if not same or not old.get("ran_now") or any(k not in old for k in _INSTALMENT):
+        return {}
+    return {k: old[k] for k in _INSTALMENT}
 
 
 def run_published(results_dir: Path, work_root: Path = Path("campaigns"), *,

@@ -89,7 +89,8 @@ def _size_key(kind: str, r: dict) -> float:
 
 def summarize_fdc(rows: list[dict]) -> dict:
     """False alarms per vehicle-hour (every run's hours at risk before any fault), and per fault
-    kind and size: detection, right kind, right thruster, delay."""
+    kind and size: detection, right kind, right thruster, delay; per kind, what its detected
+    faults were named as (:func:`named_as`)."""
     ok = _ok(rows)
     alarms = sum(int(r["out_false_alarms"]) for r in ok)
     hours = sum(float(r["out_monitored_h"]) for r in ok)
@@ -125,11 +126,27 @@ def summarize_fdc(rows: list[dict]) -> dict:
     return out
 
 
+def named_as(rows: list[dict]) -> dict[str, int]:
+    """What the detected faults among ``rows`` were named as: the first alarm's kind, counted,
+    most often first (ties by name) — a thruster fault named after another thruster counts as
+    ``"thruster (another)"``. Where a kind is named wrongly, this says what it is taken for."""
+    counts: dict[str, int] = {}
+    for r in rows:
+        if not r["out_detected"]:
+            continue
+        name = str(r.get("out_first_kind"))
+        if name == "thruster" and r["in_fault"] == "thruster" and not r["out_right_thruster"]:
+            name = "thruster (another)"
+        counts[name] = counts.get(name, 0) + 1
+    return dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
+
+
 def _detection_block(kind: str, rows: list[dict]) -> dict:
     det = [r for r in rows if r["out_detected"]]
     block = {"detected": proportion(len(det), len(rows)),
              "right_kind": proportion(sum(1 for r in rows if r["out_right_kind"]), len(rows)),
-             "delay_s": median_ci([r["out_delay_s"] for r in det])}
+             "delay_s": median_ci([r["out_delay_s"] for r in det]),
+             "named_as": named_as(rows)}
     if kind in ("thruster", "all"):
         thr = [r for r in rows if r["in_fault"] == "thruster"]
         block["right_thruster"] = proportion(sum(1 for r in thr if r["out_right_thruster"]),
@@ -205,6 +222,9 @@ def format_summary(kind: str, s: dict) -> str:
                          + (f", right thruster {_ci(e['right_thruster'], '{:.0%}')}"
                             if "right_thruster" in e else "")
                          + f", median delay {_ci(e['delay_s'], '{:.0f}')} s")
+            if e.get("named_as"):
+                lines.append("    named as: " + ", ".join(f"{k} {n}"
+                                                         for k, n in e["named_as"].items()))
             for b in e["by_size"]:
                 lines.append(f"    size {b['size_low']:.3g}–{b['size_high']:.3g}: detected "
                              f"{_ci(b['detected'], '{:.0%}')} of {b['detected']['n']}, right "
