@@ -35,9 +35,12 @@ def publish(name: str, work: Path, results_dir: Path, *, workers: int | None = N
     progress(f"[results] uvd campaign {source} --out {work}"
              + (f" --limit {limit}" if limit else ""))
 
+    t0 = time.perf_counter()
+
     def on_row(row: dict, done: int, todo: int) -> None:
         if done % 10 == 0 or done == todo:
-            progress(f"  {name}: {done} / {todo} runs")
+            progress(f"  {name}: {done} / {todo} runs"
+                     + _pace(time.perf_counter() - t0, done, todo))
 
     res = run_campaign(spec, work, workers=workers, on_row=on_row, limit=limit)
     keys = [run_key(spec.kind, i, code_version()) for i in spec.runs]
@@ -60,6 +63,17 @@ def publish(name: str, work: Path, results_dir: Path, *, workers: int | None = N
     out.update(_instalment_kept(path, out))
     path.write_text(json.dumps(out, indent=1, default=float) + "\n")
     return out
+
+
+def _pace(elapsed_s: float, done: int, todo: int) -> str:
+    """``", 12 min, ~1 h 50 min left"``: the time so far and what is left at the pace so far
+    (runs differ in length, so an estimate; nothing when all are done)."""
+    def hm(s: float) -> str:
+        m = round(s / 60.0)
+        return f"{m // 60} h {m % 60} min" if m >= 60 else f"{m} min"
+    left = "" if done >= todo or done <= 0 else \
+        f", ~{hm(elapsed_s / done * (todo - done))} left"
+    return f", {hm(elapsed_s)}{left}"
 
 
 #: the figures of the instalment that ran a campaign's runs (what docs/RESULTS.md quotes)
