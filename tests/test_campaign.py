@@ -281,6 +281,26 @@ def test_the_summary_says_what_each_fault_kind_was_named_as():
     assert "    named as: buoyancy 1, thruster 1, thruster (another) 1" in text
 
 
+def test_the_fdc_figures_include_what_each_fault_kind_was_named_as(tmp_path):
+    from uvd.campaign.report import write_figures
+    from uvd.campaign.summary import summarize_fdc
+
+    def row(fault, kind, **more):
+        return {"error": None, "in_vehicle": "jhu-rov", "in_fault": fault, "in_fault_size": 0.5,
+                "out_simulated_h": 1.0, "out_false_alarms": 0, "out_monitored_h": 0.5,
+                "out_detected": kind is not None, "out_right_kind": kind == "flooding",
+                "out_delay_s": 30.0 if kind else None, "out_first_kind": kind, **more}
+    faults = [row("mass", "flooding"), row("mass", "thruster"), row("mass", None)]
+    s = summarize_fdc(faults)
+    files = write_figures("fdc", s, faults, tmp_path / "with")
+    assert [f.name for f in files] == ["detection-by-size.png", "detection-delay.png",
+                                       "named-as.png", "false-alarms.png"]
+    assert all(f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in files)
+    free = [row("none", None), row("none", None)]  # a fault-free campaign: no faults to name
+    files = write_figures("fdc", summarize_fdc(free), free, tmp_path / "free")
+    assert [f.name for f in files] == ["false-alarms.png"]
+
+
 @DASK[0]
 @DASK[1]
 def test_published_again_with_nothing_to_run_keeps_the_instalment_that_ran_the_rows(tmp_path):

@@ -1,7 +1,8 @@
 """``uvd campaign SPEC --report``: PNG figures of a campaign's summary (matplotlib, Agg) —
 for fdc, the detection probability and right-kind probability per fault size with their
-Clopper–Pearson intervals, the detection delays, the false-alarm rate with its bounds; for
-control, the tracking MNE of each controller against the model error."""
+Clopper–Pearson intervals, the detection delays, what each fault kind was named as, the
+false-alarm rate with its bounds; for control, the tracking MNE of each controller against the
+model error."""
 
 from __future__ import annotations
 
@@ -57,6 +58,9 @@ def fdc_figures(summary: dict, rows: list[dict], out: Path) -> list[Path]:
         files.append(out / "detection-delay.png")
         fig.savefig(files[-1], dpi=110)
         plt.close(fig)
+        named = {k: summary["faults"][k].get("named_as") or {} for k in kinds}
+        if any(named.values()):
+            files.append(_named_as_figure(plt, named, out / "named-as.png"))
     fa = summary["false_alarms_by_vehicle"]
     if fa:
         fig, ax = plt.subplots(figsize=(5, 3.2))
@@ -74,6 +78,37 @@ def fdc_figures(summary: dict, rows: list[dict], out: Path) -> list[Path]:
         fig.savefig(files[-1], dpi=110)
         plt.close(fig)
     return files
+
+
+def _named_as_figure(plt, named: dict[str, dict[str, int]], path: Path) -> Path:
+    """The injected kinds (rows) against what their detections were named as (columns): the
+    share of each row's detections, the count written in each cell."""
+    import numpy as np
+    cols: list[str] = []
+    for counts in named.values():
+        cols += [c for c in counts if c not in cols]
+    kinds = list(named)
+    share = np.zeros((len(kinds), len(cols)))
+    for i, k in enumerate(kinds):
+        total = sum(named[k].values())
+        for j, c in enumerate(cols):
+            share[i, j] = named[k].get(c, 0) / total if total else 0.0
+    fig, ax = plt.subplots(figsize=(1.2 * len(cols) + 2.4, 0.6 * len(kinds) + 1.6))
+    ax.imshow(share, cmap="Greys", vmin=0.0, vmax=1.0, aspect="auto")
+    for i, k in enumerate(kinds):
+        for j, c in enumerate(cols):
+            n = named[k].get(c, 0)
+            if n:
+                ax.text(j, i, str(n), ha="center", va="center", fontsize=9,
+                        color="white" if share[i, j] > 0.5 else "black")
+    ax.set_xticks(range(len(cols)), cols, rotation=30, ha="right", fontsize=8)
+    ax.set_yticks(range(len(kinds)), kinds, fontsize=8)
+    ax.set_xlabel("named as (the first alarm's kind)")
+    ax.set_ylabel("fault injected")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def control_figures(summary: dict, rows: list[dict], out: Path) -> list[Path]:
