@@ -101,3 +101,7 @@ def test_results_page_puts_each_summary_next_to_its_thesis_figure(tmp_path):
     assert results.main(["--reuse", "--out", str(tmp_path), "--only", "two-step"]) == 0
     page = (tmp_path / "RESULTS.md").read_text()
     assert "KEPT" in page and page.index("## pitch-reversal") < page.index("## two-step")
+    # --only with no name is refused (it used to mean every experiment and every campaign)
+    with pytest.raises(SystemExit) as refused:
+        results.main(["--reuse", "--out", str(tmp_path), "--only"])
+    assert refused.value.code == 2

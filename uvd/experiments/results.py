@@ -391,7 +391,7 @@ def _thesis_text(name: str, result: dict, exp) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m uvd.experiments.results",
                                  description=__doc__.split("\n\n")[0])
-    ap.add_argument("--only", nargs="*", metavar="NAME", help="run only these experiments")
+    ap.add_argument("--only", nargs="+", metavar="NAME", help="run only these experiments")
     ap.add_argument("--reuse", action="store_true",
                     help="do not run: use the JSON already in OUT/results/")
     ap.add_argument("--out", type=Path, default=Path("docs"), help="output folder (docs)")
