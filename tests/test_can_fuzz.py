@@ -137,6 +137,10 @@ def _junk_exchange():
         cmd = np.array([30.0, -30.0, 20.0, -20.0, 10.0, -10.0])
         c0 = bus.status().counters
         run_cycles(group, 150, cmd, on_cycle=spray)
+        # the exchange as it stands at its last cycle: read before anything waits, since a
+        # drive rightly times out 200 ms after its last command (command_timeout_ms), and
+        # the wait for the junk's counts below (up to 2 s on a loaded machine) sends none
+        fb = group.read()
 
         def junk_counted():
             c = bus.status().counters
@@ -149,7 +153,6 @@ def _junk_exchange():
         c = bus.status().counters
         assert c["rx_malformed"] > 0 and c["rx_error_frames"] > 0 and c["rx_extended"] > 0
         assert c["rx_remote"] > 0 and c["rx_unknown"] > 0 and c["rx_callback_errors"] == 0
-        fb = group.read()
         # 150 bus-error frames in 1.5 s: the bus is (rightly) error-passive; still working
         assert fb.faults.get(0) in (None, ("error_passive",))
         assert set(fb.faults) <= {0}, fb.faults
