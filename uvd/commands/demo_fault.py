@@ -37,6 +37,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from uvd.links.zenoh_callbacks import SessionCallbacks
+
 __all__ = ["FaultSpec", "FaultRun", "config_changes"]
 
 _SPEC = re.compile(r"thruster:(\d+):([0-9.]+)@([0-9.]+)$")
@@ -116,6 +118,7 @@ class FaultRun:
         self.refused: list[str] = []
         self._lock = threading.Lock()
         self._session = None
+        self._callbacks = SessionCallbacks()
         self._clear_at: float | None = None
 
     # -- start --
@@ -134,8 +137,9 @@ class FaultRun:
         if self.false_alarm:
             self._false_at = time.monotonic() + max(0.0, at - 5.0)
         self._session = zenoh.open(client_config([self.endpoint]))
-        self._session.declare_subscriber(f"uvd/{self.key}/fault/**", self._on_fault)
-        self._session.declare_subscriber(f"uvd/{self.key}/event", self._on_event)
+        self._session.declare_subscriber(f"uvd/{self.key}/fault/**",
+                                         self._callbacks(self._on_fault))
+        self._session.declare_subscriber(f"uvd/{self.key}/event", self._callbacks(self._on_event))
         bound = f"{self.spec.at_s + 600:g}"
         for name, argv in (
                 ("fdc", ["-m", "uvd.fdc.client", "--connect", self.endpoint, "--vehicle",
@@ -212,7 +216,7 @@ class FaultRun:
                 p.kill()
                 p.wait(timeout=5.0)
         if self._session is not None:
-            self._session.close()
+            self._callbacks.close(self._session)  # and their threads ended
         s = self.spec
         out: dict[str, Any] = {"thruster": s.thruster, "eta": s.eta, "at_s": s.at_s,
                                "fdc_args": s.fdc_args(), "detected": self.detected,

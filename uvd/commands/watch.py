@@ -30,6 +30,7 @@ def _run(args) -> int:
     import zenoh
 
     from uvd.fdc.client import client_config
+    from uvd.links.zenoh_callbacks import SessionCallbacks
     conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
     last_line: dict[str, float] = {}
@@ -66,11 +67,13 @@ def _run(args) -> int:
         out(f"{str(sample.key_expr).split('/')[1]:>12} {what}")
 
     session = zenoh.open(conf)
+    callbacks = SessionCallbacks()
     try:
         v = args.vehicle
-        session.declare_subscriber(f"uvd/{v}/state", on_state)
-        session.declare_subscriber(f"uvd/{v}/event", on_event)
-        session.liveliness().declare_subscriber(f"uvd/{v}/alive", on_alive, history=True)
+        session.declare_subscriber(f"uvd/{v}/state", callbacks(on_state))
+        session.declare_subscriber(f"uvd/{v}/event", callbacks(on_event))
+        session.liveliness().declare_subscriber(f"uvd/{v}/alive", callbacks(on_alive),
+                                                history=True)
         via = ", ".join(args.connect) or args.zenoh_config or "tcp/127.0.0.1:7447"
         out(f"watching uvd/{v}/… through {via} (Ctrl-C to stop)")
         deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
@@ -79,6 +82,6 @@ def _run(args) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        session.close()
+        callbacks.close(session)  # and their threads ended: none left at exit
     sys.stdout.flush()
     return 0

@@ -35,6 +35,7 @@ def run(opts: ExperimentOptions) -> dict:
     from uvd.bench.zenoh import FdcProcess
     from uvd.experiments.fdc import SimVehicle
     from uvd.links.zenoh import ZenohSink, zenoh_config
+    from uvd.links.zenoh_callbacks import SessionCallbacks
     from uvd.netports import free_port
 
     hours = 1.0 if opts.hours is None else opts.hours
@@ -62,8 +63,10 @@ def run(opts: ExperimentOptions) -> dict:
             found.setdefault(vehicle, []).append(json.loads(sample.payload.to_bytes()))
 
     t0 = time.perf_counter()
-    with zenoh.open(conf) as observer:
-        observer.declare_subscriber("uvd/*/fault/*", on_fault)
+    observer = zenoh.open(conf)
+    callbacks = SessionCallbacks()
+    try:
+        observer.declare_subscriber("uvd/*/fault/*", callbacks(on_fault))
         fdc = None
 
         async def main() -> None:
@@ -94,6 +97,8 @@ def run(opts: ExperimentOptions) -> dict:
             asyncio.run(main())
         finally:
             stats = fdc.finish() if fdc is not None else {}
+    finally:
+        callbacks.close(observer)
     published = {k: n for s in sinks for k, n in s._seq.items()}
     received = stats.get("received", {})
     runs = {}

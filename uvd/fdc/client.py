@@ -25,6 +25,7 @@ from collections import deque
 
 from uvd.fdc.align import STREAMS, Aligned
 from uvd.fdc.detector import CusumSettings, VehicleDetector, thruster_matrix
+from uvd.links.zenoh_callbacks import CLOSE_TIMEOUT_S, SessionCallbacks
 
 #: state samples of a vehicle kept until its first estimate (10 minutes at 100 Hz)
 EARLY_STATES = 60_000
@@ -145,6 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     aligned: dict[tuple[str, str], Aligned] = {}
     early: dict[str, deque] = {}  # vehicle → state samples before its first estimate
     session = zenoh.open(conf)
+    callbacks = SessionCallbacks()
 
     def say(text: str) -> None:
         with lock:
@@ -295,10 +297,10 @@ def main(argv: list[str] | None = None) -> int:
         report(vehicle, found)
 
     try:
-        session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*", on_estimate)
-        session.declare_subscriber(f"uvd/{args.vehicle}/state", on_state)
-        session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive", on_alive,
-                                                history=True)
+        session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*", callbacks(on_estimate))
+        session.declare_subscriber(f"uvd/{args.vehicle}/state", callbacks(on_state))
+        session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive",
+                                                callbacks(on_alive), history=True)
         say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* and state (baseline after "
             f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; "
             f"h {settings.h:g})")
@@ -318,7 +320,10 @@ def main(argv: list[str] | None = None) -> int:
                 ask_thrusters(vehicle)
             release()  # a stream gone quiet stops holding the other
     finally:
-        session.close()
+        running = callbacks.close(session)  # and their threads ended: none left at exit
+        if running:
+            say(f"uvd-fdc: {running} callback(s) still running {CLOSE_TIMEOUT_S:g} s after the "
+                "session closed")
         if link.dropped:
             say(f"uvd-fdc: dropped {sum(link.dropped.values())} malformed samples "
                 f"({', '.join(f'{k} {n}' for k, n in sorted(link.dropped.items()))})")

@@ -45,6 +45,7 @@ import numpy as np
 
 from uvd.geometry import R_to_euler, wrap_angle
 from uvd.jsonio import to_jsonable
+from uvd.links.zenoh_callbacks import CLOSE_TIMEOUT_S, SessionCallbacks
 from uvd.telemetry._worker import DaemonWorker
 
 log = logging.getLogger(__name__)
@@ -145,6 +146,7 @@ class ZenohSink:
         self._lock = threading.Lock()
         self._token = None
         self._queryable = None
+        self._callbacks = SessionCallbacks()  # the queryable's and fault subscriber's threads
         self.published = 0
         self.query_errors = 0
         self.faults = faults
@@ -159,10 +161,10 @@ class ZenohSink:
         self._session = zenoh.open(self.config)
         self._token = self._session.liveliness().declare_token(f"{self.prefix}/alive")
         self._queryable = self._session.declare_queryable(f"{self.prefix}/params",
-                                                          self._on_query)
+                                                          self._callbacks(self._on_query))
         if self.faults is not None:
-            self._fault_sub = self._session.declare_subscriber(f"{self.prefix}/fault/**",
-                                                               self._on_fault)
+            self._fault_sub = self._session.declare_subscriber(
+                f"{self.prefix}/fault/**", self._callbacks(self._on_fault))
 
     def _on_fault(self, sample) -> None:
         """A fault sample (zenoh's thread): queued for the cycle, or counted and dropped."""
@@ -222,7 +224,10 @@ class ZenohSink:
             if self._token is not None:
                 self._token.undeclare()
             if self._session is not None:
-                self._session.close()
+                running = self._callbacks.close(self._session)
+                if running:
+                    log.warning("zenoh: %d callback(s) still running %.1f s after the session "
+                                "closed", running, CLOSE_TIMEOUT_S)
         finally:
             self._session = None
 
