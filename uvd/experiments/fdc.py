@@ -182,7 +182,7 @@ def watch(v: SimVehicle, minutes: float, progress=None, *, until_first: bool = F
             # the state payload's fields the detector reads (uvd.state.v1: ``t_ns``, ``v``,
             # ``R``, ``thrust``), as the arrays whose numbers its JSON carries: the payload's
             # other fields and its JSON conversion, built every cycle, were read by nothing
-            # (tests/test_fdc.py checks that both give the detector the same numbers)
+            # (tests/test_fdc_detector.py checks that both give the detector the same numbers)
             nav = out.nav
             found += [d.as_dict() for d in det.update_state(
                 {"t_ns": t_ns, "v": nav.v, "R": nav.H[:3, :3], "thrust": out.thrust_n})]

@@ -61,9 +61,9 @@ reference, as above). What it costs: a fault against the direction of a drift or
 counts only what it carries the estimate beyond the baseline (a mass −5 % after a +3 %
 excursion: −2 %, found once the excursion has gone). Measured: those 7 runs again, 0 alarms; on
 the recordings, the two b̂₃ alarms of the fault-free 4 h runs (2× and 1.85×) are gone, and of
-the 22 faults injected at minute 57 the same 18 are found, at the same times but one (a mass +5
-% at 2×: 59.0 → 59.2 min). b's δ (5 % of ‖b‖) is what finds a weak thruster (η 0.8 moves b̂₃
-+10 %), so it stays.
+the 22 faults injected at minute 57 the same 18 are found, at the same times but one (a mass
++5 % at 2×: 59.0 → 59.2 min). b's δ (5 % of ‖b‖) is what finds a weak thruster (η 0.8 moves
+b̂₃ +10 %), so it stays.
 
 σ. The estimates are autocorrelated, so n of them carry the information of n/τ independent
 ones, τ = 1 + 2 Σ ρₗ the integrated autocorrelation time (Sokal's window: the sum stops at the
