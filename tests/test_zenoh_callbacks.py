@@ -1,4 +1,4 @@
-"""A Zenoh session's Python callbacks end with it (uvd.links.zenoh_callbacks): zenoh-python runs
+"""A Zenoh session's Python callbacks end with it (uvd.zenoh_callbacks): zenoh-python runs
 each on a thread of its own that ``Session.close()`` does not wait for, and a process that
 exits while one is still running can abort in Python's finalization. Real sessions on
 loopback; a callback held inside itself by an event, so the order is certain, not timed."""
@@ -13,8 +13,8 @@ import time
 import zenoh
 
 from uvd.links.zenoh import ZenohSink, zenoh_config
-from uvd.links.zenoh_callbacks import SessionCallbacks
 from uvd.netports import free_port
+from uvd.zenoh_callbacks import SessionCallbacks
 
 
 def _held_callback():

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from uvd.links.zenoh_callbacks import SessionCallbacks
+from uvd.zenoh_callbacks import SessionCallbacks
 
 __all__ = ["FaultSpec", "FaultRun", "config_changes"]
 

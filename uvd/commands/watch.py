@@ -30,7 +30,7 @@ def _run(args) -> int:
     import zenoh
 
     from uvd.fdc.client import client_config
-    from uvd.links.zenoh_callbacks import SessionCallbacks
+    from uvd.zenoh_callbacks import SessionCallbacks
     conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
     last_line: dict[str, float] = {}

@@ -35,8 +35,8 @@ def run(opts: ExperimentOptions) -> dict:
     from uvd.bench.zenoh import FdcProcess
     from uvd.experiments.fdc import SimVehicle
     from uvd.links.zenoh import ZenohSink, zenoh_config
-    from uvd.links.zenoh_callbacks import SessionCallbacks
     from uvd.netports import free_port
+    from uvd.zenoh_callbacks import SessionCallbacks
 
     hours = 1.0 if opts.hours is None else opts.hours
     nominal_min = 30.0  # uvd-fdc's baseline is learned from 5 to 25 min

@@ -25,7 +25,7 @@ from collections import deque
 
 from uvd.fdc.align import STREAMS, Aligned
 from uvd.fdc.detector import CusumSettings, VehicleDetector, thruster_matrix
-from uvd.links.zenoh_callbacks import CLOSE_TIMEOUT_S, SessionCallbacks
+from uvd.zenoh_callbacks import CLOSE_TIMEOUT_S, SessionCallbacks
 
 #: state samples of a vehicle kept until its first estimate (10 minutes at 100 Hz)
 EARLY_STATES = 60_000

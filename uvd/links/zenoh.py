@@ -45,8 +45,8 @@ import numpy as np
 
 from uvd.geometry import R_to_euler, wrap_angle
 from uvd.jsonio import to_jsonable
-from uvd.links.zenoh_callbacks import CLOSE_TIMEOUT_S, SessionCallbacks
 from uvd.telemetry._worker import DaemonWorker
+from uvd.zenoh_callbacks import CLOSE_TIMEOUT_S, SessionCallbacks
 
 log = logging.getLogger(__name__)
 
