@@ -16,6 +16,7 @@ import pytest
 
 from tests.test_fdc_detector import _payload
 from uvd.netports import free_port
+from uvd.zenoh_callbacks import SessionCallbacks
 
 
 @pytest.mark.slow
@@ -28,11 +29,12 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     faults = []
+    callbacks = SessionCallbacks()
     with zenoh.open(conf) as s:
         token = s.liveliness().declare_token("uvd/sub1/alive")
         pub = s.declare_publisher("uvd/sub1/estimate/aid6")
-        s.declare_subscriber("uvd/*/fault/*", lambda x: faults.append(
-            (str(x.key_expr), json.loads(x.payload.to_bytes()))))
+        s.declare_subscriber("uvd/*/fault/*", callbacks(lambda x: faults.append(
+            (str(x.key_expr), json.loads(x.payload.to_bytes())))))
         proc = subprocess.Popen(
             [sys.executable, "-m", "uvd.fdc.client", "--connect", f"tcp/127.0.0.1:{port}",
              "--warmup-s", "10", "--baseline-s", "100", "--seconds", "30",
@@ -58,6 +60,7 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
         finally:
             proc.terminate()
             out, _ = proc.communicate(timeout=10)
+    assert callbacks.close(s) == 0  # the session closed with the block; its threads end
     print(out)
     assert len(faults) == 1, faults
     key, d = faults[0]
@@ -124,17 +127,18 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path, busy_m
                                                "configuration": {"thruster_matrix":
                                                                  B.tolist()}}))
 
+    callbacks = SessionCallbacks()
     with zenoh.open(conf) as s:
         token = s.liveliness().declare_token("uvd/sub2/alive")
-        s.declare_queryable("uvd/sub2/params", on_params)
+        s.declare_queryable("uvd/sub2/params", callbacks(on_params))
         # BLOCK: this vehicle runs 20× faster than real time, and what is tested is the
         # client's verdict on every sample, however late (the daemon's DROP loses none at
         # its real rate, docs/zenoh.md)
         block = zenoh.CongestionControl.BLOCK
         est = s.declare_publisher("uvd/sub2/estimate/aid6", congestion_control=block)
         state = s.declare_publisher("uvd/sub2/state", congestion_control=block)
-        s.declare_subscriber("uvd/*/fault/*", lambda x: faults.append(
-            (str(x.key_expr), json.loads(x.payload.to_bytes()))))
+        s.declare_subscriber("uvd/*/fault/*", callbacks(lambda x: faults.append(
+            (str(x.key_expr), json.loads(x.payload.to_bytes())))))
         proc = subprocess.Popen(
             [sys.executable, "-m", "uvd.fdc.client", "--connect", f"tcp/127.0.0.1:{port}",
              "--warmup-s", "10", "--baseline-s", "150", "--seconds", "90",
@@ -170,6 +174,7 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path, busy_m
         finally:
             proc.terminate()
             proc.wait(timeout=10)
+    assert callbacks.close(s) == 0  # the session closed with the block; its threads end
     time.sleep(0.2)  # the reader thread takes the last lines
     out = "".join(lines)
     print(out)

@@ -18,6 +18,7 @@ import zenoh
 
 from tests.test_zenoh_security import _client, _wait, fleet
 from uvd.runtime import commands as cmd
+from uvd.zenoh_callbacks import SessionCallbacks
 
 pytestmark = pytest.mark.skipif(shutil.which("openssl") is None,
                                 reason="openssl makes the test's certificates")
@@ -166,8 +167,9 @@ def test_the_fdc_client_reads_hold_reason_from_the_estimates(tmp_path):
     try:
         asyncio.run(sink.open())
         fdc = zenoh.open(_client("fdc", tmp_path, endpoint, "fdc-secret"))
-        fdc.declare_subscriber("uvd/rov7/estimate/**",
-                               lambda s: seen.append(json.loads(s.payload.to_bytes())))
+        callbacks = SessionCallbacks()
+        fdc.declare_subscriber("uvd/rov7/estimate/**", callbacks(
+            lambda s: seen.append(json.loads(s.payload.to_bytes()))))
         time.sleep(0.5)  # the subscription travels to the router
         assert sim.command(cmd.SetThrusterEta(4, 0.0, source="test")).ok
         asyncio.run(sink.write(records(1.0)))
@@ -175,7 +177,7 @@ def test_the_fdc_client_reads_hold_reason_from_the_estimates(tmp_path):
         assert sim.command(cmd.SetThrusterEta(4, 1.0)).ok
         asyncio.run(sink.write(records(1.0)))
         assert _wait(lambda: len(seen) >= 2, 5.0)
-        fdc.close()
+        assert callbacks.close(fdc) == 0
     finally:
         asyncio.run(sink.aclose())
         router.close()

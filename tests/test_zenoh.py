@@ -18,6 +18,7 @@ import zenoh
 from tests.hil_daemon import run_scenario, running_bridge
 from uvd.netports import free_port
 from uvd.runtime.config import load_config
+from uvd.zenoh_callbacks import SessionCallbacks
 
 pytestmark = pytest.mark.slow
 
@@ -36,7 +37,8 @@ class Watcher:
         self.samples: dict[str, list[dict]] = defaultdict(list)
         self.invalid: list[tuple[str, str]] = []
         self.validators = {}
-        self.sub = self.session.declare_subscriber("uvd/**", self._on_sample)
+        self.callbacks = SessionCallbacks()
+        self.sub = self.session.declare_subscriber("uvd/**", self.callbacks(self._on_sample))
 
     def _validator(self, encoding: str):
         name = encoding.split("schema=", 1)[1]
@@ -109,7 +111,7 @@ def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path)
         time.sleep(0.5)
         info["alive_after"] = w.alive()
     finally:
-        w.session.close()
+        w.callbacks.close(w.session)
     assert not w.invalid, w.invalid[:5]
     state = w.samples["uvd/rov7/state"]
     health = w.samples["uvd/rov7/health"]

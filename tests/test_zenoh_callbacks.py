@@ -9,6 +9,7 @@ import asyncio
 import json
 import threading
 import time
+from pathlib import Path
 
 import zenoh
 
@@ -119,3 +120,59 @@ def test_the_daemons_sink_ends_its_fault_callback_before_its_close_returns():
     waited, left = asyncio.run(main())
     assert got and got[0].channel == "thruster4"
     assert not left and waited >= 0.25, (waited, left)
+
+
+# --- every Python callback handed to zenoh goes through SessionCallbacks ----------------------
+
+#: the calls that take a handler, and where it is when given by position
+_HANDLER_CALLS = {"declare_subscriber": 1, "declare_queryable": 1}
+#: this file's first test hands zenoh plain callbacks on purpose (the premise it shows)
+_PLAIN_ON_PURPOSE = {"tests/test_zenoh_callbacks.py"}
+
+
+def bare_callbacks(source: str) -> list[int]:
+    """Lines where a handler given to ``declare_subscriber`` / ``declare_queryable`` is not
+    ``callbacks(fn)`` (any name ending in ``callbacks``: a :class:`SessionCallbacks`). A call
+    with no handler (zenoh's channel, read by the caller) starts no thread and is fine."""
+    import ast
+    lines = []
+    for node in ast.walk(ast.parse(source)):
+        if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr in _HANDLER_CALLS):
+            continue
+        at = _HANDLER_CALLS[node.func.attr]
+        handler = node.args[at] if len(node.args) > at else next(
+            (k.value for k in node.keywords if k.arg == "handler"), None)
+        if handler is None:
+            continue
+        f = handler.func if isinstance(handler, ast.Call) else None
+        name = f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) \
+            else ""
+        if not name.endswith("callbacks"):
+            lines.append(node.lineno)
+    return lines
+
+
+def test_the_scan_finds_a_bare_callback_and_passes_a_wrapped_one():
+    assert bare_callbacks('s.declare_subscriber("k", lambda x: None)') == [1]
+    assert bare_callbacks('s.declare_queryable("k", handler=on_query)') == [1]
+    assert bare_callbacks('s.liveliness().declare_subscriber("k",\n on_alive, history=True)') \
+        == [1]
+    assert bare_callbacks('s.declare_subscriber("k", callbacks(on_x))') == []
+    assert bare_callbacks('s.declare_queryable("k", handler=self._callbacks(self.on_q))') == []
+    assert bare_callbacks('sub = s.declare_subscriber("k")') == []  # a channel: no thread
+
+
+def test_no_callback_is_handed_to_zenoh_bare():
+    """A callback not wrapped by SessionCallbacks keeps a thread that the session's close does
+    not end (the abort this module's docstring tells of), in the daemon's packages and in the
+    tests' own processes alike."""
+    root = Path(__file__).resolve().parents[1]
+    found = []
+    for folder in ("uvd", "drivers", "sim_bridge", "tests"):
+        for path in sorted((root / folder).rglob("*.py")):
+            rel = path.relative_to(root).as_posix()
+            if rel in _PLAIN_ON_PURPOSE:
+                continue
+            found += [f"{rel}:{n}" for n in bare_callbacks(path.read_text(encoding="utf-8"))]
+    assert not found, "callbacks handed to zenoh without SessionCallbacks: " + ", ".join(found)

@@ -24,6 +24,7 @@ import zenoh
 from sim_bridge.bridge import write_local_config
 from uvd.netports import free_port
 from uvd.runtime.config import load_config
+from uvd.zenoh_callbacks import SessionCallbacks
 
 pytestmark = pytest.mark.skipif(shutil.which("openssl") is None,
                                 reason="openssl makes the test's certificates")
@@ -101,12 +102,13 @@ def test_router_tls_auth_and_acl_let_fdc_read_and_refuse_its_control_puts(tmp_pa
         asyncio.run(vehicle_up())
         # the vehicle listens on a control key (as a daemon taking commands would)
         listener = zenoh.open(_client("vehicle", tmp_path, endpoint, "rov-secret"))
-        listener.declare_subscriber("uvd/rov7/command/**", lambda s: commands.append(
-            s.payload.to_bytes()))
-        listener.declare_subscriber("uvd/rov7/fault/**", lambda s: faults.append(
-            s.payload.to_bytes()))
+        listener_callbacks, fdc_callbacks = SessionCallbacks(), SessionCallbacks()
+        listener.declare_subscriber("uvd/rov7/command/**", listener_callbacks(
+            lambda s: commands.append(s.payload.to_bytes())))
+        listener.declare_subscriber("uvd/rov7/fault/**", listener_callbacks(
+            lambda s: faults.append(s.payload.to_bytes())))
         fdc = zenoh.open(_client("fdc", tmp_path, endpoint, "fdc-secret"))
-        fdc.declare_subscriber("uvd/**", lambda s: seen.append(str(s.key_expr)))
+        fdc.declare_subscriber("uvd/**", fdc_callbacks(lambda s: seen.append(str(s.key_expr))))
         time.sleep(0.5)  # the declarations travel through the router
 
         async def publish() -> None:  # the daemon's sink, as the hub feeds it
@@ -133,8 +135,7 @@ def test_router_tls_auth_and_acl_let_fdc_read_and_refuse_its_control_puts(tmp_pa
             zenoh.open(_client("fdc", tmp_path, endpoint, "wrong"))
         with pytest.raises(zenoh.ZError):
             zenoh.open(_client("fdc", tmp_path, endpoint, "fdc-secret", ca="other-ca.pem"))
-        fdc.close()
-        listener.close()
+        assert fdc_callbacks.close(fdc) == 0 and listener_callbacks.close(listener) == 0
     finally:
         async def vehicle_down() -> None:
             await sink.aclose()
