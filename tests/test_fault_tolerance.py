@@ -79,3 +79,35 @@ def test_a_supervised_run_names_the_dof_given_up_holds_its_adaptation_and_fires_
     assert held["max_change_others"] > 0.0
     assert theta_rows(16, ["pitch"]) == [4, 10, 12, 13, 14, 15]
     assert theta_rows(241, ["sway"]) == list(range(241)) and theta_rows(16, []) == []
+
+
+def test_reftraj1_asks_more_yaw_torque_than_one_aft_thruster_of_the_jhu_rov_gives():
+    """Why the JHU ROV with an aft thruster dead misses the issue's 2× on heading whatever the
+    allocation (docs/experiments.md): the fault-free run of fault-tolerance's experiment
+    commands more yaw torque than the remaining aft thruster alone can give (its full thrust
+    at its lever arm, from the vehicle's own B) in a fifth of the cycles after the settling,
+    while the fault-free allocation stays within every thruster's limit."""
+    import numpy as np
+
+    from uvd.experiments.fault_tolerance import SETTLE_S, T_FAULT_S, _config_dir
+    from uvd.lockstep import Lockstep, lockstep_config, run
+    from uvd.runtime.build import build_core, start_pose
+    from uvd.runtime.config import load_config
+    from uvd.runtime.cycle import unsupervised
+
+    cfg = load_config(_config_dir() / "sim.toml")
+    vehicle = cfg.load_vehicle()
+    H0, v0 = start_pose(cfg)
+    core_cfg = build_core(cfg, vehicle)
+    sim = Lockstep(vehicle, unsupervised(core_cfg), lockstep_config(cfg, 0), H0=H0, v0=v0)
+    log = run(sim, 180.0)
+    after = log.t >= T_FAULT_S + SETTLE_S
+    B, f_max = core_cfg.allocator.B, core_cfg.allocator.max_thrust_n
+    one_aft = abs(B[5, 1]) * f_max[1]  # thruster 2 alone (thruster 1 dead), N m
+    assert B[0, 0] == B[0, 1] == 1.0 and one_aft == pytest.approx(0.35 * 300.0)
+    tau_z = np.abs(log.u_cmd[after, 5])
+    assert not log.saturated[after].any()  # fault-free: the command is the controller's
+    share = float(np.mean(tau_z > one_aft))
+    print(f"|tau_z| > {one_aft:.0f} N m in {share:.1%} of cycles; p90 "
+          f"{np.percentile(tau_z, 90):.1f}, max {tau_z.max():.1f} N m")
+    assert share > 0.15 and tau_z.max() > 1.3 * one_aft
