@@ -135,7 +135,8 @@ def test_router_tls_auth_and_acl_let_fdc_read_and_refuse_its_control_puts(tmp_pa
             zenoh.open(_client("fdc", tmp_path, endpoint, "wrong"))
         with pytest.raises(zenoh.ZError):
             zenoh.open(_client("fdc", tmp_path, endpoint, "fdc-secret", ca="other-ca.pem"))
-        assert fdc_callbacks.close(fdc) == 0 and listener_callbacks.close(listener) == 0
+        running = fdc_callbacks.close(fdc), listener_callbacks.close(listener)
+        assert running == (0, 0)  # both sessions' callback threads ended
     finally:
         async def vehicle_down() -> None:
             await sink.aclose()
