@@ -86,11 +86,14 @@ def test_reftraj1_asks_more_yaw_torque_than_one_aft_thruster_of_the_jhu_rov_give
     allocation (docs/experiments.md): the fault-free run of fault-tolerance's experiment
     commands more yaw torque than the remaining aft thruster alone can give (its full thrust
     at its lever arm, from the vehicle's own B) in a fifth of the cycles after the settling,
-    while the fault-free allocation stays within every thruster's limit."""
+    while the fault-free allocation stays within every thruster's limit. With thruster 1 told
+    dead at the fault, the yaw command is held at that most, and the couple's surge force,
+    which nothing left cancels, is applied ten times over."""
     import numpy as np
 
     from uvd.experiments.fault_tolerance import SETTLE_S, T_FAULT_S, _config_dir
     from uvd.lockstep import Lockstep, lockstep_config, run
+    from uvd.runtime import commands as cmd
     from uvd.runtime.build import build_core, start_pose
     from uvd.runtime.config import load_config
     from uvd.runtime.cycle import unsupervised
@@ -99,15 +102,35 @@ def test_reftraj1_asks_more_yaw_torque_than_one_aft_thruster_of_the_jhu_rov_give
     vehicle = cfg.load_vehicle()
     H0, v0 = start_pose(cfg)
     core_cfg = build_core(cfg, vehicle)
-    sim = Lockstep(vehicle, unsupervised(core_cfg), lockstep_config(cfg, 0), H0=H0, v0=v0)
-    log = run(sim, 180.0)
-    after = log.t >= T_FAULT_S + SETTLE_S
+
+    def run_jhu(dead: int | None):
+        sim = Lockstep(vehicle, unsupervised(core_cfg), lockstep_config(cfg, 0), H0=H0, v0=v0)
+        step, told = sim.advance, []
+
+        def advance():  # thruster ``dead`` fails and the cycle is told at the fault
+            if dead and not told and sim.t_ns >= T_FAULT_S * 1e9:
+                sim.plant.thrusters.health[dead - 1] = 0.0
+                told.append(sim.command(cmd.SetThrusterEta(dead, 0.0, source="schedule")))
+            return step()
+        sim.advance = advance
+        log = run(sim, 180.0)
+        assert dead is None or told[0].ok
+        after = log.t >= T_FAULT_S + SETTLE_S
+        return np.abs(log.u_cmd[after, 5]), np.abs(log.u_applied[after, 0]), \
+            log.saturated[after]
+
     B, f_max = core_cfg.allocator.B, core_cfg.allocator.max_thrust_n
     one_aft = abs(B[5, 1]) * f_max[1]  # thruster 2 alone (thruster 1 dead), N m
     assert B[0, 0] == B[0, 1] == 1.0 and one_aft == pytest.approx(0.35 * 300.0)
-    tau_z = np.abs(log.u_cmd[after, 5])
-    assert not log.saturated[after].any()  # fault-free: the command is the controller's
+    tau_z, surge, saturated = run_jhu(None)
+    assert not saturated.any()  # fault-free: the command is the controller's
     share = float(np.mean(tau_z > one_aft))
-    print(f"|tau_z| > {one_aft:.0f} N m in {share:.1%} of cycles; p90 "
-          f"{np.percentile(tau_z, 90):.1f}, max {tau_z.max():.1f} N m")
+    tau_z_dead, surge_dead, _ = run_jhu(1)
+    print(f"fault-free: |tau_z| > {one_aft:.0f} N m in {share:.1%} of cycles; p90 "
+          f"{np.percentile(tau_z, 90):.1f}, max {tau_z.max():.1f} N m; median |f_x| "
+          f"{np.median(surge):.1f} N. Thruster 1 dead: |tau_z| p90 "
+          f"{np.percentile(tau_z_dead, 90):.1f}, max {tau_z_dead.max():.1f} N m; median |f_x| "
+          f"{np.median(surge_dead):.1f} N")
     assert share > 0.15 and tau_z.max() > 1.3 * one_aft
+    assert tau_z_dead.max() <= one_aft * (1 + 1e-9)
+    assert np.median(surge_dead) > 5 * np.median(surge)
