@@ -5,6 +5,7 @@ loopback; a callback held inside itself by an event, so the order is certain, no
 
 from __future__ import annotations
 
+import ast
 import asyncio
 import json
 import threading
@@ -134,7 +135,6 @@ def bare_callbacks(source: str) -> list[int]:
     """Lines where a handler given to ``declare_subscriber`` / ``declare_queryable`` is not
     ``callbacks(fn)`` (any name ending in ``callbacks``: a :class:`SessionCallbacks`). A call
     with no handler (zenoh's channel, read by the caller) starts no thread and is fine."""
-    import ast
     lines = []
     for node in ast.walk(ast.parse(source)):
         if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
