@@ -81,56 +81,91 @@ def test_a_supervised_run_names_the_dof_given_up_holds_its_adaptation_and_fires_
     assert theta_rows(241, ["sway"]) == list(range(241)) and theta_rows(16, []) == []
 
 
-def test_reftraj1_asks_more_yaw_torque_than_one_aft_thruster_of_the_jhu_rov_gives():
-    """Why the JHU ROV with an aft thruster dead misses the issue's 2× on heading whatever the
-    allocation (docs/experiments.md): the fault-free run of fault-tolerance's experiment
-    commands more yaw torque than the remaining aft thruster alone can give (its full thrust
-    at its lever arm, from the vehicle's own B) in a fifth of the cycles after the settling,
-    while the fault-free allocation stays within every thruster's limit. With thruster 1 told
-    dead at the fault, the yaw command is held at that most, and the couple's surge force,
-    which nothing left cancels, is applied ten times over."""
+def _jhu_aft(dead: int | None, heading_scale: float = 1.0):
+    """fault-tolerance's lockstep run of the JHU ROV (``run_arm``, seed 0, 180 s) on RefTraj1
+    with its heading swing scaled, thruster ``dead`` failing and the cycle told at the fault:
+    after the settling, |τ_z| commanded, |f_x| applied, the thrusters at their limit, the
+    position MAE."""
     import numpy as np
 
-    from uvd.experiments.fault_tolerance import SETTLE_S, T_FAULT_S, _config_dir
-    from uvd.lockstep import Lockstep, lockstep_config, run
-    from uvd.runtime import commands as cmd
-    from uvd.runtime.build import build_core, start_pose
+    from uvd.control.trajectory import REFTRAJ1_SPEC, CosineTerm, CosineTrajectory, reftraj1
+    from uvd.experiments.fault_tolerance import SETTLE_S, T_FAULT_S
+
+    spec = [*REFTRAJ1_SPEC[:5], (REFTRAJ1_SPEC[5][0] * heading_scale, REFTRAJ1_SPEC[5][1])]
+    ref = reftraj1() if heading_scale == 1.0 else CosineTrajectory(
+        center=reftraj1().center, terms=tuple((CosineTerm(a, w),) for a, w in spec))
+    r = run_arm("sim.toml", dead or 1, 0.0 if dead else 1.0, "told" if dead else "fault-free",
+                reference=ref, keep_log=True)
+    log = r["log"]
+    after = log.t >= T_FAULT_S + SETTLE_S
+    return np.abs(log.u_cmd[after, 5]), np.abs(log.u_applied[after, 0]), \
+        log.saturated[after], r["after"]
+
+
+def _jhu_allocator():
+    """The JHU ROV's allocator as fault-tolerance's runs build it (B, the thrusters' limits)."""
+    from uvd.experiments.fault_tolerance import _config_dir
+    from uvd.runtime.build import build_core
     from uvd.runtime.config import load_config
-    from uvd.runtime.cycle import unsupervised
 
     cfg = load_config(_config_dir() / "sim.toml")
-    vehicle = cfg.load_vehicle()
-    H0, v0 = start_pose(cfg)
-    core_cfg = build_core(cfg, vehicle)
+    assert cfg.control.reference == "reftraj1"
+    return build_core(cfg, cfg.load_vehicle()).allocator
 
-    def run_jhu(dead: int | None):
-        sim = Lockstep(vehicle, unsupervised(core_cfg), lockstep_config(cfg, 0), H0=H0, v0=v0)
-        step, told = sim.advance, []
 
-        def advance():  # thruster ``dead`` fails and the cycle is told at the fault
-            if dead and not told and sim.t_ns >= T_FAULT_S * 1e9:
-                sim.plant.thrusters.health[dead - 1] = 0.0
-                told.append(sim.command(cmd.SetThrusterEta(dead, 0.0, source="schedule")))
-            return step()
-        sim.advance = advance
-        log = run(sim, 180.0)
-        assert dead is None or told[0].ok
-        after = log.t >= T_FAULT_S + SETTLE_S
-        return np.abs(log.u_cmd[after, 5]), np.abs(log.u_applied[after, 0]), \
-            log.saturated[after]
+def test_an_aft_thruster_dead_keeps_the_jhu_rov_heading_though_reftraj1_asks_more_yaw():
+    """The JHU ROV with an aft thruster dead (surge given up) keeps heading, roll and pitch
+    within the issue's 2x of its fault-free error (docs/experiments.md), although the
+    fault-free run commands more yaw torque than the remaining aft thruster alone can give (its
+    full thrust at its lever arm, from the vehicle's own B) in a fifth of the cycles after the
+    settling: with thruster 1 told dead the yaw command is held at that most and the couple's
+    surge force, which nothing left cancels, is applied ten times over. What used to cost the
+    heading (3.4x) was the lateral thruster chasing, to its limit, the sway error the surge
+    drift became as the heading turned; with horizontal position given up along both axes
+    (uvd.control.given_up) it is at its limit in a few per cent of the cycles. Depth misses
+    the 2x (2.11x: the drift's speed through the pitching vehicle's Coriolis terms, which the
+    controller's masses, still learning from zero at the fault, under-model): held here as a
+    figure, not met."""
+    import numpy as np
 
-    B, f_max = core_cfg.allocator.B, core_cfg.allocator.max_thrust_n
+    tau_z, surge, saturated, mae = _jhu_aft(None)
+    alloc = _jhu_allocator()
+    B, f_max = alloc.B, alloc.max_thrust_n
     one_aft = abs(B[5, 1]) * f_max[1]  # thruster 2 alone (thruster 1 dead), N m
     assert B[0, 0] == B[0, 1] == 1.0 and one_aft == pytest.approx(0.35 * 300.0)
-    tau_z, surge, saturated = run_jhu(None)
+    assert B[5, 2] == 0.0 and B[1, 2] == 1.0  # the lateral thruster: sway only, no yaw
     assert not saturated.any()  # fault-free: the command is the controller's
     share = float(np.mean(tau_z > one_aft))
-    tau_z_dead, surge_dead, _ = run_jhu(1)
+    tau_z_dead, surge_dead, saturated_dead, mae_dead = _jhu_aft(1)
+    ratio = {d: mae_dead[d] / mae[d] for d in mae}
     print(f"fault-free: |tau_z| > {one_aft:.0f} N m in {share:.1%} of cycles; p90 "
           f"{np.percentile(tau_z, 90):.1f}, max {tau_z.max():.1f} N m; median |f_x| "
           f"{np.median(surge):.1f} N. Thruster 1 dead: |tau_z| p90 "
           f"{np.percentile(tau_z_dead, 90):.1f}, max {tau_z_dead.max():.1f} N m; median |f_x| "
-          f"{np.median(surge_dead):.1f} N")
+          f"{np.median(surge_dead):.1f} N; at their limit "
+          f"{np.round(saturated_dead.mean(axis=0), 3)}; MAE ratios "
+          + " ".join(f"{d} {r:.2f}" for d, r in ratio.items()))
     assert share > 0.15 and tau_z.max() > 1.3 * one_aft
     assert tau_z_dead.max() <= one_aft * (1 + 1e-9)
     assert np.median(surge_dead) > 5 * np.median(surge)
+    assert saturated_dead[:, 2].mean() < 0.05  # the lateral thruster does not chase drift
+    for dof in ("roll", "pitch", "heading"):
+        assert ratio[dof] <= 2.0, (dof, ratio[dof])
+    assert ratio["z"] < 2.2  # 2.11x measured: the issue's 2x is not met on depth
+
+
+def test_half_reftraj1s_heading_swing_keeps_every_dof_of_the_bound_within_2x():
+    """RefTraj1 with half its heading swing (67.5°: the yaw asked stays within one aft
+    thruster's reach) and the JHU ROV's thruster 1 dead: depth and attitude within the issue's
+    2× of the fault-free run (docs/experiments.md: z 1.17×, heading 0.95×). With the reference
+    sliding along surge only the same run missed (heading 2.46×, the lateral thruster at its
+    limit in 59 % of the cycles): the miss was the sway error the drift became, not the yaw."""
+    _, _, _, mae = _jhu_aft(None, heading_scale=0.5)
+    tau_z, _, saturated, mae_dead = _jhu_aft(1, heading_scale=0.5)
+    alloc = _jhu_allocator()
+    assert tau_z.max() < 0.5 * abs(alloc.B[5, 1]) * alloc.max_thrust_n[1]
+    ratio = {d: mae_dead[d] / mae[d] for d in ("z", "roll", "pitch", "heading")}
+    print("half heading swing, thruster 1 dead:", {d: round(r, 2) for d, r in ratio.items()},
+          "at their limit", saturated.mean(axis=0).round(3))
+    assert max(ratio.values()) <= 2.0, ratio
+    assert saturated[:, 2].mean() < 0.05

@@ -1,5 +1,6 @@
-"""A horizontal DOF given up: the controller's reference slides horizontally along it, so the
-drift it cannot correct is not turned into depth error (issue 33, uvd.control.given_up)."""
+"""A horizontal DOF given up: the controller's reference slides horizontally to the vehicle,
+along both horizontal axes, so the drift it cannot correct is not turned into depth error nor
+chased by the thrusters left (issue 33, uvd.control.given_up)."""
 
 import numpy as np
 import pytest
@@ -29,7 +30,7 @@ def _case():
 
 
 @pytest.mark.parametrize("given", [(0,), (1,), (0, 1)])
-def test_what_is_left_of_the_error_is_on_the_kept_axes_and_the_slide_is_horizontal(given):
+def test_what_is_left_of_the_error_is_on_the_heave_axis_and_the_slide_is_horizontal(given):
     ref, vs = _case()
     act = np.ones(6, dtype=bool)
     act[list(given)] = False
@@ -38,10 +39,12 @@ def test_what_is_left_of_the_error_is_on_the_kept_axes_and_the_slide_is_horizont
     moved = out.H[:3, 3] - ref.H[:3, 3]
     assert moved[2] == 0.0 and np.linalg.norm(moved) > 0.1  # horizontal, and it moved
     body = R.T @ (vs.H[:3, 3] - out.H[:3, 3])  # the controller's error, desired frame
-    np.testing.assert_allclose(body[list(given)], 0.0, atol=1e-12)
-    # velocity alike: the linear velocity error has nothing along the given-up axes
+    # surge or sway given up, horizontal position is: no error left along either axis
+    np.testing.assert_allclose(body[:2], 0.0, atol=1e-12)
+    assert abs(body[2]) > 0.1  # the heave error stays (the vehicle is 0.4 m off in depth)
+    # velocity alike: the linear velocity error has nothing along body surge and sway
     dv = R.T @ (vs.H[:3, :3] @ vs.v[:3]) - out.v[:3]
-    np.testing.assert_allclose(dv[list(given)], 0.0, atol=1e-12)
+    np.testing.assert_allclose(dv[:2], 0.0, atol=1e-12)
     assert (out.v[:3] - ref.v[:3]) @ (R.T @ [0.0, 0.0, 1.0]) == pytest.approx(0.0, abs=1e-12)
     # attitude, angular velocity, acceleration untouched
     np.testing.assert_array_equal(out.H[:3, :3], R)

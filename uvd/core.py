@@ -35,7 +35,7 @@ healthy, the direction-keeping scaling of the thesis experiments). Given-up DOFs
 out of the reference's closed loop — so the controller neither commands nor adapts on them
 (AMBC's error is masked by the closed loop in (5.28), and its spec's ``hold_dofs`` keeps those
 DOFs' parameters, which other rows' Coriolis terms would still move); a horizontal DOF given
-up also slides the controller's reference horizontally along it to the vehicle
+up also slides the controller's reference horizontally to the vehicle, along both axes
 (:func:`uvd.control.given_up.slide_reference`: drift it cannot correct is not read as depth or
 attitude error; ``CoreOutputs.reference`` stays the trajectory's) — and the wrench the
 estimators see is B diag(η) f, what the thrusters really give. The estimators (AID) run in
@@ -523,8 +523,8 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     ol = _ZERO6
     if (mode is _CONTROL or mode is _PDC) and armed:
         if sensed.nav_ok:
-            # surge or sway given up: the controller's reference slides horizontally along it
-            # to the vehicle, so what cannot be corrected ends as drift, not depth error (the
+            # surge or sway given up: the controller's reference slides horizontally to the
+            # vehicle, so what cannot be corrected ends as drift, not depth error (the
             # outputs keep the trajectory's reference: what tracking is measured against)
             ref_c = ref if not given_up else slide_reference(ref, sensed.vs, actuated)
             if mode is _CONTROL:

@@ -223,9 +223,13 @@ def note(result: dict) -> str | None:
         if coupled:
             xy = [v["dead"][k]["ratio_after"][d] for k in coupled for d in ("x", "y")
                   if d in v["dead"][k]["ratio_after"]]
+            sat = max(max(v["dead"][k]["saturated_fraction_after"]) for k in coupled)
             text += (f". Thrusters {', '.join(coupled)}: every DOF of the bound is still "
                      "allocated, the DOF given up lies outside it, and the misses come with "
-                     "the remaining thrusters at their limit in the share of cycles shown")
+                     + ("the remaining thrusters at their limit in the share of cycles shown"
+                        if sat >= 0.1 else "the remaining thrusters at their limit in at most "
+                        f"{sat:.0%} of the cycles (docs/experiments.md, \"fault-tolerance\", "
+                        "has what the depth miss comes from)"))
             if xy:
                 text += (f" and the horizontal position {min(xy):.1f}–{max(xy):.1f}× its "
                          "fault-free error")

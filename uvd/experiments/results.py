@@ -377,8 +377,13 @@ def _figure_fig51_hunt(result: dict, figures: Path) -> None:
     write_m4_m5_figure(result, figures / "fig51-hunt-m4-m5.png")
 
 
+def _figure_fault_tolerance(result: dict, figures: Path) -> None:
+    from uvd.experiments.fault_tolerance import _figure
+    _figure(result["vehicles"], figures / "fault-tolerance.png")
+
+
 #: figures drawn from an experiment's JSON into OUT/figures/ (so --reuse redraws them)
-FIGURES = {"fig51-hunt": _figure_fig51_hunt}
+FIGURES = {"fig51-hunt": _figure_fig51_hunt, "fault-tolerance": _figure_fault_tolerance}
 
 
 def _thesis_text(name: str, result: dict, exp) -> str:
