@@ -77,9 +77,11 @@ def test_a_callback_that_outlasts_the_timeout_is_counted_not_waited_for_ever():
     s.put("t/x", "1")
     assert inside.wait(5.0)
     t0 = time.monotonic()
+    told: list[str] = []
     try:
-        assert callbacks.close(s, timeout_s=0.2) == 1
+        assert callbacks.close(s, timeout_s=0.2, warn=told.append, who="uvd-fdc") == 1
         assert time.monotonic() - t0 < 2.0
+        assert told == ["uvd-fdc: 1 callback(s) still running 0.2 s after the session closed"]
     finally:
         release.set()
         ran_on[0].join(5.0)

@@ -7,8 +7,8 @@ of them is still in a callback, or still winding down, aborts in Python's finali
 (``FATAL: exception not rethrown``, SIGABRT, exit −6): Python 3.11 ends a thread that wants
 the GIL back during finalization with ``pthread_exit``, whose forced unwind cannot pass the
 Rust frames on that thread's stack (PyO3 pull request 4874). Measured: the daemon of
-tests/test_runtime_app.py, given SIGTERM beside two busy processes, aborted so once in 25
-starts after an orderly shutdown — a systemd unit left ``failed`` with a core dump — with a
+tests/test_runtime_app.py, given SIGTERM beside two busy processes, aborted this way in 1 of
+25 starts after an orderly shutdown — a systemd unit left ``failed`` with a core dump — with a
 ``(pyo3-closure)`` thread still alive at exit.
 
 :class:`SessionCallbacks` hands zenoh each callback with a ``drop`` of its own (zenoh calls it
@@ -48,10 +48,12 @@ class SessionCallbacks:
         self._handlers.append((dropped, thread))
         return zenoh.handlers.Callback(fn, drop)
 
-    def close(self, session, timeout_s: float = CLOSE_TIMEOUT_S) -> int:
+    def close(self, session, timeout_s: float = CLOSE_TIMEOUT_S, *,
+              warn: Callable[[str], Any] | None = None, who: str = "zenoh") -> int:
         """Close ``session`` (undeclaring everything it declared), then wait up to
         ``timeout_s`` in all for each callback's thread to run its drop and end. Returns how
-        many were still running when the time ran out (0: all ended)."""
+        many were still running when the time ran out (0: all ended); if any were, ``warn``
+        (a logger's ``warning``, a print) is told so, the message naming ``who``."""
         session.close()
         deadline = time.monotonic() + timeout_s
         running = 0
@@ -63,4 +65,7 @@ class SessionCallbacks:
                 thread[0].join(max(0.0, deadline - time.monotonic()))
                 running += thread[0].is_alive()
         self._handlers.clear()
+        if running and warn is not None:
+            warn(f"{who}: {running} callback(s) still running {timeout_s:g} s after the "
+                 "session closed")
         return running

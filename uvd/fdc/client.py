@@ -25,7 +25,7 @@ from collections import deque
 
 from uvd.fdc.align import STREAMS, Aligned
 from uvd.fdc.detector import CusumSettings, VehicleDetector, thruster_matrix
-from uvd.zenoh_callbacks import CLOSE_TIMEOUT_S, SessionCallbacks
+from uvd.zenoh_callbacks import SessionCallbacks
 
 #: state samples of a vehicle kept until its first estimate (10 minutes at 100 Hz)
 EARLY_STATES = 60_000
@@ -320,10 +320,7 @@ def main(argv: list[str] | None = None) -> int:
                 ask_thrusters(vehicle)
             release()  # a stream gone quiet stops holding the other
     finally:
-        running = callbacks.close(session)  # and their threads ended: none left at exit
-        if running:
-            say(f"uvd-fdc: {running} callback(s) still running {CLOSE_TIMEOUT_S:g} s after the "
-                "session closed")
+        callbacks.close(session, warn=say, who="uvd-fdc")  # their threads ended: none at exit
         if link.dropped:
             say(f"uvd-fdc: dropped {sum(link.dropped.values())} malformed samples "
                 f"({', '.join(f'{k} {n}' for k, n in sorted(link.dropped.items()))})")

@@ -46,7 +46,7 @@ import numpy as np
 from uvd.geometry import R_to_euler, wrap_angle
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
-from uvd.zenoh_callbacks import CLOSE_TIMEOUT_S, SessionCallbacks
+from uvd.zenoh_callbacks import SessionCallbacks
 
 log = logging.getLogger(__name__)
 
@@ -224,10 +224,7 @@ class ZenohSink:
             if self._token is not None:
                 self._token.undeclare()
             if self._session is not None:
-                running = self._callbacks.close(self._session)
-                if running:
-                    log.warning("zenoh: %d callback(s) still running %.1f s after the session "
-                                "closed", running, CLOSE_TIMEOUT_S)
+                self._callbacks.close(self._session, warn=log.warning)
         finally:
             self._session = None
 
