@@ -421,15 +421,15 @@ class VehicleDetector:
             return []
         from uvd.fdc.residual import state_sample
         t = int(payload["t_ns"]) * 1e-9
-        sample = (t, *state_sample(payload["v"], payload["R"], payload["thrust"],
-                                   self.B.shape[1]))
         if self.model is None:
+            v, R, f = state_sample(payload["v"], payload["R"], payload["thrust"],
+                                   self.B.shape[1])
             if not self.mu and self._age(int(payload["t_ns"])) >= self.settings.warmup_s:
                 if len(self.states) < MAX_BASELINE_STATES:  # one row: t, v, R, f
-                    self.states.append(np.concatenate([[t], sample[1], sample[2].ravel(),
-                                                       sample[3]]))
+                    self.states.append(np.concatenate([[t], v, R.ravel(), f]))
             return []
-        seg = self.integrator.add(*sample)
+        # the integrator checks the sample itself (state_sample): a ValueError names it
+        seg = self.integrator.add(t, payload["v"], payload["R"], payload["thrust"])
         if seg is not None and self.spread is not None:
             self.segments.append(seg)
             if self.pending:
