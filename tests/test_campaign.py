@@ -332,9 +332,9 @@ def test_published_again_with_nothing_to_run_keeps_the_instalment_that_ran_the_r
 
 def test_make_results_campaign_progress_says_how_long_so_far_and_what_is_left():
     from uvd.campaign.publish import _pace
-    assert _pace(660.0, 10, 130) == ", 11 min, ~2 h 12 min left"
-    assert _pace(7400.0, 130, 130) == ", 2 h 3 min"  # done: nothing left to estimate
-    assert _pace(90.0, 1, 4) == ", 2 min, ~4 min left"
+    assert _pace(660.0, 7920.0) == ", 11 min, ~2 h 12 min left"
+    assert _pace(7400.0, None) == ", 2 h 3 min"  # done: nothing left to estimate
+    assert _pace(90.0, 270.0) == ", 2 min, ~4 min left"
 
 
 def test_a_row_half_written_by_a_dead_campaign_is_removed_and_a_live_writers_is_kept(tmp_path):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import io
 
-from uvd.progress import Progress
+from uvd.progress import Pace, Progress
 
 
 class _Clock:
@@ -54,3 +54,19 @@ def test_quiet_is_silent():
     p.note("nothing")
     p.close()
     assert out.getvalue() == ""
+
+
+def test_the_time_left_is_the_recent_paces_so_a_slow_start_is_forgotten():
+    """30 runs in the first hour (the machine shared), then one a minute: at 40 of 130 the
+    time left is 90 minutes at the last ten minutes' pace, not the 158 the mean since the start
+    gives; before ten minutes have passed the pace is the one since the start."""
+    pace = Pace(0.0)
+    for k in range(1, 31):
+        pace.mark(k, 130, k * 120.0)
+    for k in range(31, 40):
+        pace.mark(k, 130, 3600.0 + (k - 30) * 60.0)
+    assert pace.mark(40, 130, 4200.0) == 90 * 60.0
+    young = Pace(0.0)
+    assert young.mark(0, 10, 5.0) is None  # nothing done yet: nothing to go by
+    assert young.mark(2, 10, 60.0) == 240.0
+    assert young.mark(10, 10, 300.0) == 0.0 and young.mark(3, None, 301.0) is None

@@ -12,6 +12,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from uvd.progress import Pace
+
 #: the campaigns of docs/RESULTS.md, in page order
 PUBLISHED = ("fdc-false-alarms", "fdc-detection", "control-model-error")
 
@@ -36,11 +38,14 @@ def publish(name: str, work: Path, results_dir: Path, *, workers: int | None = N
              + (f" --limit {limit}" if limit else ""))
 
     t0 = time.perf_counter()
+    pace = Pace(t0)
 
     def on_row(row: dict, done: int, todo: int) -> None:
+        now = time.perf_counter()
+        left = pace.mark(done, todo, now)
         if done % 10 == 0 or done == todo:
             progress(f"  {name}: {done} / {todo} runs"
-                     + _pace(time.perf_counter() - t0, done, todo))
+                     + _pace(now - t0, left if done < todo else None))
 
     res = run_campaign(spec, work, workers=workers, on_row=on_row, limit=limit)
     keys = [run_key(spec.kind, i, code_version()) for i in spec.runs]
@@ -65,15 +70,14 @@ def publish(name: str, work: Path, results_dir: Path, *, workers: int | None = N
     return out
 
 
-def _pace(elapsed_s: float, done: int, todo: int) -> str:
-    """``", 12 min, ~1 h 50 min left"``: the time so far and what is left at the pace so far
-    (runs differ in length, so an estimate; nothing when all are done)."""
+def _pace(elapsed_s: float, left_s: float | None) -> str:
+    """``", 12 min, ~1 h 50 min left"``: the time so far and what is left at the recent pace
+    (:class:`uvd.progress.Pace`; runs differ in length, so an estimate; nothing left to say
+    when ``left_s`` is None)."""
     def hm(s: float) -> str:
         m = round(s / 60.0)
         return f"{m // 60} h {m % 60} min" if m >= 60 else f"{m} min"
-    left = "" if done >= todo or done <= 0 else \
-        f", ~{hm(elapsed_s / done * (todo - done))} left"
-    return f", {hm(elapsed_s)}{left}"
+    return f", {hm(elapsed_s)}" + ("" if left_s is None else f", ~{hm(left_s)} left")
 
 
 #: the figures of the instalment that ran a campaign's runs (what docs/RESULTS.md quotes)
