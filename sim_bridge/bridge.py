@@ -188,6 +188,7 @@ class SimBridge:
         self._pending: list[tuple[str, Any]] = []
         self._timed: list[tuple[int, str, dict]] = []  # (due ns, op, args), soonest first
         self._timed_lock = threading.Lock()  # the control thread adds, the plant loop takes
+        self._timed_running = 0  # taken from _timed and not yet carried out (stats' scheduled)
         self.timed_results: list[dict] = []
         self._links = dict(config.serial_ports)
         # each frame's noise keyed by (seed, instrument, frame since the release) as the
@@ -438,12 +439,22 @@ class SimBridge:
                 if not (self._timed and self._timed[0][0] <= t_ns):
                     return
                 due, op, kw = self._timed.pop(0)
-            ans = self.call(op, **kw)
-            self.timed_results.append({"op": op, **kw, "due_ns": due, **ans})
+                self._timed_running += 1
+            try:
+                ans = self.call(op, **kw)
+                self.timed_results.append({"op": op, **kw, "due_ns": due, **ans})
+            finally:
+                # counted as scheduled until its result is in timed_results: a stats call
+                # between the two saw nothing scheduled and nothing done (seen under load,
+                # tests/test_sim_bridge_faults.py)
+                with self._timed_lock:
+                    self._timed_running -= 1
             (log.info if ans.get("ok") else log.warning)(
                 "scheduled %s %s: %s", op, kw, ans)
 
     def stats(self, history: bool = False) -> dict:
+        with self._timed_lock:
+            scheduled = len(self._timed) + self._timed_running
         ports = {n: {"device": p.device, "frames_written": p.frames_written,
                      "frames_dropped": p.frames_dropped, "garbage": p.garbage_written}
                  for n, p in self.emulators.ports.items()}
@@ -451,7 +462,8 @@ class SimBridge:
                 "faults": dict(self.faults.mode), "held": self.held,
                 "plant_fault": dataclasses.asdict(self.plant.fault),
                 "thruster_health": self.plant.thrusters.health.tolist(),
-                "timed": list(self.timed_results), "scheduled": len(self._timed),
+                "timed": list(self.timed_results),
+                "scheduled": scheduled,
                 "leak_wet": self.leak_wet,
                 "released_at_ns": self.released_at_ns,
                 "can": self.can.stats(history) if self.can is not None else {}}
