@@ -22,9 +22,10 @@ changes, and the one thruster left for it chases that error to its limit. Measur
 an aft thruster dead, the reference sliding along surge only): the lateral thruster at its limit
 in 22–59 % of the cycles after the fault, and the heading missing 2.5–3.6× of its fault-free
 error on RefTraj1 and on RefTraj1 with half its heading swing (where the yaw asked stays within
-the one aft thruster's reach); sliding both axes, the lateral thruster at its limit in 0–3 % and
-heading, roll and pitch within 1.3× (docs/experiments.md, "fault-tolerance"). Horizontal
-position is given up with surge or sway; the thrusters left keep depth and attitude.
+the one aft thruster's reach); sliding both axes, the lateral thruster at its limit in none of
+the cycles and heading, roll and pitch within 1.31× on both (docs/experiments.md,
+"fault-tolerance"). Horizontal position is given up with surge or sway; the thrusters left keep
+depth and attitude.
 """
 
 from __future__ import annotations
