@@ -122,7 +122,7 @@ def test_an_aft_thruster_dead_keeps_the_jhu_rov_heading_though_reftraj1_asks_mor
     surge force, which nothing left cancels, is applied ten times over. What used to cost the
     heading (3.4x) was the lateral thruster chasing, to its limit, the sway error the surge
     drift became as the heading turned; with horizontal position given up along both axes
-    (uvd.control.given_up) it is at its limit in a few per cent of the cycles. Depth misses
+    (uvd.control.given_up) it is at its limit in none of the cycles. Depth misses
     the 2x (2.11x: the drift's speed through the pitching vehicle's Coriolis terms, which the
     controller's masses, still learning from zero at the fault, under-model): held here as a
     figure, not met."""
