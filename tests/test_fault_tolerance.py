@@ -123,7 +123,7 @@ def test_an_aft_thruster_dead_keeps_the_jhu_rov_heading_though_reftraj1_asks_mor
     heading (3.4x) was the lateral thruster chasing, to its limit, the sway error the surge
     drift became as the heading turned; with horizontal position given up along both axes
     (uvd.control.given_up) it is at its limit in none of the cycles. Depth misses
-    the 2x (2.11x: the drift's speed through the pitching vehicle's Coriolis terms, which the
+    the 2x (2.12x: the drift's speed through the pitching vehicle's Coriolis terms, which the
     controller's masses, still learning from zero at the fault, under-model): held here as a
     figure, not met."""
     import numpy as np
@@ -152,6 +152,25 @@ def test_an_aft_thruster_dead_keeps_the_jhu_rov_heading_though_reftraj1_asks_mor
     for dof in ("roll", "pitch", "heading"):
         assert ratio[dof] <= 2.0, (dof, ratio[dof])
     assert ratio["z"] < 2.2  # 2.11x measured: the issue's 2x is not met on depth
+
+
+@pytest.mark.parametrize("dead", [1, 2, 3])
+def test_a_converged_controller_keeps_the_jhu_rov_on_depth_and_attitude_with_a_thruster_dead(dead):
+    """Two-step AMBC whose θ̂ starts at the vehicle's parameters (``[control] theta0 =
+    "vehicle"``: a controller that has converged, as one on a vehicle in service has), the JHU
+    ROV's aft or lateral thruster dead at 60 s: depth and attitude within the issue's 2× of the
+    same controller's fault-free run. With the slid reference taking the trajectory's
+    acceleration, not its own, this missed by far (z 8.0×, 8.1× and 3.2×; heading 3.5× with
+    thruster 1): the drift's acceleration went unmodelled into a heave loop that a converged
+    model leaves damped by k_d alone (uvd.control.given_up). Measured now, seed 0: z 0.47×,
+    0.94×, 0.56×, every attitude DOF under 1×."""
+    free = run_arm("sim.toml", 1, 1.0, "fault-free", theta0="vehicle")
+    r = run_arm("sim.toml", dead, 0.0, "told", theta0="vehicle")
+    ratio = {d: r["after"][d] / free["after"][d] for d in ("z", "roll", "pitch", "heading")}
+    print(f"theta0 vehicle, thruster {dead} dead:", {d: round(x, 2) for d, x in ratio.items()},
+          "given up", r["given_up"])
+    assert r["given_up"] == (["surge"] if dead < 3 else ["sway"])
+    assert max(ratio.values()) <= 2.0, ratio
 
 
 def test_half_reftraj1s_heading_swing_keeps_every_dof_of_the_bound_within_2x():

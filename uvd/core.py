@@ -91,7 +91,7 @@ from uvd.control.allocation import (
     dof_priority_indices,
     lag_compensate,
 )
-from uvd.control.given_up import slide_reference
+from uvd.control.given_up import measured_acceleration, slide_reference, world_velocity
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.types import ControllerSpec, EstimatorSpec, Reference, VehicleState
 from uvd.estimation.navigation import NavConfig, NavMemory, NavState, nav_init, nav_step
@@ -242,6 +242,9 @@ class CoreState:
     #: the running reference (``.at(t_s) -> Reference``, t_s from ``t0_ns``): the configured
     #: one from :func:`core_init`; the supervised cycle replaces it (a pose to hold)
     reference: Any = None
+    #: (t_ns, world linear velocity) of the last cycle whose controller's reference slid
+    #: (surge or sway given up), for the slid reference's acceleration (uvd.control.given_up)
+    slid_v: tuple | None = None
 
 
 class CoreOutputs(NamedTuple):
@@ -517,6 +520,7 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
     hold = None
 
     status = "ok"
+    slid_v = None
     ctrl = state.ctrl
     ctrl_new = None
     u_ctrl = _ZERO6
@@ -526,7 +530,11 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
             # surge or sway given up: the controller's reference slides horizontally to the
             # vehicle, so what cannot be corrected ends as drift, not depth error (the
             # outputs keep the trajectory's reference: what tracking is measured against)
-            ref_c = ref if not given_up else slide_reference(ref, sensed.vs, actuated)
+            ref_c = ref
+            if given_up:
+                slid_v = (inputs.t_ns, world_velocity(sensed.vs))
+                ref_c = slide_reference(ref, sensed.vs, actuated,
+                                        measured_acceleration(state.slid_v, slid_v, dt))
             if mode is _CONTROL:
                 params = cfg.controller.params if eta is None else \
                     cfg.controller_params_for(eta)
@@ -597,7 +605,8 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
                       guard, given_up)
     return out, CoreState(sensed.nav_mem, ctrl, sensed.est, t0, sensed.est_t_ns,
                           state.cycles + 1, u_cmd, hold,
-                          inputs.t_ns if ctrl is not state.ctrl else state.ctrl_t_ns, reference)
+                          inputs.t_ns if ctrl is not state.ctrl else state.ctrl_t_ns, reference,
+                          slid_v)
 
 
 def step(cfg: CoreConfig, inputs: CoreInputs, state: CoreState, dt: float

@@ -26,6 +26,19 @@ the one aft thruster's reach); sliding both axes, the lateral thruster at its li
 the cycles and heading, roll and pitch within 1.31× on both (docs/experiments.md,
 "fault-tolerance"). Horizontal position is given up with surge or sway; the thrusters left keep
 depth and attitude.
+
+The slid reference's acceleration is the one its velocity has: the model-based controllers
+feed M α forward (5.12), α from ᵈv̇_d, and with the drag and Coriolis forces fed forward
+exactly (a converged θ̂) little but the gains k_p, k_d is left to damp heave (for the JHU ROV
+ω_n = √(300/1043) ≈ 0.54 rad/s, ζ ≈ 0.09). The trajectory's ᵈv̇_d is the derivative of the
+trajectory's velocity, not of the slid one: it misses the vehicle's own horizontal acceleration
+(its body heave axis, pitched θ, sees sin θ of the surge acceleration) and the turning of the
+drift velocity in the desired frame (−ω_d × ᵈv_d). Measured (the JHU ROV, an aft thruster dead,
+θ̂ converged, seed 0): with the trajectory's ᵈv̇_d the depth error swung ±45 cm with the surge
+drift, 8.0× its fault-free error; with the slid reference's own, 0.47× (docs/experiments.md,
+"fault-tolerance"). The vehicle's horizontal acceleration is measured: the difference of two
+cycles' velocities (:func:`measured_acceleration`); with none (the first cycle sliding, a
+navigation gap) it is taken as zero.
 """
 
 from __future__ import annotations
@@ -37,6 +50,30 @@ from uvd.control.types import Reference, VehicleState
 #: a given-up body axis whose horizontal part is shorter than this (the desired frame pitched
 #: or rolled near 90°) has no horizontal direction to slide along: the reference stays
 HORIZONTAL_MIN = 0.2
+
+#: two velocities further apart than this many control periods give no acceleration
+ACCEL_MAX_PERIODS = 3.0
+
+
+def world_velocity(state: VehicleState) -> np.ndarray:
+    """The vehicle's linear velocity in the world frame, ʷRₐ ᵃν."""
+    H = np.asarray(state.H, dtype=float)
+    return H[:3, :3] @ np.asarray(state.v, dtype=float)[:3]
+
+
+def measured_acceleration(prev, now, dt: float) -> np.ndarray | None:
+    """The vehicle's world acceleration from two ``(t_ns, world velocity)`` samples, the
+    difference quotient; None when either is missing or not finite, or the two are not 0 <
+    Δt ≤ :data:`ACCEL_MAX_PERIODS` control periods ``dt`` apart. (A velocity held between
+    slower DVL samples gives 0 and then the whole change: the mean is right, cycle by cycle it
+    is noisier.)"""
+    if prev is None or now is None:
+        return None
+    gap = (now[0] - prev[0]) * 1e-9
+    if not 0.0 < gap <= ACCEL_MAX_PERIODS * dt:
+        return None
+    a = (np.asarray(now[1], dtype=float) - np.asarray(prev[1], dtype=float)) / gap
+    return a if np.isfinite(a).all() else None
 
 
 def _slide(e: np.ndarray, R_d: np.ndarray, given: np.ndarray) -> np.ndarray | None:
@@ -53,7 +90,8 @@ def _slide(e: np.ndarray, R_d: np.ndarray, given: np.ndarray) -> np.ndarray | No
     return A[:, given] @ c[given]
 
 
-def slide_reference(ref: Reference, state: VehicleState, actuated) -> Reference:
+def slide_reference(ref: Reference, state: VehicleState, actuated,
+                    accel: np.ndarray | None = None) -> Reference:
     """``ref`` with its desired position and linear velocity moved horizontally to the
     vehicle's when surge or sway is given up (``actuated`` False for either; module docstring:
     both axes slide).
@@ -63,10 +101,13 @@ def slide_reference(ref: Reference, state: VehicleState, actuated) -> Reference:
     neither axis is near vertical) and p_d ← p_d + c₁a₁ + c₂a₂; the world velocity error
     likewise (the desired body-frame velocity ᵈv_d's linear part, ᵈv_d ← R_dᵀ(ṗ_d + d₁a₁ +
     d₂a₂)). The error the controller forms on the body heave axis is then zero exactly when the
-    vehicle is at the desired depth; along body surge and sway it is zero. Nothing horizontal
-    given up, heave given up, an axis near vertical or a non-finite state: ``ref`` unchanged.
-    Attitude, angular velocity, acceleration and closed loop are kept; a preview moves by the
-    same offsets.
+    vehicle is at the desired depth; along body surge and sway it is zero. The acceleration is
+    the slid velocity's derivative (module docstring): in the world, the vehicle's horizontal
+    acceleration ``accel`` (its x and y; None: zero) and the trajectory's vertical one p̈_d,z,
+    so ᵈv̇_d ← R_dᵀ[a_x, a_y, p̈_d,z] − ω_d × ᵈv_d (ν̇ = Rᵀp̈ − ω × ν, as the trajectory's). Nothing
+    horizontal given up, heave given up, an axis near vertical or a non-finite state: ``ref``
+    unchanged. Attitude, angular velocity, angular acceleration and closed loop are kept; a
+    preview moves by the same offsets and takes the same acceleration.
     """
     act = np.asarray(actuated, dtype=bool).reshape(-1)
     if act[:2].all() or not act[2]:
@@ -81,19 +122,26 @@ def slide_reference(ref: Reference, state: VehicleState, actuated) -> Reference:
         return ref
     v_d = np.asarray(ref.v, dtype=float)
     dv = _slide(H_a[:3, :3] @ np.asarray(state.v, dtype=float)[:3] - R_d @ v_d[:3], R_d, given)
+    a_h = (0.0, 0.0) if accel is None or not np.isfinite(accel).all() else \
+        (float(accel[0]), float(accel[1]))
     preview = ref.preview
     if preview is not None:  # moved alike: the preview's increment stays the trajectory's
-        preview = _moved(preview, dp, dv)
+        preview = _moved(preview, dp, dv, a_h)
     return _moved(Reference(H_d, v_d, ref.vdot, ref.open_loop_wrench, ref.closed_loop, preview),
-                  dp, dv)
+                  dp, dv, a_h)
 
 
-def _moved(ref: Reference, dp: np.ndarray, dv: np.ndarray) -> Reference:
-    """``ref`` with its desired position moved by the world vector ``dp`` and its linear
-    velocity by the world vector ``dv`` (ᵈv_d is in the desired body frame)."""
+def _moved(ref: Reference, dp: np.ndarray, dv: np.ndarray, a_h) -> Reference:
+    """``ref`` with its desired position moved by the world vector ``dp``, its linear velocity
+    by the world vector ``dv`` (ᵈv_d is in the desired body frame) and its linear acceleration
+    that of the moved velocity, horizontally ``a_h`` in the world (:func:`slide_reference`)."""
     H = np.array(ref.H, dtype=float)
     v = np.array(ref.v, dtype=float)
+    vdot = np.array(ref.vdot, dtype=float)
     R = H[:3, :3]
+    w = v[3:]
+    a_z = (R @ (vdot[:3] + np.cross(w, v[:3])))[2]  # the trajectory's p̈_d,z
     H[:3, 3] += dp
     v[:3] += R.T @ dv
-    return Reference(H, v, ref.vdot, ref.open_loop_wrench, ref.closed_loop, ref.preview)
+    vdot[:3] = R.T @ np.array([a_h[0], a_h[1], a_z]) - np.cross(w, v[:3])
+    return Reference(H, v, vdot, ref.open_loop_wrench, ref.closed_loop, ref.preview)
