@@ -76,18 +76,18 @@ def measured_acceleration(prev, now, dt: float) -> np.ndarray | None:
     return a if np.isfinite(a).all() else None
 
 
-def _slide(e: np.ndarray, R_d: np.ndarray, given: np.ndarray) -> np.ndarray | None:
-    """The world vector c·a (a: each given-up axis's horizontal direction) such that e − c·a
-    lies in the span of the kept translational axes of R_d; None where it cannot be formed."""
+def _slide(e: np.ndarray, R_d: np.ndarray) -> np.ndarray | None:
+    """The world vector c₁a₁ + c₂a₂ (a₁, a₂: the horizontal directions of R_d's surge and sway
+    axes) such that e − c₁a₁ − c₂a₂ lies along R_d's heave axis; None where it cannot be formed
+    (an axis near vertical)."""
     A = R_d.copy()
-    for i in np.flatnonzero(given):
-        h = np.array([R_d[0, i], R_d[1, i], 0.0])
-        n = float(np.hypot(h[0], h[1]))
+    for i in (0, 1):
+        n = float(np.hypot(R_d[0, i], R_d[1, i]))
         if n < HORIZONTAL_MIN:
             return None
-        A[:, i] = h / n
+        A[:, i] = (R_d[0, i] / n, R_d[1, i] / n, 0.0)
     c = np.linalg.solve(A, e)
-    return A[:, given] @ c[given]
+    return A[:, :2] @ c[:2]
 
 
 def slide_reference(ref: Reference, state: VehicleState, actuated,
@@ -112,16 +112,15 @@ def slide_reference(ref: Reference, state: VehicleState, actuated,
     act = np.asarray(actuated, dtype=bool).reshape(-1)
     if act[:2].all() or not act[2]:
         return ref
-    given = np.array([True, True, False])
     H_d, H_a = np.asarray(ref.H, dtype=float), np.asarray(state.H, dtype=float)
     if not (np.isfinite(H_a).all() and np.isfinite(state.v).all()):
         return ref
     R_d = H_d[:3, :3]
-    dp = _slide(H_a[:3, 3] - H_d[:3, 3], R_d, given)
+    dp = _slide(H_a[:3, 3] - H_d[:3, 3], R_d)
     if dp is None:
         return ref
     v_d = np.asarray(ref.v, dtype=float)
-    dv = _slide(H_a[:3, :3] @ np.asarray(state.v, dtype=float)[:3] - R_d @ v_d[:3], R_d, given)
+    dv = _slide(world_velocity(state) - R_d @ v_d[:3], R_d)
     a_h = (0.0, 0.0) if accel is None or not np.isfinite(accel).all() else \
         (float(accel[0]), float(accel[1]))
     preview = ref.preview

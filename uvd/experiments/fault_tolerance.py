@@ -102,7 +102,8 @@ def run_arm(config_name: str, k: int, eta_k: float, arm: str, *, t_fault_s: floa
     cyc = make_cycle(cfg, vehicle) if supervised else unsupervised(build_core(cfg, vehicle))
     if reference is not None:
         cyc = replace(cyc, core=replace(cyc.core, reference=reference))
-        H0, v0 = reference.at(0.0).H, reference.at(0.0).v
+        r0 = reference.at(0.0)
+        H0, v0 = r0.H, r0.v
     cyc = replace(cyc, thresholds=replace(cyc.thresholds, amplifier_fault="reallocate"))
     sim = Lockstep(vehicle, cyc, lockstep_config(cfg, seed), H0=H0, v0=v0)
     fault_ns = int(round(t_fault_s * 1e9))
