@@ -75,13 +75,12 @@ def run_arm(config_name: str, k: int, eta_k: float, arm: str, *, t_fault_s: floa
     ``[control] theta0`` (``"vehicle"``: a controller whose θ̂ has converged), ``reference``
     the configured trajectory (a :class:`~uvd.control.trajectory.CosineTrajectory`, the run
     starting on it); ``keep_log``: the run's :class:`~uvd.lockstep.LockstepLog` is the
-    result's ``log``. ``supervised``:
-    the daemon's cycle (:func:`uvd.runtime.build.make_cycle`: its failsafes and lifecycle, as
-    ``uvd demo``'s lockstep run), armed from the start, instead of the thesis experiments'
-    :func:`~uvd.runtime.cycle.unsupervised` one; the result then has the failsafe events and
-    lifecycle transitions (``failsafe_events``), the told command's text (``told``) and the
-    controller's θ̂ at the fault and at the end (``theta_at_fault``, ``theta_end``; None
-    without adaptation)."""
+    result's ``log``. ``supervised``: the daemon's cycle (:func:`uvd.runtime.build.make_cycle`:
+    its failsafes and lifecycle, as ``uvd demo``'s lockstep run), armed from the start, instead
+    of the thesis experiments' :func:`~uvd.runtime.cycle.unsupervised` one; the result then has
+    the failsafe events and lifecycle transitions (``failsafe_events``), the told command's text
+    (``told``) and the controller's θ̂ at the fault and at the end (``theta_at_fault``,
+    ``theta_end``; None without adaptation)."""
     from dataclasses import replace
 
     from uvd.lockstep import Lockstep, lockstep_config, run, tracking_errors
