@@ -9,6 +9,7 @@ from tests.test_core import _cfg, _samples
 from uvd import core
 from uvd.control.given_up import (
     ACCEL_MAX_PERIODS,
+    controlled_dofs,
     measured_acceleration,
     slide_reference,
     world_velocity,
@@ -174,3 +175,16 @@ def test_the_core_carries_the_velocity_only_while_its_reference_slides():
     assert st.slid_v is not None and st.slid_v[0] == 0 and np.isfinite(st.slid_v[1]).all()
     _, healthy = core.step(cfg, core.CoreInputs(t_ns=0, **s), core.core_init(cfg), 0.1)
     assert healthy.slid_v is None
+
+
+@pytest.mark.parametrize(("act", "controlled"), [
+    ([False, True, True, True, True, True], [False, False, True, True, True, True]),
+    ([True, False, True, True, True, True], [False, False, True, True, True, True]),
+    ([True, True, True, True, False, True], [True, True, True, True, False, True]),
+    ([False, True, False, True, True, True], [False, True, False, True, True, True]),
+    ([True] * 6, [True] * 6)])
+def test_surge_or_sway_given_up_takes_both_out_of_the_controllers_loop(act, controlled):
+    """Horizontal position given up: the controller acts on neither horizontal translation
+    (the slid reference leaves the kept one no error, only a feed-forward of the drift); with
+    heave given up nothing slides and only the DOFs no thruster reaches are out."""
+    assert controlled_dofs(act).tolist() == controlled

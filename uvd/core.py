@@ -91,7 +91,12 @@ from uvd.control.allocation import (
     dof_priority_indices,
     lag_compensate,
 )
-from uvd.control.given_up import measured_acceleration, slide_reference, world_velocity
+from uvd.control.given_up import (
+    controlled_dofs,
+    measured_acceleration,
+    slide_reference,
+    world_velocity,
+)
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.types import ControllerSpec, EstimatorSpec, Reference, VehicleState
 from uvd.estimation.navigation import NavConfig, NavMemory, NavState, nav_init, nav_step
@@ -513,8 +518,10 @@ def act(cfg: CoreConfig, sensed: Sensed, inputs: CoreInputs, state: CoreState, d
         acc, B = cfg.accommodation_for(eta)
         B_pinv, given_up = acc.B_pinv, acc.given_up
         actuated = acc.actuated
-        if given_up:  # no feedback and no adaptation on a DOF no thruster reaches
-            cl = acc.actuated if ref.closed_loop is None else (acc.actuated & ref.closed_loop)
+        if given_up:  # no feedback and no adaptation on a DOF no thruster reaches (neither
+            # horizontal translation when surge or sway is: horizontal position is given up)
+            cl = controlled_dofs(acc.actuated)
+            cl = cl if ref.closed_loop is None else (cl & ref.closed_loop)
             ref = replace(ref, closed_loop=cl)
     mask = None  # HOLD_DEPTH's vertical thrusters
     hold = None
