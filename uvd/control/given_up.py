@@ -38,7 +38,9 @@ drift velocity in the desired frame (−ω_d × ᵈv_d). Measured (the JHU ROV, 
 drift, 8.0× its fault-free error; with the slid reference's own, 0.45× (docs/experiments.md,
 "fault-tolerance"). The vehicle's horizontal acceleration is measured: the difference of two
 cycles' velocities (:func:`measured_acceleration`); with none (the first cycle sliding, a
-navigation gap) it is taken as zero.
+navigation gap) it is taken as zero. Unfiltered, it carries the DVL's noise: within the bound
+at 3× the thesis's DVL noise, not with the lateral thruster dead at 10× (z 2.53×;
+docs/experiments.md).
 
 With horizontal position given up the controller acts on neither horizontal translation
 (:func:`controlled_dofs`): the slid reference leaves the kept one (sway with surge given up) no

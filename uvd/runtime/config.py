@@ -191,8 +191,9 @@ class ControlSection:
             "or dead thruster) no longer reaches every DOF, allocation keeps these in order "
             "and gives up the last ones, which the controller then neither commands nor "
             "adapts on (uvd.control.allocation.accommodate); depth and attitude first by "
-            "default. Surge or sway given up gives up horizontal position too: the vehicle "
-            "keeps depth and attitude and drifts (uvd.control.given_up). With a thruster's "
+            "default. Surge or sway given up gives up horizontal position too: the "
+            "controller acts on neither horizontal translation, the vehicle keeps depth and "
+            "attitude and drifts (uvd.control.given_up). With a thruster's "
             "effectiveness set, a command beyond a thruster's limit is resolved in this order "
             "too: each DOF in turn gets the thrust the ones before it left "
             "(uvd.control.allocation.allocate_prioritised)")
