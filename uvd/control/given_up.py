@@ -86,12 +86,18 @@ def measured_acceleration(prev, now, dt: float) -> np.ndarray | None:
     return a if np.isfinite(a).all() else None
 
 
+def horizontal_given_up(act: np.ndarray) -> bool:
+    """Horizontal position is given up: surge or sway no longer reached, heave still is
+    (``act``: 6 booleans, the DOFs the thrusters reach)."""
+    return not act[:2].all() and bool(act[2])
+
+
 def controlled_dofs(actuated) -> np.ndarray:
     """The DOFs the controller acts on when the thrusters reach ``actuated`` (6 booleans): those,
-    less both horizontal translations when surge or sway is given up and heave is kept —
-    horizontal position is given up (module docstring)."""
+    less both horizontal translations when horizontal position is given up (module
+    docstring)."""
     act = np.array(actuated, dtype=bool).reshape(-1)
-    if not act[:2].all() and act[2]:
+    if horizontal_given_up(act):
         act[:2] = False
     return act
 
@@ -129,8 +135,7 @@ def slide_reference(ref: Reference, state: VehicleState, actuated,
     unchanged. Attitude, angular velocity, angular acceleration and closed loop are kept; a
     preview moves by the same offsets and takes the same acceleration.
     """
-    act = np.asarray(actuated, dtype=bool).reshape(-1)
-    if act[:2].all() or not act[2]:
+    if not horizontal_given_up(np.asarray(actuated, dtype=bool).reshape(-1)):
         return ref
     H_d, H_a = np.asarray(ref.H, dtype=float), np.asarray(state.H, dtype=float)
     if not (np.isfinite(H_a).all() and np.isfinite(state.v).all()):
