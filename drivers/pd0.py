@@ -553,6 +553,79 @@ def from_dvl_velocity(v_dvl: np.ndarray, altitude_m: float, ensemble_number: int
 VELOCITY_RESOLUTION_M_S = 0.001
 
 
+# ---------------------------------------------------------------------------------------------
+# the DVL's own velocity noise, from its error velocity
+# ---------------------------------------------------------------------------------------------
+#: ensembles with an error velocity needed before :func:`bottom_track_noise` gives a figure
+NOISE_MIN_ENSEMBLES = 10
+
+
+def bt_error_velocity_m_s(ens: Pd0Ensemble) -> float:
+    """The ensemble's bottom-track error velocity (m/s), NaN when it has none.
+
+    In beam coordinates it is formed from the four beams (:func:`drivers.frames.
+    beam_to_instrument`); in the instrument, ship and earth frames it is the fourth velocity
+    the instrument sent (RDI marks it bad, −32768, where it could not form it)."""
+    v = ens.bt_velocity_m_s
+    if ens.coord_frame == "beam":
+        if not np.isfinite(v).all():
+            return float("nan")
+        return float(frames.beam_to_instrument(*v, ens.beam_angle_deg, ens.convex)[3])
+    return float(v[3])
+
+
+@dataclass(frozen=True)
+class BottomTrackNoise:
+    """A DVL's horizontal velocity noise, read off a recording (:func:`bottom_track_noise`).
+
+    Attributes
+    ----------
+    ensembles : ensembles with an error velocity.
+    sigma_m_s : the noise of one ensemble's horizontal velocity (m/s).
+    bt_pings : bottom-track pings averaged into an ensemble (the BT leader's count; 0 unknown).
+    sigma_ping_m_s : the noise of one ping, ``sigma_m_s·√bt_pings`` (NaN when unknown).
+    interval_s : the median time between those ensembles (NaN without RTC times).
+    """
+
+    ensembles: int
+    sigma_m_s: float
+    bt_pings: int
+    sigma_ping_m_s: float
+    interval_s: float
+
+
+def bottom_track_noise(ensembles) -> BottomTrackNoise | None:
+    """The horizontal velocity noise of the DVL that wrote ``ensembles``, from its error
+    velocity; None with fewer than :data:`NOISE_MIN_ENSEMBLES` that carry one.
+
+    For RDI's 4-beam Janus head the error velocity has the very noise of each horizontal
+    component: with independent beam noise σ_b, X = c·a(b₁ − b₂) has σ_b·a√2 and
+    E = d(b₁ + b₂ − b₃ − b₄) with d = a/√2 has σ_b·2d = σ_b·a√2 (RDI "ADCP Coordinate
+    Transformation", the a, d of :func:`drivers.frames.beam_to_instrument`), while the
+    vehicle's own motion over a flat bottom cancels from E. So σ is read off E alone,
+    whatever the vehicle did: the robust standard deviation 1.4826·median|E − median E|,
+    which the odd wild value does not move. An ensemble averages the bottom-track pings of
+    the BT leader's count; one ping's noise is σ·√pings."""
+    errors, times = [], []
+    pings = 0
+    for ens in ensembles:
+        e = bt_error_velocity_m_s(ens)
+        if not math.isfinite(e):
+            continue
+        errors.append(e)
+        times.append(ens.time_unix_s)
+        pings = int((ens.bottom_track or {}).get("pings_per_ensemble", 0)) or pings
+    if len(errors) < NOISE_MIN_ENSEMBLES:
+        return None
+    e = np.asarray(errors)
+    sigma = 1.4826 * float(np.median(np.abs(e - np.median(e))))
+    dt = np.diff(np.asarray(times))
+    dt = dt[np.isfinite(dt) & (dt > 0)]
+    interval = float(np.median(dt)) if dt.size else float("nan")
+    return BottomTrackNoise(len(errors), sigma, pings,
+                            sigma * math.sqrt(pings) if pings else float("nan"), interval)
+
+
 def _mm(v_m_s: float) -> int:
     """m/s → int16 mm/s, saturating short of the 'bad' marker."""
     return max(-32767, min(32767, round(v_m_s * 1000.0)))

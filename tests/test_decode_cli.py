@@ -103,3 +103,20 @@ def test_decode_console_script_pipes():
                           capture_output=True, timeout=60, check=True)
     lines = proc.stdout.decode().splitlines()
     assert len(lines) == 4 and json.loads(lines[-1])["frames"] == 3
+
+
+def test_decode_pd0_reports_the_dvls_velocity_noise(capsys):
+    """The summary of a DVL's recording names its velocity noise beside the simulated DVL's:
+    the Workhorse of RDI_withBT.000 (898 ensembles with an error velocity, 2 bottom-track
+    pings every 1.5 s)."""
+    assert main(["decode", "--format", "pd0", str(_path("pd0/RDI_withBT.000"))]) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert last.startswith("# bottom-track velocity noise") and "898 ensembles" in last
+    assert "every 1.50 s): 4.4 mm/s an ensemble, 6.3 mm/s a ping (2 bottom-track" in last
+    assert "the simulated DVL (thesis Table A.1): 3.0 mm/s a sample at 6 Hz" in last
+    rc, _, summary = _run_json(capsys, "pd0", _path("pd0/RDI_withBT.000"))
+    noise = summary["bottom_track_noise"]
+    assert rc == 0 and noise["ensembles"] == 898 and noise["bt_pings"] == 2
+    assert noise["sigma_m_s"] == pytest.approx(0.0044478, abs=1e-6)
+    _, _, few = _run_json(capsys, "pd0", _path("pd0/adcp_auv_3.pd0"))
+    assert "bottom_track_noise" not in few  # 3 ensembles: too few for a figure

@@ -295,3 +295,64 @@ def test_phins_ascii_values_and_signs():
     assert s.heading == pytest.approx(math.radians(284.49 - 360.0))
     assert s.roll == pytest.approx(math.radians(-0.035))
     assert s.pitch == pytest.approx(math.radians(-0.445))
+
+
+# ---------------------------------------------------------------------------------------------
+# a DVL's velocity noise, read off its error velocity (drivers.pd0.bottom_track_noise)
+# ---------------------------------------------------------------------------------------------
+def _robust_sigma(x) -> float:
+    x = np.asarray(x, dtype=float)
+    return 1.4826 * float(np.median(np.abs(x - np.median(x))))
+
+
+def test_pd0_bottom_track_noise_is_read_off_the_reference_decoders_error_velocity():
+    """The noise figure of three real DVLs equals the robust σ of the error velocity that
+    the reference decoders (dolfyn's CSV, mi-instrument's particles) give for the same
+    ensembles, with their bottom-track pings and ensemble interval."""
+    csv_rows = list(csv.DictReader((DATA / "pd0" / "RDI_withBT_dolfyn_bottom_track.csv").open()))
+    workhorse = [float(r["vel_bt_4_mps"]) for r in csv_rows if float(r["vel_bt_4_mps"]) != -32.768]
+    expected = {"RDI_withBT.000": (workhorse, 1.5)}
+    for name, interval in (("adcp_auv_51", 2.03), ("NE051400", 3.44)):
+        err = [p["bt_error_velocity"] / 1000.0 for p in _bt_particles(_yaml(f"pd0/{name}.yml"))
+               if p["bt_error_velocity"] != -32768]
+        expected[f"{name}.pd0" if name != "NE051400" else "NE051400.PD0"] = (err, interval)
+    pings = {"RDI_withBT.000": 2, "adcp_auv_51.pd0": 4, "NE051400.PD0": 5}
+    for fname, (err, interval) in expected.items():
+        ensembles, _ = decode_bytes(pd0.Pd0Codec(), read_data(f"pd0/{fname}"))
+        n = pd0.bottom_track_noise(ensembles)
+        assert n is not None and n.ensembles == len(err) >= 50, fname
+        assert n.sigma_m_s == pytest.approx(_robust_sigma(err), rel=1e-9), fname
+        assert 0.002 < n.sigma_m_s < 0.006, fname  # a few mm/s, as such DVLs are specified
+        assert n.bt_pings == pings[fname]
+        assert n.sigma_ping_m_s == pytest.approx(n.sigma_m_s * math.sqrt(pings[fname]))
+        assert n.interval_s == pytest.approx(interval, abs=0.01), fname
+    few, _ = decode_bytes(pd0.Pd0Codec(), read_data("pd0/adcp_auv_3.pd0"))
+    assert pd0.bottom_track_noise(few) is None  # 3 ensembles: no figure
+
+
+def test_pd0_bottom_track_noise_in_beam_coordinates_is_the_horizontal_noise_whatever_the_motion():
+    """Beam-coordinate ensembles of a vehicle swinging at up to 1 m/s, each beam with noise
+    σ_b: the figure is the noise of X, σ_b·√2/(2 sin θ), within the sampling error of 3000
+    ensembles, and the motion does not enter it."""
+    base, _ = decode_bytes(pd0.Pd0Codec(), read_data("pd0/adcp_auv_3.pd0"))
+    theta = base[0].beam_angle_deg
+    fixed = dict(base[0].fixed)
+    fixed["coord_transform"] = 0  # beam coordinates
+    rng = np.random.default_rng(3)
+    sigma_b = 0.02  # well above PD0's 1 mm/s resolution
+    s, c = math.sin(math.radians(theta)), math.cos(math.radians(theta))
+    ensembles = []
+    for k in range(3000):
+        vx, vy, vz = math.sin(k / 40.0), 0.8 * math.cos(k / 25.0), 0.1 * math.sin(k / 7.0)
+        # convex Janus: beams 1/2 along ±X, 4/3 along ±Y (what beam_to_instrument inverts)
+        beams = np.array([vx * s + vz * c, -vx * s + vz * c, -vy * s + vz * c, vy * s + vz * c])
+        beams += rng.normal(0.0, sigma_b, 4)
+        bt = dict(base[0].bottom_track)
+        bt["velocity_mm_s"] = tuple(int(round(b * 1000.0)) for b in beams)
+        ensembles.append(pd0.Pd0Ensemble(fixed, base[0].variable, bt))
+    x = [pd0.frames.beam_to_instrument(*e.bt_velocity_m_s, theta, True)[0] for e in ensembles]
+    assert np.ptp(x) > 1.5  # the motion is in X …
+    n = pd0.bottom_track_noise(ensembles)
+    expected = sigma_b * math.sqrt(2.0) / (2.0 * s)
+    assert n.ensembles == 3000
+    assert n.sigma_m_s == pytest.approx(expected, rel=0.06)  # … and not in the figure

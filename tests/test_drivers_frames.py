@@ -127,3 +127,24 @@ def test_beam_to_instrument_inverts_the_janus_geometry(v, angle, convex):
 def test_three_beam_needs_exactly_one_missing():
     with pytest.raises(ValueError, match="exactly one"):
         frames.three_beam_to_instrument([1.0, float("nan"), float("nan"), 1.0], 30.0)
+
+
+@given(st.floats(5.0, 45.0), st.booleans())
+@settings(max_examples=60, deadline=None)
+def test_janus_error_velocity_carries_the_noise_of_each_horizontal_component(angle, convex):
+    """drivers.pd0.bottom_track_noise reads a DVL's horizontal noise off its error velocity:
+    for any beam angle, X, Y and E weigh independent beam noise alike (equal norms of their
+    rows of the beam → instrument transform), and E weighs no motion (its row is orthogonal
+    to the beams' response to any X, Y, Z velocity)."""
+    rows = np.array([frames.beam_to_instrument(*np.eye(4)[i], angle, convex)
+                     for i in range(4)]).T  # rows X, Y, Z, E over beams 1…4
+    nx, ny, _, ne = np.linalg.norm(rows, axis=1)
+    assert nx == pytest.approx(ne, rel=1e-12) and ny == pytest.approx(ne, rel=1e-12)
+    # the beams' response to a velocity (X, Y, Z): each beam sees it along its own axis,
+    # tilted θ from Z (beams 1/2 in ±X, 4/3 in ±Y for a convex head; mirrored if concave)
+    sn, cs, sg = math.sin(math.radians(angle)), math.cos(math.radians(angle)), \
+        (1.0 if convex else -1.0)
+    response = np.array([[sg * sn, 0, cs], [-sg * sn, 0, cs], [0, -sg * sn, cs],
+                         [0, sg * sn, cs]])
+    np.testing.assert_allclose(rows[:3] @ response, np.eye(3), atol=1e-12)  # the right one
+    assert np.abs(rows[3] @ response).max() < 1e-12

@@ -3,7 +3,10 @@
 Prints one line per decoded frame — with ``--json`` a JSON object holding the values in SI
 units and our frames (App. A: NED world, body x bow / y starboard / z keel, radians) plus the
 raw instrument fields — and a final summary of the counters and of every damaged or dropped
-stretch (offset, kind, reason). Exit code 0 when at least one frame decoded, 1 otherwise.
+stretch (offset, kind, reason); for a DVL's PD0 also its horizontal velocity noise, read off
+the error velocity (:func:`drivers.pd0.bottom_track_noise`), beside the simulated DVL's —
+what docs/experiments.md compares with the noise the fault-tolerance slide stands. Exit
+code 0 when at least one frame decoded, 1 otherwise.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from pathlib import Path
 
 from drivers import digiquartz, frames, pd0, phins_ascii, phins_stdbin
 from drivers.framing import decode_bytes
+from sim_bridge.instruments.models import InstrumentConfig
 from uvd.errors import ConfigError
 from uvd.geometry import wrap_angle
 from uvd.jsonio import to_jsonable
@@ -121,6 +125,20 @@ def _run(args) -> int:
         return 0
 
 
+def _noise_line(n: pd0.BottomTrackNoise) -> str:
+    """The summary's line on the DVL's velocity noise (:func:`drivers.pd0.bottom_track_noise`),
+    beside the simulated DVL's (Table A.1's, :class:`~sim_bridge.instruments.models.
+    InstrumentConfig`'s default)."""
+    per_ping = "" if not n.bt_pings else \
+        f", {n.sigma_ping_m_s * 1e3:.1f} mm/s a ping ({n.bt_pings} bottom-track pings an ensemble)"
+    every = "" if not math.isfinite(n.interval_s) else f", an ensemble every {n.interval_s:.2f} s"
+    sim = InstrumentConfig()
+    return (f"# bottom-track velocity noise (robust σ of the error velocity, {n.ensembles} "
+            f"ensembles{every}): {n.sigma_m_s * 1e3:.1f} mm/s an ensemble{per_ping}; "
+            f"the simulated DVL (thesis Table A.1): {sim.dvl_std_m_s * 1e3:.1f} mm/s a sample "
+            f"at {sim.dvl_rate_hz:g} Hz\n")
+
+
 def _decode(args) -> int:
     if args.file == Path("-"):
         data = sys.stdin.buffer.read()
@@ -160,11 +178,19 @@ def _decode(args) -> int:
             out.write(" ".join(f"{key}={val}" for key, val in rec.items()
                                if key not in ("format",)) + "\n")
     errors = list(dec.errors)
+    noise = None
+    if args.format == "pd0":
+        noise = pd0.bottom_track_noise(msg for msg, _, _ in frames_out)
     summary = {"summary": True, "file": str(args.file), "format": args.format,
                "bytes": len(data), **dec.counters.as_dict(),
                "errors_listed": min(len(errors), args.max_errors),
                "errors": [{"offset": e.offset, "kind": e.kind, "bytes": e.n_bytes,
                            "message": e.message} for e in errors[:args.max_errors]]}
+    if noise is not None:
+        summary["bottom_track_noise"] = {
+            "ensembles": noise.ensembles, "sigma_m_s": _r(noise.sigma_m_s, 6),
+            "bt_pings": noise.bt_pings, "sigma_ping_m_s": _r(noise.sigma_ping_m_s, 6),
+            "interval_s": _r(noise.interval_s, 3)}
     if args.json:
         out.write(json.dumps(to_jsonable(summary), separators=(",", ":")) + "\n")
     else:
@@ -174,4 +200,6 @@ def _decode(args) -> int:
                   f"{len(data)} bytes dropped\n")
         for e in errors[:args.max_errors]:
             out.write(f"#   at byte {e.offset}: {e.kind} ({e.n_bytes} B): {e.message}\n")
+        if noise is not None:
+            out.write(_noise_line(noise))
     return 0 if frames_out else 1
