@@ -124,8 +124,9 @@ def test_an_aft_thruster_dead_keeps_the_jhu_rov_heading_though_reftraj1_asks_mor
     drift became as the heading turned; with horizontal position given up along both axes
     (uvd.control.given_up) it is at its limit in none of the cycles. Depth misses
     the 2x (2.12x: the drift's speed through the pitching vehicle's Coriolis terms, which the
-    controller's masses, still learning from zero at the fault, under-model): held here as a
-    figure, not met."""
+    controller's masses, learning from g and b alone (``vehicle-gb``) for 60 s at the fault,
+    under-model; from θ̂ = 0 it holds, the test further down): held here as a figure, not
+    met."""
     import numpy as np
 
     tau_z, surge, saturated, mae = _jhu_aft(None)
@@ -186,6 +187,24 @@ def test_a_converged_controller_keeps_the_jhu_rov_on_depth_and_attitude_with_a_t
     assert max(ratio.values()) <= 2.0, ratio
     if dead < 3:  # an aft thruster dead: the lateral one is all sway, and sway is out of the loop
         assert jumps[0] <= jumps[1]
+
+
+@pytest.mark.parametrize("dead", [1, 2])
+def test_learning_from_theta_zero_the_jhu_rov_keeps_depth_and_attitude_with_an_aft_thruster_dead(
+        dead):
+    """Two-step AMBC learning from θ̂ = 0 (``[control] theta0 = "zero"``, §5.3.5 step 1's
+    start), the JHU ROV's aft thruster 1 or 2 dead at 60 s: depth and attitude within the
+    issue's 2× of the same controller's fault-free run. The published experiment starts from
+    ``vehicle-gb`` (g and b known, M and D zero) and there depth misses (2.09–2.12×, held by
+    the test above); from zero it holds (docs/experiments.md, seeds 0/1/2: z 1.39–1.52×), so the
+    miss belongs to one stage of learning, not to learning as such."""
+    free = run_arm("sim.toml", 1, 1.0, "fault-free", theta0="zero")
+    r = run_arm("sim.toml", dead, 0.0, "told", theta0="zero")
+    ratio = {d: r["after"][d] / free["after"][d] for d in ("z", "roll", "pitch", "heading")}
+    print(f"theta0 zero, thruster {dead} dead:", {d: round(x, 2) for d, x in ratio.items()})
+    assert r["given_up"] == ["surge"]
+    assert max(ratio.values()) <= 2.0, ratio
+    assert ratio["z"] > 1.2  # the fault costs depth (1.39x, 1.51x): a run that saw it
 
 
 def test_half_reftraj1s_heading_swing_keeps_every_dof_of_the_bound_within_2x():
