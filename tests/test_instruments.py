@@ -5,6 +5,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sim_bridge.instruments.models import InstrumentConfig, Instruments
 from uvd.geometry import R_to_euler, euler_to_R, wrap_angle
@@ -267,3 +269,99 @@ def test_a_zero_std_keeps_the_per_draw_path():
     assert Instruments(InstrumentConfig(heading_std_rad=0.0),
                        np.random.default_rng(0))._ins_stds is None
     assert Instruments(InstrumentConfig(noise=False), np.random.default_rng(0))._ins_stds is None
+
+
+def _period(k: int, n: int = 10, dt: float = 0.01):
+    """The plant's trace over period k (n steps of dt): a pose turning through ±π in heading,
+    rolling and pitching, moving and sinking."""
+    H = np.empty((n, 4, 4))
+    v = np.empty((n, 6))
+    for i in range(n):
+        t = (k * n + i + 1) * dt
+        H[i] = make_H(euler_to_R(0.4 * math.sin(0.7 * t), 0.3 * math.cos(0.5 * t), 0.9 * t),
+                      np.array([0.3 * t, -0.1 * t, 2.0 + 0.5 * math.sin(0.2 * t)]))
+        v[i] = (0.3 + 0.1 * math.sin(t), -0.1, 0.05 * math.cos(0.2 * t), 0.2 * math.cos(t),
+                -0.1 * math.sin(0.5 * t), 0.9)
+    return H, v
+
+
+@pytest.mark.parametrize("cfg", [
+    InstrumentConfig(),
+    InstrumentConfig(ins_rate_hz=7.0, dvl_rate_hz=5.5, depth_rate_hz=13.0, ins_offset_s=0.03,
+                     dvl_resolution_m_s=0.001),
+    InstrumentConfig(noise=False),
+    InstrumentConfig(heading_std_rad=0.0, rate_std_rad_s=0.0),
+    InstrumentConfig(dvl_std_m_s=0.0, depth_std_m=0.0, roll_pitch_std_rad=0.0,
+                     ins_rate_hz=25.0),
+    # DVL samples before the first INS frame: DVLNAV rotates by the true attitude
+    InstrumentConfig(ins_rate_hz=5.0, ins_offset_s=0.15, dvl_rate_hz=20.0),
+], ids=["table-a1", "odd-rates-offset-resolution", "no-noise", "zero-heading-rate-std",
+        "zero-dvl-depth-rp-std", "dvl-before-the-first-ins"])
+def test_a_period_sampled_in_one_compiled_walk_is_the_samples_one_at_a_time_bit_for_bit(cfg):
+    """``sample_trace`` (lockstep's compiled walk over a control period) against
+    ``sample_steps`` (``sample`` at each due step): over 90 s of a vehicle turning through
+    ±π, every newest sample, field by field to the bit, the dead reckoning, the schedules and
+    the noise stream's state after each period are the same."""
+    walk = Instruments(cfg, np.random.default_rng(11))
+    steps = Instruments(cfg, np.random.default_rng(11))
+    assert walk.can_sample_trace
+    H0, v0 = _period(-1)
+    for inst in (walk, steps):  # primed as Lockstep primes them
+        inst.sample(0, H0[-1], v0[-1])
+    made = np.zeros(3, dtype=int)
+    for k in range(900):
+        H, v = _period(k)
+        t0 = k * 100_000_000
+        a = walk.sample_trace(t0, 10_000_000, H, v)
+        b = steps.sample_steps(t0, 10_000_000, H, v)
+        for j, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert (x is None) == (y is None), (k, j)
+            if x is not None:
+                made[j] += 1
+                assert type(x) is type(y)
+                for name in x.__slots__:
+                    assert np.asarray(getattr(x, name)).tobytes() == \
+                        np.asarray(getattr(y, name)).tobytes(), (k, j, name)
+                    assert type(getattr(x, name)) is type(getattr(y, name)), (k, j, name)
+        assert (walk.dr_north, walk.dr_east) == (steps.dr_north, steps.dr_east), k
+        for p, q in ((walk._ins, steps._ins), (walk._dvl, steps._dvl),
+                     (walk._depth, steps._depth)):
+            assert (p.k, p.next_ns) == (q.k, q.next_ns), k
+        assert walk._last_dr_ns == steps._last_dr_ns
+        assert walk.rng.bit_generator.state == steps.rng.bit_generator.state, k
+    rates = (cfg.ins_rate_hz, cfg.dvl_rate_hz, cfg.depth_rate_hz)
+    # a sample of each instrument in (nearly) every period its rate gives one
+    assert all(m >= min(900, 90 * r) - 1 for m, r in zip(made, rates, strict=True)), made
+    assert walk.dr_north != 0.0 and walk.dr_east != 0.0
+
+
+def test_with_a_fault_or_frame_keyed_noise_lockstep_samples_one_at_a_time():
+    from sim_bridge.instruments.faults import FaultyInstruments, SensorFaults
+    faults = SensorFaults(clock=lambda: 0)
+    inst = FaultyInstruments(InstrumentConfig(), np.random.default_rng(0), faults)
+    assert inst.can_sample_trace
+    faults.set("dvl", "stuck")
+    assert not inst.can_sample_trace
+    faults.set("dvl", "ok")
+    assert inst.can_sample_trace
+    assert not Instruments(InstrumentConfig(), np.random.default_rng(0),
+                           frame_seed=4).can_sample_trace
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.one_of(
+    st.floats(allow_nan=False, allow_infinity=False),
+    st.floats(-50.0, 50.0),
+    # the halfway points (k + ½)·2π and their neighbours: the even multiple's side
+    st.builds(lambda k, d: float(np.nextafter((k + 0.5) * 2.0 * math.pi, d)),
+              st.integers(-40, 40), st.sampled_from([-math.inf, 0.0, math.inf])),
+    st.builds(lambda k: (k + 0.5) * 2.0 * math.pi, st.integers(-40, 40))))
+def test_the_compiled_walks_wrap_is_uvd_geometrys_wrap_angle(a):
+    from sim_bridge.instruments._kernels import _remainder, _wrap_angle
+    assert _remainder(a, 2.0 * math.pi) == math.remainder(a, 2.0 * math.pi)
+    assert np.float64(_wrap_angle(a)).tobytes() == np.float64(wrap_angle(a)).tobytes()
+
+
+def test_the_compiled_walks_wrap_of_no_angle_is_nan():
+    from sim_bridge.instruments._kernels import _wrap_angle
+    assert all(math.isnan(_wrap_angle(x)) for x in (math.nan, math.inf, -math.inf))

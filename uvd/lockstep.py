@@ -235,30 +235,25 @@ class Lockstep:
     def _sample_period(self, thrust: np.ndarray) -> list:
         """One control period of the plant with ``thrust`` held, in one compiled call that
         keeps the state after every step (``self._trace``); the instruments then sample it at
-        the steps where their samples fall due (:attr:`Instruments.next_due_ns`: before it
-        they return nothing and change nothing), in time order. Returns the newest sample of
-        each instrument ([ins, dvl, depth], None where none came)."""
+        the steps where their samples fall due, in time order — in one compiled walk
+        (:meth:`Instruments.sample_trace`), or one sample at a time with the faults' clock at
+        each (:meth:`Instruments.sample_steps`) while a fault is injected or the noise is
+        frame-keyed. Returns the newest sample of each instrument ([ins, dvl, depth], None
+        where none came)."""
         n, step_ns, t0 = self.substeps, self.plant_dt_ns, self.t_ns
         H_trace, v_trace = trace = self._trace
         self.plant.steps_held(thrust, n, trace)
         instruments = self.instruments
-        newest = [None, None, None]
-        i = 0  # the step whose state was sampled last (0: none)
-        while True:
-            # the first step after i at or after the next due time
-            i = max(i + 1, -((t0 - instruments.next_due_ns) // step_ns))
-            if i > n:
-                break
-            self.t_ns = t0 + i * step_ns  # the faults' clock (SensorFaults)
-            ins, dvl, depth = instruments.sample(self.t_ns, H_trace[i - 1], v_trace[i - 1])
-            if ins is not None:
-                newest[0] = ins
-            if dvl is not None:
-                newest[1] = dvl
-            if depth is not None:
-                newest[2] = depth
+        if instruments.can_sample_trace:
+            newest = instruments.sample_trace(t0, step_ns, H_trace, v_trace)
+        else:
+            newest = instruments.sample_steps(t0, step_ns, H_trace, v_trace, at=self._tick)
         self.t_ns = t0 + n * step_ns
         return newest
+
+    def _tick(self, t_ns: int) -> None:
+        """The simulated clock at an instrument's sample (the faults' clock, SensorFaults)."""
+        self.t_ns = t_ns
 
     def _defer_coincident(self, newest: list) -> None:
         """``ins_trigger``: the next cycle runs on the INS frame of its instant ``t_ns``; a DVL

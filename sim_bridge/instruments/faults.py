@@ -64,6 +64,13 @@ class FaultyInstruments(Instruments):
         super().__init__(config, rng, frame_seed=frame_seed)
         self.faults = faults
 
+    @property
+    def can_sample_trace(self) -> bool:
+        """... and no fault is injected (one can end within a period, none can begin)."""
+        mode = self.faults.mode
+        return (self.frame_seed is None
+                and mode["ins"] == mode["dvl"] == mode["depth"] == "ok")
+
     def sample(self, t_ns, H, v):
         got = ins, dvl, depth = super().sample(t_ns, H, v)
         mode = self.faults.mode

@@ -48,6 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.samples import DepthSample, DvlSample, InsSample
+from sim_bridge.instruments import _kernels as _kn
 from uvd.geometry import R_to_euler, euler_to_R, wrap_angle
 
 _DEG = math.pi / 180.0
@@ -151,6 +152,7 @@ class Instruments:
         stds = (config.heading_std_rad, config.roll_pitch_std_rad, config.roll_pitch_std_rad,
                 config.rate_std_rad_s, config.rate_std_rad_s, config.rate_std_rad_s)
         self._ins_stds = np.array(stds) if config.noise and all(stds) else None
+        self._trace_buffers: _TraceBuffers | None = None
 
     def set_epoch(self, t_ns: int | None) -> None:
         """Start every instrument's schedule again at ``t_ns``: frame f of each falls due at
@@ -244,6 +246,81 @@ class Instruments:
             depth = DepthSample(t_ns, float(H[2, 3]) + self._n(c.depth_std_m))
         return ins, dvl, depth
 
+    def sample_steps(self, t0_ns: int, step_ns: int, H_trace: np.ndarray,
+                     v_trace: np.ndarray, at=None) -> list:
+        """:meth:`sample` at every step of a plant's period where a sample falls due
+        (:attr:`next_due_ns`: before it :meth:`sample` returns nothing and changes nothing),
+        in time order: the state after step i (t0 + i·step, i = 1…n) is ``H_trace[i - 1]``,
+        ``v_trace[i - 1]``; ``at(t_ns)`` is called before each. Returns the newest sample of
+        each instrument ([ins, dvl, depth], None where none came)."""
+        n = H_trace.shape[0]
+        newest = [None, None, None]
+        i = 0  # the step whose state was sampled last (0: none)
+        while True:
+            # the first step after i at or after the next due time
+            i = max(i + 1, -((t0_ns - self.next_due_ns) // step_ns))
+            if i > n:
+                return newest
+            t_ns = t0_ns + i * step_ns
+            if at is not None:
+                at(t_ns)
+            for j, s in enumerate(self.sample(t_ns, H_trace[i - 1], v_trace[i - 1])):
+                if s is not None:
+                    newest[j] = s
+
+    @property
+    def can_sample_trace(self) -> bool:
+        """:meth:`sample_trace` makes what :meth:`sample` would: the noise is the one stream."""
+        return self.frame_seed is None
+
+    def sample_trace(self, t0_ns: int, step_ns: int, H_trace: np.ndarray,
+                     v_trace: np.ndarray) -> list:
+        """:meth:`sample_steps` compiled (:mod:`sim_bridge.instruments._kernels`), bit for bit
+        (tests/test_instruments.py): every sample of the period draws its noise and enters the
+        dead reckoning, the newest of each instrument is returned. Only when
+        :attr:`can_sample_trace`."""
+        n = H_trace.shape[0]
+        b = self._trace_buffers
+        if b is None or b.steps.shape[0] < n:
+            b = self._trace_buffers = _TraceBuffers(self, n)
+        ins_p, dvl_p, depth_p = self._ins, self._dvl, self._depth
+        sched = b.sched
+        sched[:] = ((ins_p.k, ins_p.next_ns, ins_p.offset_ns),
+                    (dvl_p.k, dvl_p.next_ns, dvl_p.offset_ns),
+                    (depth_p.k, depth_p.next_ns, depth_p.offset_ns))
+        m, n_normals = _kn.due_steps(t0_ns, step_ns, n, sched, b.rates, b.draws, b.steps,
+                                     b.masks)
+        if m == 0:
+            return [None, None, None]
+        z = self.rng.standard_normal(n_normals) if n_normals else b.no_normals
+        ins, dvl, times = self._last_ins, self._last_dvl, b.times
+        # the dead reckoning's state (_kernels.S_*): the newest INS attitude, the last DVL
+        # velocity and its time
+        b.state[:] = (self.dr_north, self.dr_east, self._dr_scale,
+                      *((0.0, 0.0, 0.0, 0.0) if ins is None else
+                        (1.0, ins.roll, ins.pitch, ins.heading)),
+                      *((0.0, 0.0, 0.0, 0.0) if dvl is None or self._last_dr_ns is None else
+                        (1.0, *dvl.velocity_body.tolist())))
+        times[:] = (-1, -1, -1, -1 if self._last_dr_ns is None else self._last_dr_ns)
+        _kn.make_samples(t0_ns, step_ns, b.steps, b.masks, m, H_trace, v_trace, z, b.params,
+                         b.state, times, b.ins_out, b.dvl_out, b.depth_out)
+        (ins_p.k, ins_p.next_ns, _), (dvl_p.k, dvl_p.next_ns, _), \
+            (depth_p.k, depth_p.next_ns, _) = sched.tolist()
+        self.dr_north, self.dr_east = b.state[:2].tolist()
+        t_ins, t_dvl, t_depth, t_dr = times.tolist()
+        newest = [None, None, None]
+        if t_ins >= 0:
+            roll, pitch, heading = b.ins_out[:3].tolist()
+            newest[0] = self._last_ins = InsSample(t_ins, roll, pitch, heading,
+                                                   b.ins_out[3:].copy())
+        if t_dvl >= 0:
+            out = b.dvl_out
+            newest[1] = self._last_dvl = DvlSample(t_dvl, out[:3].copy(), True, float(out[3]))
+            self._last_dr_ns = t_dr
+        if t_depth >= 0:
+            newest[2] = DepthSample(t_depth, float(b.depth_out[0]))
+        return newest
+
     def _dead_reckon(self, t_ns: int, H: np.ndarray, dvl: DvlSample) -> None:
         """DVLNAV: integrate the previous DVL velocity, rotated by the measured attitude."""
         if self._last_dvl is not None and self._last_dr_ns is not None:
@@ -257,3 +334,39 @@ class Instruments:
             self.dr_east += self._dr_scale * vw[1] * dt
         self._last_dvl = dvl
         self._last_dr_ns = t_ns
+
+
+class _TraceBuffers:
+    """The arrays :meth:`Instruments.sample_trace` hands its kernels, made once."""
+
+    def __init__(self, inst: Instruments, n: int) -> None:
+        kn = _kn
+        c = inst.config
+        self.sched = np.zeros((3, 3), dtype=np.int64)
+        self.rates = np.array([c.ins_rate_hz, c.dvl_rate_hz, c.depth_rate_hz], dtype=float)
+        one_draw = inst._ins_stds is not None
+        if not c.noise:
+            ins_draws = 0
+        elif one_draw:
+            ins_draws = 6
+        else:
+            ins_draws = ((c.heading_std_rad != 0.0) + 2 * (c.roll_pitch_std_rad != 0.0)
+                         + 3 * (c.rate_std_rad_s != 0.0))
+        self.draws = np.array([ins_draws, 3 * (c.noise and c.dvl_std_m_s != 0.0),
+                               c.noise and c.depth_std_m != 0.0], dtype=np.int64)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.masks = np.zeros(n, dtype=np.int64)
+        p = np.zeros(kn.N_PARAMS)
+        p[kn.P_NOISE] = float(c.noise)
+        p[kn.P_INS_ONE_DRAW] = float(one_draw)
+        p[kn.P_HEADING_STD], p[kn.P_RP_STD], p[kn.P_RATE_STD] = \
+            c.heading_std_rad, c.roll_pitch_std_rad, c.rate_std_rad_s
+        p[kn.P_DVL_STD], p[kn.P_DVL_ALTITUDE] = c.dvl_std_m_s, c.dvl_altitude_m
+        p[kn.P_DEPTH_STD], p[kn.P_DVL_RESOLUTION] = c.depth_std_m, c.dvl_resolution_m_s
+        self.params = p
+        self.state = np.zeros(kn.N_STATE)
+        self.times = np.zeros(4, dtype=np.int64)
+        self.ins_out = np.zeros(6)
+        self.dvl_out = np.zeros(4)
+        self.depth_out = np.zeros(1)
+        self.no_normals = np.zeros(0)
