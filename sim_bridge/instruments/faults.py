@@ -66,7 +66,8 @@ class FaultyInstruments(Instruments):
 
     @property
     def can_sample_trace(self) -> bool:
-        """... and no fault is injected (one can end within a period, none can begin)."""
+        """:meth:`sample_trace` makes what :meth:`sample` would: the noise is the one stream
+        and no fault is injected (one may end within a period; none can begin there)."""
         mode = self.faults.mode
         return (self.frame_seed is None
                 and mode["ins"] == mode["dvl"] == mode["depth"] == "ok")

@@ -340,7 +340,6 @@ class _TraceBuffers:
     """The arrays :meth:`Instruments.sample_trace` hands its kernels, made once."""
 
     def __init__(self, inst: Instruments, n: int) -> None:
-        kn = _kn
         c = inst.config
         self.sched = np.zeros((3, 3), dtype=np.int64)
         self.rates = np.array([c.ins_rate_hz, c.dvl_rate_hz, c.depth_rate_hz], dtype=float)
@@ -356,15 +355,15 @@ class _TraceBuffers:
                                c.noise and c.depth_std_m != 0.0], dtype=np.int64)
         self.steps = np.zeros(n, dtype=np.int64)
         self.masks = np.zeros(n, dtype=np.int64)
-        p = np.zeros(kn.N_PARAMS)
-        p[kn.P_NOISE] = float(c.noise)
-        p[kn.P_INS_ONE_DRAW] = float(one_draw)
-        p[kn.P_HEADING_STD], p[kn.P_RP_STD], p[kn.P_RATE_STD] = \
+        p = np.zeros(_kn.N_PARAMS)
+        p[_kn.P_NOISE] = float(c.noise)
+        p[_kn.P_INS_ONE_DRAW] = float(one_draw)
+        p[_kn.P_HEADING_STD], p[_kn.P_RP_STD], p[_kn.P_RATE_STD] = \
             c.heading_std_rad, c.roll_pitch_std_rad, c.rate_std_rad_s
-        p[kn.P_DVL_STD], p[kn.P_DVL_ALTITUDE] = c.dvl_std_m_s, c.dvl_altitude_m
-        p[kn.P_DEPTH_STD], p[kn.P_DVL_RESOLUTION] = c.depth_std_m, c.dvl_resolution_m_s
+        p[_kn.P_DVL_STD], p[_kn.P_DVL_ALTITUDE] = c.dvl_std_m_s, c.dvl_altitude_m
+        p[_kn.P_DEPTH_STD], p[_kn.P_DVL_RESOLUTION] = c.depth_std_m, c.dvl_resolution_m_s
         self.params = p
-        self.state = np.zeros(kn.N_STATE)
+        self.state = np.zeros(_kn.N_STATE)
         self.times = np.zeros(4, dtype=np.int64)
         self.ins_out = np.zeros(6)
         self.dvl_out = np.zeros(4)
