@@ -35,7 +35,9 @@ _PARTS = (
     ("act", "uvd.core", "act"),
     ("arbiter+lifecycle", "uvd.runtime.cycle", "_supervise"),
     ("plant", "sim_bridge.plant:Plant", "steps_held"),
-    ("instruments", "sim_bridge.instruments.faults:FaultyInstruments", "sample"),
+    # the compiled walk of a period's samples (no campaign run injects an instrument fault,
+    # which would sample one call at a time)
+    ("instruments", "sim_bridge.instruments.models:Instruments", "sample_trace"),
     ("fdc state", "uvd.fdc.detector:VehicleDetector", "update_state"),
     ("fdc estimates", "uvd.fdc.detector:VehicleDetector", "update"),
 )
