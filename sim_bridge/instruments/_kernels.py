@@ -19,6 +19,8 @@ import math
 import numba
 import numpy as np
 
+from uvd.model.lie import R_euler, euler_R
+
 #: rows of the schedule array: the instruments, in the order ``sample`` makes them
 INS, DVL, DEPTH = 0, 1, 2
 #: columns of the schedule array: ``_Periodic``'s k, next due time and offset (ns)
@@ -95,25 +97,6 @@ def _wrap_angle(a):
 
 
 @numba.njit(cache=True)
-def _euler_to_R(roll, pitch, heading):
-    """:func:`uvd.geometry.euler_to_R`."""
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    ch, sh = np.cos(heading), np.sin(heading)
-    R = np.empty((3, 3))
-    R[0, 0] = ch * cp
-    R[0, 1] = ch * sp * sr - sh * cr
-    R[0, 2] = ch * sp * cr + sh * sr
-    R[1, 0] = sh * cp
-    R[1, 1] = sh * sp * sr + ch * cr
-    R[1, 2] = sh * sp * cr - ch * sr
-    R[2, 0] = -sp
-    R[2, 1] = cp * sr
-    R[2, 2] = cp * cr
-    return R
-
-
-@numba.njit(cache=True)
 def _noise(p, std, z, c):
     """A draw of ``Instruments._n``: 0 + std·z[c] (one standard normal used), or 0 without a
     draw when the noise is off or std is 0. Returns (value, next c)."""
@@ -141,14 +124,7 @@ def make_samples(t0_ns, step_ns, steps, masks, m, H_trace, v_trace, z, p, state,
         H = H_trace[i - 1]
         v = v_trace[i - 1]
         if mask & 1:
-            s = -H[2, 0]
-            pitch = math.asin(min(max(s, -1.0), 1.0))
-            roll = math.atan2(H[2, 1], H[2, 2])
-            heading = math.atan2(H[1, 0], H[0, 0])
-            if roll == -math.pi:
-                roll = math.pi
-            if heading == -math.pi:
-                heading = math.pi
+            roll, pitch, heading = R_euler(H[:3, :3])
             if p[P_INS_ONE_DRAW] != 0.0:  # Instruments._ins_noise: six scaled normals
                 n_heading = z[c] * p[P_HEADING_STD] + 0.0
                 n_roll = z[c + 1] * p[P_RP_STD] + 0.0
@@ -186,8 +162,7 @@ def make_samples(t0_ns, step_ns, steps, masks, m, H_trace, v_trace, z, p, state,
             if state[S_HAVE_DVL] != 0.0:
                 dt = (t - times[3]) * 1e-9
                 if state[S_HAVE_INS] != 0.0:
-                    R = _euler_to_R(state[S_INS_ROLL], state[S_INS_PITCH],
-                                    state[S_INS_HEADING])
+                    R = euler_R(state[S_INS_ROLL], state[S_INS_PITCH], state[S_INS_HEADING])
                 else:
                     R = H[:3, :3].copy()
                 vw = R @ state[S_DVL_U:S_DVL_W + 1].copy()
