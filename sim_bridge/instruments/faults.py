@@ -69,8 +69,7 @@ class FaultyInstruments(Instruments):
         """:meth:`sample_trace` makes what :meth:`sample` would: the noise is the one stream
         and no fault is injected (one may end within a period; none can begin there)."""
         mode = self.faults.mode
-        return (self.frame_seed is None
-                and mode["ins"] == mode["dvl"] == mode["depth"] == "ok")
+        return super().can_sample_trace and mode["ins"] == mode["dvl"] == mode["depth"] == "ok"
 
     def sample(self, t_ns, H, v):
         got = ins, dvl, depth = super().sample(t_ns, H, v)
