@@ -45,7 +45,6 @@ import numba
 import numpy as np
 
 from drivers.samples import InsSample
-from sim_bridge.instruments.models import Instruments
 from sim_bridge.thrusters import _thruster_step
 from uvd.geometry import R_to_euler, euler_to_R
 from uvd.model.integrate import _rkmk4
@@ -312,12 +311,6 @@ class TankInstruments:
 
     def __getattr__(self, name):
         return getattr(self.instruments, name)
-
-    #: its samples are changed one at a time: lockstep takes each through :meth:`sample`
-    #: (``Instruments.sample_steps`` over this wrapper), never the compiled walk of the
-    #: instruments inside
-    can_sample_trace = False
-    sample_steps = Instruments.sample_steps
 
     def sample(self, t_ns, H, v):
         ins, dvl, depth = self.instruments.sample(t_ns, H, v)

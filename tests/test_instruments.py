@@ -348,6 +348,56 @@ def test_with_a_fault_or_frame_keyed_noise_lockstep_samples_one_at_a_time():
                            frame_seed=4).can_sample_trace
 
 
+
+def test_lockstep_samples_instruments_of_another_class_through_their_own_sample():
+    """A wrapper that changes the samples and hands everything else to the instruments inside
+    (``__getattr__``, as :class:`sim_bridge.tank.TankInstruments`) is sampled through its own
+    ``sample``: neither the compiled walk nor ``sample_steps`` of the instruments inside may
+    bypass it, though it declares nothing. Its first period's samples are the plain run's with
+    its change, the noise bit for bit."""
+    from dataclasses import replace
+
+    from uvd.lockstep import Lockstep, LockstepConfig
+    from uvd.runtime.build import build_core, start_pose
+    from uvd.runtime.config import load_config
+    from uvd.runtime.cycle import unsupervised
+
+    class OneMetreDeeper:
+        def __init__(self, inner):
+            self.inner = inner
+
+        def __getattr__(self, name):
+            return getattr(self.inner, name)
+
+        def sample(self, t_ns, H, v):
+            ins, dvl, depth = self.inner.sample(t_ns, H, v)
+            return ins, dvl, (None if depth is None
+                              else replace(depth, depth_m=depth.depth_m + 1.0))
+
+    cfg = load_config(Path(__file__).resolve().parents[1] / "config" / "sim.toml")
+    vehicle = cfg.load_vehicle()
+    H0, v0 = start_pose(cfg)
+
+    def sim():
+        return Lockstep(vehicle, unsupervised(build_core(cfg, vehicle)),
+                        LockstepConfig(control_rate_hz=cfg.loop.rate_hz, seed=5), H0=H0, v0=v0)
+
+    plain, wrapped = sim(), sim()
+    assert plain.instruments.can_sample_trace  # the plain run takes the compiled walk
+    wrapped.instruments = OneMetreDeeper(wrapped.instruments)
+    # the first period (0.1 s) samples no depth (7 Hz): the second cycle's inputs, and so
+    # both runs' second period, are the same; that period samples all three
+    for _ in range(2):
+        plain.advance()
+        wrapped.advance()
+    (ins_a, dvl_a, depth_a), (ins_b, dvl_b, depth_b) = plain._pending, wrapped._pending
+    assert None not in plain._pending and None not in wrapped._pending
+    assert depth_b.depth_m == depth_a.depth_m + 1.0 and depth_b.t_ns == depth_a.t_ns
+    assert (ins_b.t_ns, ins_b.roll, ins_b.pitch, ins_b.heading) == \
+        (ins_a.t_ns, ins_a.roll, ins_a.pitch, ins_a.heading)
+    assert np.array_equal(dvl_b.velocity_body, dvl_a.velocity_body)
+
+
 @settings(max_examples=400, deadline=None)
 @given(st.one_of(
     st.floats(allow_nan=False, allow_infinity=False),

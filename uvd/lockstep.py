@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from sim_bridge.instruments.faults import FaultyInstruments, SensorFaults
-from sim_bridge.instruments.models import InstrumentConfig
+from sim_bridge.instruments.models import InstrumentConfig, Instruments
 from sim_bridge.plant import Plant, PlantConfig
 from uvd import core
 from uvd.control.errors import error_coordinates
@@ -238,13 +238,18 @@ class Lockstep:
         the steps where their samples fall due, in time order — in one compiled walk
         (:meth:`Instruments.sample_trace`), or one sample at a time with the faults' clock at
         each (:meth:`Instruments.sample_steps`) while a fault is injected or the noise is
-        frame-keyed. Returns the newest sample of each instrument ([ins, dvl, depth], None
-        where none came)."""
+        frame-keyed. Instruments of any other class (a wrapper that changes the samples, as
+        :class:`sim_bridge.tank.TankInstruments`) are sampled one call at a time through their
+        own ``sample``, whatever they delegate: the walk never bypasses them. Returns the
+        newest sample of each instrument ([ins, dvl, depth], None where none came)."""
         n, step_ns, t0 = self.substeps, self.plant_dt_ns, self.t_ns
         H_trace, v_trace = trace = self._trace
         self.plant.steps_held(thrust, n, trace)
         instruments = self.instruments
-        if instruments.can_sample_trace:
+        if not isinstance(instruments, Instruments):
+            newest = Instruments.sample_steps(instruments, t0, step_ns, H_trace, v_trace,
+                                              at=self._tick)
+        elif instruments.can_sample_trace:
             newest = instruments.sample_trace(t0, step_ns, H_trace, v_trace)
         else:
             newest = instruments.sample_steps(t0, step_ns, H_trace, v_trace, at=self._tick)
