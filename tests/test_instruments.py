@@ -324,6 +324,8 @@ def test_a_period_sampled_in_one_compiled_walk_is_the_samples_one_at_a_time_bit_
                         np.asarray(getattr(y, name)).tobytes(), (k, j, name)
                     assert type(getattr(x, name)) is type(getattr(y, name)), (k, j, name)
         assert (walk.dr_north, walk.dr_east) == (steps.dr_north, steps.dr_east), k
+        assert {type(x) for x in (walk.dr_north, walk.dr_east, steps.dr_north,
+                                  steps.dr_east)} == {float}, k  # the same type either way
         for p, q in ((walk._ins, steps._ins), (walk._dvl, steps._dvl),
                      (walk._depth, steps._depth)):
             assert (p.k, p.next_ns) == (q.k, q.next_ns), k

@@ -329,9 +329,9 @@ class Instruments:
                 R = euler_to_R(self._last_ins.roll, self._last_ins.pitch, self._last_ins.heading)
             else:
                 R = H[:3, :3]
-            vw = R @ self._last_dvl.velocity_body
-            self.dr_north += self._dr_scale * vw[0] * dt
-            self.dr_east += self._dr_scale * vw[1] * dt
+            vw_n, vw_e = (R @ self._last_dvl.velocity_body)[:2].tolist()  # Python floats, as
+            self.dr_north += self._dr_scale * vw_n * dt                  # the compiled walk's
+            self.dr_east += self._dr_scale * vw_e * dt
         self._last_dvl = dvl
         self._last_dr_ns = t_ns
 
