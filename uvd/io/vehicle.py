@@ -112,6 +112,9 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
         kw = {**defaults, **t}
         if "curve" in kw:
             cname = kw["curve"]
+            if not isinstance(cname, str):
+                raise ConfigError(f"{path}: thrusters[{i}]: curve must be the name of a thrust "
+                                  f"curve, got {cname!r}")
             try:
                 kw["curve"] = curves[cname] if cname in curves else load_curve(cname)
             except ConfigError as exc:
@@ -123,6 +126,9 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
     if len(specs) < 6:
         raise ConfigError(
             f"{path}: a fully actuated vehicle needs >= 6 thrusters, got {len(specs)}")
+    for key in ("name", "description"):
+        if not isinstance(doc.get(key, ""), str):
+            raise ConfigError(f"{path}: {key} must be a string, got {doc[key]!r}")
     v = Vehicle(name=doc.get("name", path.stem), description=doc.get("description", ""),
                 params=params, thrusters=tuple(specs))
     rank = np.linalg.matrix_rank(v.B)

@@ -7,6 +7,7 @@ Steady state, thrust and propeller speed obey f = k ω|ω| (App. A.1).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,18 +29,43 @@ class ThrusterSpec:
     curve: ThrustCurve | None = None
 
     def __post_init__(self) -> None:
-        d = np.asarray(self.direction, dtype=float)
-        n = float(np.linalg.norm(d))
-        if len(self.position_m) != 3 or d.shape != (3,):
-            raise ParameterError(f"thruster {self.name!r}: position_m and direction need 3 entries")
-        if not n > 0.0:
-            raise ParameterError(f"thruster {self.name!r}: direction must be non-zero")
+        """Every number finite (a NaN or infinite gain or limit would reach the loop, whose
+        guard would then hold zero thrust for ever), the limits and constants of the right
+        sign; a :class:`ParameterError` names the thruster and the field."""
+        if not isinstance(self.name, str) or not self.name:
+            raise ParameterError(f"thruster name must be a non-empty string, got {self.name!r}")
+        position = _vector3(self.name, "position_m", self.position_m)
+        d = _vector3(self.name, "direction", self.direction)
+        with np.errstate(over="ignore"):  # a norm past the largest float is refused below
+            n = float(np.linalg.norm(d))
+        if not (math.isfinite(n) and n > 0.0):
+            raise ParameterError(f"thruster {self.name!r}: direction must be a non-zero "
+                                 f"vector of finite length, got {self.direction!r}")
         object.__setattr__(self, "direction", tuple(float(x) for x in d / n))
-        object.__setattr__(self, "position_m", tuple(float(x) for x in self.position_m))
-        if self.k_thrust <= 0 or self.max_thrust_n <= 0 or self.time_constant_s < 0:
-            raise ParameterError(
-                f"thruster {self.name!r}: k_thrust and max_thrust_n must be > 0, "
-                "time_constant_s >= 0")
+        object.__setattr__(self, "position_m", tuple(float(x) for x in position))
+        for key, least, strict in (("k_thrust", 0.0, True), ("max_thrust_n", 0.0, True),
+                                   ("time_constant_s", 0.0, False),
+                                   ("stiction_n", 0.0, False)):
+            x = _number(self.name, key, getattr(self, key))
+            if x < least or (strict and x == least):
+                raise ParameterError(f"thruster {self.name!r}: {key} must be "
+                                     f"{'>' if strict else '>='} {least:g}, got {x!r}")
+            object.__setattr__(self, key, x)
+
+
+def _number(name: str, key: str, x) -> float:
+    """``x`` as a float when it is a finite real number (not a bool, a string or a list)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(x):
+        raise ParameterError(f"thruster {name!r}: {key} must be a finite number, got {x!r}")
+    return float(x)
+
+
+def _vector3(name: str, key: str, x) -> np.ndarray:
+    """``x`` as three finite numbers."""
+    if isinstance(x, (str, bytes)) or not hasattr(x, "__len__") or len(x) != 3:
+        raise ParameterError(f"thruster {name!r}: {key} needs 3 entries, got {x!r}")
+    return np.array([_number(name, key, e) for e in x])
 
 
 def thruster_matrix(specs: tuple[ThrusterSpec, ...] | list[ThrusterSpec]) -> np.ndarray:
