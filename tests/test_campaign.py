@@ -49,6 +49,23 @@ def _spec(axes: dict, **head):
     ({"campaign": {"name": "t", "kind": "control"}, "extra": {}}, ["extra", "unknown table"]),
     ({"campaign": {"name": "t", "kind": "fdc"}, "axes": {"fault_size": {"by": "fault"}}},
      ["axes.fault_size.by", "'fault'"]),
+    # found by fuzzing the built-in campaigns: each raised a bare TypeError or ValueError, or
+    # (runs) hung listing its runs
+    ({"campaign": {"name": "t", "kind": ["control"]}}, ["campaign.kind", "['control']"]),
+    ({"campaign": {"name": "t", "kind": "fdc"},
+      "axes": {"fault": ["drag"], "fault_size": {"by": ["fault"]}}},
+     ["axes.fault_size.by", "['fault']"]),
+    ({"campaign": {"name": "t", "kind": "control", "sampling": "random", "runs": 10 ** 30}},
+     ["campaign.runs", "at most 100000"]),
+    ({"campaign": {"name": "t", "kind": "control"},
+      "axes": {"kp": [float(k) for k in range(1, 401)],
+               "kd": [float(k) for k in range(1, 401)]}}, ["[axes]", "160000 runs"]),
+    ({"campaign": {"name": "t", "kind": "control", "sampling": "random", "runs": 2},
+      "axes": {"seed": {"integers": [0, 10 ** 30]}}}, ["axes.seed.integers", "±2⁶³"]),
+    ({"campaign": {"name": "t", "kind": "control", "sampling": "random", "runs": 2},
+      "axes": {"kp": {"uniform": [-1e308, 1e308]}}}, ["axes.kp.uniform", "finite"]),
+    ({"campaign": {"name": "t", "kind": "control", "description": 7}},
+     ["campaign.description", "string"]),
 ])
 def test_a_bad_campaign_file_is_refused_by_name(data, words):
     with pytest.raises(CampaignError) as err:

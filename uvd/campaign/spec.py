@@ -39,6 +39,11 @@ from uvd.errors import UvdError
 
 SAMPLINGS = ("grid", "random")
 DRAWS = ("uniform", "integers")
+#: the most runs one campaign may hold (its runs are listed when it is read): a typing slip
+#: such as ``runs = 10000000000`` is refused by name instead of filling the memory
+MAX_RUNS = 100_000
+#: the range of an integer draw (numpy's int64)
+_INT64 = (-2 ** 63, 2 ** 63)
 
 
 class CampaignError(UvdError, ValueError):
@@ -124,6 +129,11 @@ def _parse_values(kind_axes, name: str, raw: Any, sampling: str, where: str):
                 for i, v in enumerate(ab))
         if not a < b:
             raise CampaignError(f"{where}.{how}: need a < b (got {a}, {b})")
+        if how == "integers" and not (_INT64[0] <= a and b <= _INT64[1]):
+            raise CampaignError(f"{where}.{how}: the bounds must lie within ±2⁶³ "
+                                f"(got {a}, {b})")
+        if how == "uniform" and not math.isfinite(b - a):
+            raise CampaignError(f"{where}.{how}: b − a must be a finite number (got {a}, {b})")
         if signed and not (how == "uniform" and a >= 0):
             raise CampaignError(f"{where}.signed: needs a uniform draw of a magnitude (a ≥ 0)")
         return ("signed" if signed else how, (a, b))
@@ -162,11 +172,11 @@ def parse(data: dict, kinds: dict[str, dict[str, Axis]], source: str = "") -> Ca
     if not isinstance(name, str) or not name:
         raise CampaignError(f"{_where(source, 'campaign.name')}: a non-empty string is needed")
     kind = head.get("kind")
-    if kind not in kinds:
+    if not isinstance(kind, str) or kind not in kinds:
         raise CampaignError(f"{_where(source, 'campaign.kind')}: {kind!r} is not one of "
                             f"{', '.join(sorted(kinds))}")
     sampling = head.get("sampling", "grid")
-    if sampling not in SAMPLINGS:
+    if not isinstance(sampling, str) or sampling not in SAMPLINGS:
         raise CampaignError(f"{_where(source, 'campaign.sampling')}: {sampling!r} is not one "
                             f"of {', '.join(SAMPLINGS)}")
     seed = head.get("seed", 0)
@@ -178,10 +188,15 @@ def parse(data: dict, kinds: dict[str, dict[str, Axis]], source: str = "") -> Ca
         if isinstance(n_runs, bool) or not isinstance(n_runs, int) or n_runs < 1:
             raise CampaignError(f"{_where(source, 'campaign.runs')}: random sampling needs "
                                 "a positive integer count of runs")
+        if n_runs > MAX_RUNS:
+            raise CampaignError(f"{_where(source, 'campaign.runs')}: {n_runs} runs; a "
+                                f"campaign holds at most {MAX_RUNS} (split it)")
     elif n_runs is not None:
         raise CampaignError(f"{_where(source, 'campaign.runs')}: a grid's count is the "
                             "product of its lists; remove runs or use sampling = \"random\"")
     description = head.get("description", "")
+    if not isinstance(description, str):
+        raise CampaignError(f"{_where(source, 'campaign.description')}: a string is needed")
     kind_axes = kinds[kind]
     axes_raw = data.get("axes", {})
     if not isinstance(axes_raw, dict):
@@ -194,8 +209,8 @@ def parse(data: dict, kinds: dict[str, dict[str, Axis]], source: str = "") -> Ca
                                 f"{', '.join(sorted(kind_axes))}")
         if isinstance(raw, dict) and "by" in raw:
             by = raw["by"]
-            if by not in axes_raw or by == ax or (isinstance(axes_raw[by], dict)
-                                                  and "by" in axes_raw[by]):
+            if not isinstance(by, str) or by not in axes_raw or by == ax or (
+                    isinstance(axes_raw[by], dict) and "by" in axes_raw[by]):
                 raise CampaignError(f"{where}.by: {by!r} is not another plain axis of this "
                                     "campaign")
             cases = {k: _parse_values(kind_axes, ax, v, sampling, f"{where}.{k}")
@@ -231,6 +246,10 @@ def _expand(parsed, kind_axes, sampling: str, seed: int, n_runs: int | None,
     if sampling == "grid":
         names = sorted(plain)
         lists = [plain[k][1] if plain[k][0] == "list" else [plain[k][1]] for k in names]
+        n_grid = math.prod(len(v) for v in lists)
+        if n_grid > MAX_RUNS:
+            raise CampaignError(f"{_where(source, '[axes]')}: the grid's lists make {n_grid} "
+                                f"runs; a campaign holds at most {MAX_RUNS} (split it)")
         for combo in itertools.product(*lists):
             run = {**defaults, **dict(zip(names, combo, strict=True))}
             _resolve_by(parsed, run, None, source, grid=True)
