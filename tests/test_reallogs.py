@@ -276,6 +276,13 @@ def test_builtin_profiles_valid():
     assert load_profile("bluerov-exjobb-may").signals["thrusters"].topic == "rovio/thrusters"
 
 
+def _fields_instead(signal: dict, fields) -> None:
+    """A profile's signal given by ``fields`` instead of its ``field`` and ``index``."""
+    signal.pop("field")
+    signal.pop("index", None)
+    signal["fields"] = fields
+
+
 @pytest.mark.parametrize("edit,match", [
     (lambda d: d.pop("signals"), r"missing \[signals\]"),
     (lambda d: d.update(bogus=1), r"unknown key\(s\) \['bogus'\]"),
@@ -289,6 +296,18 @@ def test_builtin_profiles_valid():
     (lambda d: d.update(resample="cubic"), r"resample must be 'hold' or 'interpolate'"),
     (lambda d: d.update(format="csv"), r"format 'csv' is not one of"),
     (lambda d: d["signals"]["depth"].pop("topic"), r"\[signals.depth\]: missing key 'topic'"),
+    # found by fuzzing the built-in profiles: each raised a bare TypeError or ValueError
+    (lambda d: _fields_instead(d["signals"]["angular_rate"], -1.0),
+     r"\[signals.angular_rate\]: fields must be a list of field names"),
+    (lambda d: d["signals"]["depth"].update(density_kg_m3="frd"),
+     r"\[signals.depth\]: density_kg_m3 must be a finite number, got 'frd'"),
+    (lambda d: d["signals"]["depth"].update(reference_pa=[1, 2]),
+     r"reference_pa must be a finite number"),
+    (lambda d: d["signals"]["depth"].update(scale=float("nan")), r"scale must be a finite"),
+    (lambda d: d["signals"]["thrusters"].update(topic=["a"]),
+     r"\[signals.thrusters\]: topic must be a string"),
+    (lambda d: d.update(format=["ros1"]), r"format \['ros1'\] is not one of"),
+    (lambda d: d.update(vehicle=7), r"vehicle must be a vehicle's name or file, got 7"),
 ])
 def test_profile_errors_named(edit, match):
     doc = _profile_doc("bluerov-exjobb-april")

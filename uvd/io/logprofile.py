@@ -37,6 +37,7 @@ Errors are :class:`~uvd.errors.ConfigError` naming the file and key.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass
 from importlib import resources
@@ -119,6 +120,14 @@ def _match(m, where: str) -> tuple:
     return tuple(sorted(m.items()))
 
 
+def _number(t: dict, key: str, default: float, where: str) -> float:
+    """``t[key]`` (or ``default``) as a finite float; else a ConfigError naming the key."""
+    x = t.get(key, default)
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+        raise ConfigError(f"{where}: {key} must be a finite number, got {x!r}")
+    return float(x)
+
+
 def _signal(name: str, t: dict, where: str) -> SignalSpec:
     if not isinstance(t, dict):
         raise ConfigError(f"{where}: must be a table")
@@ -131,23 +140,31 @@ def _signal(name: str, t: dict, where: str) -> SignalSpec:
     if ("field" in t) == ("fields" in t):
         raise ConfigError(f"{where}: give either 'field' (with 'index' for an array) or "
                           "'fields' (one per component)")
+    for k in ("topic", "field", "unit", "frame"):
+        if k in t and not isinstance(t[k], str):
+            raise ConfigError(f"{where}: {k} must be a string, got {t[k]!r}")
+    if "fields" in t and not (isinstance(t["fields"], list) and t["fields"]
+                              and all(isinstance(x, str) for x in t["fields"])):
+        raise ConfigError(f"{where}: fields must be a list of field names, got "
+                          f"{t['fields']!r}")
     if t["unit"] not in UNITS[name]:
         raise ConfigError(f"{where}: unit {t['unit']!r} is not one of {UNITS[name]}")
     if t["frame"] not in FRAMES[name]:
         raise ConfigError(f"{where}: frame {t['frame']!r} is not one of {FRAMES[name]}")
-    fields = tuple(str(x) for x in t["fields"]) if "fields" in t else None
+    fields = tuple(t["fields"]) if "fields" in t else None
     index = None
     if "index" in t:
         if not (isinstance(t["index"], list) and all(isinstance(i, int) and i >= 0
                                                       for i in t["index"])):
             raise ConfigError(f"{where}: index must be a list of integers >= 0")
         index = tuple(t["index"])
-    spec = SignalSpec(name=name, topic=str(t["topic"]), field=t.get("field"), index=index,
+    spec = SignalSpec(name=name, topic=t["topic"], field=t.get("field"), index=index,
                       fields=fields, unit=t["unit"], frame=t["frame"],
-                      scale=float(t.get("scale", 1.0)), offset=float(t.get("offset", 0.0)),
-                      reference_pa=float(t.get("reference_pa", 0.0)),
-                      density_kg_m3=float(t.get("density_kg_m3", 1000.0)),
-                      gravity_m_s2=float(t.get("gravity_m_s2", 9.81)),
+                      scale=_number(t, "scale", 1.0, where),
+                      offset=_number(t, "offset", 0.0, where),
+                      reference_pa=_number(t, "reference_pa", 0.0, where),
+                      density_kg_m3=_number(t, "density_kg_m3", 1000.0, where),
+                      gravity_m_s2=_number(t, "gravity_m_s2", 9.81, where),
                       match=_match(t.get("match", {}), where))
     want = {"angular_rate": 3, "attitude": 3, "depth": 1, "linear_velocity": 3}.get(name)
     if want is not None and spec.width != want:
@@ -195,11 +212,14 @@ def profile_from_mapping(doc: dict, *, where: str) -> LogProfile:
     fmt = doc.get("format")
     if fmt is not None:
         from uvd.io.logs import FORMATS
-        if fmt not in FORMATS:
+        if not isinstance(fmt, str) or fmt not in FORMATS:
             raise ConfigError(f"{where}: format {fmt!r} is not one of {sorted(FORMATS)}")
+    vehicle = doc.get("vehicle")
+    if vehicle is not None and not isinstance(vehicle, str):
+        raise ConfigError(f"{where}: vehicle must be a vehicle's name or file, got {vehicle!r}")
     return LogProfile(name=str(doc.get("name", "")), description=str(doc.get("description", "")),
                       format=fmt, time=time, time_unit=time_unit, rate_hz=rate,
-                      resample=resample, max_gap_s=gap, span=span, vehicle=doc.get("vehicle"),
+                      resample=resample, max_gap_s=gap, span=span, vehicle=vehicle,
                       signals=signals, source=where)
 
 
