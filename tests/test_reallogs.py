@@ -386,6 +386,9 @@ def test_thrust_curve_validation():
         ThrustCurve(command=(0.0, 0.0), thrust_n=(0.0, 1.0))
     with pytest.raises(ParameterError, match="must not decrease"):
         ThrustCurve(command=(0.0, 1.0), thrust_n=(1.0, 0.0))
+    for bad in ({"neutral": float("nan")}, {"dead_band": float("inf")}):  # taken silently before
+        with pytest.raises(ParameterError, match="neutral and dead_band must be finite"):
+            ThrustCurve(command=(0.0, 1.0), thrust_n=(0.0, 1.0), **bad)
 
 
 def test_exjobb_vehicle_thrust_matrix():

@@ -136,6 +136,9 @@ class ThrustCurve:
             raise ParameterError("thrust curve: command must increase strictly")
         if not np.all(np.diff(f) >= 0):
             raise ParameterError("thrust curve: thrust must not decrease with the command")
+        if not (math.isfinite(self.neutral) and math.isfinite(self.dead_band)):
+            raise ParameterError(f"thrust curve: neutral and dead_band must be finite, got "
+                                 f"{self.neutral!r}, {self.dead_band!r}")
         if self.dead_band < 0:
             raise ParameterError("thrust curve: dead_band must be >= 0")
         if self.unit not in ("pwm_us", "normalised"):
