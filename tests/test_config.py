@@ -116,6 +116,12 @@ port = "/dev/ttyUSB2"
     ("vehicle = \"jhu-rov\"", "vehicle", "expected a table"),
     ("[vehicle]\nname = \"submarine\"", "vehicle.name", "neither a built-in vehicle"),
     ("[vehicle]\nname = \"missing.toml\"", "vehicle.name", "not found"),
+    # an infinity was taken where no maximum stood (10 keys, found by trying ±inf on every
+    # number): a depth conversion of inf, a failsafe threshold that trips always
+    ("[sensors.depth.conversion]\nrho_kg_m3 = inf", "sensors.depth.conversion.rho_kg_m3",
+     "expected a finite number, got inf"),
+    ("[failsafe]\nm_hat_min_eig = inf", "failsafe.m_hat_min_eig", "expected a finite number"),
+    ("[can]\nreopen_after_s = inf", "can.reopen_after_s", "expected a finite number"),
 ])
 def test_single_mistakes(tmp_path, snippet, key, words):
     _, errs = errors_of(tmp_path, snippet + "\n" + MINIMAL)

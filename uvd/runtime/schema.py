@@ -202,8 +202,8 @@ def _scalar(value: Any, tp: Any, key: str, errors: list) -> Any:
             errors.append((key, f"expected a number, got {_toml_type(value)} {value!r}"))
             return MISSING
         value = float(value)
-        if math.isnan(value):
-            errors.append((key, "expected a number, got nan"))
+        if not math.isfinite(value):  # no setting means "never" or "any" by an infinity
+            errors.append((key, f"expected a finite number, got {value!r}"))
             return MISSING
         return value
     if tp is Path:
