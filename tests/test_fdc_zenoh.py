@@ -78,6 +78,20 @@ def test_a_malformed_fault_sample_is_named():
     with pytest.raises(ValueError, match="relative_change is 'x'"):
         fault_report("k", json.dumps({"kind": "thruster", "channel": "thruster1", "t_ns": 5,
                                       "confidence": 1.0, "relative_change": "x"}).encode())
+    # found by fuzzing the daemon's fault path: a since_t_ns past a float's range reached the
+    # cycle, where confirming the claim raised OverflowError (the daemon refused the command
+    # with that text); a NaN confidence was taken
+    good = {"kind": "thruster", "channel": "thruster4", "t_ns": 5, "confidence": 1.0,
+            "relative_change": -0.5}
+    with pytest.raises(ValueError, match=r"explanation.since_t_ns 10{400} is beyond 64 bits"):
+        fault_report("k", json.dumps({**good, "explanation": {"since_t_ns": 10 ** 400}}
+                                     ).encode())
+    with pytest.raises(ValueError, match="t_ns 9223372036854775808 is beyond 64 bits"):
+        fault_report("k", json.dumps({**good, "t_ns": 2 ** 63}).encode())
+    with pytest.raises(ValueError, match="confidence is nan"):
+        fault_report("k", json.dumps({**good, "confidence": float("nan")}).encode())
+    assert fault_report("k", json.dumps({**good, "t_ns": 2 ** 63 - 1}).encode()).t_ns == \
+        2 ** 63 - 1
 
 
 def _sample_from_the_schema(thruster: int, eta: float) -> bytes:

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import threading
 import time
 from collections.abc import Mapping, Sequence
@@ -356,6 +357,13 @@ def fault_report(key: str, payload: bytes):
     if since is not None and (isinstance(since, bool) or not isinstance(since, int)):
         raise ValueError(f"{key}: fault sample's explanation.since_t_ns is {since!r} (an "
                          "integer); dropped")
+    # a clock in ns fits 64 bits, a confidence is finite (JSON's NaN and Infinity are not)
+    for name, x in (("t_ns", d["t_ns"]), ("explanation.since_t_ns", since)):
+        if x is not None and not -2 ** 63 <= x < 2 ** 63:
+            raise ValueError(f"{key}: fault sample's {name} {x} is beyond 64 bits; dropped")
+    if not math.isfinite(d["confidence"]):
+        raise ValueError(f"{key}: fault sample's confidence is {d['confidence']!r} (a finite "
+                         "number); dropped")
     return FaultReport(d["kind"], d["channel"], None if rc is None else float(rc),
                        int(d["t_ns"]), float(d["confidence"]), since)
 
