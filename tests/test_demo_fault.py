@@ -22,6 +22,17 @@ def test_a_bad_fault_spec_is_named(text, why):
         FaultSpec.parse(text)
 
 
+@pytest.mark.parametrize("thruster", [0, 9])
+def test_a_thruster_the_vehicle_does_not_have_is_a_command_line_error(thruster, capsys):
+    """``uvd demo --fault thruster:9:…`` on the six-thruster JHU ROV says so in one line and
+    exits 2, before any process starts (it was a Python traceback)."""
+    from uvd.cli import main
+    assert main(["demo", "--duration", "1", "--fault", f"thruster:{thruster}:0.5@30"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == (f"uvd demo: error: --fault: thruster {thruster} is not one of 1…6 "
+                           "of jhu-rov")
+
+
 def test_a_fault_spec_reads_as_the_issue_writes_it():
     assert FaultSpec.parse("thruster:4:0.5@30") == FaultSpec(4, 0.5, 30.0)
 

@@ -81,11 +81,12 @@ def config_changes(spec: FaultSpec, run_dir: Path, vehicle, accept: str = "confi
                    ) -> dict[str, Any]:
     """The daemon's configuration for a fault run: Zenoh and MAVLink on free loopback ports,
     online AID from the vehicle file's parameters, estimates every second, ``[faults.fdc]``."""
+    from uvd.errors import ExperimentError
     from uvd.io.params import save_params
     from uvd.netports import free_port
-    if not 1 <= spec.thruster <= vehicle.n_thrusters:
-        raise ValueError(f"--fault: thruster {spec.thruster} is not one of "
-                         f"1…{vehicle.n_thrusters} of {vehicle.name}")
+    if not 1 <= spec.thruster <= vehicle.n_thrusters:  # the command line says it, no traceback
+        raise ExperimentError(f"--fault: thruster {spec.thruster} is not one of "
+                              f"1…{vehicle.n_thrusters} of {vehicle.name}")
     params = run_dir / "vehicle-params.toml"
     save_params(vehicle.params, params, title=f"{vehicle.name}: AID's start in uvd demo --fault")
     return {"telemetry": {"zenoh": {"enabled": True, "mode": "peer", "config_file": "",
