@@ -14,13 +14,14 @@ import tempfile
 from pathlib import Path
 
 from uvd.bench import Bench
+from uvd.commands._argtypes import positive_float, positive_int
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--workers", type=int, nargs="+", default=[1, 2],
+    p.add_argument("--workers", type=positive_int, nargs="+", default=[1, 2],
                    help="worker counts to compare (default 1 2)")
-    p.add_argument("--runs", type=int, default=16, help="runs of the default grid (16)")
-    p.add_argument("--minutes", type=float, default=6.0,
+    p.add_argument("--runs", type=positive_int, default=16, help="runs of the default grid (16)")
+    p.add_argument("--minutes", type=positive_float, default=6.0,
                    help="simulated minutes per run of the default grid (6)")
     p.add_argument("--spec", help="a campaign file or built-in name instead of the grid")
 

@@ -36,13 +36,15 @@ import can
 import numpy as np
 
 from uvd.bench import Bench, percentiles
+from uvd.commands._argtypes import positive_float, positive_int
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--duration", type=float, default=60.0,
+    p.add_argument("--duration", type=positive_float, default=60.0,
                    help="seconds of the 100 Hz exchange over udp_multicast (default 60)")
-    p.add_argument("--rate", type=float, default=100.0, help="cycle rate, Hz (default 100)")
-    p.add_argument("--samples", type=int, default=2000,
+    p.add_argument("--rate", type=positive_float, default=100.0,
+                   help="cycle rate, Hz (default 100)")
+    p.add_argument("--samples", type=positive_int, default=2000,
                    help="cycles for the in-process encode/decode timings (default 2000)")
     p.add_argument("--no-realtime", dest="realtime", action="store_false",
                    help="do not ask for SCHED_FIFO priority")

@@ -16,12 +16,13 @@ import time
 import numpy as np
 
 from uvd.bench import Bench, percentiles
+from uvd.commands._argtypes import positive_float, positive_int
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--cycles", type=int, default=20000,
+    p.add_argument("--cycles", type=positive_int, default=20000,
                    help="timed calls per controller (default 20000)")
-    p.add_argument("--lockstep-seconds", type=float, default=600.0,
+    p.add_argument("--lockstep-seconds", type=positive_float, default=600.0,
                    help="simulated seconds of two-step lockstep to time (default 600; "
                         "0 skips)")
 

@@ -25,6 +25,7 @@ import time
 from collections.abc import Callable
 
 from uvd.bench import Bench
+from uvd.commands._argtypes import positive_float, positive_int
 
 #: (part, owner, attribute): the function each part's timer wraps, as the run looks it up
 _PARTS = (
@@ -56,9 +57,9 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                         "uvd-fdc)")
     p.add_argument("--vehicle", default="jhu-rov", choices=("jhu-rov", "bluerov2-heavy"),
                    help="--kind fdc: the vehicle (default jhu-rov)")
-    p.add_argument("--minutes", type=float, default=40.0,
+    p.add_argument("--minutes", type=positive_float, default=40.0,
                    help="simulated minutes (default 40; fdc runs need >= 25, the baseline)")
-    p.add_argument("--block", type=int, default=2000, help="cycles a block (default 2000)")
+    p.add_argument("--block", type=positive_int, default=2000, help="cycles a block (default 2000)")
 
 
 def _owner(spec: str):

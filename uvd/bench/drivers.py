@@ -28,6 +28,7 @@ from drivers import digiquartz, pd0, phins_ascii, phins_stdbin
 from drivers.framing import StreamDecoder
 from drivers.samples import DepthSample, DvlSample, InsSample
 from uvd.bench import Bench, percentiles
+from uvd.commands._argtypes import positive_float, positive_int
 
 #: the real recordings of a checkout (tests/data/); an installed package has none: synthetic
 #: frames then
@@ -35,9 +36,9 @@ DEFAULT_DATA = Path(__file__).resolve().parents[2] / "tests" / "data"
 
 
 def _add_arguments(p) -> None:
-    p.add_argument("--duration", type=float, default=1.0,
+    p.add_argument("--duration", type=positive_float, default=1.0,
                    help="seconds of decoding per codec (default 1)")
-    p.add_argument("--samples", type=int, default=300,
+    p.add_argument("--samples", type=positive_int, default=300,
                    help="latency samples per codec (default 300)")
     p.add_argument("--data", type=Path, default=DEFAULT_DATA,
                    help="folder of the recordings (default tests/data of the checkout)")

@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from uvd.bench import Bench, percentiles
+from uvd.commands._argtypes import positive_float, positive_int
 from uvd.control.types import VehicleState
 from uvd.estimation.aid import (
     INITP_6DOF,
@@ -31,8 +32,9 @@ BUDGET_US = 300.0
 
 
 def _add(p) -> None:
-    p.add_argument("--cycles", type=int, default=20000, help="timed calls (default 20000)")
-    p.add_argument("--rate", type=float, default=1000.0, help="loop rate, Hz (default 1000)")
+    p.add_argument("--cycles", type=positive_int, default=20000, help="timed calls (default 20000)")
+    p.add_argument("--rate", type=positive_float, default=1000.0,
+                   help="loop rate, Hz (default 1000)")
 
 
 def _inputs(n: int, dt: float):

@@ -35,15 +35,16 @@ from typing import Any
 import numpy as np
 
 from uvd.bench import Bench, percentiles
+from uvd.commands._argtypes import nonnegative_int, positive_float
 
 
 def _add(p) -> None:
-    p.add_argument("--rate", type=float, nargs="+", default=None,
+    p.add_argument("--rate", type=positive_float, nargs="+", default=None,
                    help="control loop rate(s), Hz; the INS sends at the same rate (default: "
                         "the configuration's, 10)")
-    p.add_argument("--duration", type=float, default=30.0,
+    p.add_argument("--duration", type=positive_float, default=30.0,
                    help="seconds measured while armed (default 30)")
-    p.add_argument("--sched-fifo", type=int, default=50, metavar="PRIO",
+    p.add_argument("--sched-fifo", type=nonnegative_int, default=50, metavar="PRIO",
                    help="SCHED_FIFO priority of the daemon's loop (default 50, 0 = normal)")
     p.add_argument("--config", type=Path, default=None, help="base configuration")
 

@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 from uvd.bench import Bench
+from uvd.commands._argtypes import positive_float, positive_int
 
 ROOT = Path(__file__).resolve().parents[2]
 #: the last commit before the campaign work (issue 31): "today's code" of the issue
@@ -40,9 +41,9 @@ _TIMING_KEYS = {"wall_seconds", "sim_wall_s", "wall_s", "summary"}
 def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--experiment", default="two-step",
                    help="the lockstep experiment timed (default two-step)")
-    p.add_argument("--hours", type=float, default=0.5,
+    p.add_argument("--hours", type=positive_float, default=0.5,
                    help="simulated hours per run (default 0.5; the experiment's own: 6)")
-    p.add_argument("--repeats", type=int, default=2, help="runs of each side (default 2)")
+    p.add_argument("--repeats", type=positive_int, default=2, help="runs of each side (default 2)")
     p.add_argument("--old-ref", default=DEFAULT_OLD_REF,
                    help=f"git revision of the previous version (default {DEFAULT_OLD_REF})")
     p.add_argument("--old-path", type=Path,

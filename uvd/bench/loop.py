@@ -42,6 +42,7 @@ from collections.abc import Callable
 import numpy as np
 
 from uvd.bench import Bench, host_steal_s, percentiles
+from uvd.commands._argtypes import nonnegative_float, nonnegative_int, positive_float, positive_int
 from uvd.runtime.clock import MonotonicClock
 from uvd.runtime.loop import CpuLatencyRequest, FixedRateLoop, LoopSettings, apply_realtime
 
@@ -338,8 +339,9 @@ CYCLES: dict[str, CycleFactory] = {"none": _cycle_none, "pdc": _cycle_pdc,
 
 
 def _add(p) -> None:
-    p.add_argument("--rate", type=float, default=1000.0, help="loop rate, Hz (default 1000)")
-    p.add_argument("--duration", type=float, default=10.0,
+    p.add_argument("--rate", type=positive_float, default=1000.0,
+                   help="loop rate, Hz (default 1000)")
+    p.add_argument("--duration", type=positive_float, default=10.0,
                    help="seconds measured for each loop (default 10)")
     p.add_argument("--cycle", choices=sorted(CYCLES), default="none",
                    help="per-cycle work (default none)")
@@ -349,11 +351,11 @@ def _add(p) -> None:
                    help="fine wait of our loop (default spin)")
     p.add_argument("--margin-us", type=float, default=None,
                    help="coarse wait ends this long before the deadline (default per timer)")
-    p.add_argument("--sched-fifo", type=int, default=0, metavar="PRIO",
+    p.add_argument("--sched-fifo", type=nonnegative_int, default=0, metavar="PRIO",
                    help="SCHED_FIFO priority for the benchmark (default 0 = normal)")
     p.add_argument("--cpu", type=int, action="append", default=[],
                    help="pin to this CPU (repeatable)")
-    p.add_argument("--warmup", type=float, default=0.5,
+    p.add_argument("--warmup", type=nonnegative_float, default=0.5,
                    help="seconds run before measuring (default 0.5)")
     p.add_argument("--gc", choices=("slack", "python"), default="slack",
                    help="garbage collection while our loop runs (LoopSettings.gc; default "
@@ -363,7 +365,7 @@ def _add(p) -> None:
                    help="also publish a cycle record every cycle to the black-box recorder "
                         "writing MCAP into DIR (its cost on the loop: compare with a run "
                         "without)")
-    p.add_argument("--mavlink-fuzz", type=int, default=0, metavar="N",
+    p.add_argument("--mavlink-fuzz", type=nonnegative_int, default=0, metavar="N",
                    help="also run a MAVLink link (its sink fed a cycle record every cycle) on "
                         "a loopback port, in 2-s blocks, quiet and fuzzed in turn (--duration "
                         "of each): N random and malformed datagrams arrive in the fuzzed ones "
@@ -372,12 +374,12 @@ def _add(p) -> None:
                    help="with --mavlink-fuzz: no link; the datagrams go to a bare process that "
                         "judges them as the link's receiver does (off the loop's CPUs) — what "
                         "the fuzz then changes is the machine's, not the daemon's")
-    p.add_argument("--zenoh-stall", type=float, default=0.0, metavar="SECONDS",
+    p.add_argument("--zenoh-stall", type=nonnegative_float, default=0.0, metavar="SECONDS",
                    help="also publish every cycle's state over Zenoh (the daemon's sink) to a "
                         "uvd-fdc process, and measure blocks of SECONDS in turn: it reads, "
                         "it stops reading (SIGSTOP), it reads again (SIGCONT), …; lateness of "
                         "each (--duration is then ignored)")
-    p.add_argument("--stall-rounds", type=int, default=2, metavar="N",
+    p.add_argument("--stall-rounds", type=positive_int, default=2, metavar="N",
                    help="with --zenoh-stall: N stops, so 2N + 1 blocks (default 2)")
 
 

@@ -16,13 +16,16 @@ import numpy as np
 from sim_bridge.instruments.models import InstrumentConfig, Instruments
 from sim_bridge.plant import Plant, PlantConfig
 from uvd.bench import Bench, percentiles
+from uvd.commands._argtypes import positive_float
 from uvd.io.vehicle import load_vehicle
 
 
 def _add(p) -> None:
-    p.add_argument("--seconds", type=float, default=600.0, help="simulated seconds (default 600)")
+    p.add_argument("--seconds", type=positive_float, default=600.0,
+                   help="simulated seconds (default 600)")
     p.add_argument("--vehicle", default="jhu-rov-coupled")
-    p.add_argument("--rate", type=float, default=100.0, help="plant rate, Hz (default 100)")
+    p.add_argument("--rate", type=positive_float, default=100.0,
+                   help="plant rate, Hz (default 100)")
 
 
 def _commands(n_steps: int, n_thr: int, dt: float) -> np.ndarray:

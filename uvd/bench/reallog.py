@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from uvd.bench import Bench
+from uvd.commands._argtypes import positive_int
 
 _DEFAULT = (Path(__file__).resolve().parents[2].parent / "shared" / "data" / "bluerov-exjobb"
             / "all_2_2016-04-18-14-56-58.bag")
@@ -26,7 +27,7 @@ def _add(p) -> None:
     p.add_argument("--profile", default="bluerov-exjobb-april")
     p.add_argument("--vehicle", default=None, help="vehicle file (default: the profile's)")
     p.add_argument("--method", default="ls-consistent", choices=("aid", "ls", "ls-consistent"))
-    p.add_argument("--repeat", type=int, default=3, help="timed repetitions (default 3)")
+    p.add_argument("--repeat", type=positive_int, default=3, help="timed repetitions (default 3)")
 
 
 def _run(args) -> dict:

@@ -31,16 +31,19 @@ from pathlib import Path
 import numpy as np
 
 from uvd.bench import Bench
+from uvd.commands._argtypes import positive_float, positive_int
 from uvd.netports import free_port
 
 
 def _add(p) -> None:
-    p.add_argument("--vehicles", type=int, default=20, help="simulated vehicles (default 20)")
-    p.add_argument("--duration", type=float, default=10.0,
+    p.add_argument("--vehicles", type=positive_int, default=20,
+                   help="simulated vehicles (default 20)")
+    p.add_argument("--duration", type=positive_float, default=10.0,
                    help="seconds of publishing (default 10)")
-    p.add_argument("--rate", type=float, default=100.0, help="control cycles a second (100)")
-    p.add_argument("--state-hz", type=float, default=20.0, help="state rate (20 Hz)")
-    p.add_argument("--estimate-hz", type=float, default=10.0, help="estimate rate (10 Hz)")
+    p.add_argument("--rate", type=positive_float, default=100.0,
+                   help="control cycles a second (100)")
+    p.add_argument("--state-hz", type=positive_float, default=20.0, help="state rate (20 Hz)")
+    p.add_argument("--estimate-hz", type=positive_float, default=10.0, help="estimate rate (10 Hz)")
 
 
 class FdcProcess:

@@ -7,6 +7,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from uvd.commands._argtypes import positive_int
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -29,7 +31,7 @@ def register(sub) -> None:
     p.add_argument("--report", action="store_true",
                    help="run nothing: summarise the stored rows and draw figures in "
                         "OUT/figures")
-    p.add_argument("--limit", type=int, metavar="N",
+    p.add_argument("--limit", type=positive_int, metavar="N",
                    help="run at most N of the runs not yet done, in run order (a first look, "
                         "or a campaign in instalments: the rest follows on the next call)")
     p.add_argument("--json", type=Path, metavar="SUMMARY",

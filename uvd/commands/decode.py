@@ -19,6 +19,7 @@ from pathlib import Path
 from drivers import digiquartz, frames, pd0, phins_ascii, phins_stdbin
 from drivers.framing import decode_bytes
 from sim_bridge.instruments.models import InstrumentConfig
+from uvd.commands._argtypes import nonnegative_int
 from uvd.errors import ConfigError
 from uvd.geometry import wrap_angle
 from uvd.jsonio import to_jsonable
@@ -36,7 +37,7 @@ def register(sub) -> None:
     p.add_argument("--format", required=True, choices=FORMATS, help="wire format")
     p.add_argument("--json", action="store_true",
                    help="one JSON object per frame (SI + raw fields), then a summary object")
-    p.add_argument("--max-errors", type=int, default=50,
+    p.add_argument("--max-errors", type=nonnegative_int, default=50,
                    help="damaged stretches listed in the summary (default 50)")
     g = p.add_argument_group("digiquartz")
     g.add_argument("--unit", type=int, default=1, help="UN setting: 1 psi … 8 mH2O")

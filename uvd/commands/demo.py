@@ -43,6 +43,7 @@ import numpy as np
 
 from uvd import _jitcache
 from uvd.bench import host_steal_s
+from uvd.commands._argtypes import positive_float
 from uvd.jsonio import write_json
 from uvd.lockstep import hil_tracking
 
@@ -54,7 +55,7 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="hardware-in-the-loop demo: sim-bridge + uvd run, "
                                     "RefTraj1 with two-step AMBC",
                        description=__doc__.split("\n\n")[0])
-    p.add_argument("--duration", type=float, default=60.0, metavar="S",
+    p.add_argument("--duration", type=positive_float, default=60.0, metavar="S",
                    help="seconds of armed tracking (default 60)")
     p.add_argument("--json", type=Path, metavar="OUT", help="write the figures to this file")
     p.add_argument("--record", type=Path, metavar="DIR",

@@ -21,6 +21,8 @@ import sys
 import time
 from pathlib import Path
 
+from uvd.commands._argtypes import positive_float
+
 
 def register(sub) -> None:
     p = sub.add_parser("eta", help="set or clear a thruster's effectiveness on a running "
@@ -35,7 +37,7 @@ def register(sub) -> None:
                    help="the link's UDP address (default: [mavlink] listen)")
     p.add_argument("--system", type=int, default=255,
                    help="this station's MAVLink system id (default 255)")
-    p.add_argument("--timeout", type=float, default=5.0,
+    p.add_argument("--timeout", type=positive_float, default=5.0,
                    help="seconds to wait for each answer (default 5)")
     p.set_defaults(handler=_run)
 

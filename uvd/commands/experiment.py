@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from uvd import experiments
+from uvd.commands._argtypes import positive_float
 from uvd.jsonio import write_json
 from uvd.progress import Progress
 
@@ -24,7 +25,7 @@ def register(sub) -> None:
     p.add_argument("--record", type=Path, metavar="DIR",
                    help="write each control run to MCAP in DIR/<run>/ as the daemon records "
                         "(uvd report draws it; docs/recording.md)")
-    p.add_argument("--hours", type=float, help="override the simulated duration (hours)")
+    p.add_argument("--hours", type=positive_float, help="override the simulated duration (hours)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random generator")
     p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=_run)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from uvd.commands._argtypes import positive_float
 from uvd.errors import ConfigError, ParameterError
 
 
@@ -48,7 +49,7 @@ def register(sub) -> None:
                         "--profile a,γ1,γ2,γ3 of the rotational law, default §4.5's with each "
                         "DOF's scaled by its inertia over the JHU ROV's, "
                         "uvd.estimation.aid.scaled_aid_gains)")
-    p.add_argument("--window", type=float, default=None, metavar="S",
+    p.add_argument("--window", type=positive_float, default=None, metavar="S",
                    help="ls: Savitzky-Golay window in seconds (default 2.1; 1.0 with "
                         "--profile)")
     p.add_argument("--linear-damping", action="store_true",

@@ -19,6 +19,8 @@ import sys
 import time
 from pathlib import Path
 
+from uvd.commands._argtypes import positive_float
+
 
 def register(sub) -> None:
     p = sub.add_parser("replay", help="replay a black-box recording through the one cycle",
@@ -40,7 +42,7 @@ def register(sub) -> None:
                          "recording (default: a new one in the temporary directory)")
     rt.add_argument("--daemon", action="store_true",
                     help="start the daemon under test (uvd run --arm) and stop it at the end")
-    rt.add_argument("--wait", type=float, default=60.0, metavar="S",
+    rt.add_argument("--wait", type=positive_float, default=60.0, metavar="S",
                     help="longest wait for the daemon's first frame (default 60 s)")
     p.add_argument("--config", type=Path, metavar="FILE",
                    help="replay with this configuration instead of the recorded one "

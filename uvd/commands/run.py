@@ -12,6 +12,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from uvd.commands._argtypes import positive_float
+
 
 def register(sub) -> None:
     p = sub.add_parser("run", help="run the control daemon",
@@ -20,7 +22,7 @@ def register(sub) -> None:
                    help="configuration (default: the embedded config/sim.toml)")
     p.add_argument("--arm", action="store_true",
                    help="arm as soon as the arming checks pass (once)")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--duration", type=positive_float, default=None, metavar="S",
                    help="stop by itself after S seconds (default: run until signalled)")
     p.add_argument("--summary-json", type=Path, default=None, metavar="OUT",
                    help="write the run's summary (loop statistics, failsafe events) at exit")

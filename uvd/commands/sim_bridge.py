@@ -27,6 +27,7 @@ import threading
 from pathlib import Path
 
 from uvd.blas import single_threaded_blas
+from uvd.commands._argtypes import positive_float
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -68,7 +69,7 @@ def _add_arguments(p) -> None:
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="the daemon's configuration, a file or a shipped one's name "
                         "(default: the embedded config/sim.toml)")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--duration", type=positive_float, default=None, metavar="S",
                    help="end by itself after S seconds (default: until signalled)")
     p.add_argument("--seed", type=int, default=0, help="seed of the instrument noise")
     p.add_argument("--hold", action="store_true",

@@ -14,6 +14,8 @@ import sys
 import threading
 import time
 
+from uvd.commands._argtypes import nonnegative_float
+
 
 def register(sub) -> None:
     p = sub.add_parser("watch", help="watch running vehicles over Zenoh (docs/zenoh.md)",
@@ -21,7 +23,7 @@ def register(sub) -> None:
     from uvd.fdc.client import add_connection_arguments
     add_connection_arguments(p)
     p.add_argument("--vehicle", default="*", help="vehicle key, or * for all (default)")
-    p.add_argument("--seconds", type=float, default=0.0,
+    p.add_argument("--seconds", type=nonnegative_float, default=0.0,
                    help="stop after this long (default: until Ctrl-C)")
     p.set_defaults(handler=_run)
 

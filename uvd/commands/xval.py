@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from uvd.commands._argtypes import positive_float, positive_int
+
 
 def register(sub) -> None:
     p = sub.add_parser("xval", help="cross-validate a parameter set on a recorded run (App. A.2)",
@@ -23,13 +25,13 @@ def register(sub) -> None:
                         "rotational cross-validation over windows")
     p.add_argument("--vehicle", metavar="FILE",
                    help="with --profile: vehicle file (default: the profile's)")
-    p.add_argument("--window", type=float, default=2.0, metavar="S",
+    p.add_argument("--window", type=positive_float, default=2.0, metavar="S",
                    help="with --profile: restart from the recorded state every S seconds "
                         "(default 2)")
     p.add_argument("--json", type=Path, metavar="OUT", help="write the MAE to this file")
     p.add_argument("--plots", type=Path, metavar="DIR",
                    help="write figures in the style of Figs. 4.5-4.7 into this folder")
-    p.add_argument("--substeps", type=int, default=2,
+    p.add_argument("--substeps", type=positive_int, default=2,
                    help="integration steps per recorded period (default 2)")
     p.set_defaults(handler=_run)
 

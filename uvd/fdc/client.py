@@ -126,14 +126,24 @@ def main(argv: list[str] | None = None) -> int:
                    help="CUSUM h (a log-likelihood ratio: about one false alarm in e^h "
                         "estimates)")
     args = p.parse_args(argv)
+    if not (math.isfinite(args.seconds) and args.seconds >= 0.0):
+        p.error(f"argument --seconds: {args.seconds!r} is not a finite number >= 0")
+    try:  # a NaN threshold, a negative window…: one line naming it, exit 2, before Zenoh
+        settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s,
+                                 reference_lag_s=args.reference_lag_s,
+                                 h=args.threshold, segment_s=args.segment_s)
+    except ValueError as exc:
+        text = str(exc)
+        for name, option in (("warmup_s", "--warmup-s"), ("baseline_s", "--baseline-s"),
+                             ("reference_lag_s", "--reference-lag-s"), ("h", "--threshold"),
+                             ("segment_s", "--segment-s")):
+            text = text.replace(f"CusumSettings.{name} ", f"argument {option} ")
+        p.error(text)
     import zenoh
 
     from uvd.fdc.residual import warm
     warm()  # the residual's kernels before any sample waits on them
 
-    settings = CusumSettings(warmup_s=args.warmup_s, baseline_s=args.baseline_s,
-                             reference_lag_s=args.reference_lag_s,
-                             h=args.threshold, segment_s=args.segment_s)
     conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
     link = LinkStats()

@@ -101,7 +101,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -138,6 +138,24 @@ class CusumSettings:
     drag_resolution: float = 1e-3
     g_resolution_n: float = 1e-3
     b_resolution_nm: float = 1e-3
+
+    def __post_init__(self) -> None:
+        """Every setting a finite number, > 0 (the two waits ≥ 0, the window an integer ≥ 1):
+        a NaN threshold would never detect, a negative window never fill. ValueError names
+        the setting."""
+        for f in fields(self):
+            x = getattr(self, f.name)
+            least = 0.0 if f.name in ("warmup_s", "reference_lag_s") else None
+            if f.name == "window":
+                ok = isinstance(x, int) and not isinstance(x, bool) and x >= 1
+            else:
+                ok = isinstance(x, (int, float)) and not isinstance(x, bool) \
+                    and math.isfinite(x) and (x >= least if least is not None else x > 0)
+            if not ok:
+                want = ("an integer >= 1" if f.name == "window" else
+                        "a finite number >= 0" if least is not None else
+                        "a finite number > 0")
+                raise ValueError(f"CusumSettings.{f.name} must be {want}, got {x!r}")
 
     def resolution(self, channel: str) -> float:
         """The smallest σ of ``channel`` in its own units (module docstring, "σ")."""
