@@ -22,9 +22,9 @@ Layers, top to bottom (a module may import its own layer and any layer below it)
 of uvd.runtime: it takes a configuration of its own (sim_bridge.config); only the top two
 layers may import sim_bridge. The utilities (uvd.errors, uvd.jsonio, uvd.blas, uvd._jitcache,
 uvd.progress, uvd.netports, uvd.geometry, uvd.rtthreads, uvd.shipped, uvd.zenoh_callbacks,
-the ``uvd`` package) are importable from anywhere in uvd and import no other layer. drivers
-imports nothing of uvd but uvd.errors and uvd.geometry; uvd.fdc (uvd-fdc, a process of its own)
-nothing but itself and uvd.zenoh_callbacks.
+uvd.cliargs, the ``uvd`` package) are importable from anywhere in uvd and import no other
+layer. drivers imports nothing of uvd but uvd.errors and uvd.geometry; uvd.fdc (uvd-fdc, a
+process of its own) nothing but itself and uvd.zenoh_callbacks.
 """
 
 from __future__ import annotations
@@ -50,7 +50,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("drivers",),
 )
 UTILITIES = ("uvd", "uvd.errors", "uvd.jsonio", "uvd.blas", "uvd._jitcache", "uvd.progress",
-             "uvd.netports", "uvd.geometry", "uvd.rtthreads", "uvd.shipped", "uvd.zenoh_callbacks")
+             "uvd.netports", "uvd.geometry", "uvd.rtthreads", "uvd.shipped", "uvd.zenoh_callbacks",
+             "uvd.cliargs")
 #: uvd-fdc imports nothing of uvd but itself and this: how any process of the project ends a
 #: Zenoh session's callback threads (zenoh-python's, not uvd's: it imports nothing of the
 #: project, checked below) — the daemon's Zenoh face needs it as much as uvd-fdc does

@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 
 from uvd.bench import Bench
-from uvd.commands._argtypes import positive_float, positive_int
+from uvd.cliargs import positive_float, positive_int
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:

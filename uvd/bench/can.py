@@ -36,7 +36,7 @@ import can
 import numpy as np
 
 from uvd.bench import Bench, percentiles
-from uvd.commands._argtypes import positive_float, positive_int
+from uvd.cliargs import positive_float, positive_int
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:

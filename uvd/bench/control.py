@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from uvd.bench import Bench, percentiles
-from uvd.commands._argtypes import positive_float, positive_int
+from uvd.cliargs import positive_float, positive_int
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:

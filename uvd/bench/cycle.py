@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable
 
 from uvd.bench import Bench
-from uvd.commands._argtypes import positive_float, positive_int
+from uvd.cliargs import positive_float, positive_int
 
 #: (part, owner, attribute): the function each part's timer wraps, as the run looks it up
 _PARTS = (

@@ -28,7 +28,7 @@ from drivers import digiquartz, pd0, phins_ascii, phins_stdbin
 from drivers.framing import StreamDecoder
 from drivers.samples import DepthSample, DvlSample, InsSample
 from uvd.bench import Bench, percentiles
-from uvd.commands._argtypes import positive_float, positive_int
+from uvd.cliargs import positive_float, positive_int
 
 #: the real recordings of a checkout (tests/data/); an installed package has none: synthetic
 #: frames then

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from uvd.bench import Bench, percentiles
-from uvd.commands._argtypes import positive_float, positive_int
+from uvd.cliargs import positive_float, positive_int
 from uvd.control.types import VehicleState
 from uvd.estimation.aid import (
     INITP_6DOF,

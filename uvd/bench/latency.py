@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from uvd.bench import Bench, percentiles
-from uvd.commands._argtypes import nonnegative_int, positive_float
+from uvd.cliargs import nonnegative_int, positive_float
 
 
 def _add(p) -> None:

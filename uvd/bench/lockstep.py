@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 from uvd.bench import Bench
-from uvd.commands._argtypes import positive_float, positive_int
+from uvd.cliargs import positive_float, positive_int
 
 ROOT = Path(__file__).resolve().parents[2]
 #: the last commit before the campaign work (issue 31): "today's code" of the issue

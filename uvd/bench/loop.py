@@ -42,7 +42,7 @@ from collections.abc import Callable
 import numpy as np
 
 from uvd.bench import Bench, host_steal_s, percentiles
-from uvd.commands._argtypes import nonnegative_float, nonnegative_int, positive_float, positive_int
+from uvd.cliargs import nonnegative_float, nonnegative_int, positive_float, positive_int
 from uvd.runtime.clock import MonotonicClock
 from uvd.runtime.loop import CpuLatencyRequest, FixedRateLoop, LoopSettings, apply_realtime
 

@@ -16,7 +16,7 @@ import numpy as np
 from sim_bridge.instruments.models import InstrumentConfig, Instruments
 from sim_bridge.plant import Plant, PlantConfig
 from uvd.bench import Bench, percentiles
-from uvd.commands._argtypes import positive_float
+from uvd.cliargs import positive_float
 from uvd.io.vehicle import load_vehicle
 
 

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from uvd.bench import Bench
-from uvd.commands._argtypes import positive_int
+from uvd.cliargs import positive_int
 
 _DEFAULT = (Path(__file__).resolve().parents[2].parent / "shared" / "data" / "bluerov-exjobb"
             / "all_2_2016-04-18-14-56-58.bag")

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from uvd.bench import Bench
-from uvd.commands._argtypes import positive_float, positive_int
+from uvd.cliargs import positive_float, positive_int
 from uvd.netports import free_port
 
 

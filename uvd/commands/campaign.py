@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from uvd.commands._argtypes import positive_int
+from uvd.cliargs import positive_int
 
 
 def register(sub) -> None:

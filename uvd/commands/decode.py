@@ -19,7 +19,7 @@ from pathlib import Path
 from drivers import digiquartz, frames, pd0, phins_ascii, phins_stdbin
 from drivers.framing import decode_bytes
 from sim_bridge.instruments.models import InstrumentConfig
-from uvd.commands._argtypes import nonnegative_int
+from uvd.cliargs import nonnegative_int
 from uvd.errors import ConfigError
 from uvd.geometry import wrap_angle
 from uvd.jsonio import to_jsonable

@@ -43,7 +43,7 @@ import numpy as np
 
 from uvd import _jitcache
 from uvd.bench import host_steal_s
-from uvd.commands._argtypes import positive_float
+from uvd.cliargs import positive_float
 from uvd.jsonio import write_json
 from uvd.lockstep import hil_tracking
 

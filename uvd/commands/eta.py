@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from uvd.commands._argtypes import positive_float
+from uvd.cliargs import positive_float
 
 
 def register(sub) -> None:

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from uvd import experiments
-from uvd.commands._argtypes import positive_float
+from uvd.cliargs import positive_float
 from uvd.jsonio import write_json
 from uvd.progress import Progress
 

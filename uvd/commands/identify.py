@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uvd.commands._argtypes import positive_float
+from uvd.cliargs import positive_float
 from uvd.errors import ConfigError, ParameterError
 
 

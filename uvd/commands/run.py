@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from uvd.commands._argtypes import positive_float
+from uvd.cliargs import positive_float
 
 
 def register(sub) -> None:

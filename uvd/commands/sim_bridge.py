@@ -27,7 +27,7 @@ import threading
 from pathlib import Path
 
 from uvd.blas import single_threaded_blas
-from uvd.commands._argtypes import positive_float
+from uvd.cliargs import positive_float
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -14,7 +14,7 @@ import sys
 import threading
 import time
 
-from uvd.commands._argtypes import nonnegative_float
+from uvd.cliargs import nonnegative_float
 
 
 def register(sub) -> None:

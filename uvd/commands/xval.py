@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from uvd.commands._argtypes import positive_float, positive_int
+from uvd.cliargs import positive_float, positive_int
 
 
 def register(sub) -> None:

@@ -140,19 +140,22 @@ class CusumSettings:
     b_resolution_nm: float = 1e-3
 
     def __post_init__(self) -> None:
-        """Every setting a finite number, > 0 (the two waits ≥ 0, the window an integer ≥ 1):
-        a NaN threshold would never detect, a negative window never fill. ValueError names
-        the setting."""
+        """Every setting a finite number > 0, but the warm-up ≥ 0, the reference's lag ≥ 0 or
+        infinite (a reference that never follows the drift) and the window an integer ≥ 1: a
+        NaN threshold would never detect, a negative window never fill. ValueError names the
+        setting."""
         for f in fields(self):
             x = getattr(self, f.name)
             least = 0.0 if f.name in ("warmup_s", "reference_lag_s") else None
             if f.name == "window":
                 ok = isinstance(x, int) and not isinstance(x, bool) and x >= 1
             else:
-                ok = isinstance(x, (int, float)) and not isinstance(x, bool) \
-                    and math.isfinite(x) and (x >= least if least is not None else x > 0)
+                finite = math.isfinite(x) or (f.name == "reference_lag_s" and x == math.inf)
+                ok = isinstance(x, (int, float)) and not isinstance(x, bool) and finite \
+                    and (x >= least if least is not None else x > 0)
             if not ok:
                 want = ("an integer >= 1" if f.name == "window" else
+                        "a number >= 0 or inf" if f.name == "reference_lag_s" else
                         "a finite number >= 0" if least is not None else
                         "a finite number > 0")
                 raise ValueError(f"CusumSettings.{f.name} must be {want}, got {x!r}")
