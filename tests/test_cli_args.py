@@ -76,3 +76,15 @@ def test_cusum_settings_refuse_a_setting_that_would_never_detect(bad):
 def test_cusum_settings_defaults_and_zero_waits_are_valid():
     assert CusumSettings().h == 15.0
     assert CusumSettings(warmup_s=0.0, reference_lag_s=0.0).warmup_s == 0.0
+
+
+def test_a_campaign_folder_that_cannot_be_made_is_a_command_line_error(tmp_path, capsys):
+    """``uvd campaign NAME --out X`` where X cannot be a folder (under a file here; /proc or
+    a read-only disk alike) says so in one line, exit 2 (it was a FileNotFoundError's
+    traceback), and runs nothing."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    assert main(["campaign", "smoke", "--out", str(blocker / "out"), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"uvd campaign: error: {blocker / 'out'}: cannot hold the "
+                          "campaign's rows"), err

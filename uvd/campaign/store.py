@@ -17,6 +17,8 @@ import os
 from functools import cache
 from pathlib import Path
 
+from uvd.campaign.spec import CampaignError
+
 #: columns that say how a run went on this machine, not what it computed: left out when rows
 #: are compared across worker counts or orders
 RUN_ENVIRONMENT = ("wall_s", "worker")
@@ -27,7 +29,7 @@ _PACKAGES = ("uvd", "sim_bridge", "drivers")
 #: summary and figures, the results page): editing them keeps the finished rows valid
 _NOT_RUN = ("uvd/commands/", "uvd/bench/", "uvd/experiments/results.py", "uvd/campaign/builtin/",
             "uvd/campaign/execute.py", "uvd/campaign/store.py", "uvd/campaign/summary.py",
-            "uvd/campaign/report.py", "uvd/campaign/publish.py")
+            "uvd/campaign/report.py", "uvd/campaign/publish.py", "uvd/cliargs.py")
 
 
 @cache
@@ -79,7 +81,11 @@ class RowStore:
     def __init__(self, directory: str | Path) -> None:
         self.directory = Path(directory)
         self.rows_dir = self.directory / "rows"
-        self.rows_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            self.rows_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:  # a read-only or missing place: said by the command, no traceback
+            raise CampaignError(f"{self.directory}: cannot hold the campaign's rows "
+                                f"({exc.strerror or exc})") from exc
         self.stale_removed = self._remove_stale_tmp()
 
     def _remove_stale_tmp(self) -> int:
