@@ -337,6 +337,11 @@ def test_a_two_step_experiment_records_the_daemons_channels_and_reports(tmp_path
                                       "p_degps", "q_degps", "r_degps")}
     _check_report(out, {"tracking.png", "mne.png", "thrust.png", "estimates.png",
                         "failsafe.png", "lateness.png"} | xval)
+    # a lockstep replay needs a daemon's bytes: said as such (it was the recorded
+    # configuration's missing sensor ports, named by a temporary file)
+    with pytest.raises(RecordingError, match="no raw instrument channels.*uvd experiment "
+                                             "--record.*needs a daemon's recording"):
+        replay_lockstep(path)
 
 
 def test_a_stalled_disk_drops_counts_and_never_delays_the_loop(tmp_path):

@@ -135,6 +135,9 @@ def _config_of(rec: Recording, override: str | Path | None) -> tuple[Config, boo
         tmp = Path(fh.name)
     try:
         cfg = load_config(tmp)
+    except ConfigError as exc:  # named by the recording, not by the temporary file
+        raise ConfigError(str(exc).replace(str(tmp), f"{rec.path}'s recorded configuration")
+                          ) from exc
     finally:
         tmp.unlink(missing_ok=True)
     kept = rec.start.get("params_kept") or {}
@@ -203,6 +206,11 @@ def replay_lockstep(path: str | Path, *, config: str | Path | None = None,
 
 
 def _replay(rec: Recording, config, progress) -> ReplayReport:
+    if not rec.serial:
+        raise RecordingError(f"{rec.path}: no raw instrument channels, the bytes a daemon read "
+                             "(a lockstep experiment's recording, `uvd experiment --record`, "
+                             "has none): `uvd replay --lockstep` needs a daemon's recording "
+                             "(`uvd run`, `uvd demo --record`); `uvd report` draws either")
     cfg, same = _config_of(rec, config)
     if cfg.sensors.depth.source == "can":
         raise ConfigError(f"{rec.path}: the depth sensor is on CAN — its samples are not in the "
