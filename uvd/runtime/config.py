@@ -705,11 +705,6 @@ class Config:
 # The CAN driver keeps plain dataclasses (drivers/can/config.py; drivers never import uvd):
 # the [can] tables are declared here, validated with everything else and converted.
 
-def _finite(obj, keys) -> list[tuple[str, str]]:
-    return [(k, f"{getattr(obj, k)!r} is not a finite number") for k in keys
-            if not math.isfinite(getattr(obj, k))]
-
-
 @dataclass(frozen=True)
 class CanAmplifiersSection:
     """The thruster amplifiers (``[can.amplifiers]``): one CiA 402 node per thruster."""
@@ -774,9 +769,7 @@ class CanAmplifiersSection:
         if t is not None and len(t) != len(self.node_ids):
             out.append(("thrust_per_permille_n", f"{len(t)} values for {len(self.node_ids)} "
                                                  "node ids (one per node id)"))
-        if t is not None and not all(math.isfinite(x) for x in t):
-            out.append(("thrust_per_permille_n", f"{list(t)}: not all finite"))
-        return out + _finite(self, ("velocity_rad_s_per_count",))
+        return out  # every number is finite: the schema refuses nan and inf
 
     def convert(self) -> AmplifierConfig:
         return AmplifierConfig(**{**vars(self), "eds": self.eds.expanduser()})
@@ -797,9 +790,6 @@ class CanDepthSection:
     density_kg_m3: float = setting(998.0, unit="kg/m³", gt=0, doc="water density ρ")
     gravity_m_s2: float = setting(9.80665, unit="m/s²", gt=0, doc="gravity g")
     max_age_ms: int = setting(500, unit="ms", min=1, doc="a sample older than this is stale")
-
-    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
-        return _finite(self, ("pressure_pa_per_count", "density_kg_m3", "gravity_m_s2"))
 
     def convert(self) -> CanDepthConfig:
         return CanDepthConfig(**{**vars(self), "eds": self.eds.expanduser()})
