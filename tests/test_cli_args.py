@@ -67,7 +67,8 @@ def test_uvd_fdc_refuses_a_bad_setting_before_it_connects(argv, words, capsys):
 
 @pytest.mark.parametrize("bad", [dict(h=float("nan")), dict(baseline_s=0.0), dict(window=0),
                                  dict(window=2.5), dict(segment_s=float("inf")),
-                                 dict(reference_lag_s=-1.0), dict(mass_change=True)])
+                                 dict(reference_lag_s=-1.0), dict(mass_change=True),
+                                 dict(h="15")])
 def test_cusum_settings_refuse_a_setting_that_would_never_detect(bad):
     with pytest.raises(ValueError, match=f"CusumSettings.{next(iter(bad))} must be"):
         CusumSettings(**bad)

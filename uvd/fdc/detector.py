@@ -149,10 +149,11 @@ class CusumSettings:
             least = 0.0 if f.name in ("warmup_s", "reference_lag_s") else None
             if f.name == "window":
                 ok = isinstance(x, int) and not isinstance(x, bool) and x >= 1
+            elif isinstance(x, bool) or not isinstance(x, (int, float)):
+                ok = False
             else:
                 finite = math.isfinite(x) or (f.name == "reference_lag_s" and x == math.inf)
-                ok = isinstance(x, (int, float)) and not isinstance(x, bool) and finite \
-                    and (x >= least if least is not None else x > 0)
+                ok = finite and (x >= least if least is not None else x > 0)
             if not ok:
                 want = ("an integer >= 1" if f.name == "window" else
                         "a number >= 0 or inf" if f.name == "reference_lag_s" else
