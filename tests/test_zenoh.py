@@ -60,9 +60,13 @@ class Watcher:
         self.samples[key].append(msg)
 
     def alive(self) -> list[str]:
-        return [str(r.ok.key_expr) for r in self.session.liveliness().get("uvd/*/alive",
-                                                                           timeout=1.0)
-                if r.ok is not None]
+        """The live tokens, each once, by key: the same token can come back twice when the
+        query races its routes (seen once in a fresh clone beside a campaign:
+        ``['uvd/rov7/alive', 'uvd/rov7/alive']``; zenoh's duplicates of one token by timing,
+        eclipse-zenoh/zenoh#1404 and #2523, where a token is identified by its key)."""
+        return sorted({str(r.ok.key_expr) for r in
+                       self.session.liveliness().get("uvd/*/alive", timeout=1.0)
+                       if r.ok is not None})
 
     def query(self, selector: str) -> tuple[list[dict], list[dict], float]:
         t0 = time.monotonic()
