@@ -117,6 +117,15 @@ REFERENCE_STEP_S = 10.0
 MAX_BASELINE_STATES = 150_000
 
 
+#: what each of :class:`CusumSettings`' numbers may be (a test, its text); the rest: _POSITIVE
+_POSITIVE = (lambda x: math.isfinite(x) and x > 0, "a finite number > 0")
+_SETTING_RULES = {
+    "window": (lambda x: isinstance(x, int) and x >= 1, "an integer >= 1"),
+    "warmup_s": (lambda x: math.isfinite(x) and x >= 0, "a finite number >= 0"),
+    "reference_lag_s": (lambda x: x >= 0, "a number >= 0 or inf"),  # NaN >= 0 is False
+}
+
+
 @dataclass(frozen=True)
 class CusumSettings:
     """The detector's settings (module docstring): baseline window, the lag of the
@@ -146,19 +155,8 @@ class CusumSettings:
         setting."""
         for f in fields(self):
             x = getattr(self, f.name)
-            least = 0.0 if f.name in ("warmup_s", "reference_lag_s") else None
-            if f.name == "window":
-                ok = isinstance(x, int) and not isinstance(x, bool) and x >= 1
-            elif isinstance(x, bool) or not isinstance(x, (int, float)):
-                ok = False
-            else:
-                finite = math.isfinite(x) or (f.name == "reference_lag_s" and x == math.inf)
-                ok = finite and (x >= least if least is not None else x > 0)
-            if not ok:
-                want = ("an integer >= 1" if f.name == "window" else
-                        "a number >= 0 or inf" if f.name == "reference_lag_s" else
-                        "a finite number >= 0" if least is not None else
-                        "a finite number > 0")
+            ok, want = _SETTING_RULES.get(f.name, _POSITIVE)
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not ok(x):
                 raise ValueError(f"CusumSettings.{f.name} must be {want}, got {x!r}")
 
     def resolution(self, channel: str) -> float:
