@@ -4,9 +4,13 @@ trying such values on every command: they gave tracebacks (``uvd demo --duration
 ``uvd experiment two-step --hours nan``, ``uvd bench cycle --block 0``), watched for ever
 (``uvd watch --seconds -1``, ``uvd-fdc --seconds -1``), ran all but one run
 (``uvd campaign --limit -1``), never detected (``uvd-fdc --threshold nan``) or ran and ended at
-once (``uvd run --duration -1``, ``uvd sim-bridge --duration -5``)."""
+once (``uvd run --duration -1``, ``uvd sim-bridge --duration -5``). And the outputs: every
+option naming where a result goes is checked the same way (a path under a file made 14 commands
+run their work and then lose it to a traceback)."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import pytest
 
@@ -26,6 +30,7 @@ from uvd.fdc.detector import CusumSettings
     (["experiment", "two-step", "--hours", "nan"], "--hours"),
     (["campaign", "smoke", "--limit", "-1"], "--limit"),
     (["campaign", "smoke", "--limit", "0"], "--limit"),
+    (["campaign", "smoke", "--workers", "0"], "--workers"),
     (["decode", "--format", "pd0", "--max-errors", "-5", "x.pd0"], "--max-errors"),
     (["xval", "--params", "p.toml", "--log", "l.bag", "--substeps", "0"], "--substeps"),
     (["bench", "lockstep", "--hours", "-1"], "--hours"),
@@ -38,7 +43,7 @@ def test_a_bad_number_is_refused_by_its_option(argv, option, capsys):
         main(argv)
     assert e.value.code == 2
     err = capsys.readouterr().err
-    bad = "0" if option == "--workers" else argv[argv.index(option) + 1]  # workers: 1 then 0
+    bad = "0" if argv[:2] == ["bench", "campaign"] else argv[argv.index(option) + 1]  # 1 then 0
     assert f"argument {option}: '{bad}' is not " in err, err
 
 
@@ -79,13 +84,114 @@ def test_cusum_settings_defaults_and_zero_waits_are_valid():
     assert CusumSettings(warmup_s=0.0, reference_lag_s=0.0).warmup_s == 0.0
 
 
-def test_a_campaign_folder_that_cannot_be_made_is_a_command_line_error(tmp_path, capsys):
-    """``uvd campaign NAME --out X`` where X cannot be a folder (under a file here; /proc or
-    a read-only disk alike) says so in one line, exit 2 (it was a FileNotFoundError's
-    traceback), and runs nothing."""
+#: every option naming where a command writes a result: a file (--json, …) or a folder
+OUTPUT_OPTIONS = {"--json": "file", "--history": "file", "--doc-out": "file", "--out": None,
+                  "--summary-json": "file", "--truth-log": "file", "--plots": "folder",
+                  "--record": "folder", "--work": "folder"}
+
+
+def _subparsers(parser, path=()):
+    import argparse
+    yield path, parser
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            for name, sp in a.choices.items():
+                yield from _subparsers(sp, (*path, name))
+
+
+def test_every_output_option_is_checked_before_anything_starts():
+    """Every option that names where a result goes is an output type: found by pointing each
+    at a path under a file, 14 of them ran their work (an experiment, a demo, a campaign, an
+    identification) and then lost it to a NotADirectoryError's traceback."""
+    from uvd.cli import build_parser
+    from uvd.cliargs import output_file, output_folder
+    seen = []
+    for path, sp in _subparsers(build_parser()):
+        for a in sp._actions:
+            for opt in a.option_strings:
+                if opt in OUTPUT_OPTIONS and a.type is not None:  # decode --json: a flag
+                    assert a.type in (output_file, output_folder), (path, opt, a.type)
+                    seen.append((*path, opt))
+    assert len(seen) >= 20, seen  # 12 commands' and every bench's --json/--history
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["experiment", "two-step", "--json", "{F}/x.json"], "--json"),
+    (["experiment", "two-step", "--plots", "{F}/plots"], "--plots"),
+    (["experiment", "two-step", "--record", "{F}"], "--record"),
+    (["demo", "--json", "{F}/sub/x.json"], "--json"),
+    (["demo", "--record", "{F}/run"], "--record"),
+    (["campaign", "smoke", "--out", "{F}/out", "--workers", "1"], "--out"),
+    (["campaign", "smoke", "--json", "{F}/s.json"], "--json"),
+    (["identify", "--log", "x.bag", "--out", "{F}/p.toml"], "--out"),
+    (["report", "x.mcap", "--out", "{F}/rep"], "--out"),
+    (["replay", "--lockstep", "x.mcap", "--json", "{F}/r.json"], "--json"),
+    (["xval", "--params", "p.toml", "--log", "l.bag", "--plots", "{F}"], "--plots"),
+    (["bench", "plant", "--history", "{F}/h.jsonl"], "--history"),
+    (["check-config", "--doc-out", "{F}/config.md"], "--doc-out"),
+    (["run", "--summary-json", "{F}/s.json"], "--summary-json"),
+    (["sim-bridge", "--truth-log", "{F}/t.bin"], "--truth-log"),
+])
+def test_an_output_under_a_file_is_refused_by_its_option(argv, option, tmp_path, capsys):
+    """A path under a file (here; a read-only disk alike) cannot be made: refused by its option,
+    exit 2, before anything starts — with nothing made."""
     blocker = tmp_path / "a-file"
     blocker.write_text("")
-    assert main(["campaign", "smoke", "--out", str(blocker / "out"), "--workers", "1"]) == 2
+    argv = [a.replace("{F}", str(blocker)) for a in argv]
+    before = sorted(tmp_path.rglob("*"))
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"uvd campaign: error: {blocker / 'out'}: cannot hold the "
-                          "campaign's rows"), err
+    assert f"argument {option}: " in err and f"{blocker} is a file, not a folder" in err, err
+    assert sorted(tmp_path.rglob("*")) == before
+
+
+def test_a_folder_given_for_a_file_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", "two-step", "--json", str(tmp_path)])
+    assert e.value.code == 2
+    assert f"argument --json: '{tmp_path}' is a folder, not a file" in capsys.readouterr().err
+
+
+def test_missing_folders_of_an_output_are_made(tmp_path):
+    """The other half of the one rule: what does not exist yet is made when written."""
+    out = tmp_path / "new" / "deeper" / "config.md"
+    assert main(["check-config", "--doc-out", str(out)]) == 0
+    assert out.read_text().startswith("#")
+
+
+def test_an_unwritable_folder_is_refused(tmp_path):
+    """A folder this user cannot write in: a read-only one, or (root writes nearly anywhere)
+    /proc/self, which not even root may write in."""
+    import argparse
+    import os
+
+    from uvd.cliargs import output_file, output_folder
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        unwritable = [p for p in (ro, Path("/proc/self"))
+                      if p.is_dir() and not os.access(p, os.W_OK | os.X_OK)]
+        if not unwritable:
+            pytest.skip("no folder here that this user cannot write in")
+        for folder in unwritable:
+            with pytest.raises(argparse.ArgumentTypeError, match=f"{folder} is not writable"):
+                output_file(str(folder / "x.json"))
+            with pytest.raises(argparse.ArgumentTypeError, match=f"{folder} is not writable"):
+                output_folder(str(folder / "a" / "b"))
+    finally:
+        ro.chmod(0o700)
+
+
+def test_a_default_campaign_folder_that_cannot_be_made_is_an_error(tmp_path, capsys,
+                                                                    monkeypatch):
+    """Without --out the rows go to campaigns/<name>; where that cannot be a folder (a file
+    named campaigns here) the store says so in one line, exit 2, and runs nothing."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "campaigns").write_text("")
+    assert main(["campaign", "smoke", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("uvd campaign: error: campaigns/smoke: cannot hold the campaign's "
+                          "rows"), err

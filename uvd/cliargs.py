@@ -1,12 +1,22 @@
-"""Argument types of the command line's numbers: a duration, a count or a rate that is
-negative, zero where it must not be, NaN or infinite is an error argparse names by its option
-(``uvd demo: error: argument --duration: '-1' is not a positive finite number``), exit 2,
-before anything starts — not a traceback, a hang or a run that ends at once."""
+"""Argument types of the command line's numbers and outputs, checked by argparse before
+anything starts (exit 2, the option named: ``uvd demo: error: argument --duration: '-1' is not
+a positive finite number``) — not a traceback, a hang or a run that ends at once, nor minutes of
+work whose result then cannot be written.
+
+* Numbers: a duration, a count or a rate that is negative, zero where it must not be, NaN or
+  infinite is refused.
+* Outputs (a result file, a folder of figures or recordings): one rule for every command — a
+  missing folder is made when the result is written, and a path that cannot be made is refused
+  now: a folder where the file belongs, a file where a folder belongs (itself or one of its
+  parents), or a folder that is not writable.
+"""
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
+from pathlib import Path
 
 
 def _float(text: str, ok, what: str) -> float:
@@ -47,3 +57,36 @@ def positive_int(text: str) -> int:
 def nonnegative_int(text: str) -> int:
     """An integer ≥ 0."""
     return _int(text, lambda x: x >= 0, "an integer >= 0")
+
+
+def _cannot_make_folder(folder: Path) -> str | None:
+    """Why files cannot be made in ``folder`` (made first where missing), or None if they can:
+    its nearest existing ancestor must be a writable folder."""
+    p = folder
+    while not p.exists() and p.parent != p:
+        p = p.parent
+    if not p.is_dir():
+        return f"{p} is a file, not a folder"
+    if not os.access(p, os.W_OK | os.X_OK):
+        return f"{p} is not writable"
+    return None
+
+
+def output_file(text: str) -> Path:
+    """A file a command writes its result to (its missing folders made when it does)."""
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder, not a file")
+    why = _cannot_make_folder(path.parent)
+    if why:
+        raise argparse.ArgumentTypeError(f"{text!r} cannot be written: {why}")
+    return path
+
+
+def output_folder(text: str) -> Path:
+    """A folder a command writes its files into (made, with its parents, when it does)."""
+    path = Path(text)
+    why = _cannot_make_folder(path)
+    if why:
+        raise argparse.ArgumentTypeError(f"{text!r} cannot be made a folder: {why}")
+    return path

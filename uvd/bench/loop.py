@@ -42,7 +42,13 @@ from collections.abc import Callable
 import numpy as np
 
 from uvd.bench import Bench, host_steal_s, percentiles
-from uvd.cliargs import nonnegative_float, nonnegative_int, positive_float, positive_int
+from uvd.cliargs import (
+    nonnegative_float,
+    nonnegative_int,
+    output_folder,
+    positive_float,
+    positive_int,
+)
 from uvd.runtime.clock import MonotonicClock
 from uvd.runtime.loop import CpuLatencyRequest, FixedRateLoop, LoopSettings, apply_realtime
 
@@ -361,7 +367,7 @@ def _add(p) -> None:
                    help="garbage collection while our loop runs (LoopSettings.gc; default "
                         "slack: start-up heap frozen, collections only in slack time)")
     p.add_argument("--no-naive", action="store_true", help="skip the naive asyncio loop")
-    p.add_argument("--record", metavar="DIR", default=None,
+    p.add_argument("--record", type=output_folder, metavar="DIR", default=None,
                    help="also publish a cycle record every cycle to the black-box recorder "
                         "writing MCAP into DIR (its cost on the loop: compare with a run "
                         "without)")

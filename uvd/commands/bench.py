@@ -5,10 +5,10 @@ them in the benchmark history (``make bench``: ``docs/bench/history.jsonl``, ren
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 from uvd import bench as benches
 from uvd.bench.page import append_history, current_commit, new_record
+from uvd.cliargs import output_file
 from uvd.jsonio import write_json
 
 
@@ -17,8 +17,9 @@ def register(sub) -> None:
     bsub = p.add_subparsers(dest="bench", metavar="NAME")
     for name, b in sorted(benches.registry().items()):
         bp = bsub.add_parser(name, help=b.summary, description=b.summary)
-        bp.add_argument("--json", type=Path, metavar="OUT", help="write the figures to this file")
-        bp.add_argument("--history", type=Path, metavar="JSONL",
+        bp.add_argument("--json", type=output_file, metavar="OUT",
+                        help="write the figures to this file")
+        bp.add_argument("--history", type=output_file, metavar="JSONL",
                         help="append the figures as one record to this benchmark history "
                              "(make bench: docs/bench/history.jsonl; python -m uvd.bench.page "
                              "renders docs/BENCHMARKS.md from it)")

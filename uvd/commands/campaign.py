@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from uvd.cliargs import positive_int
+from uvd.cliargs import output_file, output_folder, positive_int
 
 
 def register(sub) -> None:
@@ -20,10 +20,10 @@ def register(sub) -> None:
                     "built-in campaigns.")
     p.add_argument("spec", metavar="SPEC.toml|NAME", help="campaign file, built-in name, or "
                                                           "'list'")
-    p.add_argument("--out", type=Path, metavar="DIR",
+    p.add_argument("--out", type=output_folder, metavar="DIR",
                    help="where the rows go (default: campaigns/<name>)")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, metavar="N",
+    where.add_argument("--workers", type=positive_int, metavar="N",
                        help="worker processes of the local Dask cluster (default: the "
                             "machine's cores)")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
@@ -34,7 +34,7 @@ def register(sub) -> None:
     p.add_argument("--limit", type=positive_int, metavar="N",
                    help="run at most N of the runs not yet done, in run order (a first look, "
                         "or a campaign in instalments: the rest follows on the next call)")
-    p.add_argument("--json", type=Path, metavar="SUMMARY",
+    p.add_argument("--json", type=output_file, metavar="SUMMARY",
                    help="write the summary (with intervals) to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=_run)
@@ -54,9 +54,6 @@ def _run(args) -> int:
         return 0
     spec = builtin.resolve(args.spec)
     out = args.out if args.out is not None else Path("campaigns") / spec.name
-    if args.workers is not None and args.workers < 1:
-        print("uvd campaign: --workers must be at least 1", file=sys.stderr)
-        return 2
     if not args.report:
         with Progress(spec.name, unit="runs", quiet=args.quiet, every_s=30.0) as p:
             def on_row(row: dict, done: int, todo: int) -> None:

@@ -15,6 +15,8 @@ import json
 import sys
 from pathlib import Path
 
+from uvd.cliargs import output_file
+
 
 def register(sub) -> None:
     p = sub.add_parser("check-config", help="validate a configuration file (or write its "
@@ -25,7 +27,7 @@ def register(sub) -> None:
                         "sim-bluerov2, jhu-rov)")
     p.add_argument("--shipped", action="store_true",
                    help="validate every configuration shipped with the package")
-    p.add_argument("--doc-out", type=Path, metavar="MD",
+    p.add_argument("--doc-out", type=output_file, metavar="MD",
                    help="write the configuration reference generated from the schema "
                         "(docs/config.md)")
     p.add_argument("--print", dest="dump", action="store_true",

@@ -43,7 +43,7 @@ import numpy as np
 
 from uvd import _jitcache
 from uvd.bench import host_steal_s
-from uvd.cliargs import positive_float
+from uvd.cliargs import output_file, output_folder, positive_float
 from uvd.jsonio import write_json
 from uvd.lockstep import hil_tracking
 
@@ -57,8 +57,8 @@ def register(sub) -> None:
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--duration", type=positive_float, default=60.0, metavar="S",
                    help="seconds of armed tracking (default 60)")
-    p.add_argument("--json", type=Path, metavar="OUT", help="write the figures to this file")
-    p.add_argument("--record", type=Path, metavar="DIR",
+    p.add_argument("--json", type=output_file, metavar="OUT", help="write the figures to this file")
+    p.add_argument("--record", type=output_folder, metavar="DIR",
                    help="keep the run's files (config, telemetry, truth, CAN log, logs)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="base configuration (default: the embedded config/sim.toml)")

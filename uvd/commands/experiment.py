@@ -5,10 +5,9 @@ from __future__ import annotations
 import json
 import sys
 import time
-from pathlib import Path
 
 from uvd import experiments
-from uvd.cliargs import positive_float
+from uvd.cliargs import output_file, output_folder, positive_float
 from uvd.jsonio import write_json
 from uvd.progress import Progress
 
@@ -20,9 +19,11 @@ def register(sub) -> None:
         description="Run a lockstep experiment; `uvd experiment list` lists them.",
     )
     p.add_argument("name", help="experiment name, or 'list'")
-    p.add_argument("--json", type=Path, metavar="OUT", help="write results to this JSON file")
-    p.add_argument("--plots", type=Path, metavar="DIR", help="write figures into this folder")
-    p.add_argument("--record", type=Path, metavar="DIR",
+    p.add_argument("--json", type=output_file, metavar="OUT",
+                   help="write results to this JSON file")
+    p.add_argument("--plots", type=output_folder, metavar="DIR",
+                   help="write figures into this folder")
+    p.add_argument("--record", type=output_folder, metavar="DIR",
                    help="write each control run to MCAP in DIR/<run>/ as the daemon records "
                         "(uvd report draws it; docs/recording.md)")
     p.add_argument("--hours", type=positive_float, help="override the simulated duration (hours)")

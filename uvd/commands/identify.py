@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uvd.cliargs import positive_float
+from uvd.cliargs import output_file, positive_float
 from uvd.errors import ConfigError, ParameterError
 
 
@@ -40,7 +40,7 @@ def register(sub) -> None:
                    help="with --profile: the vehicle file (thrusters, thrust curves, first "
                         "guess; default: the profile's vehicle)")
     p.add_argument("--method", choices=("aid", "ls", "ls-consistent"), required=True)
-    p.add_argument("--out", type=Path, required=True, metavar="PARAMS.toml",
+    p.add_argument("--out", type=output_file, required=True, metavar="PARAMS.toml",
                    help="where to write the identified parameters")
     p.add_argument("--init", type=Path, metavar="PARAMS.toml",
                    help="aid: initial parameters (default INITP of Tables 4.6-4.7)")
@@ -57,7 +57,7 @@ def register(sub) -> None:
                         "damping diag(K_p, M_q, N_r) beside (2.40)'s quadratic one, written as "
                         "the parameter file's [linear_damping] (outside the thesis's model; "
                         "docs/real-vehicles.md)")
-    p.add_argument("--json", type=Path, metavar="OUT", help="also write a summary as JSON")
+    p.add_argument("--json", type=output_file, metavar="OUT", help="also write a summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=_run)
 
@@ -158,8 +158,6 @@ def _run(args) -> int:
     from uvd.jsonio import write_json
     from uvd.progress import Progress
 
-    if not args.out.parent.is_dir():  # before minutes of identification, not after
-        raise ConfigError(f"--out {args.out}: cannot write: no folder {args.out.parent}")
     if args.linear_damping and (not args.profile or args.method == "aid"):
         raise ConfigError("--linear-damping: only with --profile (the rotational model of "
                           "another system's recordings) and --method ls or ls-consistent "
@@ -217,6 +215,7 @@ def _run(args) -> int:
         valid = f"NOT physically valid: {exc}"
     summary["validity"] = valid
     try:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
         save_params(params, args.out, title=title)
     except OSError as exc:
         raise ConfigError(f"--out {args.out}: cannot write: {exc.strerror or exc}") from exc
@@ -310,6 +309,7 @@ def _run_logs(args) -> int:
         text += linear_damping_toml(d_lin, "K_p, M_q, N_r (N m s/rad), identified beside (2.40)'s "
                                     "quadratic damping (--linear-damping)")
     try:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
         save_params(params, args.out, title=title, extra=text)
     except OSError as exc:
         raise ConfigError(f"--out {args.out}: cannot write: {exc.strerror or exc}") from exc

@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from uvd.cliargs import positive_float
+from uvd.cliargs import output_file, output_folder, positive_float
 
 
 def register(sub) -> None:
@@ -37,7 +37,7 @@ def register(sub) -> None:
                     help="python-can interface of the bus the daemon under test is on")
     rt.add_argument("--channel", help="its channel (multicast group, virtual name, vcan0)")
     rt.add_argument("--can-port", type=int, help="UDP port of udp_multicast")
-    rt.add_argument("--work", type=Path, metavar="DIR",
+    rt.add_argument("--work", type=output_folder, metavar="DIR",
                     help="folder of the pseudo-terminals, the daemon's configuration and its "
                          "recording (default: a new one in the temporary directory)")
     rt.add_argument("--daemon", action="store_true",
@@ -47,7 +47,7 @@ def register(sub) -> None:
     p.add_argument("--config", type=Path, metavar="FILE",
                    help="replay with this configuration instead of the recorded one "
                         "(compares tracking, not bits)")
-    p.add_argument("--json", type=Path, metavar="OUT", help="write the report to this file")
+    p.add_argument("--json", type=output_file, metavar="OUT", help="write the report to this file")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_run)
 

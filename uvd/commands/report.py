@@ -9,12 +9,14 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from uvd.cliargs import output_folder
+
 
 def register(sub) -> None:
     p = sub.add_parser("report", help="an HTML report with figures of a black-box recording",
                        description="Write DIR/index.html and PNG figures of RUN.mcap.")
     p.add_argument("recording", type=Path, metavar="RUN.mcap")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR")
+    p.add_argument("--out", type=output_folder, required=True, metavar="DIR")
     p.add_argument("--params", type=Path, metavar="PARAMS.toml",
                    help="also cross-validate this parameter set on the run (Figs. 4.5-4.7)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from uvd.cliargs import positive_float
+from uvd.cliargs import output_file, positive_float
 
 
 def register(sub) -> None:
@@ -24,7 +24,7 @@ def register(sub) -> None:
                    help="arm as soon as the arming checks pass (once)")
     p.add_argument("--duration", type=positive_float, default=None, metavar="S",
                    help="stop by itself after S seconds (default: run until signalled)")
-    p.add_argument("--summary-json", type=Path, default=None, metavar="OUT",
+    p.add_argument("--summary-json", type=output_file, default=None, metavar="OUT",
                    help="write the run's summary (loop statistics, failsafe events) at exit")
     p.add_argument("--log-level", default="INFO",
                    choices=("DEBUG", "INFO", "WARNING", "ERROR"))

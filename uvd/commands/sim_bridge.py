@@ -27,7 +27,7 @@ import threading
 from pathlib import Path
 
 from uvd.blas import single_threaded_blas
-from uvd.cliargs import positive_float
+from uvd.cliargs import output_file, positive_float
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -74,7 +74,7 @@ def _add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the instrument noise")
     p.add_argument("--hold", action="store_true",
                    help="keep the vehicle at its start pose until the first thrust command")
-    p.add_argument("--truth-log", type=Path, default=None, metavar="FILE",
+    p.add_argument("--truth-log", type=output_file, default=None, metavar="FILE",
                    help="write the true state at every plant step (float64 rows)")
     p.add_argument("--control", action="store_true",
                    help="JSON commands on stdin, answers on stdout; exit when stdin closes")

@@ -21,6 +21,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from uvd.cliargs import output_file
 from uvd.runtime.schema import AXES
 
 DEFAULT_ZETA = 0.8
@@ -39,7 +40,7 @@ def register(sub) -> None:
     p.add_argument("--aid-sweep", type=float, metavar="S", default=None,
                    help="choose AID's [estimation] gain_factors by a logarithmic sweep over an "
                         "S-second lockstep simulation of this configuration (seed 1; minutes)")
-    p.add_argument("--json", type=Path, metavar="OUT", help="write the figures as JSON")
+    p.add_argument("--json", type=output_file, metavar="OUT", help="write the figures as JSON")
     p.set_defaults(handler=_run)
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from uvd.cliargs import positive_float, positive_int
+from uvd.cliargs import output_file, output_folder, positive_float, positive_int
 
 
 def register(sub) -> None:
@@ -28,8 +28,8 @@ def register(sub) -> None:
     p.add_argument("--window", type=positive_float, default=2.0, metavar="S",
                    help="with --profile: restart from the recorded state every S seconds "
                         "(default 2)")
-    p.add_argument("--json", type=Path, metavar="OUT", help="write the MAE to this file")
-    p.add_argument("--plots", type=Path, metavar="DIR",
+    p.add_argument("--json", type=output_file, metavar="OUT", help="write the MAE to this file")
+    p.add_argument("--plots", type=output_folder, metavar="DIR",
                    help="write figures in the style of Figs. 4.5-4.7 into this folder")
     p.add_argument("--substeps", type=positive_int, default=2,
                    help="integration steps per recorded period (default 2)")
