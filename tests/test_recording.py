@@ -31,6 +31,7 @@ from uvd.runtime import commands as cmd
 from uvd.runtime.config import load_config
 from uvd.runtime.replay.lockstep import replay_lockstep
 from uvd.telemetry.recording import CHANNELS, RecordingError, read_messages, schema
+from uvd.telemetry.report import write_report
 
 pytestmark = pytest.mark.slow
 
@@ -258,6 +259,17 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path):
              if topic == "/uvd/cycle" else msg)
     with pytest.raises(RecordingError, match="no-thrust.mcap: a record does not hold"):
         replay_lockstep(no_thrust)
+    # valid JSON, but not what the schema promises: the report names it too (a fuzzed byte
+    # that shortened one cycle's position made it a numpy ValueError's traceback)
+    short_p = tmp_path / "short-p.mcap"
+    n_cycle = iter(range(10**6))
+    _rewrite(path, short_p, lambda k, topic, msg: {**msg, "p": msg["p"][:2]}
+             if topic == "/uvd/cycle" and next(n_cycle) == 20 else msg)
+    for bad in (no_thrust, short_p):
+        with pytest.raises(RecordingError, match=f"{bad.name}: a record does not hold what "
+                                                 "its schema"):
+            write_report(bad, tmp_path / "report")
+    assert main(["report", str(short_p), "--out", str(tmp_path / "report"), "--quiet"]) == 2
 
 
 def test_sigkill_of_the_daemon_leaves_a_file_report_reads_to_within_a_second(tmp_path):

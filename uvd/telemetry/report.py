@@ -80,11 +80,15 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
     Raises
     ------
     RecordingError
-        The recording cannot be read, or holds no cycles.
+        The recording cannot be read, holds no cycles, or holds a record that is not what
+        its schema promises (valid JSON, but a field missing or of the wrong shape: the
+        report names the file and the error, as ``uvd replay`` does).
     """
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from uvd.errors import UvdError
 
     path = Path(recording)
     out = Path(out_dir)
@@ -92,6 +96,18 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
     say = progress or (lambda _msg: None)
     say(f"reading {path}")
     data = _load(path)
+    try:
+        return _draw(plt, path, out, data, params, say)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        if isinstance(exc, (RecordingError, UvdError)):  # the parameters' own errors
+            raise
+        plt.close("all")
+        raise RecordingError(f"{path}: a record does not hold what its schema (uvd.cycle.v1, "
+                             f"uvd.estimate.v1, …) promises: {type(exc).__name__}: "
+                             f"{exc}") from exc
+
+
+def _draw(plt, path: Path, out: Path, data: dict[str, list], params, say) -> dict[str, Any]:
     cyc = data["cycle"]
     t0 = int(cyc[0]["t_ns"])
     t = np.array([(int(r["t_ns"]) - t0) * 1e-9 for r in cyc])
