@@ -37,6 +37,15 @@ from uvd.fdc.detector import CusumSettings
     (["bench", "cycle", "--block", "0"], "--block"),
     (["bench", "loop", "--rate", "0"], "--rate"),
     (["bench", "campaign", "--workers", "1", "0"], "--workers"),
+    (["experiment", "two-step", "--seed", "-1"], "--seed"),
+    (["demo", "--seed", "-1"], "--seed"),
+    (["sim-bridge", "--seed", "-1"], "--seed"),
+    (["tune", "--aid-sweep", "-1"], "--aid-sweep"),
+    (["eta", "4", "0.5", "--system", "300"], "--system"),
+    (["eta", "4", "0.5", "--system", "0"], "--system"),
+    (["eta", "4", "0.5", "--to", "127.0.0.1"], "--to"),
+    (["eta", "4", "0.5", "--to", "localhost:14551"], "--to"),
+    (["eta", "4", "0.5", "--to", "127.0.0.1:70000"], "--to"),
 ])
 def test_a_bad_number_is_refused_by_its_option(argv, option, capsys):
     with pytest.raises(SystemExit) as e:
@@ -47,6 +56,17 @@ def test_a_bad_number_is_refused_by_its_option(argv, option, capsys):
     assert f"argument {option}: '{bad}' is not " in err, err
 
 
+def test_eta_refuses_thruster_0_and_an_ipv6_address_it_cannot_reach(capsys):
+    """Thrusters count from 1; pymavlink's UDP is IPv4 only, so ``--to [::1]:P`` is refused
+    in words (it was pymavlink's "UDP ports must be specified as host:port")."""
+    with pytest.raises(SystemExit) as e:
+        main(["eta", "0", "0.5"])
+    assert e.value.code == 2
+    assert "argument thruster: '0' is not an integer >= 1" in capsys.readouterr().err
+    assert main(["eta", "4", "0.5", "--to", "[::1]:14551", "--timeout", "1"]) == 2
+    assert "[::1]:14551: uvd eta speaks IPv4 only" in capsys.readouterr().err
+
+
 def test_the_defaults_and_good_values_still_parse():
     from uvd.cli import build_parser
     p = build_parser()
@@ -55,6 +75,10 @@ def test_the_defaults_and_good_values_still_parse():
     assert p.parse_args(["campaign", "smoke", "--limit", "3"]).limit == 3
     assert p.parse_args(["decode", "--format", "pd0", "--max-errors", "0", "x"]).max_errors == 0
     assert p.parse_args(["experiment", "two-step", "--hours", "0.5"]).hours == 0.5
+    assert p.parse_args(["experiment", "two-step", "--seed", "0"]).seed == 0
+    eta = p.parse_args(["eta", "4", "0.5", "--to", "127.0.0.1:14551", "--system", "1"])
+    assert (eta.thruster, eta.to, eta.system) == (4, "127.0.0.1:14551", 1)
+    assert p.parse_args(["eta", "4", "0.5"]).system == 255
 
 
 @pytest.mark.parametrize("argv, words", [

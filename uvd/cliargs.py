@@ -59,6 +59,14 @@ def nonnegative_int(text: str) -> int:
     return _int(text, lambda x: x >= 0, "an integer >= 0")
 
 
+def int_in(lo: int, hi: int):
+    """The type of an integer in ``lo..hi`` (an identifier of a fixed width: a MAVLink system
+    id is 1..255)."""
+    def parse(text: str) -> int:
+        return _int(text, lambda x: lo <= x <= hi, f"an integer in {lo}..{hi}")
+    return parse
+
+
 def _cannot_make_folder(folder: Path) -> str | None:
     """Why files cannot be made in ``folder`` (made first where missing), or None if they can:
     its nearest existing ancestor must be a writable folder."""

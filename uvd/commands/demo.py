@@ -43,7 +43,7 @@ import numpy as np
 
 from uvd import _jitcache
 from uvd.bench import host_steal_s
-from uvd.cliargs import output_file, output_folder, positive_float
+from uvd.cliargs import nonnegative_int, output_file, output_folder, positive_float
 from uvd.jsonio import write_json
 from uvd.lockstep import hil_tracking
 
@@ -62,7 +62,8 @@ def register(sub) -> None:
                    help="keep the run's files (config, telemetry, truth, CAN log, logs)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="base configuration (default: the embedded config/sim.toml)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the simulated instruments")
+    p.add_argument("--seed", type=nonnegative_int, default=0,
+                   help="seed of the simulated instruments")
     p.add_argument("--fault", metavar="thruster:I:ETA@T",
                    help="T s after arming thruster I keeps ETA of its thrust (sim-bridge); "
                         "uvd-fdc detects it over Zenoh, the daemon confirms and reallocates "

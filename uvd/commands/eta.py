@@ -21,25 +21,37 @@ import sys
 import time
 from pathlib import Path
 
-from uvd.cliargs import positive_float
+from uvd.cliargs import int_in, positive_float, positive_int
 
 
 def register(sub) -> None:
     p = sub.add_parser("eta", help="set or clear a thruster's effectiveness on a running "
                                    "daemon (MAVLink)",
                        description=__doc__.split("\n\n")[0])
-    p.add_argument("thruster", type=int, help="the thruster, 1-based, in the vehicle's order")
+    p.add_argument("thruster", type=positive_int,
+                   help="the thruster, 1-based, in the vehicle's order")
     p.add_argument("eta", help="its effectiveness in [0, 1] (0 dead, 0.5 weak), or 'clear' (1)")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="the daemon's configuration: its [mavlink] listen address and signing "
                         "key (default: the embedded config/sim.toml)")
-    p.add_argument("--to", default=None, metavar="HOST:PORT",
+    p.add_argument("--to", type=_udp_address, default=None, metavar="HOST:PORT",
                    help="the link's UDP address (default: [mavlink] listen)")
-    p.add_argument("--system", type=int, default=255,
+    p.add_argument("--system", type=int_in(1, 255), default=255,
                    help="this station's MAVLink system id (default 255)")
     p.add_argument("--timeout", type=positive_float, default=5.0,
                    help="seconds to wait for each answer (default 5)")
     p.set_defaults(handler=_run)
+
+
+def _udp_address(text: str) -> str:
+    """``--to``: ADDRESS:PORT as the configuration's [mavlink] listen is written."""
+    import argparse
+
+    from uvd.runtime.config import check_udp_address
+    bad = check_udp_address(text, "--to")
+    if bad:
+        raise argparse.ArgumentTypeError(bad[0][1])
+    return text
 
 
 def _eta(text: str) -> float:
@@ -59,6 +71,9 @@ def send_eta(host: str, port: int, thruster: int, eta: float, *, system: int = 2
     """Send the command and wait for its answer: (``"accepted"``/``"denied"``/…, the
     daemon's STATUSTEXT, "" when none came). Raises TimeoutError when the vehicle's heartbeat
     or the COMMAND_ACK does not come within ``timeout_s``."""
+    if ":" in host:
+        raise ValueError(f"{host}:{port}: uvd eta speaks IPv4 only (pymavlink's UDP "
+                         "connection); reach the daemon on an IPv4 address ([mavlink] listen)")
     os.environ.setdefault("MAVLINK20", "1")  # pymavlink's MAVLink 2 dialects
     from pymavlink import mavutil
 

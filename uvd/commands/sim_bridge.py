@@ -27,7 +27,7 @@ import threading
 from pathlib import Path
 
 from uvd.blas import single_threaded_blas
-from uvd.cliargs import output_file, positive_float
+from uvd.cliargs import nonnegative_int, output_file, positive_float
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -71,7 +71,7 @@ def _add_arguments(p) -> None:
                         "(default: the embedded config/sim.toml)")
     p.add_argument("--duration", type=positive_float, default=None, metavar="S",
                    help="end by itself after S seconds (default: until signalled)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the instrument noise")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the instrument noise")
     p.add_argument("--hold", action="store_true",
                    help="keep the vehicle at its start pose until the first thrust command")
     p.add_argument("--truth-log", type=output_file, default=None, metavar="FILE",

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from uvd import experiments
+from uvd.cliargs import nonnegative_int
 from uvd.experiments.reproduce import compare, report_line
 from uvd.jsonio import write_json
 from uvd.progress import Progress
@@ -400,7 +401,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reuse", action="store_true",
                     help="do not run: use the JSON already in OUT/results/")
     ap.add_argument("--out", type=Path, default=Path("docs"), help="output folder (docs)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=nonnegative_int, default=0)
     ap.add_argument("--quiet", action="store_true", help="no progress")
     ap.add_argument("--campaigns", nargs="*", metavar="NAME",
                     help="run only these built-in campaigns (default: every published one, "

@@ -469,7 +469,8 @@ class TelemetrySection:
     zenoh: ZenohSection = section(ZenohSection)
 
 
-def _check_udp(addr: str, key: str) -> list[tuple[str, str]]:
+def check_udp_address(addr: str, key: str) -> list[tuple[str, str]]:
+    """``[(key, why)]`` if ``addr`` is not ADDRESS:PORT (numeric IP, port 1..65535), else []."""
     host, sep, port = addr.rpartition(":")
     try:
         ok = bool(sep) and 0 < int(port) < 65536
@@ -540,9 +541,9 @@ class MavlinkSection:
             "directory)")
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
-        out = _check_udp(self.listen, "listen") if self.listen else []
+        out = check_udp_address(self.listen, "listen") if self.listen else []
         for i, a in enumerate(self.connect):
-            out += _check_udp(a, f"connect[{i}]")
+            out += check_udp_address(a, f"connect[{i}]")
         return out
 
 
