@@ -56,6 +56,46 @@ def test_a_bad_number_is_refused_by_its_option(argv, option, capsys):
     assert f"argument {option}: '{bad}' is not " in err, err
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--connect", "garbage"], "argument --connect: 'garbage' is not <protocol>/<address>"),
+    (["--connect", "tcp/127.0.0.1:99999"], "'tcp/127.0.0.1:99999' has no port 1-65535"),
+    (["--vehicle", ""], "argument --vehicle: '' is empty"),
+    (["--vehicle", "rov/7"], "'rov/7' is not a single key chunk"),
+    (["--vehicle", "**"], "'**' is not a single key chunk"),
+])
+def test_the_zenoh_clients_refuse_an_endpoint_or_vehicle_zenoh_cannot_take(argv, words,
+                                                                            capsys):
+    """``uvd watch`` and uvd-fdc: ``--connect garbage`` and ``--vehicle ''`` were zenoh's
+    ZError tracebacks, ``--connect tcp/127.0.0.1:99999`` a watch that waited for ever."""
+    from uvd.fdc.client import main as fdc_main
+    for run in (lambda: main(["watch", *argv]), lambda: fdc_main(argv)):
+        with pytest.raises(SystemExit) as e:
+            run()
+        assert e.value.code == 2
+        assert words in capsys.readouterr().err
+
+
+def test_the_zenoh_clients_name_a_bad_config_file_and_an_unreachable_router(tmp_path, capsys):
+    from uvd.fdc.client import main as fdc_main
+    from uvd.netports import free_port
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{ not json5")
+    closed = tmp_path / "client.json5"  # client mode: zenoh.open fails at once without one
+    closed.write_text(f'{{mode: "client", connect: {{endpoints: '
+                      f'["tcp/127.0.0.1:{free_port()}"]}}}}')
+    for run, who in ((lambda a: main(["watch", "--seconds", "1", *a]), "uvd watch"),
+                     (lambda a: fdc_main(["--seconds", "1", *a]), "uvd-fdc")):
+        assert run(["--zenoh-config", str(tmp_path / "none.json5")]) == 2
+        assert (f"{who}: error: --zenoh-config {tmp_path / 'none.json5'}: No such file"
+                in capsys.readouterr().err)
+        assert run(["--zenoh-config", str(bad)]) == 2
+        assert f"{who}: error: --zenoh-config {bad}: " in capsys.readouterr().err
+        assert run(["--zenoh-config", str(closed)]) == 2
+        err = capsys.readouterr().err
+        assert f"{who}: error: cannot open the Zenoh session: Unable to connect" in err, err
+        assert ".rs:" not in err  # zenoh's Rust source locations left out
+
+
 def test_eta_refuses_thruster_0_and_an_ipv6_address_it_cannot_reach(capsys):
     """Thrusters count from 1; pymavlink's UDP is IPv4 only, so ``--to [::1]:P`` is refused
     in words (it was pymavlink's "UDP ports must be specified as host:port")."""
@@ -219,3 +259,17 @@ def test_a_default_campaign_folder_that_cannot_be_made_is_an_error(tmp_path, cap
     err = capsys.readouterr().err
     assert err.startswith("uvd campaign: error: campaigns/smoke: cannot hold the campaign's "
                           "rows"), err
+
+
+def test_zenoh_names_rules():
+    from uvd.zenoh_names import endpoint_problem, vehicle_key_problem
+    for good in ("jhu-rov", "rov_7", "bluerov2-heavy", "sim00"):
+        assert vehicle_key_problem(good) is None
+    for bad in ("", "*", "**", "a/b", "a b", "$x", "a?b", "a#b", "a\tb"):
+        assert vehicle_key_problem(bad) is not None, bad
+    for good in ("tcp/127.0.0.1:7447", "tcp/[::1]:7447", "tls/localhost:7448",
+                 "udp/127.0.0.1:7447#iface=lo", "tcp/127.0.0.1:1?prio=1", "unixsock-stream/x"):
+        assert endpoint_problem(good) is None, good
+    for bad in ("garbage", "", "tcp/", "tcp/127.0.0.1", "tcp/127.0.0.1:0",
+                "tcp/127.0.0.1:65536", "tcp/:7447", "/127.0.0.1:7447", "tcp /x:1"):
+        assert endpoint_problem(bad) is not None, bad

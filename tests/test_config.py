@@ -122,6 +122,17 @@ port = "/dev/ttyUSB2"
      "expected a finite number, got inf"),
     ("[failsafe]\nm_hat_min_eig = inf", "failsafe.m_hat_min_eig", "expected a finite number"),
     ("[can]\nreopen_after_s = inf", "can.reopen_after_s", "expected a finite number"),
+    # what the daemon refused only when it built its Zenoh face, check-config said OK to:
+    # a key that is a pattern (its fault subscription would be every vehicle's) and
+    # endpoints zenoh cannot parse
+    ("[telemetry.zenoh]\nenabled = true\nkey = \"*\"", "telemetry.zenoh.key",
+     "'*' is not a single key chunk"),
+    ("[telemetry.zenoh]\nenabled = true\nkey = \"rov/7\"", "telemetry.zenoh.key",
+     "is not a single key chunk"),
+    ("[telemetry.zenoh]\nlisten = [\"garbage\"]", "telemetry.zenoh.listen[0]",
+     "'garbage' is not <protocol>/<address>"),
+    ("[telemetry.zenoh]\nconnect = [\"tcp/127.0.0.1:7447\", \"tcp/10.0.0.1\"]",
+     "telemetry.zenoh.connect[1]", "has no port 1-65535"),
 ])
 def test_single_mistakes(tmp_path, snippet, key, words):
     _, errs = errors_of(tmp_path, snippet + "\n" + MINIMAL)

@@ -22,9 +22,10 @@ Layers, top to bottom (a module may import its own layer and any layer below it)
 of uvd.runtime: it takes a configuration of its own (sim_bridge.config); only the top two
 layers may import sim_bridge. The utilities (uvd.errors, uvd.jsonio, uvd.blas, uvd._jitcache,
 uvd.progress, uvd.netports, uvd.geometry, uvd.rtthreads, uvd.shipped, uvd.zenoh_callbacks,
-uvd.cliargs, the ``uvd`` package) are importable from anywhere in uvd and import no other
-layer. drivers imports nothing of uvd but uvd.errors and uvd.geometry; uvd.fdc (uvd-fdc, a
-process of its own) nothing but itself and uvd.zenoh_callbacks.
+uvd.zenoh_names, uvd.cliargs, the ``uvd`` package) are importable from anywhere in uvd and
+import no other layer. drivers imports nothing of uvd but uvd.errors and uvd.geometry; uvd.fdc
+(uvd-fdc, a process of its own) nothing but itself, uvd.zenoh_callbacks, uvd.zenoh_names and
+uvd.cliargs.
 """
 
 from __future__ import annotations
@@ -51,11 +52,13 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 )
 UTILITIES = ("uvd", "uvd.errors", "uvd.jsonio", "uvd.blas", "uvd._jitcache", "uvd.progress",
              "uvd.netports", "uvd.geometry", "uvd.rtthreads", "uvd.shipped", "uvd.zenoh_callbacks",
-             "uvd.cliargs")
+             "uvd.zenoh_names", "uvd.cliargs")
 #: uvd-fdc imports nothing of uvd but itself and this: how any process of the project ends a
 #: Zenoh session's callback threads (zenoh-python's, not uvd's: it imports nothing of the
 #: project, checked below) — the daemon's Zenoh face needs it as much as uvd-fdc does
-FDC_MAY_IMPORT = ("uvd.zenoh_callbacks",)
+#: — and, as pure utilities that import nothing of the project either, the key space's and
+#: endpoints' rules (the daemon's configuration checks the same) and the command line's types
+FDC_MAY_IMPORT = ("uvd.zenoh_callbacks", "uvd.zenoh_names", "uvd.cliargs")
 #: drivers never import uvd, except two pure modules that import nothing of the project: the
 #: design card's one error hierarchy (UvdError and the matching built-ins) and the attitude
 #: conventions every layer shares (Euler ⇄ R, η, the one angle wrap)

@@ -20,9 +20,10 @@ from uvd.cliargs import nonnegative_float
 def register(sub) -> None:
     p = sub.add_parser("watch", help="watch running vehicles over Zenoh (docs/zenoh.md)",
                        description="Print the state, events and liveliness of uvd vehicles.")
-    from uvd.fdc.client import add_connection_arguments
+    from uvd.fdc.client import add_connection_arguments, vehicle_pattern
     add_connection_arguments(p)
-    p.add_argument("--vehicle", default="*", help="vehicle key, or * for all (default)")
+    p.add_argument("--vehicle", type=vehicle_pattern, default="*",
+                   help="vehicle key, or * for all (default)")
     p.add_argument("--seconds", type=nonnegative_float, default=0.0,
                    help="stop after this long (default: until Ctrl-C)")
     p.set_defaults(handler=_run)
@@ -31,9 +32,8 @@ def register(sub) -> None:
 def _run(args) -> int:
     import zenoh
 
-    from uvd.fdc.client import client_config
+    from uvd.fdc.client import open_client
     from uvd.zenoh_callbacks import SessionCallbacks
-    conf = client_config(args.connect, args.zenoh_config)
     lock = threading.Lock()
     last_line: dict[str, float] = {}
 
@@ -68,7 +68,11 @@ def _run(args) -> int:
         what = "up" if sample.kind == zenoh.SampleKind.PUT else "gone"
         out(f"{str(sample.key_expr).split('/')[1]:>12} {what}")
 
-    session = zenoh.open(conf)
+    try:
+        session = open_client(args.connect, args.zenoh_config)
+    except ValueError as exc:
+        print(f"uvd watch: error: {exc}", file=sys.stderr)
+        return 2
     callbacks = SessionCallbacks()
     try:
         v = args.vehicle

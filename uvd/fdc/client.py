@@ -17,15 +17,18 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import signal
 import sys
 import threading
 import time
 from collections import deque
 
+from uvd.cliargs import output_file
 from uvd.fdc.align import STREAMS, Aligned
 from uvd.fdc.detector import CusumSettings, VehicleDetector, thruster_matrix
 from uvd.zenoh_callbacks import SessionCallbacks
+from uvd.zenoh_names import endpoint_problem, vehicle_key_problem
 
 #: state samples of a vehicle kept until its first estimate (10 minutes at 100 Hz)
 EARLY_STATES = 60_000
@@ -74,9 +77,30 @@ class LinkStats:
                     "latency_ms": ms}
 
 
+def endpoint(text: str) -> str:
+    """``--connect``: a Zenoh endpoint (:func:`uvd.zenoh_names.endpoint_problem`)."""
+    why = endpoint_problem(text)
+    if why:
+        raise argparse.ArgumentTypeError(f"{text!r} {why}")
+    return text
+
+
+def vehicle_pattern(text: str) -> str:
+    """``--vehicle``: one vehicle's key, or ``*`` for every vehicle."""
+    why = None if text == "*" else vehicle_key_problem(text)
+    if why:
+        raise argparse.ArgumentTypeError(f"{text!r} {why}; or * for every vehicle")
+    return text
+
+
+def zenoh_message(exc: BaseException) -> str:
+    """A ``zenoh.ZError``'s text without the Rust source locations it ends its lines with."""
+    return re.sub(r"\s+at /\S+\.rs:\d+\.?", "", str(exc)).strip()
+
+
 def add_connection_arguments(p: argparse.ArgumentParser) -> None:
     """``--connect`` and ``--zenoh-config`` of a client (:func:`client_config`)."""
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+    p.add_argument("--connect", action="append", type=endpoint, default=[], metavar="ENDPOINT",
                    help="a daemon's (or router's) endpoint (repeatable; default "
                         "tcp/127.0.0.1:7447)")
     p.add_argument("--zenoh-config", metavar="FILE",
@@ -87,10 +111,15 @@ def add_connection_arguments(p: argparse.ArgumentParser) -> None:
 def client_config(connect: list[str], config_file: str | None = None):
     """The ``zenoh.Config`` of a client of the key space: ``config_file`` (JSON5) when given,
     else a peer with multicast scouting off; ``connect`` endpoints (default, without a file,
-    ``tcp/127.0.0.1:7447``: the demo's daemon) replace the file's."""
+    ``tcp/127.0.0.1:7447``: the demo's daemon) replace the file's.
+
+    Raises ValueError naming ``--zenoh-config``: a file that is missing or not Zenoh's JSON5."""
     import zenoh
     if config_file:
-        conf = zenoh.Config.from_file(str(config_file))
+        try:
+            conf = zenoh.Config.from_file(str(config_file))
+        except zenoh.ZError as exc:
+            raise ValueError(f"--zenoh-config {config_file}: {zenoh_message(exc)}") from exc
     else:
         conf = zenoh.Config()
         conf.insert_json5("mode", '"peer"')
@@ -101,6 +130,17 @@ def client_config(connect: list[str], config_file: str | None = None):
     return conf
 
 
+def open_client(connect: list[str], config_file: str | None = None):
+    """``zenoh.open`` of :func:`client_config`. Raises ValueError in words where zenoh raises
+    its ZError: the configuration file, or a router that cannot be reached (client mode)."""
+    import zenoh
+    conf = client_config(connect, config_file)
+    try:
+        return zenoh.open(conf)
+    except zenoh.ZError as exc:
+        raise ValueError(f"cannot open the Zenoh session: {zenoh_message(exc)}") from exc
+
+
 # main is long (~215 lines): the Zenoh callbacks are closures over one session's per-vehicle
 # state (detectors, aligners, thruster matrices) under one lock; the decisions themselves
 # live in uvd.fdc.detector and uvd.fdc.align. Making that state a class is the way to
@@ -108,9 +148,10 @@ def client_config(connect: list[str], config_file: str | None = None):
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="uvd-fdc", description=__doc__.split("\n\n")[0])
     add_connection_arguments(p)
-    p.add_argument("--vehicle", default="*", help="vehicle key or * (default: every vehicle)")
+    p.add_argument("--vehicle", type=vehicle_pattern, default="*",
+                   help="vehicle key or * (default: every vehicle)")
     p.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: never)")
-    p.add_argument("--stats", metavar="FILE",
+    p.add_argument("--stats", type=output_file, metavar="FILE",
                    help="write, at the end, per key the samples received, those lost (gaps "
                         "in seq) and the end-to-end latency (receipt − the payload's "
                         "wall_time: same machine only)")
@@ -144,7 +185,11 @@ def main(argv: list[str] | None = None) -> int:
     from uvd.fdc.residual import warm
     warm()  # the residual's kernels before any sample waits on them
 
-    conf = client_config(args.connect, args.zenoh_config)
+    try:
+        session = open_client(args.connect, args.zenoh_config)
+    except ValueError as exc:
+        print(f"uvd-fdc: error: {exc}", file=sys.stderr)
+        return 2
     lock = threading.Lock()
     link = LinkStats()
     detectors: dict[tuple[str, str], VehicleDetector] = {}
@@ -155,7 +200,6 @@ def main(argv: list[str] | None = None) -> int:
     # depend on how the two subscriptions' samples interleave or how late they arrive)
     aligned: dict[tuple[str, str], Aligned] = {}
     early: dict[str, deque] = {}  # vehicle → state samples before its first estimate
-    session = zenoh.open(conf)
     callbacks = SessionCallbacks()
 
     def say(text: str) -> None:
@@ -340,6 +384,7 @@ def main(argv: list[str] | None = None) -> int:
             say(f"uvd-fdc: samples late behind the other stream: {late} (late state samples "
                 f"dropped); released unaligned (too many held): {forced}")
         if args.stats:
+            args.stats.parent.mkdir(parents=True, exist_ok=True)
             with open(args.stats, "w") as f:
                 json.dump({**link.summary(), "late": late, "forced": forced}, f)
     return 0

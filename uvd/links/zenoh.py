@@ -48,6 +48,7 @@ from uvd.geometry import R_to_euler, wrap_angle
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
 from uvd.zenoh_callbacks import SessionCallbacks
+from uvd.zenoh_names import vehicle_key_problem
 
 log = logging.getLogger(__name__)
 
@@ -127,9 +128,9 @@ class ZenohSink:
     def __init__(self, vehicle: str, config, *, state_hz: float = 20.0, health_hz: float = 2.0,
                  configuration: Mapping[str, Any] | None = None, dropped=None,
                  faults=None) -> None:
-        if not vehicle or any(c in vehicle for c in "/*?#$ "):
-            raise ValueError(f"[telemetry.zenoh] vehicle: {vehicle!r} is not a single key "
-                             "chunk (no '/', '*', '?', '#', '$' or spaces)")
+        why = vehicle_key_problem(vehicle)
+        if why:
+            raise ValueError(f"[telemetry.zenoh] vehicle: {vehicle!r} {why}")
         self.vehicle = vehicle
         self.prefix = f"uvd/{vehicle}"
         self.config = config

@@ -455,6 +455,13 @@ class ZenohSection:
     health_hz: float = setting(2.0, unit="Hz", min=0.0, max=1000.0,
                                doc="uvd/<key>/health rate (0: off)")
 
+    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
+        from uvd.zenoh_names import endpoint_problem
+        return [(f"{name}[{i}]", f"{e!r} {why}")
+                for name in ("listen", "connect")
+                for i, e in enumerate(getattr(self, name))
+                if (why := endpoint_problem(e))]
+
 
 @dataclass(frozen=True)
 class TelemetrySection:
@@ -667,6 +674,14 @@ class Config:
                          f"{helper} is above [loop] sched_fifo_priority "
                          f"{self.loop.sched_fifo_priority} (helper threads must not preempt "
                          "the loop)"))
+        z = self.telemetry.zenoh
+        if z.enabled:  # the daemon's key space uvd/<key>/… (ZenohSink refuses it else)
+            from uvd.zenoh_names import vehicle_key_problem
+            key = z.key or Path(self.vehicle.name).stem
+            why = vehicle_key_problem(key)
+            if why:
+                out.append(("telemetry.zenoh.key", f"{key!r}"
+                            + ("" if z.key else " (the [vehicle] name's stem)") + f" {why}"))
         if self.faults.fdc.enabled and not self.telemetry.zenoh.enabled:
             out.append(("faults.fdc.enabled", "uvd-fdc's samples come over Zenoh: needs "
                                               "[telemetry.zenoh] enabled = true"))
