@@ -378,8 +378,9 @@ class SimBridge:
                 if not (math.isfinite(at_s) and at_s >= 0.0):
                     raise ValueError(f"at_s must be a finite number of seconds >= 0, not "
                                      f"{raw!r}")
-                if op == "plant_fault":
-                    PlantFault(**_plant_fault_args(kw))  # a bad fault is refused now
+                why = self.command_problem(op, kw)  # a bad command is refused now
+                if why:
+                    raise ValueError(why)
                 due = now + int(at_s * 1e9)
                 with self._timed_lock:
                     self._timed.append((due, op, kw))
@@ -431,6 +432,37 @@ class SimBridge:
             return ans
         except (KeyError, ValueError, TypeError) as exc:
             return {"ok": False, "error": f"{op}: {exc}"}
+
+    def command_problem(self, op: str, kw: dict) -> str | None:
+        """Why :meth:`call` could not carry out ``op`` with ``kw``, or None — checked without
+        carrying it out (a command scheduled with ``at_s``: ``sim-bridge --at S JSON``)."""
+        if op == "plant_fault":
+            try:
+                PlantFault(**_plant_fault_args(kw))
+            except (TypeError, ValueError) as exc:
+                return str(exc)
+            return None
+        if op == "sensor":
+            name, mode, seconds = kw.get("name"), kw.get("mode", "ok"), kw.get("seconds")
+            if name not in self.faults.mode:
+                return f"unknown instrument {name!r}; have {sorted(self.faults.mode)}"
+            if mode not in SENSOR_MODES:
+                return f"unknown mode {mode!r}; known: {', '.join(SENSOR_MODES)}"
+            if seconds is not None and (isinstance(seconds, bool)
+                                        or not isinstance(seconds, (int, float))
+                                        or not (math.isfinite(seconds) and seconds >= 0.0)):
+                return f"seconds must be a finite number >= 0 (or absent), not {seconds!r}"
+            return None
+        if op == "writes":
+            name = kw.get("name", "ins")
+            return None if name in self.emulators.ports else \
+                f"no instrument port {name!r}; have {sorted(self.emulators.ports)}"
+        if op in ("ping", "truth", "release", "place", "stats", "leak", "reset"):
+            return None
+        c = self.config.can  # the rest are the CAN emulators' (CanEmulators.call)
+        from sim_bridge.amplifiers.emulators import command_problem
+        return command_problem(op, kw, c.amplifiers.node_ids,
+                               c.depth.node_id if c.depth.enabled else None)
 
     def run_due(self, t_ns: int) -> None:
         """Carry out the scheduled commands due by ``t_ns`` (the plant's loop calls it)."""

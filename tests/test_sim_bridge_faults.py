@@ -4,11 +4,13 @@ process given ``--at`` commands from its start and further ones on its control c
 
 from __future__ import annotations
 
+import re
 import time
 
 import pytest
 
 from sim_bridge.bridge import BridgeProcess, write_local_config
+from uvd.errors import TransportError
 
 pytestmark = pytest.mark.slow
 
@@ -45,6 +47,40 @@ def test_plant_and_thruster_faults_at_chosen_times(tmp_path):
             assert not bad["ok"] and words in bad["error"], bad
         assert proc.call("plant_fault")["ok"]  # no argument: the vehicle's own again
         assert proc.call("stats")["plant_fault"]["mass_scale"] == 1.0
+        # every command is checked when given, not when it comes due (a CAN or instrument
+        # command scheduled wrongly was a logged warning when due), and a value no amplifier
+        # could have is refused at once too (a health of NaN or 7 was taken)
+        for op, kw, words in (
+                ("health", {"node": 9, "value": 0.5, "at_s": 5}, "node 9 is not one of"),
+                ("health", {"node": 4, "value": float("nan")}, "gain in [0, 1], not nan"),
+                ("health", {"node": 4, "value": 7, "at_s": 5}, "gain in [0, 1], not 7"),
+                ("helth", {"node": 4, "at_s": 5}, "unknown op 'helth'"),
+                ("sensor", {"name": "gps", "mode": "silence", "at_s": 5},
+                 "unknown instrument 'gps'"),
+                ("sensor", {"name": "dvl", "mode": "sulk", "at_s": 5}, "unknown mode 'sulk'"),
+                ("fault", {"node": 4, "name": "warp", "at_s": 5}, "unknown fault 'warp'"),
+                ("silence", {"node": 4, "seconds": -1, "at_s": 5}, "seconds must be"),
+                ("bus_off", {"seconds": 0, "at_s": 5}, "seconds must be")):
+            bad = proc.call(op, **kw)
+            assert not bad["ok"] and words in bad["error"], (op, kw, bad)
+        st = proc.call("stats")
+        assert st["scheduled"] == 0 and st["thruster_health"][3] == 0.0
     finally:
         proc.stop(timeout_s=5.0)
+        proc.kill()
+
+
+@pytest.mark.parametrize("command, words", [
+    ('{"op": "helth", "node": 4}', "unknown op 'helth'"),
+    ('{"op": "health", "node": 9, "value": 0.5}', "node 9 is not one of [1, 2, 3, 4, 5, 6]"),
+])
+def test_a_bad_at_command_stops_sim_bridge_at_its_start(tmp_path, command, words):
+    """``sim-bridge --at 60 JSON`` with a command it could not carry out: exit at start with
+    the command named (it ran, and logged a warning 60 s later)."""
+    proc = BridgeProcess(write_local_config(tmp_path), duration_s=30.0,
+                         extra=["--at", "60", command])
+    try:
+        with pytest.raises(TransportError, match=re.escape(words)):
+            proc.start(timeout_s=90.0)
+    finally:
         proc.kill()

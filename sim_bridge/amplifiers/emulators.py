@@ -23,6 +23,7 @@ Fault injection (also reachable as control commands, see :meth:`CanEmulators.cal
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import deque
@@ -48,6 +49,61 @@ from uvd.errors import ConfigError
 from uvd.model.thrusters import ThrusterSpec
 
 log = logging.getLogger(__name__)
+
+
+def command_problem(op: str, kw: dict, node_ids: Sequence[int],
+                    pressure_node: int | None) -> str | None:
+    """Why ``op`` with ``kw`` is not a command :meth:`CanEmulators.call` can carry out on
+    amplifiers ``node_ids`` (and the pressure transmitter ``pressure_node``), or None.
+
+    Checked without carrying it out, so that a command scheduled for later (``sim-bridge --at
+    S JSON``) is refused when it is given, not when it comes due; and a value the emulators
+    would take but no amplifier could have (a thruster's health of NaN or 7) is refused too.
+    """
+    amps = tuple(node_ids)
+    nodes = amps + ((pressure_node,) if pressure_node is not None else ())
+
+    def node(among: tuple[int, ...]) -> str | None:
+        n = kw.get("node")
+        if isinstance(n, bool) or not isinstance(n, int) or n not in among:
+            return f"node {n!r} is not one of {list(among)}"
+        return None
+
+    def number(key: str, default=None, ok=lambda x: True, what: str = "a finite number"):
+        x = kw.get(key, default)
+        if x is None and default is None and key not in kw:
+            return f"{key} is missing"
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) \
+                or not ok(x):
+            return f"{key} must be {what}, not {x!r}"
+        return None
+
+    if op in ("ping", "stats", "reset"):
+        return None
+    if op == "fault":
+        name = kw.get("name", "overcurrent")
+        if name not in cia402.FAULT_CODES:
+            return f"unknown fault {name!r}; known: {sorted(cia402.FAULT_CODES)}"
+        return node(amps)
+    if op == "silence":
+        seconds = kw.get("seconds")
+        if seconds is not None:
+            return node(nodes) or number("seconds", ok=lambda x: x >= 0.0,
+                                         what="a finite number of seconds >= 0 (or absent)")
+        return node(nodes)
+    if op == "unsilence":
+        return node(nodes)
+    if op == "health":
+        return node(amps) or number("value", ok=lambda x: 0.0 <= x <= 1.0,
+                                    what="a thruster's gain in [0, 1]")
+    if op == "bus_off":
+        return number("seconds", 0.5, ok=lambda x: x > 0.0, what="a finite number of seconds > 0")
+    if op == "depth":
+        return number("value")
+    if op == "pressure_valid":
+        return None if "value" in kw else "value is missing"
+    return (f"unknown op {op!r}; known: bus_off, depth, fault, health, ping, pressure_valid, "
+            "reset, silence, stats, unsilence")
 
 
 class CanEmulators:
@@ -378,8 +434,12 @@ class CanEmulators:
         ``persistent``), ``silence`` (``node``, ``seconds``), ``unsilence`` (``node``),
         ``health`` (``node``, ``value``), ``bus_off`` (``seconds``), ``depth`` (``value``),
         ``pressure_valid`` (``value``), ``reset``, ``ping``. Returns ``{"ok": true, ...}``, or
-        ``{"ok": false, "error": ...}`` for a bad command (never raises).
+        ``{"ok": false, "error": ...}`` for a bad command (never raises;
+        :func:`command_problem`).
         """
+        why = command_problem(op, kw, self.node_ids, self.pressure_node)
+        if why:
+            return {"ok": False, "error": f"{op}: {why}"}
         try:
             if op == "ping":
                 return {"ok": True, "t_ns": self.clock()}
