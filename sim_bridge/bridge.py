@@ -366,11 +366,15 @@ class SimBridge:
     # -- control --
     def call(self, op: str, **kw) -> dict:
         """One control command; never raises (``{"ok": false, "error": …}``). With ``at_s``
-        it is scheduled that many seconds from now instead (:meth:`run_due`)."""
+        it is scheduled that many seconds from now instead (:meth:`run_due`). Either way it is
+        checked now (:meth:`command_problem`)."""
         try:
             now = self.clock()
-            if "at_s" in kw:
-                raw = kw.pop("at_s")
+            raw = kw.pop("at_s", None)
+            why = self.command_problem(op, kw)
+            if why:
+                raise ValueError(why)
+            if raw is not None:
                 try:
                     at_s = float(raw)
                 except (TypeError, ValueError):
@@ -378,9 +382,6 @@ class SimBridge:
                 if not (math.isfinite(at_s) and at_s >= 0.0):
                     raise ValueError(f"at_s must be a finite number of seconds >= 0, not "
                                      f"{raw!r}")
-                why = self.command_problem(op, kw)  # a bad command is refused now
-                if why:
-                    raise ValueError(why)
                 due = now + int(at_s * 1e9)
                 with self._timed_lock:
                     self._timed.append((due, op, kw))
@@ -435,7 +436,8 @@ class SimBridge:
 
     def command_problem(self, op: str, kw: dict) -> str | None:
         """Why :meth:`call` could not carry out ``op`` with ``kw``, or None — checked without
-        carrying it out (a command scheduled with ``at_s``: ``sim-bridge --at S JSON``)."""
+        carrying it out, so that one scheduled with ``at_s`` (``sim-bridge --at S JSON``) is
+        refused when it is given, not when it comes due."""
         if op == "plant_fault":
             try:
                 PlantFault(**_plant_fault_args(kw))

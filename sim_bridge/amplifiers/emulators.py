@@ -86,11 +86,8 @@ def command_problem(op: str, kw: dict, node_ids: Sequence[int],
             return f"unknown fault {name!r}; known: {sorted(cia402.FAULT_CODES)}"
         return node(amps)
     if op == "silence":
-        seconds = kw.get("seconds")
-        if seconds is not None:
-            return node(nodes) or number("seconds", ok=lambda x: x >= 0.0,
-                                         what="a finite number of seconds >= 0 (or absent)")
-        return node(nodes)
+        return node(nodes) or (None if kw.get("seconds") is None else number(
+            "seconds", ok=lambda x: x >= 0.0, what="a finite number of seconds >= 0 (or absent)"))
     if op == "unsilence":
         return node(nodes)
     if op == "health":
