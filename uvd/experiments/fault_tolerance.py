@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from uvd.errors import ExperimentError
 from uvd.experiments import Experiment, ExperimentOptions
 
 #: (label, configuration file, thruster k (1-based)) of each case: the JHU ROV losing a
@@ -169,8 +170,25 @@ def _err(log, sel) -> np.ndarray:
     return e
 
 
+def run_duration(name: str, opts: ExperimentOptions, default_s: float, t_fault_s: float
+                 ) -> float:
+    """The run's length in s: ``--hours`` or ``default_s``. Raises ExperimentError when it
+    leaves no MAE after the fault: that is taken from ``t_fault_s + SETTLE_S`` to the end, so
+    the run must reach at least one ``SETTLE_S`` beyond that (a shorter ``--hours`` was a
+    numpy ValueError of an empty window)."""
+    duration = default_s if opts.hours is None else opts.hours * 3600.0
+    need = t_fault_s + 2.0 * SETTLE_S
+    if duration < need:
+        raise ExperimentError(f"{name}: --hours {opts.hours:g} is too short: the fault comes at "
+                              f"{t_fault_s:g} s and the MAE after it is taken from "
+                              f"{t_fault_s + SETTLE_S:g} s; give at least "
+                              f"{math.ceil(need / 3600.0 * 1e4) / 1e4:g} h "
+                              f"({need:g} s)")
+    return duration
+
+
 def _run(opts: ExperimentOptions) -> dict[str, Any]:
-    duration = DURATION_S if opts.hours is None else opts.hours * 3600.0
+    duration = run_duration("fault-tolerance", opts, DURATION_S, T_FAULT_S)
     rows: dict[str, Any] = {}
     lines = [f"fault-tolerance: thruster k at η from t = {T_FAULT_S:g} s, RefTraj1, lockstep, "
              f"{duration:g} s; position MAE after (from T + {SETTLE_S:g} s) / fault-free's "

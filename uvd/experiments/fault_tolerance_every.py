@@ -36,7 +36,15 @@ from typing import Any
 import numpy as np
 
 from uvd.experiments import Experiment, ExperimentOptions
-from uvd.experiments.fault_tolerance import DOFS, DURATION_S, SETTLE_S, T_FAULT_S, _fmt, run_arm
+from uvd.experiments.fault_tolerance import (
+    DOFS,
+    DURATION_S,
+    SETTLE_S,
+    T_FAULT_S,
+    _fmt,
+    run_arm,
+    run_duration,
+)
 
 #: (label, configuration file, thrusters, the DOFs the bound applies to, the bound)
 CASES = (("jhu-rov", "sim.toml", 6, ("z", "roll", "pitch", "heading"), 2.0),
@@ -92,7 +100,7 @@ def _told_given_up(text: str | None) -> str:
 
 
 def _run(opts: ExperimentOptions) -> dict[str, Any]:
-    duration = DURATION_S if opts.hours is None else opts.hours * 3600.0
+    duration = run_duration("fault-tolerance-every", opts, DURATION_S, T_FAULT_S)
     out: dict[str, Any] = {}
     lines = [f"fault-tolerance-every: each thruster dead (η 0, told) from t = {T_FAULT_S:g} s, "
              f"RefTraj1, lockstep through the supervised cycle, {duration:g} s; MAE after (from "

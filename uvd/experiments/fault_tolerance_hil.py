@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from uvd.experiments import Experiment, ExperimentOptions
-from uvd.experiments.fault_tolerance import DOFS, SETTLE_S, _config_dir, _fmt
+from uvd.experiments.fault_tolerance import DOFS, SETTLE_S, _config_dir, _fmt, run_duration
 
 CONFIG = "sim-bluerov2.toml"
 THRUSTER = 4
@@ -123,7 +123,7 @@ def _events(telemetry: Path) -> list[dict]:
 
 
 def _run(opts: ExperimentOptions) -> dict[str, Any]:
-    duration = DURATION_S if opts.hours is None else opts.hours * 3600.0
+    duration = run_duration("fault-tolerance-hil", opts, DURATION_S, T_FAULT_S)
     opts.progress(f"fault-tolerance-hil: {CONFIG}, thruster {THRUSTER} dead at "
                   f"{T_FAULT_S:g} s, {duration:g} s, HIL")
     free = run_hil(CONFIG, THRUSTER, fault=False, duration_s=duration, seed=opts.seed,

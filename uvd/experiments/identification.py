@@ -43,6 +43,7 @@ from uvd.control.allocation import Allocator
 from uvd.control.pdc import PDGains, PDState, pdc_step
 from uvd.control.trajectory import CosineTerm, CosineTrajectory
 from uvd.control.types import Reference
+from uvd.errors import ExperimentError
 from uvd.estimation.aid import (
     INITP_6DOF,
     INITP_ROT,
@@ -497,6 +498,18 @@ def _ls_and_cross_validation(model, iddat, cross, aidp, initp, aidp_euler, truep
 # ---------------------------------------------------------------------------------------------
 # run_aid_6dof is long (~160 lines): it is the experiment's report, a sequence of measured
 # figures each computed once and printed once; split, the pieces would pass ~25 values around.
+def _at_least_a_minute(name: str, opts: ExperimentOptions, jobs: list) -> None:
+    """Every simulated run of an identification experiment is a minute at least: its figures
+    over time are 30-s samples from the first to the last, and least squares differentiates
+    over a 21-sample window (``--hours 0.01`` was an IndexError, 0.001 a ValueError)."""
+    shortest = min(job[1]["minutes"] for job in jobs)
+    if shortest < 1.0:
+        raise ExperimentError(f"{name}: --hours {opts.hours:g} is too short: its shortest run "
+                              f"would be {shortest * 60.0:.0f} s; give at least "
+                              f"{math.ceil(opts.hours / shortest * 1e4) / 1e4:g} h (every run "
+                              "a minute)")
+
+
 def run_aid_6dof(opts: ExperimentOptions) -> dict:
     scale = 1.0 if opts.hours is None else opts.hours * 60.0 / 66.7
     progress = opts.progress
@@ -509,6 +522,7 @@ def run_aid_6dof(opts: ExperimentOptions) -> dict:
             # what the DVL costs the velocity estimate from what AID's convergence costs
             (datasets[0], {"kind": "6dof", "seed": opts.seed, "minutes":
                            datasets[0].minutes * scale, "instruments": EXACT_DVL}, "aid6")]
+    _at_least_a_minute("aid-6dof", opts, jobs)
     t0 = time.perf_counter()
     progress(f"aid-6dof: simulating IDDAT ({jobs[0][1]['minutes']:.1f} min, with AID), "
              f"CROSS ({jobs[1][1]['minutes']:.1f} min) and IDDAT with an exact DVL in lockstep")
@@ -680,6 +694,7 @@ def run_aid_rot(opts: ExperimentOptions) -> dict:
              "aid3"),
             (datasets[1], {**kw, "seed": opts.seed + 1, "minutes": datasets[1].minutes * scale},
              None)]
+    _at_least_a_minute("aid-rot", opts, jobs)
     t0 = time.perf_counter()
     progress(f"aid-rot: simulating IDDAT ({jobs[0][1]['minutes']:.1f} min, with AID) and "
              f"CROSS ({jobs[1][1]['minutes']:.1f} min)")
