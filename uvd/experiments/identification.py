@@ -493,11 +493,6 @@ def _ls_and_cross_validation(model, iddat, cross, aidp, initp, aidp_euler, truep
     return ls, lsc, mae, diverged, sims, mae_true, t_ls
 
 
-# ---------------------------------------------------------------------------------------------
-# aid-6dof
-# ---------------------------------------------------------------------------------------------
-# run_aid_6dof is long (~160 lines): it is the experiment's report, a sequence of measured
-# figures each computed once and printed once; split, the pieces would pass ~25 values around.
 def _at_least_a_minute(name: str, opts: ExperimentOptions, jobs: list) -> None:
     """Every simulated run of an identification experiment is a minute at least: its figures
     over time are 30-s samples from the first to the last, and least squares differentiates
@@ -510,6 +505,11 @@ def _at_least_a_minute(name: str, opts: ExperimentOptions, jobs: list) -> None:
                               "a minute)")
 
 
+# ---------------------------------------------------------------------------------------------
+# aid-6dof
+# ---------------------------------------------------------------------------------------------
+# run_aid_6dof is long (~160 lines): it is the experiment's report, a sequence of measured
+# figures each computed once and printed once; split, the pieces would pass ~25 values around.
 def run_aid_6dof(opts: ExperimentOptions) -> dict:
     scale = 1.0 if opts.hours is None else opts.hours * 60.0 / 66.7
     progress = opts.progress
