@@ -149,8 +149,8 @@ def test_a_recorded_eta_the_replay_does_not_reach_is_a_mismatch(recorded, tmp_pa
 def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = None,
              stray_channel: int | None = None) -> None:
     """Copy a recording message by message through MCAP's writer, ``edit``-ing each (None:
-    left out); ``schema_names`` renames channels' schemas, ``stray_channel`` adds a message
-    on a channel id never declared."""
+    left out; bytes: written as they are); ``schema_names`` renames channels' schemas,
+    ``stray_channel`` adds a message on a channel id never declared."""
     from mcap.writer import CompressionType, Writer
     with dst.open("wb") as fh:
         w = Writer(fh, use_chunking=False, compression=CompressionType.NONE)
@@ -164,7 +164,8 @@ def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = N
         for k, (topic, t, msg) in enumerate(read_messages(src)):
             msg = edit(k, topic, msg)
             if msg is not None:
-                w.add_message(ids[topic], t, json.dumps(msg).encode(), t, k)
+                data = msg if isinstance(msg, bytes) else json.dumps(msg).encode()
+                w.add_message(ids[topic], t, data, t, k)
             if k == 100 and stray_channel is not None:
                 w.add_message(stray_channel, t, b"{}", t, k)
         w.finish()
@@ -209,7 +210,7 @@ def test_other_gains_replay_and_compare_tracking(recorded, tmp_path):
     assert rec["thrust_rms_n"] != rpl["thrust_rms_n"]
 
 
-def test_cut_foreign_and_incomplete_files(recorded, tmp_path):
+def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
     path, _, _, cycles = recorded
     data = path.read_bytes()
     # a file cut anywhere (a crash) replays with 0 mismatches: every cycle's samples lie in
@@ -270,6 +271,24 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path):
                                                  "its schema"):
             write_report(bad, tmp_path / "report")
     assert main(["report", str(short_p), "--out", str(tmp_path / "report"), "--quiet"]) == 2
+    # a message that is not JSON (a damaged byte): replay, which needs every input, stops at
+    # it; the report skips and counts it and draws the rest (it refused the whole file)
+    garbled = tmp_path / "garbled.mcap"
+    n_cycle = iter(range(10**6))
+    _rewrite(path, garbled, lambda k, topic, msg: json.dumps(msg).encode()[:-5]
+             if topic == "/uvd/cycle" and next(n_cycle) == 20 else msg)
+    with pytest.raises(RecordingError, match="garbled.mcap: message on /uvd/cycle at [0-9]+ "
+                                             "ns is not JSON"):
+        replay_lockstep(garbled)
+    n_recorded = sum(1 for _ in read_messages(path, ["/uvd/cycle"]))
+    summary = write_report(garbled, tmp_path / "report-garbled")
+    assert (summary["cycles"], summary["unreadable_messages"]) == (n_recorded - 1, 1)
+    assert summary["first_unreadable"].startswith("message on /uvd/cycle at ")
+    capsys.readouterr()
+    assert main(["report", str(garbled), "--out", str(tmp_path / "report-garbled"),
+                 "--quiet"]) == 0
+    assert "uvd report: 1 unreadable message(s) skipped (first: message on /uvd/cycle" in \
+        capsys.readouterr().err
 
 
 def test_sigkill_of_the_daemon_leaves_a_file_report_reads_to_within_a_second(tmp_path):

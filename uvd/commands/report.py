@@ -38,4 +38,7 @@ def _run(args) -> int:
         return 2
     print(f"uvd report: {args.out / 'index.html'} — {summary['cycles']} cycles "
           f"({summary['armed_cycles']} armed), {len(summary['figures'])} figures")
+    if summary.get("unreadable_messages"):
+        print(f"uvd report: {summary['unreadable_messages']} unreadable message(s) skipped "
+              f"(first: {summary['first_unreadable']})", file=sys.stderr)
     return 0

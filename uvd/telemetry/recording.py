@@ -46,19 +46,24 @@ def schema(name: str) -> dict[str, Any]:
     return json.loads(text)
 
 
-def read_messages(path: str | Path, topics: Sequence[str] | None = None
+def read_messages(path: str | Path, topics: Sequence[str] | None = None, *,
+                  unreadable: list[str] | None = None
                   ) -> Iterator[tuple[str, int, dict[str, Any]]]:
     """(topic, log time ns, decoded JSON) of every message of an MCAP file, in file order.
 
     Reads with MCAP's streaming reader, so a file cut by a crash yields every message written
     before the cut (the cut itself ends the iteration quietly).
 
+    ``unreadable``: where a message that is not JSON goes instead of raising — one line naming
+    its topic and time, the message skipped (``uvd report`` counts them and draws the rest).
+    Replay leaves it None: it needs every input, and stops at the first.
+
     Raises
     ------
     RecordingError
         Not an MCAP file, a damaged record, a channel of uvd's topics with another schema or
-        encoding, a message on a channel never declared, or a message that is not JSON (the
-        message names the file and the problem). Channels of other topics are read as they are.
+        encoding, a message on a channel never declared, or a message that is not JSON
+        unless ``unreadable`` takes it (the message names the file and the problem). Channels of other topics are read as they are.
     """
     from mcap.exceptions import EndOfFile, McapError
     from mcap.reader import StreamReader
@@ -106,8 +111,12 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None
                 if want is not None and topic not in want:
                     continue
                 try:
-                    yield topic, rec.log_time, json.loads(rec.data)
+                    msg = json.loads(rec.data)
                 except ValueError as exc:
-                    raise RecordingError(f"{path}: message on {topic} at {rec.log_time} ns is "
-                                         f"not JSON: {exc}") from exc
+                    what = f"message on {topic} at {rec.log_time} ns is not JSON: {exc}"
+                    if unreadable is None:
+                        raise RecordingError(f"{path}: {what}") from exc
+                    unreadable.append(what)
+                    continue
+                yield topic, rec.log_time, msg
 

@@ -43,11 +43,15 @@ def _eta(p, R) -> np.ndarray:
 
 
 def _load(path: Path) -> dict[str, list]:
+    """The report's channels of ``path``; ``out["unreadable"]``: the messages that were not
+    JSON (a damaged byte), skipped and counted — the rest of the run is drawn."""
     out: dict[str, list] = {"cycle": [], "estimate": [], "failsafe": [], "lifecycle": [],
                             "start": []}
     topics = {f"/uvd/{k}": k for k in out}
-    for topic, _, msg in read_messages(path, list(topics)):
+    unreadable: list[str] = []
+    for topic, _, msg in read_messages(path, list(topics), unreadable=unreadable):
         out[topics[topic]].append(msg)
+    out["unreadable"] = unreadable
     if not out["cycle"]:
         raise RecordingError(f"{path}: no cycle records (/uvd/cycle): nothing to report")
     return out
@@ -143,6 +147,12 @@ def _draw(plt, path: Path, out: Path, data: dict[str, list], params, say) -> dic
                "duration_s": float(t[-1]) if len(t) else 0.0,
                "failsafe_fired": sum(1 for e in data["failsafe"] if e.get("kind") == "fired"),
                "estimates": len(est), "figures": [f for f, _ in figures]}
+    if data["unreadable"]:
+        n = len(data["unreadable"])
+        summary["unreadable_messages"] = n
+        summary["first_unreadable"] = data["unreadable"][0]
+        say(f"{n} message{'s' if n > 1 else ''} not JSON, skipped: {data['unreadable'][0]}"
+            + (" …" if n > 1 else ""))
     if xval is not None:
         summary["xval"] = xval
     _write_html(out / "index.html", summary, figures)
