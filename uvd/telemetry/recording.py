@@ -63,7 +63,8 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None, *,
     RecordingError
         Not an MCAP file, a damaged record, a channel of uvd's topics with another schema or
         encoding, a message on a channel never declared, or a message that is not JSON
-        unless ``unreadable`` takes it (the message names the file and the problem). Channels of other topics are read as they are.
+        unless ``unreadable`` takes it (the message names the file and the problem). Channels
+        of other topics are read as they are.
     """
     from mcap.exceptions import EndOfFile, McapError
     from mcap.reader import StreamReader
