@@ -71,7 +71,9 @@ def test_plant_and_thruster_faults_at_chosen_times(tmp_path):
 
 
 @pytest.mark.parametrize("command, words", [
-    ('{"op": "helth", "node": 4}', "unknown op 'helth'"),
+    # quote-free words: the error reaches the test inside a dict's repr (its quotes escaped),
+    # and sim-bridge's stderr copy of it may not be read yet (seen under load)
+    ('{"op": "helth", "node": 4}', "helth: unknown op"),
     ('{"op": "health", "node": 9, "value": 0.5}', "node 9 is not one of [1, 2, 3, 4, 5, 6]"),
 ])
 def test_a_bad_at_command_stops_sim_bridge_at_its_start(tmp_path, command, words):
