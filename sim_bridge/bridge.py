@@ -445,11 +445,10 @@ class SimBridge:
                 return str(exc)
             return None
         if op == "sensor":
-            name, mode, seconds = kw.get("name"), kw.get("mode", "ok"), kw.get("seconds")
-            if name not in self.faults.mode:
-                return f"unknown instrument {name!r}; have {sorted(self.faults.mode)}"
-            if mode not in SENSOR_MODES:
-                return f"unknown mode {mode!r}; known: {', '.join(SENSOR_MODES)}"
+            seconds = kw.get("seconds")
+            why = self.faults.problem(kw.get("name"), kw.get("mode", "ok"))
+            if why:
+                return why
             if seconds is not None and (isinstance(seconds, bool)
                                         or not isinstance(seconds, (int, float))
                                         or not (math.isfinite(seconds) and seconds >= 0.0)):

@@ -36,11 +36,18 @@ class SensorFaults:
         self.since: dict[str, int] = {"ins": 0, "dvl": 0, "depth": 0}
         self.stuck_value: dict[str, Any] = {}
 
-    def set(self, name: str, mode: str, seconds: float | None = None) -> int:
+    def problem(self, name: str, mode: str) -> str | None:
+        """Why instrument ``name`` cannot be put in ``mode``, or None."""
         if name not in self.mode:
-            raise KeyError(f"unknown instrument {name!r}; have {sorted(self.mode)}")
+            return f"unknown instrument {name!r}; have {sorted(self.mode)}"
         if mode not in SENSOR_MODES:
-            raise ValueError(f"unknown mode {mode!r}; known: {', '.join(SENSOR_MODES)}")
+            return f"unknown mode {mode!r}; known: {', '.join(SENSOR_MODES)}"
+        return None
+
+    def set(self, name: str, mode: str, seconds: float | None = None) -> int:
+        why = self.problem(name, mode)
+        if why:
+            raise ValueError(why)
         now = self.clock()
         self.stuck_value.pop(name, None)
         self.until[name] = now + int(seconds * 1e9) if seconds else 0
