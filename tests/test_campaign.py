@@ -192,6 +192,29 @@ def test_rows_are_bit_identical_whatever_the_worker_count_or_order(tmp_path):
 
 @DASK[0]
 @DASK[1]
+def test_uvd_bench_campaign_reports_throughput_per_worker_count_and_compares_the_rows():
+    import argparse
+
+    from uvd.bench import get, run
+
+    b = get("campaign")
+    parser = argparse.ArgumentParser()
+    b.add_arguments(parser)
+    fig = run(b, parser.parse_args(["--runs", "2", "--minutes", "0.3", "--workers", "2", "1"]))
+    assert (fig["runs"], fig["simulated_minutes_per_run"]) == (2, 0.3)
+    for n in ("1", "2"):
+        w = fig["by_workers"][n]
+        assert (w["workers"], w["failed"]) == (int(n), 0)
+        assert w["runs_per_hour"] == 3600.0 * 2 / w["wall_s"]
+        assert 0.0 < w["run_wall_s_median"] < w["wall_s"]
+    # the first count named is the base: 1 worker's throughput over 2 workers'
+    assert fig["throughput_1_over_2"] == \
+        fig["by_workers"]["1"]["runs_per_hour"] / fig["by_workers"]["2"]["runs_per_hour"]
+    assert fig["rows_bit_identical"] is True
+
+
+@DASK[0]
+@DASK[1]
 def test_a_campaign_killed_mid_run_resumes_without_redoing_a_finished_run(tmp_path):
     spec_file = tmp_path / "c.toml"
     spec_file.write_text('[campaign]\nname = "kill"\nkind = "control"\n[axes]\n'

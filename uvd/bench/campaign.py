@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import tempfile
 from pathlib import Path
 
@@ -43,7 +44,9 @@ def run(args: argparse.Namespace) -> dict:
     from uvd.campaign.store import RUN_ENVIRONMENT, RowStore
 
     spec = _spec(args)
-    out: dict = {"campaign": spec.name, "runs": len(spec.runs), "by_workers": {}}
+    out: dict = {"campaign": spec.name, "runs": len(spec.runs),
+                 "simulated_minutes_per_run": None if args.spec else args.minutes,
+                 "by_workers": {}}
     rows = {}
     with tempfile.TemporaryDirectory(prefix="uvd-bench-campaign-") as tmp:
         for n in args.workers:
@@ -53,9 +56,13 @@ def run(args: argparse.Namespace) -> dict:
                 "workers": res.workers, "wall_s": res.wall_s, "failed": res.failed,
                 "runs_per_hour": 3600.0 * res.ran / res.wall_s,
                 "load_average_before": load0, "load_average_after": os.getloadavg()[0]}
+            stored = list(RowStore(Path(tmp) / f"w{n}").rows())
+            # the runs' own wall times: what the cluster's start-up and close are set against
+            out["by_workers"][str(n)]["run_wall_s_median"] = \
+                statistics.median(r["wall_s"] for r in stored) if stored else None
             rows[n] = {r["key"]: {k: v for k, v in r.items()
                                   if k not in RUN_ENVIRONMENT + ("index",)}
-                       for r in RowStore(Path(tmp) / f"w{n}").rows()}
+                       for r in stored}
     base = out["by_workers"][str(args.workers[0])]["runs_per_hour"]
     for n in args.workers[1:]:
         out[f"throughput_{n}_over_{args.workers[0]}"] = \
