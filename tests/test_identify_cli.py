@@ -180,3 +180,24 @@ def test_identify_says_what_the_data_do_not_determine(run_file, tmp_path, capsys
     assert bound, info["active_bounds"]  # 0.5 min for 241 parameters: some rest on a bound
     assert f"WARNING: the fit rests on its consistency bound for {', '.join(bound)}" in text
     assert "not identified by this run (0.5 min;" in text
+
+
+def test_xval_warns_of_a_mass_matrix_no_vehicle_has_and_still_simulates_it(run_file, tmp_path,
+                                                                           capsys):
+    from uvd.io.params import save_params
+    from uvd.model.params import UVParams
+
+    good = UVParams.decoupled([50.0] * 6, [-20.0] * 6, 0.0, [0.0, 0.0, 5.0])
+    bad = UVParams.decoupled([50.0, 50.0, 50.0, -5.0, 50.0, 50.0], [-20.0] * 6, 0.0,
+                             [0.0, 0.0, 5.0])
+    for name, p in (("good", good), ("bad", bad)):
+        save_params(p, tmp_path / f"{name}.toml")
+        assert main(["xval", "--params", str(tmp_path / f"{name}.toml"), "--log",
+                     str(run_file)]) == 0
+        out, err = capsys.readouterr()
+        assert "MAE of" in out
+        if name == "good":
+            assert "warning" not in err
+        else:
+            assert f"warning: {tmp_path / 'bad.toml'}: M is not positive definite (smallest " \
+                   "eigenvalue -5)" in err

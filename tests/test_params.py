@@ -133,6 +133,43 @@ def test_toml_errors_name_the_key(tmp_path):
         params_from_toml(f)
 
 
+_DECOUPLED = "m = [1,1,1,1,1,1]\nd = [-1,-1,-1,-1,-1,-1]\ng = 0\nb = [0,0,1]\n"
+
+
+@pytest.mark.parametrize("replace, words", [
+    (("b = [0,0,1]", "b = [true,0,1]"), "b must be 3 numbers; it holds True"),
+    (("g = 0", 'g = "x"'), "g must be a number; it holds 'x'"),
+    (("g = 0", "g = nan"), "g has a non-finite entry"),
+    (("g = 0", "g = [1, 2]"), r"g must be a number; got shape \(2,\)"),
+    (("m = [1,1,1,1,1,1]", "m = [1,1,1,1,1]"), r"m must be 6 numbers; got shape \(5,\)"),
+    (("d = [-1,-1,-1,-1,-1,-1]", "d = [-1,-1,-1,-1,-1,{a = 1}]"),
+     "d must be 6 numbers; it holds {'a': 1}"),
+])
+def test_toml_entries_that_are_not_finite_numbers_of_the_shape_are_named(tmp_path, replace,
+                                                                          words):
+    f = tmp_path / "bad.toml"
+    f.write_text("[parameters]\n" + _DECOUPLED.replace(*replace))
+    with pytest.raises(ParameterError, match=f"{f}: \\[parameters\\]: {words}"):
+        params_from_toml(f)
+
+
+def test_a_full_form_m_that_is_ragged_or_not_symmetric_is_named(tmp_path):
+    p = P.UVParams.decoupled([2] * 6, [-1] * 6, 0.0, [0, 0, 1])
+    f = tmp_path / "p.toml"
+    save_params(p, f)
+    good = f.read_text()
+    f.write_text(good.replace("  [0.0, 2.0, 0.0, 0.0, 0.0, 0.0],", "  [0.0, 2.0],", 1))
+    with pytest.raises(ParameterError, match="M must be a 6 × 6 matrix of numbers; its rows "
+                                             "differ in length"):
+        params_from_toml(f)
+    f.write_text(good.replace("  [0.0, 2.0, 0.0, 0.0, 0.0, 0.0],",
+                              "  [0.5, 2.0, 0.0, 0.0, 0.0, 0.0],", 1))
+    with pytest.raises(ParameterError, match=r"M is not symmetric \(max \|M - Mᵀ\| = 0.5\)"):
+        params_from_toml(f)
+    f.write_text(good)  # the file as written reads back
+    np.testing.assert_array_equal(params_from_toml(f).theta, p.theta)
+
+
 def test_toml_file_errors_and_atomic_save(tmp_path):
     with pytest.raises(ParameterError, match="cannot read parameters"):
         params_from_toml(tmp_path / "none.toml")

@@ -308,6 +308,20 @@ def _fields_instead(signal: dict, fields) -> None:
      r"\[signals.thrusters\]: topic must be a string"),
     (lambda d: d.update(format=["ros1"]), r"format \['ros1'\] is not one of"),
     (lambda d: d.update(vehicle=7), r"vehicle must be a vehicle's name or file, got 7"),
+    # found by fuzzing (session 19): each was taken as a number or a name without a word
+    (lambda d: d.update(rate_hz=True), r"rate_hz must be a finite number, got True"),
+    (lambda d: d.update(rate_hz="50"), r"rate_hz must be a finite number, got '50'"),
+    (lambda d: d.update(rate_hz=20000), r"rate_hz must be in \(0, 10000\], got 20000"),
+    (lambda d: d.update(max_gap_s=float("inf")), r"max_gap_s must be a finite number, got inf"),
+    (lambda d: d.update(max_gap_s=0), r"max_gap_s must be > 0, got 0"),
+    (lambda d: d["signals"]["depth"].update(density_kg_m3=-1000.0),
+     r"\[signals.depth\]: density_kg_m3 must be > 0, got -1000.0"),
+    (lambda d: d["signals"]["depth"].update(gravity_m_s2=0.0),
+     r"\[signals.depth\]: gravity_m_s2 must be > 0, got 0.0"),
+    (lambda d: d["signals"]["attitude"].update(index=[True, 1, 2]),
+     r"\[signals.attitude\]: index must be a list of integers >= 0"),
+    (lambda d: d.update(name=5), r"name must be a string, got 5"),
+    (lambda d: d.update(time=5), r"time must be a string, got 5"),
 ])
 def test_profile_errors_named(edit, match):
     doc = _profile_doc("bluerov-exjobb-april")

@@ -36,6 +36,20 @@ def register(sub) -> None:
     p.set_defaults(handler=_run)
 
 
+def _warn_if_not_physical(path, inertia, what: str) -> None:
+    """A warning on stderr when ``inertia`` (M, or the rotational I of M for --profile) is not
+    positive definite: the model is simulated as given, but it is not a physical one."""
+    import sys
+
+    import numpy as np
+
+    lam = float(np.linalg.eigvalsh(0.5 * (inertia + inertia.T))[0])
+    if not lam > 0.0:
+        print(f"warning: {path}: {what} is not positive definite (smallest eigenvalue "
+              f"{lam:.4g}): no physical vehicle has it, and its MAE below says little",
+              file=sys.stderr)
+
+
 def _run(args) -> int:
     from uvd.errors import ConfigError
     from uvd.estimation.xval import STATES_6DOF, cross_validate, format_mae_table
@@ -52,6 +66,7 @@ def _run(args) -> int:
         raise ConfigError("--log: several recordings need --profile")
     args.log = args.log[0]
     params = params_from_toml(args.params)
+    _warn_if_not_physical(args.params, params.M, "M")
     run = load_runlog(args.log)
     if run.stretch_note():
         print(f"{args.log}: {run.stretch_note()}")
@@ -94,7 +109,9 @@ def _run_logs(args) -> int:
     if vname is None:
         raise ConfigError(f"--vehicle: profile {profile.name!r} names no vehicle")
     vehicle = load_vehicle(vname)
-    rot = rot_of(params_from_toml(args.params))
+    params = params_from_toml(args.params)
+    _warn_if_not_physical(args.params, params.M[3:, 3:], "the rotational inertia I (M[3:, 3:])")
+    rot = rot_of(params)
     d_lin = linear_damping_from_toml(args.params)
     runs, reports = load_log_runs(args.log, profile, vehicle, quiet=True)
     name = args.params.stem

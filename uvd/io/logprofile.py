@@ -128,6 +128,24 @@ def _number(t: dict, key: str, default: float, where: str) -> float:
     return float(x)
 
 
+def _positive(t: dict, key: str, default: float, where: str, *, most: float = math.inf
+              ) -> float:
+    """:func:`_number`, and > 0 (and ≤ ``most``); else a ConfigError naming the key."""
+    x = _number(t, key, default, where)
+    if not 0.0 < x <= most:
+        bound = "> 0" if most == math.inf else f"in (0, {most:g}]"
+        raise ConfigError(f"{where}: {key} must be {bound}, got {x!r}")
+    return x
+
+
+def _text(t: dict, key: str, default: str, where: str) -> str:
+    """``t[key]`` (or ``default``), which must be a string; else a ConfigError naming it."""
+    x = t.get(key, default)
+    if not isinstance(x, str):
+        raise ConfigError(f"{where}: {key} must be a string, got {x!r}")
+    return x
+
+
 def _signal(name: str, t: dict, where: str) -> SignalSpec:
     if not isinstance(t, dict):
         raise ConfigError(f"{where}: must be a table")
@@ -154,8 +172,8 @@ def _signal(name: str, t: dict, where: str) -> SignalSpec:
     fields = tuple(t["fields"]) if "fields" in t else None
     index = None
     if "index" in t:
-        if not (isinstance(t["index"], list) and all(isinstance(i, int) and i >= 0
-                                                      for i in t["index"])):
+        if not (isinstance(t["index"], list) and all(
+                isinstance(i, int) and not isinstance(i, bool) and i >= 0 for i in t["index"])):
             raise ConfigError(f"{where}: index must be a list of integers >= 0")
         index = tuple(t["index"])
     spec = SignalSpec(name=name, topic=t["topic"], field=t.get("field"), index=index,
@@ -163,8 +181,8 @@ def _signal(name: str, t: dict, where: str) -> SignalSpec:
                       scale=_number(t, "scale", 1.0, where),
                       offset=_number(t, "offset", 0.0, where),
                       reference_pa=_number(t, "reference_pa", 0.0, where),
-                      density_kg_m3=_number(t, "density_kg_m3", 1000.0, where),
-                      gravity_m_s2=_number(t, "gravity_m_s2", 9.81, where),
+                      density_kg_m3=_positive(t, "density_kg_m3", 1000.0, where),
+                      gravity_m_s2=_positive(t, "gravity_m_s2", 9.81, where),
                       match=_match(t.get("match", {}), where))
     want = {"angular_rate": 3, "attitude": 3, "depth": 1, "linear_velocity": 3}.get(name)
     if want is not None and spec.width != want:
@@ -189,26 +207,21 @@ def profile_from_mapping(doc: dict, *, where: str) -> LogProfile:
     if missing:
         raise ConfigError(f"{where}: [signals]: identification needs {missing}")
     signals = {k: _signal(k, v, f"{where}: [signals.{k}]") for k, v in sig.items()}
-    time = str(doc.get("time", "receive"))
+    time = _text(doc, "time", "receive", where)
     if time != "receive" and not time.startswith("field:"):
         raise ConfigError(f"{where}: time must be 'receive' or 'field:<name>', got {time!r}")
-    time_unit = str(doc.get("time_unit", "s"))
+    time_unit = _text(doc, "time_unit", "s", where)
     if time_unit not in ("s", "ms", "us", "ns"):
         raise ConfigError(f"{where}: time_unit must be s, ms, us or ns, got {time_unit!r}")
-    resample = str(doc.get("resample", "hold"))
+    resample = _text(doc, "resample", "hold", where)
     if resample not in ("hold", "interpolate"):
         raise ConfigError(f"{where}: resample must be 'hold' or 'interpolate', got "
                           f"{resample!r}")
-    span = str(doc.get("span", "all"))
+    span = _text(doc, "span", "all", where)
     if span not in ("all", "thrusters"):
         raise ConfigError(f"{where}: span must be 'all' or 'thrusters', got {span!r}")
-    try:
-        rate = float(doc.get("rate_hz", 50.0))
-        gap = float(doc.get("max_gap_s", 0.5))
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: rate_hz / max_gap_s: {exc}") from exc
-    if not (0 < rate <= 10000) or not gap > 0:
-        raise ConfigError(f"{where}: rate_hz must be in (0, 10000] and max_gap_s > 0")
+    rate = _positive(doc, "rate_hz", 50.0, where, most=10000.0)
+    gap = _positive(doc, "max_gap_s", 0.5, where)
     fmt = doc.get("format")
     if fmt is not None:
         from uvd.io.logs import FORMATS
@@ -217,7 +230,8 @@ def profile_from_mapping(doc: dict, *, where: str) -> LogProfile:
     vehicle = doc.get("vehicle")
     if vehicle is not None and not isinstance(vehicle, str):
         raise ConfigError(f"{where}: vehicle must be a vehicle's name or file, got {vehicle!r}")
-    return LogProfile(name=str(doc.get("name", "")), description=str(doc.get("description", "")),
+    return LogProfile(name=_text(doc, "name", "", where),
+                      description=_text(doc, "description", "", where),
                       format=fmt, time=time, time_unit=time_unit, rate_hz=rate,
                       resample=resample, max_gap_s=gap, span=span, vehicle=vehicle,
                       signals=signals, source=where)

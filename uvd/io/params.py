@@ -39,35 +39,68 @@ def params_to_toml(p: UVParams, *, title: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
+def _numbers(table: dict, key: str, shape: tuple[int, ...], where: str) -> np.ndarray:
+    """``table[key]`` as a float array of ``shape`` (``()``: one number), every entry an int or
+    a float (a boolean or a text is not a number) and finite; else a ParameterError naming the
+    key."""
+    what = ("a number" if shape == () else f"{shape[0]} numbers" if len(shape) == 1
+            else f"a {shape[0]} × {shape[1]} matrix of numbers")
+    value = table[key]
+    stack, bad = [value], None
+    while stack and bad is None:
+        v = stack.pop()
+        if isinstance(v, list):
+            stack.extend(v)
+        elif isinstance(v, bool) or not isinstance(v, (int, float)):
+            bad = v
+    if bad is not None:
+        raise ParameterError(f"{where}: {key} must be {what}; it holds {bad!r}")
+    try:
+        arr = np.array(value, dtype=float)
+    except ValueError:  # ragged rows
+        raise ParameterError(f"{where}: {key} must be {what}; its rows differ in length") \
+            from None
+    if arr.shape != shape:
+        raise ParameterError(f"{where}: {key} must be {what}; got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{where}: {key} has a non-finite entry")
+    return arr
+
+
 def params_from_mapping(table: dict, *, where: str = "parameters") -> UVParams:
     """Build parameters from a TOML table in either the full form (M, D1…D6, g, b) or the
-    decoupled form (m, d, g, b) of §5.3.1. Unknown keys are an error."""
+    decoupled form (m, d, g, b) of §5.3.1. Unknown or missing keys, an entry that is not a
+    finite number, a wrong shape and an M that is not symmetric (the mass matrix of (2.40)
+    is) are errors naming the key."""
     full = {"M", "D1", "D2", "D3", "D4", "D5", "D6", "g", "b"}
     dec = {"m", "d", "g", "b"}
     keys = set(table)
-    try:
-        if "M" in keys:
-            unknown = keys - full
-            if unknown:
-                raise ParameterError(f"{where}: unknown key(s) {sorted(unknown)}")
-            missing = full - keys
-            if missing:
-                raise ParameterError(f"{where}: missing key(s) {sorted(missing)}")
-            D = np.stack([np.asarray(table[f"D{i}"], dtype=float) for i in range(1, 7)])
-            return UVParams(M=np.asarray(table["M"], dtype=float), D=D, g=table["g"],
-                            b=table["b"])
-        unknown = keys - dec
+    if "M" in keys:
+        unknown = keys - full
         if unknown:
             raise ParameterError(f"{where}: unknown key(s) {sorted(unknown)}")
-        missing = dec - keys
+        missing = full - keys
         if missing:
-            raise ParameterError(f"{where}: missing key(s) {sorted(missing)} "
-                                 "(give M, D1..D6, g, b or m, d, g, b)")
-        return UVParams.decoupled(table["m"], table["d"], table["g"], table["b"])
-    except (TypeError, ValueError) as exc:
-        if isinstance(exc, ParameterError):
-            raise
-        raise ParameterError(f"{where}: {exc}") from exc
+            raise ParameterError(f"{where}: missing key(s) {sorted(missing)}")
+        M = _numbers(table, "M", (6, 6), where)
+        D = np.stack([_numbers(table, f"D{i}", (6, 6), where) for i in range(1, 7)])
+        _numbers(table, "g", (), where)
+        b = _numbers(table, "b", (3,), where)
+        asym = float(np.max(np.abs(M - M.T)))
+        if asym > 1e-9 * max(1.0, float(np.max(np.abs(M)))):
+            raise ParameterError(f"{where}: M is not symmetric (max |M - Mᵀ| = {asym:.3g}); "
+                                 "the mass matrix of (2.40) is")
+        return UVParams(M=M, D=D, g=table["g"], b=b)
+    unknown = keys - dec
+    if unknown:
+        raise ParameterError(f"{where}: unknown key(s) {sorted(unknown)}")
+    missing = dec - keys
+    if missing:
+        raise ParameterError(f"{where}: missing key(s) {sorted(missing)} "
+                             "(give M, D1..D6, g, b or m, d, g, b)")
+    m, d = _numbers(table, "m", (6,), where), _numbers(table, "d", (6,), where)
+    _numbers(table, "g", (), where)
+    return UVParams.decoupled(m, d, table["g"], _numbers(table, "b", (3,), where))
 
 
 def params_from_toml(path: str | Path) -> UVParams:
