@@ -201,3 +201,31 @@ def test_xval_warns_of_a_mass_matrix_no_vehicle_has_and_still_simulates_it(run_f
         else:
             assert f"warning: {tmp_path / 'bad.toml'}: M is not positive definite (smallest " \
                    "eigenvalue -5)" in err
+
+
+def _arrays(n: int = 20) -> dict:
+    return {"t": np.arange(n) * 0.1, "R": np.tile(np.eye(3), (n, 1, 1)), "p": np.zeros((n, 3)),
+            "v": np.zeros((n, 6)), "u": np.zeros((n, 6))}
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"meta": np.array(json.dumps([1, 2]))}, r"meta must be a JSON object, got \[1, 2\]"),
+    ({"meta": np.array(json.dumps({"name": 5}))}, "name must be a string, got 5"),
+    ({"t": np.array(["a"] * 20)}, "t must hold numbers, got an array of <U1"),
+    ({"u": np.zeros((20, 6), dtype=bool)}, "u must hold numbers, got an array of bool"),
+    ({"t": np.zeros((20, 2))}, r"t must hold one time stamp a sample \(1-D\), got shape"),
+    ({"t": np.where(np.arange(20) == 3, np.nan, np.arange(20) * 0.1)},
+     "t has non-finite entries"),
+    ({"R_true": np.zeros((3, 3))}, r"R_true has shape \(3, 3\), expected \(20, 3, 3\)"),
+    ({"v_true": np.full((20, 6), np.nan)}, "v_true has non-finite entries"),
+])
+def test_a_malformed_run_log_is_named_not_a_traceback(tmp_path, change, words):
+    # found by fuzzing (session 19): the first four were tracebacks, the last two accepted
+    from uvd.errors import ConfigError
+
+    f = tmp_path / "run.npz"
+    np.savez(f, **{**_arrays(), **change})
+    with pytest.raises(ConfigError, match=words):
+        load_runlog(f)
+    np.savez(f, **_arrays())
+    assert len(load_runlog(f)) == 20

@@ -56,17 +56,30 @@ class RunLog:
     extra: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        t = np.asarray(self.t, dtype=float).reshape(-1)
+        for key in ("name", "source"):
+            if not isinstance(getattr(self, key), str):
+                raise ConfigError(f"run {self.name!r}: {key} must be a string, got "
+                                  f"{getattr(self, key)!r}")
+        t = self._numbers("t", self.t)
+        if t.ndim != 1:
+            raise ConfigError(f"run {self.name!r}: t must hold one time stamp a sample (1-D), "
+                              f"got shape {t.shape}")
+        if not np.all(np.isfinite(t)):
+            raise ConfigError(f"run {self.name!r}: t has non-finite entries")
         n = t.shape[0]
-        shapes = {"R": (n, 3, 3), "p": (n, 3), "v": (n, 6), "u": (n, 6)}
+        shapes = {"R": (n, 3, 3), "p": (n, 3), "v": (n, 6), "u": (n, 6),
+                  "R_true": (n, 3, 3), "v_true": (n, 6)}
         for key, shape in shapes.items():
-            arr = np.asarray(getattr(self, key), dtype=float)
+            if getattr(self, key) is None:  # R_true, v_true: only a simulated run has them
+                continue
+            arr = self._numbers(key, getattr(self, key))
             if arr.shape != shape:
                 raise ConfigError(f"run {self.name!r}: {key} has shape {arr.shape}, "
                                   f"expected {shape}")
             if not np.all(np.isfinite(arr)):
                 raise ConfigError(f"run {self.name!r}: {key} has non-finite entries")
-            object.__setattr__(self, key, arr)
+            if key not in ("R_true", "v_true"):  # the truth is kept as given
+                object.__setattr__(self, key, arr)
         object.__setattr__(self, "t", t)
         if n < 2:
             raise ConfigError(f"run {self.name!r}: needs at least 2 samples, got {n}")
@@ -79,6 +92,14 @@ class RunLog:
         if self.input_interp not in _INTERP:
             raise ConfigError(f"run {self.name!r}: input_interp must be one of {_INTERP}, "
                               f"got {self.input_interp!r}")
+
+    def _numbers(self, key: str, value) -> np.ndarray:
+        """``value`` as a float array; an array of booleans, texts or objects is refused."""
+        arr = np.asarray(value)
+        if arr.dtype.kind not in "iuf":
+            raise ConfigError(f"run {self.name!r}: {key} must hold numbers, got an array of "
+                              f"{arr.dtype}")
+        return np.asarray(arr, dtype=float)
 
     @property
     def dt(self) -> float:

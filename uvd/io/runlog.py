@@ -61,6 +61,8 @@ def load_runlog(path: str | Path) -> RunLog:
             meta = json.loads(str(data["meta"]))
         except json.JSONDecodeError as exc:
             raise ConfigError(f"{path}: meta is not JSON: {exc}") from exc
+        if not isinstance(meta, dict):
+            raise ConfigError(f"{path}: meta must be a JSON object, got {meta!r:.80}")
     extra = {k: v for k, v in meta.items() if k not in _META_KEYS}
     return RunLog(t=data["t"], R=data["R"], p=data["p"], v=data["v"], u=data["u"],
                   name=meta.get("name", path.stem),
