@@ -193,9 +193,15 @@ class DepthConverter:
         if self.water not in ("fresh", "sea"):
             raise ValueError(f"DepthConverter.water must be 'fresh' or 'sea', got "
                              f"{self.water!r}")
-        if not (self.rho_kg_m3 > 0 and self.g_m_s2 > 0 and -90 <= self.latitude_deg <= 90):
+        if not (self.rho_kg_m3 > 0 and self.g_m_s2 > 0 and -90 <= self.latitude_deg <= 90
+                and math.isfinite(self.rho_kg_m3) and math.isfinite(self.g_m_s2)):
             raise ValueError("DepthConverter: density and gravity must be positive and "
                              "latitude within ±90°")
+        if not (math.isfinite(self.atmosphere_pa) and self.atmosphere_pa >= 0.0):
+            raise ValueError("DepthConverter.atmosphere_pa must be a finite pressure >= 0 Pa "
+                             f"(0 for a gauge sensor), got {self.atmosphere_pa!r}")
+        if not math.isfinite(self.offset_m):
+            raise ValueError(f"DepthConverter.offset_m must be finite, got {self.offset_m!r}")
 
     def pressure_pa(self, value: float) -> float:
         """A reading in the sensor's unit → Pa."""

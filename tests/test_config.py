@@ -176,6 +176,9 @@ def test_driver_sections_plug_in_and_their_errors_name_keys(tmp_path):
     # the Digiquartz driver's DepthConverter is a plain dataclass section
     _, errs = errors_of(tmp_path, MINIMAL + "[sensors.depth.conversion]\nwater = \"brine\"\n")
     assert "fresh" in errs["sensors.depth.conversion"]
+    # a negative tare: every depth off by it (session 19; nan and inf the schema refuses)
+    _, errs = errors_of(tmp_path, MINIMAL + "[sensors.depth.conversion]\natmosphere_pa = -5.0\n")
+    assert "atmosphere_pa must be a finite pressure >= 0 Pa" in errs["sensors.depth.conversion"]
 
 
 def test_vehicle_file_relative_to_the_config(tmp_path):

@@ -81,6 +81,11 @@ def test_decode_digiquartz_text_and_units(tmp_path, capsys):
     assert summary["bytes_dropped"] == len(b"garbage") and summary["resyncs"] == 1
     rc = main(["decode", "--format", "digiquartz", str(f), "--unit", "9"])
     assert rc == 2 and "unit" in capsys.readouterr().err
+    # a negative tare shifted every depth by it, a non-finite one made every depth None
+    for tare in ("-5", "nan", "inf"):
+        rc = main(["decode", "--format", "digiquartz", str(f), "--atmosphere-pa", tare])
+        assert rc == 2
+        assert "atmosphere_pa must be a finite pressure >= 0 Pa" in capsys.readouterr().err
 
 
 def test_decode_missing_file_and_no_frames(tmp_path, capsys):
