@@ -147,12 +147,9 @@ def _draw(plt, path: Path, out: Path, data: dict[str, list], params, say) -> dic
                "duration_s": float(t[-1]) if len(t) else 0.0,
                "failsafe_fired": sum(1 for e in data["failsafe"] if e.get("kind") == "fired"),
                "estimates": len(est), "figures": [f for f, _ in figures]}
-    if data["unreadable"]:
-        n = len(data["unreadable"])
-        summary["unreadable_messages"] = n
+    if data["unreadable"]:  # uvd report says so on stderr, --quiet or not
+        summary["unreadable_messages"] = len(data["unreadable"])
         summary["first_unreadable"] = data["unreadable"][0]
-        say(f"{n} message{'s' if n > 1 else ''} not JSON, skipped: {data['unreadable'][0]}"
-            + (" …" if n > 1 else ""))
     if xval is not None:
         summary["xval"] = xval
     _write_html(out / "index.html", summary, figures)
