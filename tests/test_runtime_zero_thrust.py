@@ -8,6 +8,7 @@ from collections import Counter
 from pathlib import Path
 
 import can
+import pytest
 
 from uvd.cli import main
 from uvd.commands.zero_thrust import zero_amplifiers
@@ -75,3 +76,20 @@ def test_command_line(tmp_path, capsys):
     nobus.write_text(SENSORS + '[can]\ninterface = "socketcan"\nchannel = "uvdnosuch0"\n')
     assert main(["zero-thrust", "--config", str(nobus)]) == 2
     assert "uvdnosuch0" in capsys.readouterr().err
+
+
+def test_options_out_of_range_are_refused_before_anything_is_sent(tmp_path, capsys):
+    """--cycles 0 and -1 used to run one cycle, --period nan and -1 none, and --period 1e308
+    ended in an OverflowError traceback after the first frames (a sleep of that long)."""
+    path = config(tmp_path, "zt-3")
+    rx = can.Bus(interface="virtual", channel="zt-3")
+    try:
+        for option, bad in (("--cycles", "0"), ("--cycles", "-1"), ("--cycles", "101"),
+                            ("--period", "nan"), ("--period", "-1"), ("--period", "1e308")):
+            with pytest.raises(SystemExit) as exit_:
+                main(["zero-thrust", "--config", str(path), option, bad])
+            assert exit_.value.code == 2
+            assert f"argument {option}: '{bad}' is not" in capsys.readouterr().err
+        assert received(rx) == []
+    finally:
+        rx.shutdown()

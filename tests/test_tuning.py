@@ -173,7 +173,13 @@ def test_bluerov2_config_gains_are_the_rule_and_uvd_tune_prints_them(capsys, tmp
     assert "ω [5, 5, 5, 5, 5, 5] rad/s" in out      # fresh frames: the rule allows more
     assert out_json.is_file()
     assert main(["tune", "--damping", "0.7", "0.7"]) == 2
-    assert "one positive value or six" in capsys.readouterr().err
+    assert "--damping: one value or six, got 2" in capsys.readouterr().err
+    for bad in ("inf", "nan", "0", "-1"):           # was a LinAlgError traceback for inf
+        with pytest.raises(SystemExit) as exit_:
+            main(["tune", "--damping", bad])
+        assert exit_.value.code == 2
+        assert f"argument --damping: '{bad}' is not a positive finite number" in \
+            capsys.readouterr().err
 
 
 def test_adaptation_gains_keep_the_thesis_relative_rates_on_any_vehicle():

@@ -49,6 +49,13 @@ def nonnegative_float(text: str) -> float:
     return _float(text, lambda x: x >= 0.0, "a finite number >= 0")
 
 
+def float_in(lo: float, hi: float):
+    """The type of a finite number in ``lo..hi`` (a period with a sensible ceiling)."""
+    def parse(text: str) -> float:
+        return _float(text, lambda x: lo <= x <= hi, f"a number in {lo:g}..{hi:g}")
+    return parse
+
+
 def positive_int(text: str) -> int:
     """An integer ≥ 1 (a count of runs, cycles or repeats)."""
     return _int(text, lambda x: x >= 1, "an integer >= 1")

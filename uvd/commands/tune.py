@@ -33,9 +33,10 @@ def register(sub) -> None:
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--config", type=Path, metavar="FILE",
                    help="configuration (default: the embedded config/sim.toml)")
-    p.add_argument("--bandwidth", type=float, nargs="+", metavar="W",
+    p.add_argument("--bandwidth", type=positive_float, nargs="+", metavar="W",
                    help="ω in rad/s, one for every axis or six (default: delay-limited)")
-    p.add_argument("--damping", type=float, nargs="+", metavar="Z", default=[DEFAULT_ZETA],
+    p.add_argument("--damping", type=positive_float, nargs="+", metavar="Z",
+                   default=[DEFAULT_ZETA],
                    help=f"damping ratio ζ, one or six (default {DEFAULT_ZETA})")
     p.add_argument("--aid-sweep", type=positive_float, metavar="S", default=None,
                    help="choose AID's [estimation] gain_factors by a logarithmic sweep over an "
@@ -121,8 +122,8 @@ def _run(args) -> int:
     from uvd.runtime.config import ConfigValidationError, load_config
 
     for name, v in (("--bandwidth", args.bandwidth), ("--damping", args.damping)):
-        if v is not None and (len(v) not in (1, 6) or not all(x > 0 for x in v)):
-            print(f"uvd tune: {name}: one positive value or six, got {v}", file=sys.stderr)
+        if v is not None and len(v) not in (1, 6):
+            print(f"uvd tune: {name}: one value or six, got {len(v)}: {v}", file=sys.stderr)
             return 2
     try:
         cfg = load_config(args.config)

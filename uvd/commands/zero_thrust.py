@@ -7,7 +7,8 @@ configuration with the CAN driver (:class:`drivers.can.CanBus`), builds the
 runs its shutdown: ``--cycles`` command cycles of zero target torque with the controlword
 "disable voltage" (RPDO + SYNC each), then NMT pre-operational to every node. It does not wait
 for SDO answers (so a dead node cannot make it hang) and is bounded by ``--cycles`` ×
-``--period`` plus the bus opening.
+``--period`` plus the bus opening: at most 100 cycles 1 s apart, and an option out of its
+range (or NaN) is refused before anything is sent (exit 2), as a wrong configuration is.
 
 The amplifiers' own command timeout (``command_timeout_ms``, 200 ms) zeroes their output
 whatever happens to the daemon; this command makes the stop explicit and immediate.
@@ -23,6 +24,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from uvd.cliargs import float_in, int_in
+
 
 def register(sub) -> None:
     p = sub.add_parser("zero-thrust", help="command zero current to every amplifier and "
@@ -30,9 +33,10 @@ def register(sub) -> None:
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="configuration (default: the embedded config/sim.toml)")
-    p.add_argument("--cycles", type=int, default=5, help="zero-command cycles (default 5)")
-    p.add_argument("--period", type=float, default=0.01,
-                   help="seconds between cycles (default 0.01)")
+    p.add_argument("--cycles", type=int_in(1, 100), default=5,
+                   help="zero-command cycles, 1..100 (default 5)")
+    p.add_argument("--period", type=float_in(0.0, 1.0), default=0.01,
+                   help="seconds between cycles, 0..1 (default 0.01)")
     p.set_defaults(handler=_run)
 
 
