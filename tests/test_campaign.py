@@ -152,6 +152,22 @@ def _comparable(rows):
             for r in rows}
 
 
+def test_a_scheduler_that_cannot_be_reached_or_has_no_worker_is_named(tmp_path):
+    """``--scheduler`` not an address, or nothing listening: a named error before any run
+    (was distributed's traceback after 30 s); a scheduler with no worker: a named error after
+    the wait (was a campaign waiting for ever)."""
+    from dask.distributed import LocalCluster
+
+    spec = _spec(TINY)
+    with pytest.raises(CampaignError, match=r"scheduler 'foo': cannot connect: .*port"):
+        run_campaign(spec, tmp_path, scheduler="foo")
+    with LocalCluster(n_workers=0, processes=True, host="127.0.0.1",
+                      dashboard_address="127.0.0.1:0") as cluster:
+        with pytest.raises(CampaignError, match=r"no worker joined in 2 s; nothing was run"):
+            run_campaign(spec, tmp_path, scheduler=cluster.scheduler_address, worker_wait_s=2)
+    assert RowStore(tmp_path).rows() == []
+
+
 @DASK[0]
 @DASK[1]
 def test_two_runs_on_a_local_cluster_the_test_starts_one_raising(tmp_path):

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from uvd.campaign.spec import CampaignSpec
+from uvd.campaign.spec import CampaignError, CampaignSpec
 from uvd.campaign.store import RowStore, code_version, make_row, run_key
 
 
@@ -43,10 +43,25 @@ def default_workers() -> int:
 LOOPBACK = "127.0.0.1"
 
 
-def _client(workers: int, scheduler: str | None):
+#: seconds a campaign waits for a scheduler to answer, and then for its first worker
+CONNECT_S = 30.0
+WORKER_WAIT_S = 60.0
+
+
+def _client(workers: int, scheduler: str | None, worker_wait_s: float = WORKER_WAIT_S):
     from dask.distributed import Client, LocalCluster
     if scheduler is not None:
-        return Client(scheduler), None
+        try:
+            client = Client(scheduler, timeout=CONNECT_S)
+        except (OSError, ValueError, TypeError) as exc:   # unreachable, or not an address
+            raise CampaignError(f"scheduler {scheduler!r}: cannot connect: {exc}") from None
+        try:   # a lab's scheduler whose workers have not joined (yet): say so, do not hang
+            client.wait_for_workers(1, timeout=worker_wait_s)
+        except TimeoutError:
+            client.close()
+            raise CampaignError(f"scheduler {scheduler!r}: no worker joined in "
+                                f"{worker_wait_s:g} s; nothing was run") from None
+        return client, None
     # loopback only; the dashboard on a free port (None does not switch it off, and 8787 may
     # be another cluster's: distributed then warns and takes another anyway)
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
@@ -57,11 +72,14 @@ def _client(workers: int, scheduler: str | None):
 def run_campaign(spec: CampaignSpec, directory: str | Path, *, workers: int | None = None,
                  scheduler: str | None = None,
                  on_row: Callable[[dict, int, int], None] | None = None,
-                 limit: int | None = None) -> CampaignOutcome:
+                 limit: int | None = None,
+                 worker_wait_s: float = WORKER_WAIT_S) -> CampaignOutcome:
     """Run every run of ``spec`` not already stored in ``directory``; ``on_row(row, done,
     todo)`` after each row is written (progress); ``limit`` runs at most that many now (a
-    test's partial campaign). Returns what was done; ``directory/runs.parquet`` holds the rows
-    of the campaign stored so far, in run order."""
+    test's partial campaign). A ``scheduler`` that cannot be reached, or that has no worker
+    within ``worker_wait_s``, is a :class:`CampaignError` before any run. Returns what was
+    done; ``directory/runs.parquet`` holds the rows of the campaign stored so far, in run
+    order."""
     from dask.distributed import as_completed
 
     from uvd.campaign.runs import execute
@@ -78,7 +96,7 @@ def run_campaign(spec: CampaignSpec, directory: str | Path, *, workers: int | No
     ran = failed = 0
     n_workers = 0
     if todo:
-        client, cluster = _client(workers or default_workers(), scheduler)
+        client, cluster = _client(workers or default_workers(), scheduler, worker_wait_s)
         try:
             n_workers = len(client.scheduler_info()["workers"])
             futures = {client.submit(execute, spec.kind, spec.runs[i], key=f"run-{keys[i]}",
