@@ -33,6 +33,17 @@ def test_a_thruster_the_vehicle_does_not_have_is_a_command_line_error(thruster, 
                            "of jhu-rov")
 
 
+@pytest.mark.parametrize("options", [["--false-alarm"], ["--accept", "auto"],
+                                     ["--accept", "confirm"]])
+def test_the_fault_options_without_a_fault_are_a_command_line_error(options, capsys):
+    """``--accept`` and ``--false-alarm`` act only with ``--fault``: without it they were
+    silently ignored (a 60 s demo with no fault ran)."""
+    from uvd.cli import main
+    assert main(["demo", "--duration", "1", *options]) == 2
+    assert capsys.readouterr().err.strip() == ("uvd demo: --accept and --false-alarm need "
+                                               "--fault")
+
+
 def test_a_fault_spec_reads_as_the_issue_writes_it():
     assert FaultSpec.parse("thruster:4:0.5@30") == FaultSpec(4, 0.5, 30.0)
 

@@ -75,6 +75,8 @@ def test_plant_and_thruster_faults_at_chosen_times(tmp_path):
     # and sim-bridge's stderr copy of it may not be read yet (seen under load)
     ('{"op": "helth", "node": 4}', "helth: unknown op"),
     ('{"op": "health", "node": 9, "value": 0.5}', "node 9 is not one of [1, 2, 3, 4, 5, 6]"),
+    ('{"drag_scale": 1.5}', "not a JSON object with an"),     # was the KeyError's bare 'op'
+    ('[1]', "not a JSON object with an"),
 ])
 def test_a_bad_at_command_stops_sim_bridge_at_its_start(tmp_path, command, words):
     """``sim-bridge --at 60 JSON`` with a command it could not carry out: exit at start with
@@ -86,3 +88,17 @@ def test_a_bad_at_command_stops_sim_bridge_at_its_start(tmp_path, command, words
             proc.start(timeout_s=90.0)
     finally:
         proc.kill()
+
+
+@pytest.mark.parametrize("options, words", [
+    (["--realtime", "200"], "argument --realtime: '200' is not an integer in 1..99"),
+    (["--realtime", "0"], "argument --realtime: '0' is not an integer in 1..99"),
+    (["--cpu", "-1"], "argument --cpu: '-1' is not an integer >= 0"),
+])
+def test_a_priority_or_cpu_that_cannot_be_is_a_command_line_error(options, words, capsys):
+    """SCHED_FIFO has priorities 1..99 and CPUs count from 0: these were carried to the
+    system call, which refused them after the start (sim-bridge then ran without them)."""
+    from uvd.commands.sim_bridge import main
+    with pytest.raises(SystemExit) as exit_:
+        main(options)
+    assert exit_.value.code == 2 and words in capsys.readouterr().err

@@ -68,7 +68,7 @@ def register(sub) -> None:
                    help="T s after arming thruster I keeps ETA of its thrust (sim-bridge); "
                         "uvd-fdc detects it over Zenoh, the daemon confirms and reallocates "
                         "(uvd.commands.demo_fault)")
-    p.add_argument("--accept", choices=("confirm", "advisory", "auto"), default="confirm",
+    p.add_argument("--accept", choices=("confirm", "advisory", "auto"), default=None,
                    help="with --fault: [faults.fdc] accept (default confirm)")
     p.add_argument("--false-alarm", action="store_true",
                    help="with --fault: also put a fault sample naming a healthy thruster 5 s "
@@ -539,6 +539,9 @@ def _report(f: dict, progress) -> None:
 
 def _run(args) -> int:
     fault = None
+    if not args.fault and (args.accept or args.false_alarm):
+        print("uvd demo: --accept and --false-alarm need --fault", file=sys.stderr)
+        return 2
     if args.fault:
         from uvd.commands.demo_fault import FaultSpec
         try:
@@ -547,7 +550,7 @@ def _run(args) -> int:
             print(f"uvd demo: {exc}", file=sys.stderr)
             return 2
     figures, code = run_demo(args.duration, record=args.record, base=args.config,
-                             seed=args.seed, fault=fault, accept=args.accept,
+                             seed=args.seed, fault=fault, accept=args.accept or "confirm",
                              false_alarm=args.false_alarm)
     if args.json:
         write_json(args.json, figures)

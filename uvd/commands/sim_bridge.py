@@ -27,7 +27,7 @@ import threading
 from pathlib import Path
 
 from uvd.blas import single_threaded_blas
-from uvd.cliargs import nonnegative_int, output_file, positive_float
+from uvd.cliargs import int_in, nonnegative_int, output_file, positive_float
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -82,10 +82,10 @@ def _add_arguments(p) -> None:
                    help="carry out a control command S seconds after the start (repeatable),"
                         " e.g. --at 60 '{\"op\": \"plant_fault\", \"drag_scale\": 1.5}' or "
                         "--at 120 '{\"op\": \"health\", \"node\": 4, \"value\": 0}'")
-    p.add_argument("--realtime", type=int, nargs="?", const=10, default=0, metavar="PRIO",
+    p.add_argument("--realtime", type=int_in(1, 99), nargs="?", const=10, default=0, metavar="PRIO",
                    help="SCHED_FIFO priority (10 without a value) if permitted: the emulated "
                         "devices answer on time whatever else the machine runs")
-    p.add_argument("--cpu", type=int, action="append", default=[], metavar="N",
+    p.add_argument("--cpu", type=nonnegative_int, action="append", default=[], metavar="N",
                    help="run on this CPU (repeatable): keep the emulated devices off the "
                         "daemon's CPU, as separate hardware would be")
 
@@ -128,6 +128,9 @@ def _run(args) -> int:
     for seconds, text in args.at:
         try:
             cmd = json.loads(text)
+            if not (isinstance(cmd, dict) and isinstance(cmd.get("op"), str)):
+                raise ValueError('not a JSON object with an "op" (e.g. {"op": "plant_fault", '
+                                 '"drag_scale": 1.5})')
             ans = bridge.call(cmd.pop("op"), at_s=seconds, **cmd)
         except (ValueError, KeyError, AttributeError, TypeError) as exc:
             ans = {"ok": False, "error": f"{exc}"}
