@@ -128,6 +128,40 @@ def test_lockstep_replay_is_bit_identical(recorded, tmp_path):
     assert len(amp) > 5 and all(r["mode"] == "control" and r["thrust"][0] == 0.0 for r in amp)
 
 
+def test_a_replay_on_other_blas_kernels_names_both_and_the_size_of_the_difference(
+        recorded, tmp_path):
+    """OpenBLAS (numpy's and scipy's wheels) picks its kernels from the CPU when it loads, and
+    two kernels can round a product differently: a daemon's recording replayed on a machine
+    with other kernels (SkylakeX against Haswell, measured) reported every command a mismatch
+    by ~1e-14 N and nothing more. The start record names the kernels; a replay that differs on
+    other kernels says so, with the largest difference and the command that replays bit for
+    bit. Another machine is stood in for by OPENBLAS_CORETYPE (the replay in a subprocess)."""
+    import platform
+    path = recorded[0]
+    start = next(m for _, _, m in read_messages(path, ["/uvd/start"]))
+    assert isinstance(start["blas"], dict)
+    if platform.machine() != "x86_64" or not start["blas"]:
+        pytest.skip(f"OpenBLAS kernel names of x86_64 wanted; here {platform.machine()}, "
+                    f"kernels {start['blas']}")
+    other = "Nehalem" if set(start["blas"].values()) != {"Nehalem"} else "Sandybridge"
+    out = tmp_path / "replay.json"
+    proc = subprocess.run([sys.executable, "-m", "uvd", "replay", str(path), "--lockstep",
+                           "--quiet", "--json", str(out)], capture_output=True, text=True,
+                          timeout=240, env={**os.environ, "OPENBLAS_CORETYPE": other})
+    rep = json.loads(out.read_text())
+    assert rep["blas"]["recorded"] == start["blas"]
+    assert set(rep["blas"]["replayed"].values()) == {other}, rep["blas"]
+    print(rep["mismatches"], rep["largest_difference_n"], proc.stdout[-400:])
+    if rep["mismatches"]:   # (on this project's machine: SkylakeX against Nehalem, it does)
+        assert proc.returncode == 1
+        assert 0.0 < rep["largest_difference_n"] < 1e-6     # last bits, not a changed law
+        assert (f"the recording was made with BLAS kernels "
+                f"{', '.join(sorted(set(start['blas'].values())))}, this replay runs "
+                f"{other}: they round differently") in proc.stdout
+    else:                   # these kernels happen to round this run's products alike
+        assert proc.returncode == 0 and "bit-identical" in proc.stdout
+
+
 def test_a_recorded_eta_the_replay_does_not_reach_is_a_mismatch(recorded, tmp_path):
     path, _, _, _ = recorded
     bad = tmp_path / "eta.mcap"

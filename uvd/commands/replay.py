@@ -94,6 +94,14 @@ def _run(args) -> int:
     print(f"  MISMATCH: {rep.mismatches} of {rep.commands_compared} commands differ; first at "
           f"cycle {m['cycle']} (t = {m['t_ns']} ns), {m['field']}: recorded {m['recorded']!r}, "
           f"replayed {m['replayed']!r}" if m else "  no command compared")
+    if m and rep.other_arithmetic():
+        recorded = ", ".join(sorted(set(rep.blas["recorded"].values())))
+        here = ", ".join(sorted(set((rep.blas["replayed"] or {}).values()))) or "unknown"
+        print(f"  the recording was made with BLAS kernels {recorded}, this replay runs "
+              f"{here}: they round differently (largest thrust difference "
+              f"{rep.largest_difference_n:.3g} N). Replay on the recording's machine, or here "
+              f"with OPENBLAS_CORETYPE={recorded.split(', ')[0]} if this CPU has that "
+              "kernel's instructions")
     return 1
 
 

@@ -99,7 +99,10 @@ def start_record(config: Config, params_kept: dict[str, Any], cycle: CycleConfig
                  state: CycleState) -> dict[str, Any]:
     """The ``"start"`` record: what a replay needs besides the cycles — the configuration
     file's text, the parameters kept over MAVLink applied on top of it, and the online
-    estimators' θ̂(0) (a resumed estimate starts elsewhere than the file says)."""
+    estimators' θ̂(0) (a resumed estimate starts elsewhere than the file says), and the BLAS
+    kernels this machine's arithmetic used (:func:`uvd.blas.kernels`: a replay elsewhere can
+    round differently)."""
+    from uvd.blas import kernels
     text = None
     if config.source:
         try:
@@ -110,4 +113,5 @@ def start_record(config: Config, params_kept: dict[str, Any], cycle: CycleConfig
             "config_path": str(config.source or ""), "config_toml": text,
             "params_kept": dict(params_kept),
             "estimators": {spec.name: spec.diagnostics(st).theta for spec, st in
-                           zip(cycle.core.estimators, state.core.est, strict=True)}}
+                           zip(cycle.core.estimators, state.core.est, strict=True)},
+            "blas": kernels()}

@@ -117,6 +117,17 @@ class ReplayReport:
     operator_commands: int = 0
     same_config: bool = True
     tracking: dict[str, Any] = field(default_factory=dict)
+    #: the largest |recorded − replayed| of a compared thrust (N): last bits, or a real change
+    largest_difference_n: float = 0.0
+    #: the BLAS kernels the recording was made with and those of this replay (uvd.blas.kernels)
+    blas: dict[str, Any] = field(default_factory=dict)
+
+    def other_arithmetic(self) -> bool:
+        """The recording names BLAS kernels and this replay's are others: the arithmetic may
+        round differently, so commands may differ in their last bits with nothing else
+        changed."""
+        recorded, replayed = self.blas.get("recorded"), self.blas.get("replayed")
+        return bool(recorded) and recorded != replayed
 
     def as_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -271,6 +282,9 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
             bad = None
             if want.shape != thrust.shape or not np.array_equal(want, thrust):
                 bad = _mismatch(k, t, want, thrust, r, res)
+                if want.shape == thrust.shape:
+                    report.largest_difference_n = max(report.largest_difference_n,
+                                                      float(np.max(np.abs(want - thrust))))
             elif "thruster_eta" in r["inputs"]:
                 bad = _eta_mismatch(k, t, r["inputs"]["thruster_eta"], res.thruster_eta)
             if bad is not None:
@@ -279,6 +293,8 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
                     report.first_mismatch = bad
         if progress is not None:
             progress(k + 1, n)
+    from uvd.blas import kernels
+    report.blas = {"recorded": rec.start.get("blas"), "replayed": kernels()}
     report.tracking = {"recorded": tracking(rec.cycles[:report.cycles], recorded_thrust),
                        "replayed": tracking(replayed, [x["thrust"] for x in replayed])}
     return report
