@@ -184,6 +184,11 @@ def test_two_runs_on_a_local_cluster_the_test_starts_one_raising(tmp_path):
     good, bad = rows
     assert good["error"] is None and math.isfinite(good["out_position_mne"])
     assert good["out_position_mne"] > 0 and good["in_mass_error"] == 0.0
+    # where it ran: host, process and the BLAS kernels (rows are bit for bit on the same ones)
+    from uvd.blas import kernels
+    here = sorted(set(kernels().values()))
+    assert good["worker"].endswith(f" blas {', '.join(here)}" if here else "")
+    assert good["worker"].split(" ")[0].rsplit(":", 1)[1].isdigit()
     assert bad["error"].startswith("ValueError: PlantFault: scales must be finite and > 0")
     assert not any(k.startswith("out_") for k in bad)  # no figures, only its error
     import pyarrow.parquet as pq

@@ -214,7 +214,7 @@ def kind_axes() -> dict[str, dict[str, Axis]]:
 def execute(kind: str, inputs: dict) -> dict:
     """Run one run in this process (a Dask worker): ``{"figures": …, "error": None}`` or,
     if it raised, ``{"figures": {}, "error": "<type>: <message> | <last frames>"}``; with the
-    wall time and where it ran."""
+    wall time and where it ran (host, process and BLAS kernels)."""
     t0 = time.perf_counter()
     try:
         figures, error = KINDS[kind][1](dict(inputs)), None
@@ -222,4 +222,12 @@ def execute(kind: str, inputs: dict) -> dict:
         tb = traceback.format_exception(exc)
         figures, error = {}, f"{type(exc).__name__}: {exc} | {''.join(tb[-3:]).strip()}"
     return {"figures": figures, "error": error, "wall_s": time.perf_counter() - t0,
-            "worker": f"{socket.gethostname()}:{os.getpid()}"}
+            "worker": f"{socket.gethostname()}:{os.getpid()}{_blas()}"}
+
+
+def _blas() -> str:
+    """`` blas SkylakeX``: the BLAS kernels of this worker (rows are bit for bit the same on
+    the same kernels, docs/campaigns.md), or nothing where they cannot be told."""
+    from uvd.blas import kernels
+    names = sorted(set(kernels().values()))
+    return f" blas {', '.join(names)}" if names else ""
