@@ -47,20 +47,21 @@ def test_latest_beside_previous_one_table_per_benchmark():
         _rec("a", "2026-01-01 00:00 UTC", {"x": 1}),
         _rec("b", "2026-01-02 00:00 UTC", {"rtf": 250.0, "step_us": pct,
                                           "nested": {"ok": True, "none": None}},
-             commit="def5678-dirty", machine={**MACHINE, "cpus": 8}),
+             commit="def5678-dirty", machine={**MACHINE, "cpus": 8, "blas": "SkylakeX"}),
     ]
     page = render(records)
     assert page.index("## `uvd bench a`") < page.index("## `uvd bench b`")
     assert page.count("## `uvd bench") == 2
     b = page[page.index("## `uvd bench b`"):]
     assert "Latest run: 2026-01-02 00:00 UTC · commit `def5678-dirty` · x86_64, 8 CPUs, " \
-           "Python 3.11.7 · 2 run(s) in the history." in b
+           "BLAS SkylakeX, Python 3.11.7 · 2 run(s) in the history." in b
     assert "| `rtf` | 250 | 100 |" in b
     assert "| `step_us` | p50 1.5 · p90 2 · p99 3.25 · p99.9 4 · max 5 (n 10) | " in b
     assert "| `nested.ok` | true | not measured |" in b
     assert "| `nested.none` | — | not measured |" in b
     assert "`old`" not in b  # figures of the latest run only
-    assert "| *machine* | x86_64, 8 CPUs, Python 3.11.7 | x86_64, 2 CPUs, Python 3.11.7 |" in b
+    assert "| *machine* | x86_64, 8 CPUs, BLAS SkylakeX, Python 3.11.7 | x86_64, 2 CPUs, " \
+           "Python 3.11.7 |" in b   # (the BLAS kernels recorded since session 20)
     a = page[page.index("## `uvd bench a`"):page.index("## `uvd bench b`")]
     assert "| figure | latest |\n| --- | --- |\n| `x` | 1 |" in a
 

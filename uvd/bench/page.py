@@ -165,7 +165,9 @@ def _run_label(rec: dict[str, Any]) -> str:
 
 
 def _machine_label(m: dict[str, Any]) -> str:
-    return f"{m.get('processor', '?')}, {m.get('cpus', '?')} CPUs, Python {m.get('python', '?')}"
+    blas = f", BLAS {m['blas']}" if m.get("blas") else ""
+    return (f"{m.get('processor', '?')}, {m.get('cpus', '?')} CPUs{blas}, "
+            f"Python {m.get('python', '?')}")
 
 
 def render(records: Iterable[dict[str, Any]]) -> str:
