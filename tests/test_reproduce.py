@@ -166,3 +166,38 @@ def test_a_real_time_run_is_judged_on_its_lockstep_part_and_its_texts_not_its_ti
         c = copy.deepcopy(b)
         change(c)
         assert not reproduced(compare_real_time(a, c, strict)), change
+
+
+@pytest.mark.parametrize("core", [None, "Haswell", "Nehalem"])
+def test_a_failed_check_names_the_blas_kernels_against_those_of_the_committed_files(core):
+    """On an AVX-512 machine (OpenBLAS's SkylakeX kernels) aid-rot, aid-hover, fault-tolerance
+    and fault-tolerance-every did not reproduce docs/results/ and did with
+    OPENBLAS_CORETYPE=Haswell (0 to 3.8e-16 relative): the note a failed check prints names
+    both and that command. Here in a fresh process with the kernels forced (x86_64 only)."""
+    import os
+    import platform
+    from pathlib import Path
+    if core is not None and (platform.machine() != "x86_64" or "avx2" not in
+                             Path("/proc/cpuinfo").read_text(errors="replace")):
+        pytest.skip("forcing x86_64 OpenBLAS kernels wants an x86_64 CPU with AVX2")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    if core is not None:
+        env["OPENBLAS_CORETYPE"] = core
+    note = subprocess.run([sys.executable, "-c", "from uvd.experiments.reproduce import "
+                           "_kernels_note; print(_kernels_note())"], capture_output=True,
+                          text=True, env=env, timeout=120, check=True).stdout.strip()
+    import numpy  # noqa: F401  (its BLAS loaded, to be asked)
+
+    from uvd.blas import kernels
+    if core == "Haswell":
+        assert note.startswith("the runs used the BLAS kernels docs/results/ was written with "
+                               "(Haswell)")
+    elif core == "Nehalem":
+        assert note.startswith("the runs used the BLAS kernels Nehalem; docs/results/ was "
+                               "written with Haswell's")
+        assert note.endswith("OPENBLAS_CORETYPE=Haswell make results-check")
+    else:
+        here = sorted(set(kernels().values()))
+        named = ", ".join(here) or "unknown"
+        assert (note.startswith("the runs used the BLAS kernels docs/results/ was written with")
+                if here == ["Haswell"] else f"BLAS kernels {named};" in note), note

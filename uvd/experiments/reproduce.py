@@ -28,6 +28,10 @@ import time
 from pathlib import Path
 
 REL = 1e-9
+#: the OpenBLAS kernels docs/results/ were written with (measured: on an AVX-512 machine,
+#: aid-rot, aid-hover, fault-tolerance and fault-tolerance-every reproduce with these and not
+#: with its own SkylakeX kernels, docs/experiments.md "Reproducibility")
+RESULTS_BLAS = "Haswell"
 #: keys not compared: how long a run took, not what it computed
 TIMING_KEYS = frozenset({"wall_seconds", "sim_wall_s", "cpu_s", "rows_cpu_s",
                          "real_time_factor", "recordings",
@@ -231,7 +235,25 @@ def main(argv: list[str] | None = None) -> int:
             failed += not reproduced(result)
             print(report_line(name, result)
                   + (f" ({wall:.0f} s wall)" if wall is not None else ""), flush=True)
+    if failed and args.against is None:
+        print(_kernels_note(), flush=True)
     return 1 if failed else 0
+
+
+def _kernels_note() -> str:
+    """Which BLAS kernels the runs used against those the committed files were written with:
+    runs that amplify rounding move with them (docs/experiments.md, Reproducibility)."""
+    import numpy  # noqa: F401  (the runs' BLAS, loaded to be asked)
+
+    from uvd.blas import kernels
+    here = sorted(set(kernels().values()))
+    if here == [RESULTS_BLAS]:
+        return (f"the runs used the BLAS kernels docs/results/ was written with "
+                f"({RESULTS_BLAS}): the difference is not theirs")
+    return (f"the runs used the BLAS kernels {', '.join(here) or 'unknown'}; docs/results/ was "
+            f"written with {RESULTS_BLAS}'s, and runs that amplify rounding move with them "
+            f"(docs/experiments.md, Reproducibility). On a CPU with AVX2: "
+            f"OPENBLAS_CORETYPE={RESULTS_BLAS} make results-check")
 
 
 if __name__ == "__main__":
