@@ -23,9 +23,11 @@ def single_threaded_blas() -> None:
 
 
 def kernels() -> dict[str, str]:
-    """The OpenBLAS libraries loaded in this process, each with the kernel it chose for this
-    CPU (``{"libscipy_openblas64_": "SkylakeX"}``); empty where that cannot be told (not
-    Linux, another BLAS, a build without the query).
+    """numpy's and scipy's OpenBLAS loaded in this process, each with the kernel it chose for
+    this CPU (``{"libscipy_openblas64_": "SkylakeX"}``); empty where that cannot be told (not
+    Linux, another BLAS, a build without the query). Only theirs: they do uvd's arithmetic
+    (numba's kernels call scipy's), while another package's own copy (SCS's, loaded with
+    cvxpy) would make the answer depend on what was imported before.
 
     A library built with ``DYNAMIC_ARCH`` (numpy's and scipy's wheels) picks its kernels at load
     time from the CPU, unless ``OPENBLAS_CORETYPE`` names one, and two kernels may round a
@@ -39,6 +41,8 @@ def kernels() -> dict[str, str]:
         with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
             paths = sorted({line.split(None, 5)[5].strip() for line in fh
                             if len(line.split(None, 5)) == 6 and "openblas" in line.lower()})
+        paths = [p for p in paths if Path(p).parent.name in ("numpy.libs", "scipy.libs")
+                 or "scipy_openblas" in Path(p).name]
     except OSError:
         return {}
     out: dict[str, str] = {}
