@@ -162,6 +162,19 @@ def test_a_replay_on_other_blas_kernels_names_both_and_the_size_of_the_differenc
         assert proc.returncode == 0 and "bit-identical" in proc.stdout
 
 
+@pytest.mark.parametrize("recorded_blas, other", [
+    ({"libscipy_openblas64_": "SkylakeX"}, True),
+    ({"libscipy_openblas64_": "Haswell"}, False),       # this replay's own
+    (None, False), ({}, False),                          # an older recording: nothing known
+    ("SkylakeX", False), ({"lib": ["SkylakeX"]}, False),  # malformed: not a hint, no traceback
+])
+def test_other_kernels_are_told_only_from_a_start_record_that_names_them(recorded_blas, other):
+    from uvd.runtime.replay.lockstep import ReplayReport
+    rep = ReplayReport(recording="x.mcap", blas={"recorded": recorded_blas,
+                                                 "replayed": {"libscipy_openblas64_": "Haswell"}})
+    assert rep.other_arithmetic() is other
+
+
 def test_a_recorded_eta_the_replay_does_not_reach_is_a_mismatch(recorded, tmp_path):
     path, _, _, _ = recorded
     bad = tmp_path / "eta.mcap"

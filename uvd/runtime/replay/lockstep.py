@@ -127,7 +127,8 @@ class ReplayReport:
         round differently, so commands may differ in their last bits with nothing else
         changed."""
         recorded, replayed = self.blas.get("recorded"), self.blas.get("replayed")
-        return bool(recorded) and recorded != replayed
+        return (isinstance(recorded, dict) and bool(recorded) and recorded != replayed
+                and all(isinstance(v, str) for v in recorded.values()))
 
     def as_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
