@@ -22,6 +22,15 @@ def single_threaded_blas() -> None:
         os.environ.setdefault(var, "1")
 
 
+def kernel_names(table: dict[str, str] | None = None) -> str:
+    """The kernels of a :func:`kernels` table as one name (``"SkylakeX"``; several joined by
+    ", "; "" when none is known); without a table, this process's, numpy loaded first."""
+    if table is None:
+        import numpy  # noqa: F401  (loads numpy's BLAS, whose kernels are asked for)
+        table = kernels()
+    return ", ".join(sorted(set(table.values())))
+
+
 def kernels() -> dict[str, str]:
     """numpy's and scipy's OpenBLAS loaded in this process, each with the kernel it chose for
     this CPU (``{"libscipy_openblas64_": "SkylakeX"}``); empty where that cannot be told (not

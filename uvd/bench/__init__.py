@@ -63,11 +63,9 @@ def machine() -> dict[str, Any]:
     """The machine a benchmark runs on, recorded with its figures: Python, the processor's
     architecture, its CPUs and the BLAS kernels numpy picked for it (``SkylakeX``: an AVX-512
     CPU; ``Haswell``: AVX2), which tell machines of one architecture apart."""
-    import numpy  # noqa: F401  (loads numpy's BLAS, whose kernels are asked for)
-
-    from uvd.blas import kernels
+    from uvd.blas import kernel_names
     return {"python": platform.python_version(), "processor": platform.machine(),
-            "cpus": os.cpu_count(), "blas": ", ".join(sorted(set(kernels().values()))) or None}
+            "cpus": os.cpu_count(), "blas": kernel_names() or None}
 
 
 def run(bench: Bench, args: argparse.Namespace) -> dict[str, Any]:

@@ -228,6 +228,6 @@ def execute(kind: str, inputs: dict) -> dict:
 def _blas() -> str:
     """`` blas SkylakeX``: the BLAS kernels of this worker (rows are bit for bit the same on
     the same kernels, docs/campaigns.md), or nothing where they cannot be told."""
-    from uvd.blas import kernels
-    names = sorted(set(kernels().values()))
-    return f" blas {', '.join(names)}" if names else ""
+    from uvd.blas import kernel_names
+    names = kernel_names()
+    return f" blas {names}" if names else ""

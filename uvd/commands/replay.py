@@ -95,8 +95,9 @@ def _run(args) -> int:
           f"cycle {m['cycle']} (t = {m['t_ns']} ns), {m['field']}: recorded {m['recorded']!r}, "
           f"replayed {m['replayed']!r}" if m else "  no command compared")
     if m and rep.other_arithmetic():
-        recorded = ", ".join(sorted(set(rep.blas["recorded"].values())))
-        here = ", ".join(sorted(set((rep.blas["replayed"] or {}).values()))) or "unknown"
+        from uvd.blas import kernel_names
+        recorded = kernel_names(rep.blas["recorded"])
+        here = kernel_names(rep.blas["replayed"] or {}) or "unknown"
         print(f"  the recording was made with BLAS kernels {recorded}, this replay runs "
               f"{here}: they round differently (largest thrust difference "
               f"{rep.largest_difference_n:.3g} N). Replay on the recording's machine, or here "

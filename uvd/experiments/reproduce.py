@@ -243,14 +243,12 @@ def main(argv: list[str] | None = None) -> int:
 def _kernels_note() -> str:
     """Which BLAS kernels the runs used against those the committed files were written with:
     runs that amplify rounding move with them (docs/experiments.md, Reproducibility)."""
-    import numpy  # noqa: F401  (the runs' BLAS, loaded to be asked)
-
-    from uvd.blas import kernels
-    here = sorted(set(kernels().values()))
-    if here == [RESULTS_BLAS]:
+    from uvd.blas import kernel_names
+    here = kernel_names()
+    if here == RESULTS_BLAS:
         return (f"the runs used the BLAS kernels docs/results/ was written with "
                 f"({RESULTS_BLAS}): the difference is not theirs")
-    return (f"the runs used the BLAS kernels {', '.join(here) or 'unknown'}; docs/results/ was "
+    return (f"the runs used the BLAS kernels {here or 'unknown'}; docs/results/ was "
             f"written with {RESULTS_BLAS}'s, and runs that amplify rounding move with them "
             f"(docs/experiments.md, Reproducibility). On a CPU with AVX2: "
             f"OPENBLAS_CORETYPE={RESULTS_BLAS} make results-check")
