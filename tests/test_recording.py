@@ -137,9 +137,14 @@ def test_a_replay_on_other_blas_kernels_names_both_and_the_size_of_the_differenc
     other kernels says so, with the largest difference and the command that replays bit for
     bit. Another machine is stood in for by OPENBLAS_CORETYPE (the replay in a subprocess)."""
     import platform
+
+    from mcap.reader import make_reader  # the file's start record read as any MCAP client
     path = recorded[0]
-    start = next(m for _, _, m in read_messages(path, ["/uvd/start"]))
-    assert isinstance(start["blas"], dict)
+    with path.open("rb") as fh:
+        start = next(json.loads(msg.data) for _, _, msg in
+                     make_reader(fh).iter_messages(topics=["/uvd/start"]))
+    assert isinstance(start["blas"], dict) and all(isinstance(v, str)
+                                                   for v in start["blas"].values())
     if platform.machine() != "x86_64" or not start["blas"]:
         pytest.skip(f"OpenBLAS kernel names of x86_64 wanted; here {platform.machine()}, "
                     f"kernels {start['blas']}")
