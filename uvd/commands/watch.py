@@ -25,7 +25,7 @@ def register(sub) -> None:
     p.add_argument("--vehicle", type=vehicle_pattern, default="*",
                    help="vehicle key, or * for all (default)")
     p.add_argument("--seconds", type=nonnegative_float, default=0.0,
-                   help="stop after this long (default: until Ctrl-C)")
+                   help="stop after this long (default 0: until Ctrl-C, as uvd-fdc's)")
     p.set_defaults(handler=_run)
 
 
