@@ -589,15 +589,15 @@ def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
     a free UDP port for the CAN bus, records telemetry to ``run_dir/telemetry.jsonl``, keeps
     the MAVLink link's parameters and signing timestamp in ``run_dir``, and
     applies ``changes`` (``{"loop": {"rate_hz": 100.0}, …}``, merged table by table).
-    Returns the path of the written ``run_dir/uvd.toml``.
+    Returns the path of the written ``run_dir/uvd.toml``; a ``base`` that cannot be read as TOML
+    is a :class:`~uvd.io.toml.TomlFileError` naming it.
     """
-    import tomllib
-
+    from uvd.io.toml import read_toml
     from uvd.shipped import DEFAULT_CONFIG, config_path
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     base = config_path(base) if base is not None else DEFAULT_CONFIG
-    data = tomllib.loads(base.read_text(encoding="utf-8"))
+    data = read_toml(base)
     vehicle = data.get("vehicle", {}).get("name")
     if vehicle and vehicle.endswith(".toml") and not Path(vehicle).is_absolute():
         data["vehicle"]["name"] = str((base.parent / vehicle).resolve())

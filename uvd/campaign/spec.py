@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from uvd.errors import UvdError
+from uvd.io.toml import TomlFileError, read_toml
 
 SAMPLINGS = ("grid", "random")
 DRAWS = ("uniform", "integers")
@@ -268,10 +268,10 @@ def _expand(parsed, kind_axes, sampling: str, seed: int, n_runs: int | None,
 def load(path: str | Path, kinds: dict[str, dict[str, Axis]]) -> CampaignSpec:
     """Read and validate a campaign file."""
     path = Path(path)
+    if not path.exists():
+        raise CampaignError(f"{path}: no such campaign file")
     try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise CampaignError(f"{path}: no such campaign file") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise CampaignError(f"{path}: not valid TOML: {exc}") from exc
+        data = read_toml(path, "the campaign file")
+    except TomlFileError as exc:
+        raise CampaignError(str(exc)) from exc
     return parse(data, kinds, source=str(path))

@@ -549,6 +549,13 @@ def _run(args) -> int:
         except ValueError as exc:
             print(f"uvd demo: {exc}", file=sys.stderr)
             return 2
+    if args.config is not None:   # the user's file judged before anything starts
+        from uvd.runtime.config import ConfigValidationError, load_config
+        try:
+            load_config(args.config)
+        except ConfigValidationError as exc:
+            print(f"uvd demo: invalid configuration, nothing started:\n{exc}", file=sys.stderr)
+            return 2
     figures, code = run_demo(args.duration, record=args.record, base=args.config,
                              seed=args.seed, fault=fault, accept=args.accept or "confirm",
                              false_alarm=args.false_alarm)

@@ -38,12 +38,12 @@ Errors are :class:`~uvd.errors.ConfigError` naming the file and key.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 from uvd.errors import ConfigError
+from uvd.io.toml import TomlFileError, read_toml
 
 SIGNALS = ("angular_rate", "attitude", "depth", "linear_velocity", "thrusters")
 UNITS = {"angular_rate": ("rad/s", "deg/s"), "attitude": ("rad", "deg"),
@@ -249,10 +249,9 @@ def load_profile(name_or_path: str | Path) -> LogProfile:
                               f"one of the built-in profiles {builtin_profiles()}")
         where = f"log profile {name_or_path}"
     try:
-        with f.open("rb") as fh:
-            doc = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{where}: not valid TOML: {exc}") from exc
+        doc = read_toml(f, "the log profile")
+    except TomlFileError as exc:
+        raise ConfigError(f"{where}: {exc.reason}") from exc
     prof = profile_from_mapping(doc, where=where)
     if not prof.name:
         prof = LogProfile(**{**prof.__dict__, "name": p.stem})

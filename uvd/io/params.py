@@ -9,12 +9,12 @@ an already parsed table (the ``[parameters]`` of a vehicle file, :mod:`uvd.io.ve
 from __future__ import annotations
 
 import os
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from uvd.errors import ParameterError
+from uvd.io.toml import TomlFileError, read_toml
 from uvd.model.params import UVParams
 
 
@@ -111,12 +111,9 @@ def params_from_toml(path: str | Path) -> UVParams:
     """
     path = Path(path)
     try:
-        with path.open("rb") as fh:
-            doc = tomllib.load(fh)
-    except OSError as exc:
-        raise ParameterError(f"{path}: cannot read parameters: {exc.strerror or exc}") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ParameterError(f"{path}: not valid TOML: {exc}") from exc
+        doc = read_toml(path, "parameters")
+    except TomlFileError as exc:
+        raise ParameterError(str(exc)) from exc
     if "parameters" not in doc:
         raise ParameterError(f"{path}: no [parameters] table")
     return params_from_mapping(doc["parameters"], where=f"{path}: [parameters]")
@@ -156,10 +153,9 @@ def linear_damping_from_toml(path: str | Path):
     or None."""
     path = Path(path)
     try:
-        with path.open("rb") as fh:
-            doc = tomllib.load(fh)
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ParameterError(f"{path}: cannot read: {exc}") from exc
+        doc = read_toml(path, "parameters")
+    except TomlFileError as exc:
+        raise ParameterError(str(exc)) from exc
     tbl = doc.get("linear_damping")
     if tbl is None:
         return None

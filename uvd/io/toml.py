@@ -1,14 +1,53 @@
-"""TOML text of a configuration-like table: what the tools write for a daemon to read
-(``sim-bridge``'s run configuration, the realtime replay's configuration of the daemon under
-test). ``tomllib`` reads TOML but does not write it."""
+"""TOML files in and out. :func:`read_toml` is how every TOML file a user hands uvd is read
+(configuration, vehicle, parameters, log profile, campaign): whatever is wrong with the file
+comes back as one :class:`TomlFileError` saying what. :func:`dump_toml` writes the TOML text of
+a configuration-like table, what the tools write for a daemon to read (``sim-bridge``'s run
+configuration, the realtime replay's configuration of the daemon under test); ``tomllib``
+reads TOML but does not write it."""
 
 from __future__ import annotations
 
 import json
 import math
+import tomllib
+from pathlib import Path
 from typing import Any
 
-__all__ = ["dump_toml"]
+from uvd.errors import ConfigError
+
+__all__ = ["TomlFileError", "dump_toml", "read_toml"]
+
+
+class TomlFileError(ConfigError):
+    """A TOML file that cannot be read: ``reason`` says why without the path (each reader
+    puts the path, or the key that named the file, in front in its own words); the message
+    is ``PATH: reason``."""
+
+    def __init__(self, path: Path, reason: str):
+        super().__init__(f"{path}: {reason}")
+        self.path, self.reason = path, reason
+
+
+def read_toml(path: str | Path, what: str = "") -> dict[str, Any]:
+    """The tables of the TOML file ``path``. Raises :class:`TomlFileError` when it cannot be
+    opened or read (no such file, a folder, no permission: "cannot read[ WHAT]: …"), is not
+    UTF-8 text, as TOML must be (a binary file, another encoding: the offset of the first bad
+    byte), or is not valid TOML (tomllib's line and column)."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise TomlFileError(path, f"cannot read{' ' + what if what else ''}: "
+                                  f"{exc.strerror or exc}") from exc
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise TomlFileError(path, f"not a TOML file: not UTF-8 text (byte 0x{data[exc.start]:02x} "
+                                  f"at offset {exc.start})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise TomlFileError(path, f"not valid TOML: {exc}") from exc
 
 
 def _toml_value(v: Any) -> str:

@@ -7,7 +7,6 @@ everything it reads and names the file and the key in each error.
 
 from __future__ import annotations
 
-import tomllib
 from importlib import resources
 from pathlib import Path
 
@@ -15,6 +14,7 @@ import numpy as np
 
 from uvd.errors import ConfigError, ParameterError
 from uvd.io.params import params_from_mapping
+from uvd.io.toml import read_toml
 from uvd.model.thrusters import ThrustCurve, ThrusterSpec
 from uvd.model.vehicle import Vehicle
 
@@ -76,18 +76,13 @@ def load_curve(name: str) -> ThrustCurve:
     if not f.is_file():
         raise ConfigError(f"unknown thrust curve {name!r}: not one of the built-in curves "
                           f"{builtin_curves()} nor a [thrust_curves.{name}] table of the vehicle")
-    with f.open("rb") as fh:
-        return _curve_from_table(tomllib.load(fh), f"thrust curve {f}")
+    return _curve_from_table(read_toml(f), f"thrust curve {f}")
 
 
 def load_vehicle(name_or_path: str | Path) -> Vehicle:
     """Load a built-in vehicle by name or a vehicle TOML file by path; validates it."""
     path = vehicle_path(name_or_path)
-    with path.open("rb") as fh:
-        try:
-            doc = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{path}: {exc}") from exc
+    doc = read_toml(path, "the vehicle")
     unknown = set(doc) - _TOP_KEYS
     if unknown:
         raise ConfigError(f"{path}: unknown key(s) {sorted(unknown)}")

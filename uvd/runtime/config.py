@@ -47,7 +47,6 @@ from __future__ import annotations
 import ipaddress
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -66,6 +65,7 @@ from drivers.can.config import (
 from drivers.can.config import DepthConfig as CanDepthConfig
 from drivers.digiquartz import DepthConverter
 from uvd.errors import ConfigError
+from uvd.io.toml import TomlFileError, read_toml
 from uvd.runtime import schema
 from uvd.runtime.failsafe import Thresholds
 from uvd.runtime.fdc_source import FaultsSection
@@ -942,14 +942,9 @@ def load_config(path: str | Path | None = None) -> Config:
     """
     path = config_path(path) if path is not None else DEFAULT_CONFIG
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigValidationError(str(path), [("", f"cannot read: {exc.strerror or exc}")]
-                                    ) from exc
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigValidationError(str(path), [("", f"not valid TOML: {exc}")]) from exc
+        data = read_toml(path)
+    except TomlFileError as exc:
+        raise ConfigValidationError(str(path), [("", exc.reason)]) from exc
     return parse_config(data, source=path)
 
 

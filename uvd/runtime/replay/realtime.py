@@ -359,9 +359,9 @@ def live_config(rec_toml: str, work: Path, *, interface: str, channel: str, can_
     instruments on the replay's pseudo-terminals in ``work``, its bus on ``interface`` /
     ``channel``, its own recording in ``work/live`` and no other outputs (Zenoh, JSON lines,
     CAN log). Returns the written path."""
-    from uvd.io.toml import dump_toml
+    from uvd.io.toml import dump_toml, read_toml
 
-    data = tomllib.loads(base.read_text(encoding="utf-8") if base else rec_toml)
+    data = read_toml(base) if base else tomllib.loads(rec_toml)
     vehicle = data.get("vehicle", {}).get("name", "")
     if vehicle.endswith(".toml") and not Path(vehicle).is_absolute() and base is not None:
         data["vehicle"]["name"] = str((base.parent / vehicle).resolve())
