@@ -7,8 +7,10 @@ skip naming the folder when it is absent) and ``tests/data/ardusub`` (MIT, in th
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
+import struct
 from collections import Counter
 from pathlib import Path
 
@@ -16,6 +18,8 @@ import numpy as np
 import pytest
 from conftest import SHARED_DATA, shared_recordings
 from driver_strategies import DATA
+from hypothesis import given, settings
+from hypothesis import strategies as hs
 
 from uvd.errors import ConfigError, LogReadError, ParameterError
 from uvd.io.logprofile import builtin_profiles, load_profile, profile_from_mapping
@@ -348,6 +352,66 @@ def test_clean_signal_counts():
     assert list(tc) == [0, 10**8, 2 * 10**8, 3 * 10**8, 9 * 10**8, 10**9]
     assert list(xc[:, 0]) == [0, 1, 2, 5, 7, 8]
     assert st.gaps == 1 and st.kept == 6
+
+
+@settings(max_examples=300, deadline=None)
+@given(hs.lists(hs.integers(0, 12), max_size=11))
+def test_in_time_order_keeps_the_earliest_longest_increasing_run(stamps):
+    """Against every subset: the kept samples are the first (in index order) of the largest
+    subsets whose stamps strictly increase."""
+    from uvd.io.logrun import _in_time_order
+
+    t = np.array(stamps, dtype=np.int64)
+    keep = _in_time_order(t)
+    kept = [i for i in range(t.size) if keep[i]]
+    best = []
+    for n in range(t.size, 0, -1):
+        best = next((list(c) for c in itertools.combinations(range(t.size), n)
+                     if all(t[a] < t[b] for a, b in itertools.pairwise(c))), [])
+        if best:
+            break
+    assert kept == best
+    if np.all(np.diff(t) >= 0):   # never back: the first sample of each stamp
+        assert kept == [i for i in range(t.size) if i == 0 or t[i] != t[i - 1]]
+
+
+def _att_offsets(path: Path) -> list[int]:
+    """Where each ATT message of a dataflash log starts (its TimeUS at +3, uint64 µs)."""
+    from pymavlink import mavutil
+
+    conn = mavutil.mavlink_connection(str(path))
+    out = []
+    while (m := conn.recv_match(type="ATT", blocking=False)) is not None:
+        out.append(conn.offset - m.fmt.len)
+    conn.close()
+    return out
+
+
+def test_a_corrupted_time_stamp_costs_its_own_sample(tmp_path):
+    """The real ArduSub log with two ATT time stamps corrupted as an SD card can: one to
+    2^64 − 1 µs (beyond int64 ns: was an OverflowError traceback) is dropped as "without a
+    time"; one 11.6 days ahead is dropped as out of order — and only it: the rule "older than
+    the newest seen" had dropped every ATT sample after it (here 150 of 237; in a copy with 200
+    bytes flipped at random, 55 grid samples kept against the file's 236, ATT at ~0.1 Hz)."""
+    src = _need(ARDUSUB) / "small.BIN"
+    prof, vehicle = load_profile("ardusub-bin"), load_vehicle("bluerov2-heavy")
+    _runs, before = runs_from_log(src, prof, vehicle)
+    data = bytearray(src.read_bytes())
+    at = _att_offsets(src)
+    assert len(at) == before.signals["attitude"].messages
+    data[at[50] + 3:at[50] + 11] = struct.pack("<Q", 2**64 - 1)
+    (t,) = struct.unpack("<Q", data[at[86] + 3:at[86] + 11])
+    data[at[86] + 3:at[86] + 11] = struct.pack("<Q", t + 10**12)
+    bad = tmp_path / "corrupted.BIN"
+    bad.write_bytes(bytes(data))
+    _runs, after = runs_from_log(bad, prof, vehicle)
+    a, b = before.signals["attitude"], after.signals["attitude"]
+    assert (a.bad_time, a.out_of_order, a.duplicates) == (0, 0, 0)
+    assert (b.messages, b.bad_time, b.out_of_order, b.duplicates) == (a.messages, 1, 1, 0)
+    assert b.kept == a.kept - 2 and b.gaps == a.gaps
+    assert "1 without a time, 0 non-finite, 1 out of order" in after.text()
+    for name in ("angular_rate", "depth", "thrusters"):   # the other signals untouched
+        assert after.signals[name].as_dict() == before.signals[name].as_dict()
 
 
 def test_onto_grid_never_invents():

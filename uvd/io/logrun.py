@@ -5,8 +5,10 @@ Steps, each counted in :class:`LogReport`:
 
 1. **Read** the profile's topics (:func:`uvd.io.logs.open_log`); a topic the profile names that
    has no message is a :class:`~uvd.errors.LogReadError` naming file, topic and signal.
-2. **Clean** each signal on its own time stamps: samples with a non-finite component, samples
-   older than the newest one already seen (out of order) and repeated stamps (duplicates) are
+2. **Clean** each signal on its own time stamps: samples whose stamp is not a time (not a
+   finite number, or beyond 64-bit nanoseconds: a corrupted file's), samples with a non-finite
+   component, repeated stamps (duplicates) and samples out of order (the fewest whose removal
+   leaves the stamps increasing: one stamp corrupted far ahead costs that sample only) are
    dropped and counted; intervals longer than ``max_gap_s`` are counted as gaps.
 3. **Units and frames** to ours (SI, body FRD, world NED), each flip in one named function
    (:func:`flu_to_frd`, :func:`enu_to_ned`, :func:`attitude_to_ned_frd`); values implausible for
@@ -26,6 +28,7 @@ The runs carry ν = 0 when the profile has no linear velocity: ``has_linear_velo
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,6 +55,7 @@ class SignalStats:
 
     topic: str
     messages: int = 0
+    bad_time: int = 0
     non_finite: int = 0
     out_of_order: int = 0
     duplicates: int = 0
@@ -87,7 +91,8 @@ class LogReport:
         lines = [f"{self.path}: profile {self.profile}, {self.rule} onto {self.rate_hz:g} Hz"]
         for name, s in self.signals.items():
             lines.append(f"  {name:16s} {s.topic:32s} {s.messages:6d} msgs ~{s.rate_hz:6.1f} Hz;"
-                         f" dropped: {s.non_finite} non-finite, {s.out_of_order} out of order,"
+                         f" dropped: {s.bad_time} without a time, {s.non_finite} non-finite,"
+                         f" {s.out_of_order} out of order,"
                          f" {s.duplicates} duplicates; {s.gaps} gaps > max_gap_s")
         kept = sum(n for _a, n in self.stretches)
         lines.append(f"  {len(self.stretches)} stretch(es), {kept} samples kept; "
@@ -167,10 +172,18 @@ def _value(msg, spec: SignalSpec, path: Path) -> np.ndarray:
     return arr[list(spec.index)]
 
 
-def read_signals(path: str | Path, profile: LogProfile
+#: the time stamps uvd can hold: int64 nanoseconds
+_T_MIN, _T_MAX = -(2 ** 63), 2 ** 63 - 1
+
+
+def read_signals(path: str | Path, profile: LogProfile,
+                 stats: dict[str, SignalStats] | None = None
                  ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Every profile signal of one file as (t_ns (n,), raw values (n, k)) in file order,
-    before any cleaning; raises :class:`LogReadError` for a missing topic or field."""
+    before any cleaning but for the samples whose stamp is not a time (none, not finite, or
+    beyond int64 nanoseconds: a corrupted file's), which are left out and counted in
+    ``stats[name].bad_time`` when ``stats`` is given; raises :class:`LogReadError` for a
+    missing topic or field."""
     path = Path(path)
     by_topic: dict[str, list[SignalSpec]] = {}
     for s in profile.signals.values():
@@ -179,29 +192,68 @@ def read_signals(path: str | Path, profile: LogProfile
     xs: dict[str, list] = {k: [] for k in profile.signals}
     field_time = profile.time[6:] if profile.time.startswith("field:") else None
     tscale = _TIME_SCALE[profile.time_unit]
+    bad_time = dict.fromkeys(profile.signals, 0)
     for topic, t_ns, msg in open_log(path, profile.format, topics=by_topic):
         if field_time is not None:
             if not hasattr(msg, field_time):
                 raise LogReadError(f"{path}: topic {topic}: no time field {field_time!r}")
-            t_ns = int(round(float(getattr(msg, field_time)) * tscale))
+            t = float(getattr(msg, field_time)) * tscale
+            t_ns = int(round(t)) if math.isfinite(t) else None
+        timed = t_ns is not None and _T_MIN <= t_ns <= _T_MAX
         for s in by_topic.get(topic, ()):
             if s.match and any(getattr(msg, k, None) != v for k, v in s.match):
                 continue
+            if not timed:
+                bad_time[s.name] += 1
+                continue
             ts[s.name].append(t_ns)
             xs[s.name].append(_value(msg, s, path))
+    if stats is not None:
+        for name, n in bad_time.items():
+            stats[name].bad_time = n
     for name, s in profile.signals.items():
         if not ts[name]:
-            raise LogReadError(f"{path}: topic {s.topic}: no messages (the profile's signal "
+            why = (f"{bad_time[name]} message(s), none with a time stamp" if bad_time[name]
+                   else "no messages")
+            raise LogReadError(f"{path}: topic {s.topic}: {why} (the profile's signal "
                                f"{name}); check the profile {profile.name!r} against the "
                                f"file's topics")
     return {k: (np.asarray(ts[k], dtype=np.int64), np.vstack(xs[k])) for k in ts}
 
 
+def _in_time_order(t_ns: np.ndarray) -> np.ndarray:
+    """The samples to keep so that the stamps strictly increase, dropping as few as possible:
+    a longest strictly increasing subsequence, of all those the one of the earliest samples
+    (so the earliest of equal stamps). Where the stamps never go back this keeps the first
+    sample of each stamp; where one stamp jumps far ahead (a corrupted time field) it drops
+    that one sample, not every sample after it (as "older than the newest seen" would).
+    O(n log n): the longest run starting at each sample, then the earliest samples greedily."""
+    t = t_ns.tolist()
+    n = len(t)
+    longest = [0] * n              # longest[i]: the longest increasing run starting at sample i
+    tails: list[int] = []          # over the samples after i: -(the largest first stamp) of
+    for i in range(n - 1, -1, -1):  # a run of each length
+        k = bisect.bisect_left(tails, -t[i])
+        longest[i] = k + 1
+        if k == len(tails):
+            tails.append(-t[i])
+        else:
+            tails[k] = -t[i]
+    keep = np.zeros(n, dtype=bool)
+    need, last = len(tails), None
+    for i in range(n):
+        if need and longest[i] == need and (last is None or t[i] > last):
+            keep[i], need, last = True, need - 1, t[i]
+    return keep
+
+
 def clean_signal(t_ns: np.ndarray, x: np.ndarray, stats: SignalStats, max_gap_s: float
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Drop (and count in ``stats``) non-finite samples, samples out of order (older than the
-    newest kept) and duplicates (the newest kept's stamp again); count gaps > ``max_gap_s``."""
-    stats.messages = int(t_ns.size)
+    """Drop (and count in ``stats``) non-finite samples, duplicates (a stamp kept already)
+    and samples out of order: the fewest whose removal leaves the stamps increasing
+    (:func:`_in_time_order`); count gaps > ``max_gap_s``. ``stats.messages`` counts as well
+    the samples :func:`read_signals` left out for their stamp (``stats.bad_time``)."""
+    stats.messages = int(t_ns.size) + stats.bad_time
     finite = np.all(np.isfinite(x), axis=1)
     stats.non_finite = int(np.count_nonzero(~finite))
     t_ns, x = t_ns[finite], x[finite]
@@ -210,11 +262,13 @@ def clean_signal(t_ns: np.ndarray, x: np.ndarray, stats: SignalStats, max_gap_s:
         prev_max = np.maximum.accumulate(t_ns)
         older = np.zeros(t_ns.size, dtype=bool)
         older[1:] = t_ns[1:] < prev_max[:-1]
-        same = np.zeros(t_ns.size, dtype=bool)
-        same[1:] = t_ns[1:] == prev_max[:-1]
-        stats.out_of_order = int(np.count_nonzero(older))
-        stats.duplicates = int(np.count_nonzero(same & ~older))
-        keep = ~(older | same)
+        if older.any():            # the stamps go back somewhere: the longest run in order
+            keep = _in_time_order(t_ns)
+        else:                      # never back (every real recording here): first of each
+            keep[1:] = t_ns[1:] != prev_max[:-1]
+        dup = ~keep & np.isin(t_ns, t_ns[keep])
+        stats.duplicates = int(np.count_nonzero(dup))
+        stats.out_of_order = int(np.count_nonzero(~keep & ~dup))
     t_ns, x = t_ns[keep], x[keep]
     stats.kept = int(t_ns.size)
     if t_ns.size > 1:
@@ -303,14 +357,15 @@ def runs_from_log(path: str | Path, profile: LogProfile, vehicle, *,
     """The uninterrupted stretches of one recording as runs, and the report of what was
     dropped (module docstring). ``vehicle`` supplies the thrust curves and B."""
     path = Path(path)
-    raw = read_signals(path, profile)
+    stats = {name: SignalStats(topic=spec.topic) for name, spec in profile.signals.items()}
+    raw = read_signals(path, profile, stats)
     rep = LogReport(path=str(path), profile=profile.name, rule=profile.resample,
                     rate_hz=profile.rate_hz,
                     has_linear_velocity="linear_velocity" in profile.signals)
     sig = {}
     for name, (t, x) in raw.items():
         spec = profile.signals[name]
-        st = SignalStats(topic=spec.topic)
+        st = stats[name]
         t, x = clean_signal(t, x, st, profile.max_gap_s)
         rep.signals[name] = st
         if t.size == 0:

@@ -3,7 +3,8 @@
 Each format reads one kind of file through that ecosystem's own library and yields the same
 thing: ``(topic, t_ns, message)`` in file order, where ``message`` is the decoded message
 (an object whose attributes are its fields) and ``t_ns`` the time stamp the file gives it
-(a bag's receive time, a telemetry log's receive time, a dataflash log's ``TimeUS``).
+(a bag's receive time, a telemetry log's receive time, a dataflash log's ``TimeUS``), None
+where that stamp is not a finite number (a corrupted file's).
 
 =================  =====================================  ========================================
 name               files                                  read by
@@ -26,6 +27,7 @@ works on the file, never on a stream that could wait.
 from __future__ import annotations
 
 import json
+import math
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -157,7 +159,8 @@ def _read_mavlink(path: Path, topics: frozenset[str] | None, *, dataflash: bool
             if msg is None:
                 break
             topic = msg.get_type()
-            yield topic, int(round(float(getattr(msg, "_timestamp", 0.0)) * 1e9)), msg
+            t = float(getattr(msg, "_timestamp", 0.0)) * 1e9   # a corrupted stamp: not a time
+            yield topic, int(round(t)) if math.isfinite(t) else None, msg
     finally:
         conn.close()
 
