@@ -202,8 +202,11 @@ def test_truncated_bag_named(tmp_path, cut):
     data = _small_bag().read_bytes()
     bad = tmp_path / "truncated.bag"
     bad.write_bytes(data[:int(len(data) * cut)])
-    with pytest.raises(LogReadError, match=r"truncated\.bag"):
+    with pytest.raises(LogReadError, match=r"truncated\.bag") as err:
         count_messages(bad)
+    # a bag cut short has lost its index (at its end): the way to mend it is named
+    assert "Bag index looks damaged" in str(err.value)
+    assert "`rosbag reindex FILE`" in str(err.value)
 
 
 @pytest.mark.timeout(60)

@@ -73,8 +73,11 @@ def _read_rosbag(path: Path, topics: frozenset[str] | None, store: str
     except LogReadError:
         raise
     except Exception as exc:  # noqa: BLE001 - rosbags' errors, and its asserts on a bad index
+        hint = ("; a ROS 1 bag whose recording was cut short (no index at its end) is mended "
+                "by ROS 1's `rosbag reindex FILE`"
+                if store == "ROS1_NOETIC" and "index" in str(exc).lower() else "")
         raise LogReadError(f"{path}: not a readable ROS bag (truncated or corrupted?) "
-                           f"near topic {topic}: {type(exc).__name__}: {exc}") from exc
+                           f"near topic {topic}: {type(exc).__name__}: {exc}{hint}") from exc
 
 
 def _read_ros1(path, topics):
