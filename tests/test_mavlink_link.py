@@ -126,6 +126,38 @@ def test_connect_endpoint_telemetry_manual_setpoint_and_refusals():
     run_link(scenario)
 
 
+def test_a_malformed_arm_or_mode_command_is_refused_never_guessed():
+    """param1 NaN of ARM_DISARM was read as a disarm (NaN >= 0.5 is false): a running demo
+    went ARMED → STANDBY "disarm: ground station" on it; DO_SET_MODE with NaN got no answer
+    at all (int(NaN) raised in the handler). Both are now DENIED with a STATUSTEXT, counted,
+    and nothing reaches the cycle; 1 and 0 still arm and disarm."""
+    from uvd.runtime.commands import Arm, Disarm
+
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        nan = float("nan")
+        for command, p1, p2, says in (
+                (mav.MAV_CMD_COMPONENT_ARM_DISARM, nan, 0.0, "arm/disarm refused: param1 nan"),
+                (mav.MAV_CMD_COMPONENT_ARM_DISARM, 0.7, 0.0, "arm/disarm refused: param1 0.7"),
+                (mav.MAV_CMD_DO_SET_MODE, nan, 4.0, "mode refused: base mode nan"),
+                (mav.MAV_CMD_DO_SET_MODE, 1.0, float("inf"), "custom mode inf must")):
+            st.send(st.enc.command_long_encode(1, 1, command, 0, p1, p2, 0, 0, 0, 0, 0),
+                    link.port)
+            ack = st.wait("COMMAND_ACK")
+            assert (ack.command, ack.result) == (command, mav.MAV_RESULT_DENIED)
+            text = st.wait("STATUSTEXT", lambda m: "refused" in m.text).text
+            assert says in text, text
+        assert queued(link, timeout=0.3) == []
+        assert link.counters["commands_refused"] == 4 and link.counters["bad_messages"] == 0
+        for p1, kind in ((1.0, Arm), (0.0, Disarm)):
+            st.send(st.enc.command_long_encode(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, p1,
+                                               0, 0, 0, 0, 0, 0), link.port)
+            (c,) = queued(link)
+            assert isinstance(c, kind)
+
+    run_link(scenario)
+
+
 def test_a_long_reason_goes_out_in_statustext_chunks():
     reason = "x" * 120
 

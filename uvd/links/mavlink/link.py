@@ -473,24 +473,37 @@ class MavlinkLink:
                       mav.MAV_RESULT_TEMPORARILY_REJECTED if full else mav.MAV_RESULT_DENIED)
         return done
 
+    def _refuse(self, m: Any, why: str) -> None:
+        """A malformed command: counted, told (STATUSTEXT) and answered DENIED, never guessed."""
+        self.counters["commands_refused"] += 1
+        self._text(("warning", why))
+        self._ack(m, self.mavlink.MAV_RESULT_DENIED)
+
     def _on_command_long(self, m: Any, addr: tuple) -> None:
         if not self._for_us(m):
             return
         mav = self.mavlink
         source = f"mavlink {m.get_srcSystem()}/{m.get_srcComponent()}"
         if m.command == mav.MAV_CMD_COMPONENT_ARM_DISARM:
-            c = Arm(cause="ground station", source=source) if m.param1 >= 0.5 else \
+            if m.param1 not in (0.0, 1.0):   # MAVLink's 1 arm, 0 disarm; NaN or 0.7 is neither
+                self._refuse(m, f"arm/disarm refused: param1 {m.param1:g} is neither 1 (arm) "
+                                "nor 0 (disarm)")
+                return
+            c = Arm(cause="ground station", source=source) if m.param1 == 1.0 else \
                 Disarm(cause="ground station", source=source)
         elif m.command == mav.MAV_CMD_DO_SET_MODE:
+            if not all(math.isfinite(v) and v == int(v) for v in (m.param1, m.param2)):
+                self._refuse(m, f"mode refused: base mode {m.param1:g} and custom mode "
+                                f"{m.param2:g} must be whole numbers")
+                return
             c = self._set_mode(int(m.param1), int(m.param2), source)
             if c is None:
                 self._ack(m, mav.MAV_RESULT_DENIED)
                 return
         elif m.command == MAV_CMD_THRUSTER_ETA:
             if not (math.isfinite(m.param1) and m.param1 == int(m.param1)):
-                self._text(("warning", f"thruster effectiveness refused: thruster "
-                                       f"{m.param1!r} is not a thruster number"))
-                self._ack(m, mav.MAV_RESULT_DENIED)
+                self._refuse(m, f"thruster effectiveness refused: thruster {m.param1!r} is "
+                                "not a thruster number")
                 return
             c = SetThrusterEta(int(m.param1), float(m.param2), source=source)
         else:
