@@ -92,6 +92,17 @@ def test_a_malformed_fault_sample_is_named():
         fault_report("k", json.dumps({**good, "confidence": float("nan")}).encode())
     assert fault_report("k", json.dumps({**good, "t_ns": 2 ** 63 - 1}).encode()).t_ns == \
         2 ** 63 - 1
+    # nested past the parser's depth: a RecursionError escaped into zenoh's thread, uncounted
+    with pytest.raises(ValueError, match="fault sample is not JSON .*recursion"):
+        fault_report("k", b"[" * 100_000 + b"]" * 100_000)
+    # a kind outside the schema's enum, a channel of megabytes: were taken, and told whole
+    with pytest.raises(ValueError, match="kind 'a{64}' is not one of entanglement, "
+                                         "drag-decrease, flooding, lost-part, buoyancy, thruster"):
+        fault_report("k", json.dumps({**good, "kind": "a" * 10**6}).encode())
+    with pytest.raises(ValueError, match=r"channel is 1000000 characters \(at most 64\)"):
+        fault_report("k", json.dumps({**good, "channel": "t" * 10**6}).encode())
+    for kind in ("entanglement", "drag-decrease", "flooding", "lost-part", "buoyancy"):
+        assert fault_report("k", json.dumps({**good, "kind": kind}).encode()).kind == kind
 
 
 def _sample_from_the_schema(thruster: int, eta: float) -> bytes:

@@ -174,6 +174,26 @@ def test_a_long_reason_goes_out_in_statustext_chunks():
     run_link(scenario)
 
 
+def test_a_text_beyond_256_chunks_is_cut_there_and_the_link_goes_on():
+    """MAVLink numbers a STATUSTEXT's chunks in one byte: chunk 256 of a long reason could not
+    be packed (struct.error, caught by the link's thread as an error). The text is cut at 256
+    chunks (12 800 characters), with no error, and the next text goes out."""
+    reason = "y" * 13_000
+
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        asyncio.run(link.write([{"type": "failsafe", "kind": "fired", "trigger": "leak",
+                                 "action": "disarm", "reason": reason}]))
+        last = st.wait("STATUSTEXT", lambda m: m.chunk_seq == 255, timeout=10.0)
+        assert last.text == "y" * 50
+        asyncio.run(link.write([{"type": "failsafe", "kind": "cleared", "trigger": "leak",
+                                 "action": "none", "reason": "dry"}]))
+        assert "dry" in st.wait("STATUSTEXT", lambda m: "dry" in m.text).text
+        assert link.counters["errors"] == 0
+
+    run_link(scenario)
+
+
 def test_an_amplifier_fault_accommodated_is_told_as_a_warning():
     reason = "thruster 1 eta 0 (amplifier); given up: surge"
 

@@ -333,14 +333,23 @@ def estimate_payload(r: Mapping[str, Any]) -> dict[str, Any]:
                         "source": str(r.get("source") or "estimator")})
 
 
+#: the longest ``channel`` a fault sample may name (uvd-fdc's are ``thruster12``, ``mass6``…):
+#: what the daemon tells of a sample (event, STATUSTEXT) stays a line
+CHANNEL_MAX = 64
+
+
 def fault_report(key: str, payload: bytes):
     """The :class:`~uvd.runtime.commands.FaultReport` of a ``uvd.fault.v1`` sample on ``key``;
-    ValueError naming the key and what is wrong otherwise."""
+    ValueError naming the key and what is wrong otherwise: not JSON (nested too deep for the
+    parser too), a field missing or of the wrong type, a ``kind`` outside the schema's enum,
+    a ``channel`` longer than :data:`CHANNEL_MAX`, a clock beyond 64 bits, a confidence that
+    is not finite."""
     from uvd.runtime.commands import FaultReport
+    from uvd.telemetry.recording import schema
     try:
         d = json.loads(payload)
-    except ValueError as exc:
-        raise ValueError(f"{key}: fault sample is not JSON ({exc}); dropped") from exc
+    except (ValueError, RecursionError) as exc:
+        raise ValueError(f"{key}: fault sample is not JSON ({exc}); dropped") from None
     if not isinstance(d, dict):
         raise ValueError(f"{key}: fault sample is not a JSON object; dropped")
     expl = d.get("explanation") if isinstance(d.get("explanation"), dict) else {}
@@ -351,6 +360,13 @@ def fault_report(key: str, payload: bytes):
         if not isinstance(d.get(name), typ) or isinstance(d.get(name), bool):
             raise ValueError(f"{key}: fault sample's {name} is {d.get(name)!r} (uvd.fault.v1 "
                              f"wants {what}); dropped")
+    kinds = schema("uvd.fault.v1")["properties"]["kind"]["enum"]
+    if d["kind"] not in kinds:
+        raise ValueError(f"{key}: fault sample's kind {d['kind'][:CHANNEL_MAX]!r} is not one of "
+                         f"{', '.join(kinds)} (uvd.fault.v1); dropped")
+    if len(d["channel"]) > CHANNEL_MAX:
+        raise ValueError(f"{key}: fault sample's channel is {len(d['channel'])} characters "
+                         f"(at most {CHANNEL_MAX}); dropped")
     rc = d.get("relative_change")
     if rc is not None and (isinstance(rc, bool) or not isinstance(rc, (int, float))):
         raise ValueError(f"{key}: fault sample's relative_change is {rc!r} (a number or "

@@ -671,9 +671,10 @@ class MavlinkLink:
 
     def _statustext(self, severity: str, text: str) -> None:
         """One STATUSTEXT, in 50-character chunks sharing an id when longer (MAVLink 2); the
-        text in plain ASCII (:func:`ascii_text`), which every ground station shows as sent."""
+        text in plain ASCII (:func:`ascii_text`), which every ground station shows as sent.
+        MAVLink numbers the chunks in one byte: a text beyond 256 chunks is cut there."""
         data = ascii_text(text).encode("ascii")
-        chunks = [data[i:i + 50] for i in range(0, len(data), 50)] or [b""]
+        chunks = [data[i:i + 50] for i in range(0, len(data), 50)][:256] or [b""]
         self._text_id = self._text_id % 65535 + 1
         tid = self._text_id if len(chunks) > 1 else 0
         for i, ch in enumerate(chunks):
