@@ -96,6 +96,32 @@ def test_the_zenoh_clients_name_a_bad_config_file_and_an_unreachable_router(tmp_
         assert ".rs:" not in err  # zenoh's Rust source locations left out
 
 
+def test_a_client_that_reaches_nothing_says_so_and_goes_on(capsys):
+    """A peer ``uvd watch`` or uvd-fdc whose endpoint nobody listens on (a wrong port, no
+    daemon yet) printed its "watching …" line and then nothing, for as long as it ran. After
+    3 s each says that it reached nothing and keeps trying; with a Zenoh session listening
+    there, neither does."""
+    import zenoh
+
+    from uvd.fdc.client import main as fdc_main
+    from uvd.netports import free_port
+    port = free_port()
+    argv = ["--connect", f"tcp/127.0.0.1:{port}", "--seconds", "4"]
+    says = f"nothing reached through tcp/127.0.0.1:{port} in 3 s"
+    assert main(["watch", *argv]) == 0
+    assert f"uvd watch: {says}" in capsys.readouterr().err
+    assert fdc_main(argv) == 0
+    assert f"uvd-fdc: {says}" in capsys.readouterr().out
+    conf = zenoh.Config()
+    conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(conf):
+        assert main(["watch", *argv]) == 0
+        assert fdc_main(argv) == 0
+    got = capsys.readouterr()
+    assert "nothing reached" not in got.err + got.out
+
+
 def test_eta_refuses_thruster_0_and_an_ipv6_address_it_cannot_reach(capsys):
     """Thrusters count from 1; pymavlink's UDP is IPv4 only, so ``--to [::1]:P`` is refused
     in words (it was pymavlink's "UDP ports must be specified as host:port")."""

@@ -32,7 +32,7 @@ def register(sub) -> None:
 def _run(args) -> int:
     import zenoh
 
-    from uvd.fdc.client import open_client
+    from uvd.fdc.client import REACH_S, open_client, reached_through, unreached
     from uvd.zenoh_callbacks import SessionCallbacks
     lock = threading.Lock()
     last_line: dict[str, float] = {}
@@ -61,7 +61,7 @@ def _run(args) -> int:
         try:
             m = json.loads(sample.payload.to_bytes())
             out(f"{str(sample.key_expr).split('/')[1]:>12} event: {m['text']}")
-        except (ValueError, KeyError) as exc:
+        except (ValueError, KeyError, TypeError) as exc:
             out(f"{sample.key_expr}: unreadable event ({exc})")
 
     def on_alive(sample) -> None:
@@ -80,11 +80,18 @@ def _run(args) -> int:
         session.declare_subscriber(f"uvd/{v}/event", callbacks(on_event))
         session.liveliness().declare_subscriber(f"uvd/{v}/alive", callbacks(on_alive),
                                                 history=True)
-        via = ", ".join(args.connect) or args.zenoh_config or "tcp/127.0.0.1:7447"
+        via = reached_through(args.connect, args.zenoh_config)
         out(f"watching uvd/{v}/… through {via} (Ctrl-C to stop)")
-        deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
+        t0 = time.monotonic()
+        deadline = t0 + args.seconds if args.seconds > 0 else math.inf
+        told = False
         while time.monotonic() < deadline:
             time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
+            if not told and time.monotonic() - t0 >= REACH_S:   # say so, and go on trying
+                told = True
+                note = unreached(session, via, "uvd watch")
+                if note is not None:
+                    print(note, file=sys.stderr, flush=True)
     except KeyboardInterrupt:
         pass
     finally:

@@ -130,6 +130,25 @@ def client_config(connect: list[str], config_file: str | None = None):
     return conf
 
 
+#: seconds after which a client that has reached no router or peer says so
+REACH_S = 3.0
+
+
+def reached_through(connect: list[str], config_file: str | None = None) -> str:
+    """What a client connects through, in words: its endpoints, its file, or the default."""
+    return ", ".join(connect) or config_file or "tcp/127.0.0.1:7447"
+
+
+def unreached(session, via: str, who: str) -> str | None:
+    """The note a client prints, :data:`REACH_S` after it opened, when its session has reached
+    no router or peer (a wrong endpoint, no daemon yet: a peer's session opens anyway and
+    waits in silence); None when it has. The client goes on trying either way."""
+    if list(session.info.routers_zid()) or list(session.info.peers_zid()):
+        return None
+    return (f"{who}: nothing reached through {via} in {REACH_S:g} s (is the daemon running, "
+            "its [telemetry.zenoh] listen that endpoint?); still trying")
+
+
 def open_client(connect: list[str], config_file: str | None = None):
     """``zenoh.open`` of :func:`client_config`. Raises ValueError in words where zenoh raises
     its ZError: the configuration file, or a router that cannot be reached (client mode)."""
@@ -363,10 +382,18 @@ def main(argv: list[str] | None = None) -> int:
         stop = threading.Event()
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: stop.set())
-        deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
+        t0 = time.monotonic()
+        deadline = t0 + args.seconds if args.seconds > 0 else math.inf
+        told = False
         while not stop.wait(min(0.2, max(0.0, deadline - time.monotonic()))):
             if time.monotonic() >= deadline:
                 break
+            if not told and time.monotonic() - t0 >= REACH_S:
+                told = True
+                note = unreached(session, reached_through(args.connect, args.zenoh_config),
+                                 "uvd-fdc")
+                if note is not None:
+                    say(note)
             with lock:
                 unknown = [v for v, B in thrusters.items() if B is None and v not in asked]
             for vehicle in unknown:
