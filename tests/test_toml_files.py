@@ -22,6 +22,7 @@ from uvd.io.logprofile import load_profile
 from uvd.io.params import linear_damping_from_toml, params_from_toml
 from uvd.io.toml import TomlFileError, read_toml
 from uvd.io.vehicle import load_vehicle
+from uvd.links.mavlink.params import read_params_file
 from uvd.runtime.config import ConfigValidationError, load_config
 
 #: the start of a PNG file: a byte that is not UTF-8 (0x89) first
@@ -65,11 +66,13 @@ def test_read_toml_names_the_file_and_what_is_wrong(tmp_path):
     (load_vehicle, ConfigError),
     (load_profile, ConfigError),
     (lambda p: load(p, kind_axes()), CampaignError),
+    (read_params_file, ValueError),
 ])
 def test_every_reader_of_a_users_toml_file_names_what_is_wrong(tmp_path, reader, error):
     for name, (path, says) in _bad_files(tmp_path).items():
-        if name == "folder" and reader is load_profile:
-            continue  # not a file: the profile is looked up by name (next test)
+        if name == "folder" and reader in (load_profile, read_params_file):
+            continue  # not a file: a profile is looked up by name (next test), and a folder
+            #           holds no MAVLink parameters kept for a restart ({}: none)
         with pytest.raises(error) as err:
             reader(path)
         assert str(path) in str(err.value) and says in str(err.value), (name, str(err.value))

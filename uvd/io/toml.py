@@ -1,9 +1,9 @@
 """TOML files in and out. :func:`read_toml` is how every TOML file a user hands uvd is read
-(configuration, vehicle, parameters, log profile, campaign): whatever is wrong with the file
-comes back as one :class:`TomlFileError` saying what. :func:`dump_toml` writes the TOML text of
-a configuration-like table, what the tools write for a daemon to read (``sim-bridge``'s run
-configuration, the realtime replay's configuration of the daemon under test); ``tomllib``
-reads TOML but does not write it."""
+(configuration, vehicle, parameters, log profile, campaign, the MAVLink parameters kept for a
+restart): whatever is wrong with the file comes back as one :class:`TomlFileError` saying
+what. :func:`dump_toml` writes the TOML text of a configuration-like table, what the tools
+write for a daemon to read (``sim-bridge``'s run configuration, the realtime replay's
+configuration of the daemon under test); ``tomllib`` reads TOML but does not write it."""
 
 from __future__ import annotations
 

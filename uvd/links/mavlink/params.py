@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, get_args, get_origin
 
+from uvd.io.toml import TomlFileError, read_toml
 from uvd.runtime import schema
 from uvd.runtime.config import Config
 
@@ -137,9 +137,9 @@ def read_params_file(path: str | Path) -> dict[str, Any]:
     if not p.is_file():
         return {}
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{p}: not a MAVLink parameters file: {exc}") from exc
+        data = read_toml(p)
+    except TomlFileError as exc:
+        raise ValueError(f"{p}: not a MAVLink parameters file: {exc.reason}") from exc
     values = data.get("values")
     if not isinstance(values, dict):
         raise ValueError(f"{p}: no [values] table")
