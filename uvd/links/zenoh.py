@@ -120,7 +120,10 @@ class ZenohSink:
     faults : callable, optional
         ``faults(report)``: subscribe to ``uvd/<vehicle>/fault/**`` and hand each well-formed
         sample, as a :class:`~uvd.runtime.commands.FaultReport`, to it (the daemon's command
-        queue's ``put``); a malformed one is logged, counted (``faults_dropped``) and dropped.
+        queue's ``put``); a malformed one is logged, counted (``faults_dropped``) and dropped,
+        and so is one that arrives while :data:`FAULTS_WAITING_MAX` samples still wait for the
+        cycle (``faults_flooded`` too): a flooding client never fills the command queue the
+        operator's Disarm goes through.
     """
 
     name = "zenoh"
@@ -155,6 +158,9 @@ class ZenohSink:
         self._fault_sub = None
         self.faults_received = 0
         self.faults_dropped = 0
+        self.faults_flooded = 0
+        self._faults_waiting = 0
+        self._faults_lock = threading.Lock()
 
     # -- session (worker thread) --
 
@@ -171,14 +177,35 @@ class ZenohSink:
     def _on_fault(self, sample) -> None:
         """A fault sample (zenoh's thread): queued for the cycle, or counted and dropped."""
         key = str(sample.key_expr)
+        with self._faults_lock:  # a place among the waiting samples, or dropped
+            flooded = self._faults_waiting >= FAULTS_WAITING_MAX
+            if flooded:
+                self.faults_dropped += 1
+                self.faults_flooded += 1
+            else:
+                self._faults_waiting += 1
+        if flooded:  # told at the first and every 1000th: not a log line per sample
+            if self.faults_flooded == 1 or self.faults_flooded % 1000 == 0:
+                log.warning("%s: %d fault samples already wait for the cycle; dropped (%d "
+                            "so far)", key, FAULTS_WAITING_MAX, self.faults_flooded)
+            return
         try:
             report = fault_report(key, sample.payload.to_bytes())
         except ValueError as exc:
+            self._fault_taken()
             self.faults_dropped += 1
             log.warning("%s", exc)
             return
         self.faults_received += 1
-        self.faults(report)
+        waiting = self.faults(report)
+        if hasattr(waiting, "add_done_callback"):  # the cycle took it (or the queue refused it)
+            waiting.add_done_callback(lambda _f: self._fault_taken())
+        else:
+            self._fault_taken()
+
+    def _fault_taken(self) -> None:
+        with self._faults_lock:
+            self._faults_waiting -= 1
 
     def _publisher(self, key: str, schema_name: str):
         import zenoh
@@ -332,6 +359,11 @@ def estimate_payload(r: Mapping[str, Any]) -> dict[str, Any]:
                         "age_s": r.get("age_s"),
                         "source": str(r.get("source") or "estimator")})
 
+
+#: fault samples waiting for the cycle at most (the command queue holds 64; the cycle takes
+#: every waiting command at its start): more are dropped and counted, so that a client that
+#: floods ``uvd/<vehicle>/fault/**`` leaves the queue to the operator's commands
+FAULTS_WAITING_MAX = 8
 
 #: the longest ``channel`` a fault sample may name (uvd-fdc's are ``thruster12``, ``mass6``…):
 #: what the daemon tells of a sample (event, STATUSTEXT) stays a line

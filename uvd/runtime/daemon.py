@@ -186,6 +186,11 @@ class Daemon:
         fdc = self.supervisor.data.fdc
         if fdc is not None:  # uvd-fdc's samples by outcome ([faults.fdc])
             out["fault_samples"] = fdc.counts()
+        z = self.app.links.get("zenoh")
+        if getattr(z, "faults", None) is not None:  # and as they arrived (dropped: not taken)
+            out["fault_samples_in"] = {"received": z.faults_received,
+                                       "dropped": z.faults_dropped,
+                                       "flooded": z.faults_flooded}
         out["shutdown"] = self.app.shutdown_report
         return out
 

@@ -1,0 +1,83 @@
+"""A client flooding ``uvd/<vehicle>/fault/**`` never fills the daemon's one command queue:
+the daemon's Zenoh face (its real sink and command queue) and a second Zenoh session on
+loopback putting fault samples as fast as it can, while the cycle takes none (the worst case:
+a cycle slower than the flood). Found by probing a running daemon: 10 400 samples in 4 s filled
+the queue (7 791 refused as "command queue full"), and a ground station's DISARM in the middle
+of it was refused — the vehicle stayed armed."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import time
+
+import zenoh
+
+from uvd.links.zenoh import FAULTS_WAITING_MAX, ZenohSink, zenoh_config
+from uvd.netports import free_port
+from uvd.runtime import commands as cmd
+
+SAMPLE = json.dumps({"vehicle": "rov9", "kind": "thruster", "t_ns": 5, "channel": "thruster4",
+                     "magnitude": -12.0, "relative_change": -0.5, "confidence": 3.0})
+KEY = "uvd/rov9/fault/thruster"
+
+
+async def _until(pred, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not pred() and time.monotonic() < deadline:
+        await asyncio.sleep(0.05)
+    return pred()
+
+
+def test_a_flood_of_fault_samples_leaves_the_queue_to_the_operators_disarm(caplog):
+    port = free_port()
+    queue = cmd.CommandQueue()
+    sink = ZenohSink("rov9", zenoh_config(listen=[f"tcp/127.0.0.1:{port}"]), faults=queue.put)
+    out = {}
+
+    async def main() -> None:
+        await sink.open()
+        try:
+            with zenoh.open(zenoh_config(connect=[f"tcp/127.0.0.1:{port}"])) as fdc:
+                for _ in range(100):  # until the route is up (bounded: 100 × 0.1 s)
+                    fdc.put(KEY, SAMPLE)
+                    if await _until(lambda: sink.faults_received > 0, 0.1):
+                        break
+                assert sink.faults_received > 0, "no fault sample reached the daemon's face"
+                for _ in range(2000):
+                    fdc.put(KEY, SAMPLE)
+                await _until(lambda: sink.faults_flooded >= 1000, 10.0)
+                out["flood"] = (sink.faults_received, sink.faults_flooded, sink.faults_dropped,
+                                queue.stats())
+                # the operator disarms in the middle of the flood
+                out["disarm"] = queue.put(cmd.Disarm(cause="ground station",
+                                                     source="mavlink 255/190"))
+                out["disarm_answered_at_once"] = out["disarm"].done()  # "queue full"
+                # the cycle takes what waits: the fault path has its places again
+                for p in queue.drain():
+                    p.future.set_result(cmd.CommandResult(True))
+                before = sink.faults_received
+                for _ in range(100):  # bounded: 100 × 0.1 s
+                    fdc.put(KEY, SAMPLE)
+                    if await _until(lambda: sink.faults_received > before, 0.1):
+                        break
+                out["after"] = sink.faults_received - before
+        finally:
+            await sink.aclose()
+
+    with caplog.at_level(logging.WARNING, logger="uvd.links.zenoh"):
+        asyncio.run(asyncio.wait_for(main(), 60.0))
+    received, flooded, dropped, stats = out["flood"]
+    assert received == FAULTS_WAITING_MAX, out  # the cycle took none: no more were queued
+    assert flooded >= 1000 and dropped == flooded, out
+    assert stats == {"accepted": FAULTS_WAITING_MAX, "dropped": 0,
+                     "waiting": FAULTS_WAITING_MAX}, stats
+    assert not out["disarm_answered_at_once"], out["disarm"].result(0)
+    assert out["disarm"].result(0) == cmd.CommandResult(True)  # the cycle took it
+    assert out["after"] >= 1, out
+    told = [r.getMessage() for r in caplog.records
+            if "already wait for the cycle" in r.getMessage()]
+    assert told and told[0] == (f"{KEY}: {FAULTS_WAITING_MAX} fault samples already wait for "
+                                "the cycle; dropped (1 so far)"), told
+    assert len(told) <= 1 + flooded // 1000  # not a line per sample
