@@ -158,6 +158,65 @@ def test_a_malformed_arm_or_mode_command_is_refused_never_guessed():
     run_link(scenario)
 
 
+def test_a_parameter_of_another_type_is_refused_not_read_as_a_float():
+    """PARAM_SET's value is a float; a station that takes a parameter for an INT32 packs the
+    integer's bytes into it (pymavlink's mavset: 350 → 4.9e-43). It was read as the float it
+    looks like: CTL_KP_2 set to 4.9e-43, inside its range (≥ 0), the surge gain gone. Now any
+    param_type but REAL32 is refused by name, counted, and answered with the value in force."""
+    import struct
+
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        bytewise = struct.unpack(">f", struct.pack(">i", 350))[0]
+        assert 0.0 < bytewise < 1e-40
+        for ptype, value in ((mav.MAV_PARAM_TYPE_INT32, bytewise), (200, 350.0)):
+            st.send(st.enc.param_set_encode(1, 1, b"CTL_KP_2", value, ptype), link.port)
+            pv = st.wait("PARAM_VALUE", lambda m: m.param_id == "CTL_KP_2")
+            assert pv.param_value == 300.0  # unchanged
+            text = st.wait("STATUSTEXT", lambda m: "param_type" in m.text).text
+            assert text.startswith(f"CTL_KP_2: param_type {ptype} is not MAV_PARAM_TYP"), \
+                text  # its first 50-character chunk
+        assert queued(link, timeout=0.3) == []
+        assert link.counters["params_refused"] == 2
+        st.send(st.enc.param_set_encode(1, 1, b"CTL_KP_2", 350.0, mav.MAV_PARAM_TYPE_REAL32),
+                link.port)
+        (c,) = queued(link)
+        assert c.values == {"control.kp": (300.0, 350.0, 300.0, 300.0, 300.0, 300.0)}
+
+    run_link(scenario)
+
+
+def test_a_position_target_no_vehicle_can_hold_is_refused_and_counted():
+    """SET_POSITION_TARGET_LOCAL_NED carries float32s up to 3.4e38: x = 1e30 m was queued as a
+    HoldPose and held — on a running daemon the aft thrusters at their 300 N limit, two-step
+    AMBC stopped adapting; yaw 1e30 rad too. Positions beyond the navigation frame's ±1e6 m and
+    a yaw beyond ±2π are refused (STATUSTEXT naming the field, counted); a wrong frame was
+    told but not counted, and is now."""
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        for x, z, yaw, says in ((1e30, 2.0, 0.0, "x 1e+30"), (0.0, -3e38, 0.0, "z -3e+38"),
+                                (0.0, 2.0, 1e30, "yaw 1e+30")):
+            st.send(st.enc.set_position_target_local_ned_encode(
+                0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b0000_1011_1111_1000, x, 0.0, z,
+                0, 0, 0, 0, 0, 0, yaw, 0), link.port)
+            text = st.wait("STATUSTEXT", lambda m: "refused" in m.text).text
+            assert text.startswith("SET_POSITION_TARGET_LOCAL_NED refused: " + says), text
+        st.send(st.enc.set_position_target_local_ned_encode(
+            0, 1, 1, mav.MAV_FRAME_BODY_NED, 0b0000_1011_1111_1000, 1.0, 0.0, 2.0,
+            0, 0, 0, 0, 0, 0, 0.0, 0), link.port)
+        st.wait("STATUSTEXT", lambda m: m.text.endswith("refused: needs MAV_F"))
+        assert queued(link, timeout=0.3) == []
+        assert link.counters["commands_refused"] == 4
+        # the edge of the frame, and a yaw the station ignores whatever it holds: taken
+        st.send(st.enc.set_position_target_local_ned_encode(
+            0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b0000_1111_1111_1000, -1e6, 1e6, 2.0,
+            0, 0, 0, 0, 0, 0, 1e30, 0), link.port)
+        (c,) = queued(link)
+        assert c == HoldPose(-1e6, 1e6, 2.0, 0.0, source="mavlink 255")
+
+    run_link(scenario)
+
+
 def test_a_long_reason_goes_out_in_statustext_chunks():
     reason = "x" * 120
 

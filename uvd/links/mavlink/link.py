@@ -137,6 +137,10 @@ class _Out:
 #: carries it (docs/mavlink.md)
 MAV_CMD_THRUSTER_ETA = 31010
 
+#: the farthest a SET_POSITION_TARGET_LOCAL_NED position may lie from the local origin, per
+#: axis (m): the navigation frame's range ([navigation] initial_north_m, initial_east_m)
+HOLD_MAX_M = 1e6
+
 
 #: what the operator's texts hold beyond ASCII, spelled in ASCII for STATUSTEXT
 _ASCII = str.maketrans({"…": "..", "η": "eta", "±": "+/-", "σ": "sigma", "θ": "theta",
@@ -552,14 +556,28 @@ class MavlinkLink:
         if not self._for_us(m):
             return
         if m.coordinate_frame != self.mavlink.MAV_FRAME_LOCAL_NED or m.type_mask & 0x7:
-            self._text(("warning", "SET_POSITION_TARGET_LOCAL_NED refused: needs "
-                                           "MAV_FRAME_LOCAL_NED and a position"))
+            self._refuse_setpoint("SET_POSITION_TARGET_LOCAL_NED refused: needs "
+                                  "MAV_FRAME_LOCAL_NED and a position")
+            return
+        yaw_ignored = bool(m.type_mask & 0x400)
+        far = [f"{n} {v:g}" for n, v in (("x", m.x), ("y", m.y), ("z", m.z))
+               if not abs(v) <= HOLD_MAX_M]
+        if not (yaw_ignored or abs(m.yaw) <= 2 * math.pi):
+            far.append(f"yaw {m.yaw:g}")
+        if far:  # float32 reaches 3.4e38: a position no vehicle can hold, never sent on
+            self._refuse_setpoint(f"SET_POSITION_TARGET_LOCAL_NED refused: {', '.join(far)} "
+                                  f"(positions within ±{HOLD_MAX_M:g} m, yaw within ±2π)")
             return
         yaw = m.yaw
-        if m.type_mask & 0x400:  # yaw ignored: keep the heading the vehicle has
+        if yaw_ignored:  # yaw ignored: keep the heading the vehicle has
             rec = self._cycle
             yaw = 0.0 if rec is None else euler_of(rec["R"])[2]
         self._queue(HoldPose(m.x, m.y, m.z, yaw, source=f"mavlink {m.get_srcSystem()}"))
+
+    def _refuse_setpoint(self, why: str) -> None:
+        """A setpoint the link cannot use: counted and told (a stream: no COMMAND_ACK)."""
+        self.counters["commands_refused"] += 1
+        self._text(("warning", why))
 
     def _on_timesync(self, m: Any, addr: tuple) -> None:
         if m.tc1 == 0:
@@ -603,7 +621,13 @@ class MavlinkLink:
             self.counters["unknown_params"] += 1
             self._text(("warning", f"no parameter {name!r}"))
             return
-        why = mp.check_value(p, float(m.param_value))
+        if m.param_type != self.mavlink.MAV_PARAM_TYPE_REAL32:  # every one here is REAL32:
+            # another type's value comes byte-wise in the float (pymavlink's mavset packs an
+            # INT32 350 so: 4.9e-43), never to be read as the number it looks like
+            why = (f"{p.name}: param_type {m.param_type} is not MAV_PARAM_TYPE_REAL32 "
+                   f"({self.mavlink.MAV_PARAM_TYPE_REAL32}), the type of every parameter here")
+        else:
+            why = mp.check_value(p, float(m.param_value))
         cfg = self.config()
         value = None if why else mp.key_value(p, float(m.param_value), cfg)
         if why is None and not p.reload:
