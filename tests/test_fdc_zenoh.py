@@ -90,6 +90,12 @@ def test_a_malformed_fault_sample_is_named():
         fault_report("k", json.dumps({**good, "t_ns": 2 ** 63}).encode())
     with pytest.raises(ValueError, match="confidence is nan"):
         fault_report("k", json.dumps({**good, "confidence": float("nan")}).encode())
+    # below the schema's minimum 1 (no detection by uvd-fdc's own measure): -5 was acted on
+    # under accept = "auto" on a running daemon
+    for conf in (-5.0, 0.0, 0.999):
+        with pytest.raises(ValueError, match=f"confidence {conf!r} is below 1 "
+                                             r"\(uvd.fault.v1's minimum\); dropped"):
+            fault_report("k", json.dumps({**good, "confidence": conf}).encode())
     assert fault_report("k", json.dumps({**good, "t_ns": 2 ** 63 - 1}).encode()).t_ns == \
         2 ** 63 - 1
     # nested past the parser's depth: a RecursionError escaped into zenoh's thread, uncounted

@@ -81,3 +81,30 @@ def test_a_flood_of_fault_samples_leaves_the_queue_to_the_operators_disarm(caplo
     assert told and told[0] == (f"{KEY}: {FAULTS_WAITING_MAX} fault samples already wait for "
                                 "the cycle; dropped (1 so far)"), told
     assert len(told) <= 1 + flooded // 1000  # not a line per sample
+
+
+def test_a_sample_below_the_schemas_confidence_is_dropped_not_queued(caplog):
+    """A second session's sample with confidence -5 (uvd.fault.v1's minimum is 1: uvd-fdc's
+    sum over its threshold) reached the cycle and, under accept = "auto", set η."""
+    port = free_port()
+    queue = cmd.CommandQueue()
+    sink = ZenohSink("rov9", zenoh_config(listen=[f"tcp/127.0.0.1:{port}"]), faults=queue.put)
+    low = json.dumps({**json.loads(SAMPLE), "confidence": -5.0})
+
+    async def main() -> None:
+        await sink.open()
+        try:
+            with zenoh.open(zenoh_config(connect=[f"tcp/127.0.0.1:{port}"])) as fdc:
+                for _ in range(100):  # until the route is up (bounded: 100 × 0.1 s)
+                    fdc.put(KEY, low)
+                    if await _until(lambda: sink.faults_dropped > 0, 0.1):
+                        break
+        finally:
+            await sink.aclose()
+
+    with caplog.at_level(logging.WARNING, logger="uvd.links.zenoh"):
+        asyncio.run(asyncio.wait_for(main(), 30.0))
+    assert sink.faults_dropped >= 1 and sink.faults_received == 0
+    assert queue.stats()["accepted"] == 0
+    assert f"{KEY}: fault sample's confidence -5.0 is below 1 (uvd.fault.v1's minimum); " \
+        "dropped" in [r.getMessage() for r in caplog.records]

@@ -375,7 +375,7 @@ def fault_report(key: str, payload: bytes):
     ValueError naming the key and what is wrong otherwise: not JSON (nested too deep for the
     parser too), a field missing or of the wrong type, a ``kind`` outside the schema's enum,
     a ``channel`` longer than :data:`CHANNEL_MAX`, a clock beyond 64 bits, a confidence that
-    is not finite."""
+    is not finite or below the schema's minimum 1."""
     from uvd.runtime.commands import FaultReport
     from uvd.telemetry.recording import schema
     try:
@@ -413,6 +413,9 @@ def fault_report(key: str, payload: bytes):
     if not math.isfinite(d["confidence"]):
         raise ValueError(f"{key}: fault sample's confidence is {d['confidence']!r} (a finite "
                          "number); dropped")
+    if d["confidence"] < 1.0:  # the detector's sum over its threshold: below 1, no detection
+        raise ValueError(f"{key}: fault sample's confidence {d['confidence']!r} is below 1 "
+                         "(uvd.fault.v1's minimum); dropped")
     return FaultReport(d["kind"], d["channel"], None if rc is None else float(rc),
                        int(d["t_ns"]), float(d["confidence"]), since)
 
