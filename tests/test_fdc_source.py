@@ -100,6 +100,9 @@ def test_confirm_without_evidence_is_unconfirmed():
     (cmd.FaultReport("buoyancy", "g", 0.1, 0), "a buoyancy fault (g), not a thruster's"),
     (cmd.FaultReport("thruster", "thruster9", -0.5, 0), "thruster 9 is not one of 1..6"),
     (cmd.FaultReport("thruster", "thruster2", None, 0), "relative_change None is not a finite"),
+    # a channel in other digits than uvd-fdc's ASCII ones: "thruster٤" was acted on as 4
+    (cmd.FaultReport("thruster", "thruster\u0664", -0.5, 0),
+     "a thruster fault (thruster\u0664), not a thruster's"),
 ])
 def test_samples_that_name_no_thruster_are_told_not_acted_on(c, why):
     sim = _sim(_cfg("auto"))

@@ -60,7 +60,8 @@ __all__ = ["FdcSourceSection", "FaultsSection", "FdcRule", "FdcState", "Verdict"
 #: the fewest residual segments a confirmation is made from
 MIN_SEGMENTS = 3
 
-_THRUSTER = re.compile(r"thruster(\d+)$")
+#: ``thruster<i>``, i in ASCII digits (``\d`` also took "thruster٤", Arabic-Indic 4, as 4)
+_THRUSTER = re.compile(r"thruster([0-9]+)$")
 
 
 @dataclass(frozen=True)
