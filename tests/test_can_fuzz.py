@@ -167,3 +167,62 @@ def _junk_exchange():
         junk.shutdown()
         bus.close()
         rig.close()
+
+
+@pytest.mark.timeout(60)
+def test_a_speed_no_propeller_turns_at_is_not_valid_feedback(caplog):
+    """A third sender's TPDO1 for node 1 — OPERATION ENABLED, velocity 2³¹−1 counts, 2.1e6
+    rad/s on a 250 rad/s thruster — after the drive's own answer to the SYNC. On a running
+    daemon such frames reached the cycle for 41 cycles as valid feedback, the estimators'
+    applied wrench k ω|ω| ~ 2e10 N, uncounted. Now that read's feedback is not valid (the
+    cycle gets no speeds: its last command stands in), counted and logged by node."""
+    import logging
+    import struct
+
+    from uvd.runtime.can_component import actuator_status
+    rig = start_rig("virtual", pressure_node=None)
+    bus = CanBus(rig.bus_cfg).open()
+    junk = can.Bus(interface="virtual", channel=rig.bus_cfg.channel)
+    spoof = can.Message(arbitration_id=0x181, is_extended_id=False,
+                        data=struct.pack("<Hhi", 0x0627, 0, 2 ** 31 - 1))
+    cmd = np.full(6, 30.0)
+
+    def answered(group, before: int) -> bool:  # node 1's drive answered the SYNC (bounded)
+        deadline = time.monotonic() + 1.0
+        while group.stats()["tpdo_rx_by_node"][1] <= before and time.monotonic() < deadline:
+            time.sleep(0.002)
+        return group.stats()["tpdo_rx_by_node"][1] > before
+
+    try:
+        group = AmplifierGroup(bus, AmplifierConfig(), VEHICLE.thrusters)
+        assert group.start().ok and group.wait_enabled(2.0)
+        run_cycles(group, 20, cmd)
+        n = group.stats()["tpdo_rx_by_node"][1]
+        group.write(cmd)
+        assert answered(group, n)
+        fb = group.read()
+        assert fb.valid.all() and group.counters["implausible_speed"] == 0, fb
+        n = group.stats()["tpdo_rx_by_node"][1]
+        group.write(cmd)
+        assert answered(group, n)
+        with caplog.at_level(logging.WARNING, logger="drivers.can.amplifier"):
+            junk.send(spoof)
+            deadline = time.monotonic() + 1.0
+            while group.read().omega_rad_s[0] < 1e6 and time.monotonic() < deadline:
+                time.sleep(0.002)
+            fb = group.read()
+        assert fb.omega_rad_s[0] == pytest.approx((2 ** 31 - 1) * 1e-3)
+        assert fb.valid.tolist() == [False] + [True] * 5, fb.valid
+        assert group.counters["implausible_speed"] >= 1
+        assert actuator_status(fb, 1).omega_rad_s is None  # the cycle gets no speeds
+        assert any("node 1 (aft-port) 2.147e+06 rad/s" in r.getMessage()
+                   for r in caplog.records), [r.getMessage() for r in caplog.records]
+        # the drive's next answer is plausible again
+        n = group.stats()["tpdo_rx_by_node"][1]
+        group.write(cmd)
+        assert answered(group, n)
+        assert group.read().valid.all()
+    finally:
+        junk.shutdown()
+        bus.close()
+        rig.close()

@@ -15,7 +15,10 @@ amplifier is a CiA 402 drive in cyclic synchronous torque (or profile torque) mo
   target is only sent to a drive that reports OPERATION ENABLED and has no fault. A drive in
   FAULT stays there until :meth:`reset_faults` is called.
 * **feedback** — each drive answers the SYNC with its TPDO: statusword, torque actual and
-  velocity actual (propeller speed ω, from which thrust is estimated as f = k ω|ω|, App. A.1).
+  velocity actual (propeller speed ω, from which thrust is estimated as f = k ω|ω|, App. A.1);
+  a speed beyond :data:`SPEED_PLAUSIBLE_FACTOR` times the thruster's speed at its largest
+  thrust is no propeller's (a corrupt or foreign frame): that feedback is not ``valid``, and is
+  counted (``implausible_speed``) and logged.
 * **safety** — a target is non-zero only for a drive in OPERATION ENABLED with no fault of
   its own while the bus has none of ``bus_off``, ``bus_closed``, ``send_failed``
   (``error_passive``/``error_warning`` are reported, but frames still get through);
@@ -71,6 +74,11 @@ class Thruster(Protocol):
     name: str
     k_thrust: float  # f = k ω|ω|, N/(rad/s)²
     max_thrust_n: float
+
+#: the largest plausible propeller speed, in multiples of the speed at the thruster's largest
+#: thrust, √(max_thrust_n / k_thrust): a drive reporting more (2³¹ counts, 2.1e6 rad/s on a
+#: 250 rad/s thruster) reports no propeller's speed
+SPEED_PLAUSIBLE_FACTOR = 2.0
 
 NMT_OPERATIONAL = 5
 NMT_PRE_OPERATIONAL = 127
@@ -149,7 +157,8 @@ class GroupFeedback:
     """Feedback of all amplifiers, in thruster order, with the faults of the group.
 
     Arrays have shape (N,): ``omega_rad_s`` (rad/s), ``thrust_est_n`` (N, k ω|ω|),
-    ``torque_permille`` and the boolean ``valid`` (fresh, OPERATION ENABLED, no fault) and
+    ``torque_permille`` and the boolean ``valid`` (fresh, OPERATION ENABLED, no fault, a
+    plausible speed) and
     ``enabled``. ``faults`` maps a node id to its active faults; key 0 holds the faults of the
     bus/group (``bus_off``, ``send_failed``, ...).
     """
@@ -308,7 +317,8 @@ class AmplifierGroup:
         self.counters = {"cycles": 0, "syncs_sent": 0, "lost_cycles": 0,
                          "send_failed_cycles": 0,
                          "nonfinite_commands": 0, "clamped_commands": 0, "emcy_rx": 0,
-                         "heartbeats_tx": 0, "feedback_missed": 0, "fault_events": 0}
+                         "heartbeats_tx": 0, "feedback_missed": 0, "fault_events": 0,
+                         "implausible_speed": 0}
         per_permille = cfg.thrust_per_permille_n or tuple(t.max_thrust_n / 1000.0
                                                           for t in thrusters)
         self.nodes: list[_Node] = []
@@ -316,6 +326,8 @@ class AmplifierGroup:
             self.nodes.append(self._make_node(nid, spec, tpp, where))
         self._tpp = np.array([n.thrust_per_permille for n in self.nodes])
         self._k = np.array([n.k_thrust for n in self.nodes])
+        self._omega_max = np.array([SPEED_PLAUSIBLE_FACTOR * (t.max_thrust_n / t.k_thrust) ** 0.5
+                                    for t in thrusters])
         self._max = float(cfg.max_torque_permille)
 
     @classmethod
@@ -692,10 +704,24 @@ class AmplifierGroup:
                     faults.get(node.node_id, ())))
         omega = np.array([n.omega_rad_s for n in nodes])
         enabled = np.array([n.state == cia402.OPERATION_ENABLED and not n.faults for n in nodes])
-        valid = enabled & np.array([n.fresh for n in nodes]) & (0 not in faults)
+        plausible = np.abs(omega) <= self._omega_max
+        if not plausible.all():
+            self._implausible(nodes, plausible)
+        valid = enabled & np.array([n.fresh for n in nodes]) & plausible & (0 not in faults)
         return GroupFeedback(now, tuple(nodes), omega, self._k * omega * np.abs(omega),
                              np.array([n.torque_permille for n in nodes]), valid, enabled,
                              faults, self.bus.status().state)
+
+    def _implausible(self, nodes: Sequence[AmplifierFeedback], plausible: np.ndarray) -> None:
+        """Count a read with a speed no propeller turns at; log the first and every 100th."""
+        self.counters["implausible_speed"] += 1
+        n = self.counters["implausible_speed"]
+        if n == 1 or n % 100 == 0:
+            log.warning("amplifier feedback not valid: %s (more than %g times the speed at "
+                        "the largest thrust); %d such reads", ", ".join(
+                            f"node {f.node_id} ({f.name}) {f.omega_rad_s:.4g} rad/s"
+                            for f, ok in zip(nodes, plausible, strict=True) if not ok),
+                        SPEED_PLAUSIBLE_FACTOR, n)
 
     def error_codes(self, only_faulted: bool = True) -> dict[int, tuple[int, str]]:
         """Read each drive's error code (0x603F) by SDO — outside the cycle, bounded.
