@@ -30,6 +30,14 @@ async def _until(pred, timeout_s: float) -> bool:
     return pred()
 
 
+async def _put_until(fdc, payload: str, pred) -> None:
+    """Put ``payload`` until ``pred()`` (the route up, a place free): bounded, 100 × 0.1 s."""
+    for _ in range(100):
+        fdc.put(KEY, payload)
+        if await _until(pred, 0.1):
+            return
+
+
 def test_a_flood_of_fault_samples_leaves_the_queue_to_the_operators_disarm(caplog):
     port = free_port()
     queue = cmd.CommandQueue()
@@ -40,10 +48,7 @@ def test_a_flood_of_fault_samples_leaves_the_queue_to_the_operators_disarm(caplo
         await sink.open()
         try:
             with zenoh.open(zenoh_config(connect=[f"tcp/127.0.0.1:{port}"])) as fdc:
-                for _ in range(100):  # until the route is up (bounded: 100 × 0.1 s)
-                    fdc.put(KEY, SAMPLE)
-                    if await _until(lambda: sink.faults_received > 0, 0.1):
-                        break
+                await _put_until(fdc, SAMPLE, lambda: sink.faults_received > 0)
                 assert sink.faults_received > 0, "no fault sample reached the daemon's face"
                 for _ in range(2000):
                     fdc.put(KEY, SAMPLE)
@@ -58,10 +63,7 @@ def test_a_flood_of_fault_samples_leaves_the_queue_to_the_operators_disarm(caplo
                 for p in queue.drain():
                     p.future.set_result(cmd.CommandResult(True))
                 before = sink.faults_received
-                for _ in range(100):  # bounded: 100 × 0.1 s
-                    fdc.put(KEY, SAMPLE)
-                    if await _until(lambda: sink.faults_received > before, 0.1):
-                        break
+                await _put_until(fdc, SAMPLE, lambda: sink.faults_received > before)
                 out["after"] = sink.faults_received - before
         finally:
             await sink.aclose()
@@ -95,10 +97,7 @@ def test_a_sample_below_the_schemas_confidence_is_dropped_not_queued(caplog):
         await sink.open()
         try:
             with zenoh.open(zenoh_config(connect=[f"tcp/127.0.0.1:{port}"])) as fdc:
-                for _ in range(100):  # until the route is up (bounded: 100 × 0.1 s)
-                    fdc.put(KEY, low)
-                    if await _until(lambda: sink.faults_dropped > 0, 0.1):
-                        break
+                await _put_until(fdc, low, lambda: sink.faults_dropped > 0)
         finally:
             await sink.aclose()
 
