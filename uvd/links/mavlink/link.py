@@ -477,11 +477,13 @@ class MavlinkLink:
                       mav.MAV_RESULT_TEMPORARILY_REJECTED if full else mav.MAV_RESULT_DENIED)
         return done
 
-    def _refuse(self, m: Any, why: str) -> None:
-        """A malformed command: counted, told (STATUSTEXT) and answered DENIED, never guessed."""
+    def _refuse(self, m: Any, why: str, ack: bool = True) -> None:
+        """A malformed command: counted, told (STATUSTEXT) and, unless it is a stream's
+        message (a setpoint: ``ack`` False), answered DENIED; never guessed."""
         self.counters["commands_refused"] += 1
         self._text(("warning", why))
-        self._ack(m, self.mavlink.MAV_RESULT_DENIED)
+        if ack:
+            self._ack(m, self.mavlink.MAV_RESULT_DENIED)
 
     def _on_command_long(self, m: Any, addr: tuple) -> None:
         if not self._for_us(m):
@@ -556,8 +558,8 @@ class MavlinkLink:
         if not self._for_us(m):
             return
         if m.coordinate_frame != self.mavlink.MAV_FRAME_LOCAL_NED or m.type_mask & 0x7:
-            self._refuse_setpoint("SET_POSITION_TARGET_LOCAL_NED refused: needs "
-                                  "MAV_FRAME_LOCAL_NED and a position")
+            self._refuse(m, "SET_POSITION_TARGET_LOCAL_NED refused: needs "
+                            "MAV_FRAME_LOCAL_NED and a position", ack=False)
             return
         yaw_ignored = bool(m.type_mask & 0x400)
         far = [f"{n} {v:g}" for n, v in (("x", m.x), ("y", m.y), ("z", m.z))
@@ -565,19 +567,14 @@ class MavlinkLink:
         if not (yaw_ignored or abs(m.yaw) <= 2 * math.pi):
             far.append(f"yaw {m.yaw:g}")
         if far:  # float32 reaches 3.4e38: a position no vehicle can hold, never sent on
-            self._refuse_setpoint(f"SET_POSITION_TARGET_LOCAL_NED refused: {', '.join(far)} "
-                                  f"(positions within ±{HOLD_MAX_M:g} m, yaw within ±2π)")
+            self._refuse(m, f"SET_POSITION_TARGET_LOCAL_NED refused: {', '.join(far)} "
+                            f"(positions within ±{HOLD_MAX_M:g} m, yaw within ±2π)", ack=False)
             return
         yaw = m.yaw
         if yaw_ignored:  # yaw ignored: keep the heading the vehicle has
             rec = self._cycle
             yaw = 0.0 if rec is None else euler_of(rec["R"])[2]
         self._queue(HoldPose(m.x, m.y, m.z, yaw, source=f"mavlink {m.get_srcSystem()}"))
-
-    def _refuse_setpoint(self, why: str) -> None:
-        """A setpoint the link cannot use: counted and told (a stream: no COMMAND_ACK)."""
-        self.counters["commands_refused"] += 1
-        self._text(("warning", why))
 
     def _on_timesync(self, m: Any, addr: tuple) -> None:
         if m.tc1 == 0:
