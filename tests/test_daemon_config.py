@@ -81,3 +81,36 @@ def test_navigation_timeouts_are_the_failsafe_thresholds():
     H0, v0 = start_pose(cfg)
     ref0 = core_cfg.reference.at(0.0)
     assert abs(H0 - ref0.H).max() < 1e-12 and not v0.any()  # the run starts on RefTraj1
+
+
+def _with_eds(config: Path, eds: Path, out: Path) -> Path:
+    from uvd.io.toml import dump_toml, read_toml
+    data = read_toml(config)
+    data.setdefault("can", {}).setdefault("amplifiers", {})["eds"] = str(eds)
+    out.write_text(dump_toml(data))
+    return out
+
+
+def _cut_eds(tmp_path: Path) -> Path:
+    """The shipped amplifier object dictionary cut in the middle of a line."""
+    from drivers.can.config import DEFAULT_AMPLIFIER_EDS
+    cut = tmp_path / "cut.eds"
+    cut.write_bytes(DEFAULT_AMPLIFIER_EDS.read_bytes()[:3000])
+    return cut
+
+
+def test_a_can_start_failure_after_the_bus_opened_ends_without_a_traceback(tmp_path):
+    """An object dictionary that reads but maps no command (an empty file) fails the CAN
+    start after the bus is open: exit 1 naming it; the bus is closed after the App's workers
+    are gone (it was a RuntimeError traceback: cannot schedule new futures after shutdown)."""
+    from hil_daemon import running_bridge
+    empty = tmp_path / "empty.eds"
+    empty.write_text("")
+    with running_bridge(tmp_path / "run") as (cfg_path, _proc):
+        cfg = _with_eds(cfg_path, empty, tmp_path / "uvd.toml")
+        r = subprocess.run([sys.executable, "-m", "uvd", "run", "--config", str(cfg),
+                            "--duration", "5"], capture_output=True, text=True, timeout=240)
+    assert "Traceback" not in r.stderr, r.stderr[-2000:]
+    assert r.returncode == 1
+    assert "start failed (ConfigError: [can.amplifiers] eds: node 1: no enabled RPDO maps " \
+           "both controlword 0x6040 and target torque 0x6071" in r.stderr

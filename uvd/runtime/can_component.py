@@ -180,11 +180,13 @@ class CanComponent:
         if self.group is not None:
             self.group.shutdown(cycles=2, period_s=0.01, release_consumer=True)
 
+    def close_now(self) -> None:
+        """Close the bus and stop its recorder, in this thread (blocking, bounded)."""
+        if self.bus is not None:
+            self.bus.close()
+        if self.recorder is not None:
+            self.recorder.stop(timeout=0.5)
+
     async def stop(self) -> None:
-        def close() -> None:
-            if self.bus is not None:
-                self.bus.close()
-            if self.recorder is not None:
-                self.recorder.stop(timeout=0.5)
-        await asyncio.to_thread(close)
+        await asyncio.to_thread(self.close_now)
 

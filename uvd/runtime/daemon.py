@@ -170,7 +170,7 @@ class Daemon:
         try:
             return await self.app.run()
         finally:
-            await self.hardware.close_now()
+            self.hardware.close_now()
 
     def stop(self, reason: str = "requested") -> None:
         self.app.request_stop(reason)

@@ -65,10 +65,11 @@ class Hardware:
                 self.can.start_report.nodes
         return out
 
-    async def close_now(self) -> None:
+    def close_now(self) -> None:
         """Close a port or the bus the App's bounded shutdown had no time left for (a daemon
-        run inside a longer-lived process — tests, tools — leaves none locked)."""
+        run inside a longer-lived process — tests, tools — leaves none locked). In this
+        thread: the App's worker threads are gone by now."""
         for s in self.sensors:
             s.close_now()
         if self.can.bus is not None and self.can.bus.is_open:
-            await self.can.stop()
+            self.can.close_now()
