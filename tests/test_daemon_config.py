@@ -99,6 +99,25 @@ def _cut_eds(tmp_path: Path) -> Path:
     return cut
 
 
+def test_an_object_dictionary_that_does_not_read_is_a_configuration_error(tmp_path, capsys):
+    # found by probing (session 21): check-config said OK, uvd run failed at start with exit
+    # 1, sim-bridge ended in canopen's ValueError traceback
+    from uvd.runtime.config import DEFAULT_CONFIG as SIM_PATH
+    cut = _cut_eds(tmp_path)
+    for eds, what in [(cut, f"cannot read '{cut}': Source contains parsing errors: "
+                            f"'{cut}' [line 56]: 'BaudRate_1'"),
+                      (tmp_path, f"no object dictionary file at '{tmp_path}'"),
+                      (tmp_path / "none.eds", f"no object dictionary file at "
+                                              f"'{tmp_path / 'none.eds'}'")]:
+        cfg = _with_eds(SIM_PATH, eds, tmp_path / "uvd.toml")
+        assert main(["check-config", str(cfg)]) == 2
+        assert capsys.readouterr().err.splitlines()[-1] == f"{cfg}: can.amplifiers.eds: {what}"
+    r = subprocess.run([sys.executable, "-m", "uvd", "sim-bridge", "--config", str(cfg),
+                        "--duration", "1"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert f"{cfg}: can.amplifiers.eds: no object dictionary file at" in r.stderr
+
+
 def test_a_can_start_failure_after_the_bus_opened_ends_without_a_traceback(tmp_path):
     """An object dictionary that reads but maps no command (an empty file) fails the CAN
     start after the bus is open: exit 1 naming it; the bus is closed after the App's workers

@@ -23,6 +23,7 @@ import canopen
 from canopen.sdo import SdoAbortedError
 
 from drivers.can import cia402
+from drivers.can.amplifier import load_od
 from drivers.can.bus import FrameDropped
 
 log = logging.getLogger(__name__)
@@ -58,7 +59,7 @@ class EmulatedNode:
         self.network = network
         self.lock = lock or threading.RLock()
         self.clock = clock
-        self.local = canopen.LocalNode(node_id, canopen.import_od(str(eds), node_id))
+        self.local = canopen.LocalNode(node_id, load_od(eds, node_id, f"emulated node {node_id}"))
         network.add_node(self.local)
         # route SDO and NMT through this object so that a silent node hears nothing
         network.unsubscribe(self.local.sdo.rx_cobid, self.local.sdo.on_request)
