@@ -224,6 +224,7 @@ class StreamDecoder:
                 break
             # drop up to and including the first sync byte, then re-run the scanner
             cut = start + 1
+            at, n_errors = self._base, len(self.errors)
             self._drop_count(cut, "truncated", f"incomplete {self.codec.name} frame at end",
                              self._base)
             del self._buf[:cut]
@@ -231,7 +232,15 @@ class StreamDecoder:
             rest = bytes(self._buf)
             self._buf.clear()
             self.counters.bytes_in -= len(rest)  # feed() counts them again
-            out.extend(self.feed(rest))
+            found = self.feed(rest)
+            out.extend(found)
+            if not found and len(self.errors) > n_errors:
+                # no frame behind it: what the scanner dropped after that byte is the cut
+                # frame too (one record, not 1 B "truncated" and the rest "garbage")
+                dropped = [self.errors.pop() for _ in range(len(self.errors) - n_errors)]
+                self.errors.append(DecodeErrorRecord(
+                    at, "truncated", f"incomplete {self.codec.name} frame at end",
+                    sum(r.n_bytes for r in dropped)))
         if self._buf:
             self._drop_count(len(self._buf), "truncated", "bytes left at end of stream",
                              self._base)

@@ -125,3 +125,24 @@ def test_decode_pd0_reports_the_dvls_velocity_noise(capsys):
     assert noise["sigma_m_s"] == pytest.approx(0.0044478, abs=1e-6)
     _, _, few = _run_json(capsys, "pd0", _path("pd0/adcp_auv_3.pd0"))
     assert "bottom_track_noise" not in few  # 3 ensembles: too few for a figure
+
+
+@pytest.mark.parametrize("fmt, rel, cut, frames, at", [
+    ("pd0", "pd0/adcp_auv_3.pd0", 1000, 2, 864),  # three ensembles of 432 B, cut in the third
+    ("pd0", "pd0/adcp_auv_3.pd0", 40, 0, 0),  # cut in the first one's header
+    ("phins-stdbin", "phins/log_STDBIN_V3.log", 6150, 8, 5832),
+])
+def test_a_recording_cut_short_reports_its_last_frame_as_one_truncated_stretch(
+        capsys, tmp_path, fmt, rel, cut, frames, at):
+    # found by probing (session 21): the cut frame was reported as 1 B "truncated" and
+    # the rest of it as "garbage: no pd0 sync word"
+    f = tmp_path / Path(rel).name
+    f.write_bytes(_path(rel).read_bytes()[:cut])
+    rc, out, summary = _run_json(capsys, fmt, f)
+    assert len(out) == frames == summary["frames"] and rc == (0 if frames else 1)
+    assert summary["bytes_dropped"] == cut - at and summary["resyncs"] == 1
+    assert summary["errors"] == [{"offset": at, "kind": "truncated", "bytes": cut - at,
+                                  "message": f"incomplete {fmt} frame at end"}]
+    assert main(["decode", "--format", fmt, str(f)]) == rc
+    assert capsys.readouterr().out.splitlines()[-1] == \
+        f"#   at byte {at}: truncated ({cut - at} B): incomplete {fmt} frame at end"
