@@ -129,6 +129,25 @@ def test_kept_parameters_apply_at_start_and_a_bad_one_is_skipped(tmp_path, caplo
     assert "control.kd" in caplog.text and "out of range" in caplog.text
 
 
+def test_a_kept_parameters_file_that_does_not_read_is_named_and_nothing_applied(tmp_path,
+                                                                               caplog):
+    # found by probing (session 21): a folder was taken as "no parameters kept", silently;
+    # the file is now read as every TOML file is (uvd.io.toml.read_toml)
+    good = tmp_path / "params.toml"
+    write_params_file(good, {"control.kp": 420.0, "control.kd": 90.0})
+    cut = tmp_path / "cut.toml"
+    cut.write_bytes(good.read_bytes()[:-15])  # a write cut short inside the last key
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(b"[values]\n\xff\xfe")
+    for f, what in [(tmp_path, "cannot read the parameters kept over MAVLink: Is a directory"),
+                    (binary, "not a TOML file: not UTF-8 text (byte 0xff at offset 9)"),
+                    (cut, "not valid TOML: Unterminated string (at end of document)")]:
+        caplog.clear()
+        cfg, applied = kept_params(sim_config(), str(f))
+        assert applied == {} and cfg.control.kp == sim_config().control.kp
+        assert f"{f}: {what} (parameters kept over MAVLink not applied)" in caplog.text
+    assert kept_params(sim_config(), str(tmp_path / "none.toml"))[1] == {}  # none kept yet
+
 def test_docs_mavlink_md_lists_the_parameters_generated_from_the_schema():
     from pathlib import Path
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, get_args, get_origin
 
-from uvd.io.toml import TomlFileError, read_toml
+from uvd.io.toml import read_toml
 from uvd.runtime import schema
 from uvd.runtime.config import Config
 
@@ -131,15 +131,14 @@ def read_params_file(path: str | Path) -> dict[str, Any]:
     Raises
     ------
     ValueError
-        The file is not such a file (the message names it and why).
+        The file is not such a file (the message names it and why): a
+        :class:`~uvd.io.toml.TomlFileError` when it cannot be read as TOML (a folder, not
+        UTF-8 text, not TOML).
     """
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         return {}
-    try:
-        data = read_toml(p)
-    except TomlFileError as exc:
-        raise ValueError(f"{p}: not a MAVLink parameters file: {exc.reason}") from exc
+    data = read_toml(p, "the parameters kept over MAVLink")
     values = data.get("values")
     if not isinstance(values, dict):
         raise ValueError(f"{p}: no [values] table")
