@@ -229,3 +229,21 @@ def test_a_malformed_run_log_is_named_not_a_traceback(tmp_path, change, words):
         load_runlog(f)
     np.savez(f, **_arrays())
     assert len(load_runlog(f)) == 20
+
+
+@pytest.mark.parametrize("t_ns", [2**70, -2**70, True])
+def test_a_cycle_record_whose_time_is_no_int64_is_an_unreadable_line(tmp_path, capsys, t_ns):
+    # found by probing (session 21): a time stamp beyond int64 ns was an OverflowError
+    # traceback from uvd identify and xval; a boolean one was taken as t = 1 ns
+    def line(t):
+        return json.dumps({"type": "cycle", "t_ns": t, "nav_valid": True, **ZERO_POSE,
+                           "v": [0.1] * 6, "u": [1.0] * 6})
+    lines = [line(5_000_000_000 + k * 100_000_000) for k in range(50)]
+    lines.insert(20, line(t_ns))
+    f = tmp_path / "telemetry.jsonl"
+    f.write_text("\n".join(lines) + "\n")
+    run = load_runlog(f)
+    assert len(run) == 50 and run.extra["bad_lines"] == 1 and run.extra["segments"] == [[0, 50]]
+    assert main(["identify", "--log", str(f), "--method", "ls", "--out",
+                 str(tmp_path / "ls.toml")]) == 0
+    assert f"{f}: 1 unreadable line(s) skipped" in capsys.readouterr().out

@@ -82,9 +82,11 @@ def _cycle_sample(rec) -> tuple | None:
         arr = [np.asarray(rec[k], dtype=float) for k in ("p", "R", "v", "u")]
     except (KeyError, TypeError) as exc:
         raise ValueError(str(exc)) from exc
+    t_ns = rec.get("t_ns")
     if [a.shape for a in arr] not in ([(3,), (9,), (6,), (6,)], [(3,), (3, 3), (6,), (6,)]) \
             or not all(np.all(np.isfinite(a)) for a in arr) \
-            or not isinstance(rec.get("t_ns"), int):
+            or not isinstance(t_ns, int) or isinstance(t_ns, bool) \
+            or not -2**63 <= t_ns < 2**63:  # a time stamp as the daemon writes it: int64 ns
         raise ValueError("malformed cycle record")
     return rec["t_ns"], arr[0], arr[1].reshape(3, 3), arr[2], arr[3]
 
