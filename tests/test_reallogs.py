@@ -764,3 +764,16 @@ def test_aid_demo_series_reads_the_estimates_of_a_recorded_run(tmp_path):
     (tmp_path / "telemetry.jsonl").write_text(lines[0] + "\n")
     with pytest.raises(ValueError, match="no AID estimate records"):
         aid_demo_series(tmp_path)
+
+
+@pytest.mark.parametrize("stamp", ['"12:00"', "null", "[1]", "true", "NaN", "Infinity", "1e400"])
+def test_a_telemetry_record_whose_time_is_not_one_costs_its_own_sample(tmp_path, stamp):
+    # found by probing (session 21): uvd's own JSON-lines telemetry read through a profile
+    # took int() of t_ns: a ValueError, TypeError or OverflowError traceback from identify
+    f = tmp_path / "telemetry.jsonl"
+    lines = [f'{{"type": "cycle", "t_ns": {k * 100_000_000}, "x": {k}.0}}' for k in range(10)]
+    lines[4] = lines[4].replace('"t_ns": 400000000', f'"t_ns": {stamp}')
+    f.write_text("\n".join(lines) + "\n")
+    assert [t for _topic, t, _m in open_log(f, "uvd-telemetry")] == \
+        [k * 100_000_000 for k in range(10) if k != 4][:4] + [None] + \
+        [k * 100_000_000 for k in range(5, 10)]

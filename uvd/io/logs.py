@@ -179,6 +179,17 @@ def _read_dataflash(path, topics):
 # ---------------------------------------------------------------------------------------------
 # uvd's own JSON-lines telemetry
 # ---------------------------------------------------------------------------------------------
+def _telemetry_stamp(t) -> int | None:
+    """A record's ``t_ns`` as a time stamp, None where it is not one (a corrupted file's:
+    text, null, a list, true, NaN or infinite)."""
+    if isinstance(t, bool):
+        return None
+    try:
+        return int(t)
+    except (TypeError, ValueError, OverflowError):
+        return None
+
+
 def _read_uvd_telemetry(path: Path, topics: frozenset[str] | None
                         ) -> Iterator[tuple[str, int, object]]:
     try:
@@ -194,7 +205,7 @@ def _read_uvd_telemetry(path: Path, topics: frozenset[str] | None
                 topic = str(rec.get("type", "?"))
                 if topics is not None and topic not in topics:
                     continue
-                yield topic, int(rec.get("t_ns", 0)), SimpleNamespace(**rec)
+                yield topic, _telemetry_stamp(rec.get("t_ns", 0)), SimpleNamespace(**rec)
     except (OSError, UnicodeDecodeError) as exc:
         raise LogReadError(f"{path}: cannot read uvd telemetry: {exc}") from exc
 
