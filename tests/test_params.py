@@ -184,3 +184,19 @@ def test_toml_file_errors_and_atomic_save(tmp_path):
     with pytest.raises(FileNotFoundError):
         save_params(p, tmp_path / "no" / "dir.toml")
     assert sorted(x.name for x in tmp_path.iterdir()) == ["p.toml"]
+
+
+def test_a_g_beyond_int64_is_read_as_the_number_it_is(tmp_path):
+    # found by probing (session 21): g = 2**70 in a parameter file passed the check as a
+    # number, then reached UVParams as a Python int: numpy made it an object array and
+    # np.isfinite raised a TypeError (a traceback from uvd xval --params, identify --init)
+    big = 2**70
+    f = tmp_path / "p.toml"
+    save_params(P.UVParams.decoupled([2] * 6, [-1] * 6, 0.0, [0, 0, 1]), f)
+    full = f.read_text()
+    assert "g = 0.0\n" in full
+    for text in (full, "[parameters]\n" + _DECOUPLED.replace("g = 0", "g = 0.0")):
+        f.write_text(text.replace("g = 0.0\n", f"g = {big}\n"))
+        p = params_from_toml(f)
+        assert p.g == float(big) and type(p.g) is float
+        assert p.theta[P.IDX_G] == float(big)

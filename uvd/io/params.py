@@ -84,13 +84,13 @@ def params_from_mapping(table: dict, *, where: str = "parameters") -> UVParams:
             raise ParameterError(f"{where}: missing key(s) {sorted(missing)}")
         M = _numbers(table, "M", (6, 6), where)
         D = np.stack([_numbers(table, f"D{i}", (6, 6), where) for i in range(1, 7)])
-        _numbers(table, "g", (), where)
+        g = float(_numbers(table, "g", (), where))
         b = _numbers(table, "b", (3,), where)
         asym = float(np.max(np.abs(M - M.T)))
         if asym > 1e-9 * max(1.0, float(np.max(np.abs(M)))):
             raise ParameterError(f"{where}: M is not symmetric (max |M - Mᵀ| = {asym:.3g}); "
                                  "the mass matrix of (2.40) is")
-        return UVParams(M=M, D=D, g=table["g"], b=b)
+        return UVParams(M=M, D=D, g=g, b=b)
     unknown = keys - dec
     if unknown:
         raise ParameterError(f"{where}: unknown key(s) {sorted(unknown)}")
@@ -99,8 +99,8 @@ def params_from_mapping(table: dict, *, where: str = "parameters") -> UVParams:
         raise ParameterError(f"{where}: missing key(s) {sorted(missing)} "
                              "(give M, D1..D6, g, b or m, d, g, b)")
     m, d = _numbers(table, "m", (6,), where), _numbers(table, "d", (6,), where)
-    _numbers(table, "g", (), where)
-    return UVParams.decoupled(m, d, table["g"], _numbers(table, "b", (3,), where))
+    g = float(_numbers(table, "g", (), where))
+    return UVParams.decoupled(m, d, g, _numbers(table, "b", (3,), where))
 
 
 def params_from_toml(path: str | Path) -> UVParams:
