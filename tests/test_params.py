@@ -200,3 +200,18 @@ def test_a_g_beyond_int64_is_read_as_the_number_it_is(tmp_path):
         p = params_from_toml(f)
         assert p.g == float(big) and type(p.g) is float
         assert p.theta[P.IDX_G] == float(big)
+
+
+@pytest.mark.parametrize("value, got", [("5", "int 5"), ('"x"', "str 'x'"),
+                                        ("[1, 2]", "list [1, 2]")])
+def test_parameters_that_are_not_a_table_are_named(tmp_path, capsys, value, got):
+    # found by probing (session 21): a number was a TypeError traceback ('int' object is not
+    # iterable), a text or a list was read as its "unknown key(s)"
+    from uvd.cli import main
+    f = tmp_path / "p.toml"
+    f.write_text(f"parameters = {value}\n")
+    with pytest.raises(ParameterError) as e:
+        params_from_toml(f)
+    assert str(e.value) == f"{f}: [parameters]: expected a table, got {got}"
+    assert main(["xval", "--params", str(f), "--log", str(tmp_path / "run.npz")]) == 2
+    assert capsys.readouterr().err == f"uvd xval: error: {e.value}\n"

@@ -72,6 +72,9 @@ def params_from_mapping(table: dict, *, where: str = "parameters") -> UVParams:
     decoupled form (m, d, g, b) of §5.3.1. Unknown or missing keys, an entry that is not a
     finite number, a wrong shape and an M that is not symmetric (the mass matrix of (2.40)
     is) are errors naming the key."""
+    if not isinstance(table, dict):
+        raise ParameterError(f"{where}: expected a table, got {type(table).__name__} "
+                             f"{table!r:.80}")
     full = {"M", "D1", "D2", "D3", "D4", "D5", "D6", "g", "b"}
     dec = {"m", "d", "g", "b"}
     keys = set(table)
