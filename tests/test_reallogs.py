@@ -777,3 +777,32 @@ def test_a_telemetry_record_whose_time_is_not_one_costs_its_own_sample(tmp_path,
     assert [t for _topic, t, _m in open_log(f, "uvd-telemetry")] == \
         [k * 100_000_000 for k in range(10) if k != 4][:4] + [None] + \
         [k * 100_000_000 for k in range(5, 10)]
+
+
+@pytest.mark.parametrize("head, what", [
+    ("thrusters = 5", "thrusters must be an array of tables ([[thrusters]]), got int 5"),
+    ('thrusters = ["a", "b", "c", "d", "e", "f"]', "thrusters[0] must be a table, got str 'a'"),
+    ("thrusters = {a = 1}", "thrusters must be an array of tables ([[thrusters]]), got dict "
+                            "{'a': 1}"),
+    ("thruster_defaults = 5", "[thruster_defaults] must be a table, got int 5"),
+    ("thrust_curves = 5", "[thrust_curves] must be a table, got int 5"),
+    ("thrust_curves = {t200 = [1]}", "[thrust_curves.t200] must be a table, got list [1]"),
+])
+def test_vehicle_tables_that_are_not_tables_are_named(tmp_path, capsys, head, what):
+    # found by probing (session 21): tracebacks ('int' object is not iterable, 'int' object
+    # has no attribute 'items') or a text or a table taken letter by letter, key by key as
+    # "thrusters[0]: unknown key(s) ['a']"
+    from uvd.cli import main
+    src = (REPO / "uvd" / "vehicles" / "bluerov-exjobb.toml").read_text()
+    key = head.split(" = ")[0]
+    src = re.sub(rf"(?ms)^\[+{key}\]+\n.*?(?=^\[|\Z)", "", src)  # the file's own goes
+    assert f"[{key}]" not in src
+    bad = tmp_path / "v.toml"
+    bad.write_text(head + "\n" + src)
+    with pytest.raises(ConfigError) as e:
+        load_vehicle(bad)
+    assert str(e.value) == f"{bad}: {what}"
+    assert main(["identify", "--log", str(tmp_path / "x.bag"), "--profile",
+                 "bluerov-exjobb-april", "--vehicle", str(bad), "--method", "ls",
+                 "--out", str(tmp_path / "o.toml")]) == 2
+    assert capsys.readouterr().err == f"uvd identify: error: {e.value}\n"

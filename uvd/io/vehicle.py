@@ -79,6 +79,13 @@ def load_curve(name: str) -> ThrustCurve:
     return _curve_from_table(read_toml(f), f"thrust curve {f}")
 
 
+def _table(value, where: str) -> dict:
+    """``value`` if it is a table; else a ConfigError saying what it is instead."""
+    if not isinstance(value, dict):
+        raise ConfigError(f"{where} must be a table, got {type(value).__name__} {value!r:.80}")
+    return value
+
+
 def load_vehicle(name_or_path: str | Path) -> Vehicle:
     """Load a built-in vehicle by name or a vehicle TOML file by path; validates it."""
     path = vehicle_path(name_or_path)
@@ -93,15 +100,21 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
         params.validate(where=f"{path}: [parameters]")
     except ParameterError as exc:
         raise ConfigError(str(exc)) from exc
-    defaults = dict(doc.get("thruster_defaults", {}))
+    defaults = dict(_table(doc.get("thruster_defaults", {}), f"{path}: [thruster_defaults]"))
     bad = set(defaults) - _THRUSTER_KEYS
     if bad:
         raise ConfigError(f"{path}: [thruster_defaults]: unknown key(s) {sorted(bad)}")
-    curves = {name: _curve_from_table(tbl, f"{path}: [thrust_curves.{name}]")
-              for name, tbl in doc.get("thrust_curves", {}).items()}
+    curves = {name: _curve_from_table(_table(tbl, f"{path}: [thrust_curves.{name}]"),
+                                      f"{path}: [thrust_curves.{name}]")
+              for name, tbl in _table(doc.get("thrust_curves", {}),
+                                      f"{path}: [thrust_curves]").items()}
+    thrusters = doc.get("thrusters", [])
+    if not isinstance(thrusters, list):
+        raise ConfigError(f"{path}: thrusters must be an array of tables ([[thrusters]]), got "
+                          f"{type(thrusters).__name__} {thrusters!r:.80}")
     specs = []
-    for i, t in enumerate(doc.get("thrusters", [])):
-        bad = set(t) - _THRUSTER_KEYS
+    for i, t in enumerate(thrusters):
+        bad = set(_table(t, f"{path}: thrusters[{i}]")) - _THRUSTER_KEYS
         if bad:
             raise ConfigError(f"{path}: thrusters[{i}]: unknown key(s) {sorted(bad)}")
         kw = {**defaults, **t}
