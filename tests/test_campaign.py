@@ -66,6 +66,9 @@ def _spec(axes: dict, **head):
       "axes": {"kp": {"uniform": [-1e308, 1e308]}}}, ["axes.kp.uniform", "finite"]),
     ({"campaign": {"name": "t", "kind": "control", "description": 7}},
      ["campaign.description", "string"]),
+    # found by probing (session 21): said "[campaign]: missing"
+    ({"campaign": 5}, ["[campaign]: must be a table, got int 5"]),
+    ({"campaign": [1]}, ["[campaign]: must be a table, got list [1]"]),
 ])
 def test_a_bad_campaign_file_is_refused_by_name(data, words):
     with pytest.raises(CampaignError) as err:

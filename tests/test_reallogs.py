@@ -292,6 +292,9 @@ def _fields_instead(signal: dict, fields) -> None:
 
 @pytest.mark.parametrize("edit,match", [
     (lambda d: d.pop("signals"), r"missing \[signals\]"),
+    # found by probing (session 21): said "missing [signals]"
+    (lambda d: d.update(signals=5), r"\[signals\] must be a table, got int 5"),
+    (lambda d: d.update(signals=[1]), r"\[signals\] must be a table, got list \[1\]"),
     (lambda d: d.update(bogus=1), r"unknown key\(s\) \['bogus'\]"),
     (lambda d: d["signals"].pop("thrusters"), r"identification needs \['thrusters'\]"),
     (lambda d: d["signals"]["angular_rate"].update(unit="rpm"),

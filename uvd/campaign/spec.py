@@ -161,8 +161,11 @@ def parse(data: dict, kinds: dict[str, dict[str, Axis]], source: str = "") -> Ca
         raise CampaignError(f"{_where(source, sorted(unknown)[0])}: unknown table; known: "
                             "[campaign], [axes]")
     head = data.get("campaign")
-    if not isinstance(head, dict):
+    if head is None:
         raise CampaignError(f"{_where(source, '[campaign]')}: missing")
+    if not isinstance(head, dict):
+        raise CampaignError(f"{_where(source, '[campaign]')}: must be a table, got "
+                            f"{type(head).__name__} {head!r:.80}")
     known_head = {"name", "kind", "sampling", "runs", "seed", "description"}
     for k in head:
         if k not in known_head:

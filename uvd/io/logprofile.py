@@ -197,8 +197,11 @@ def profile_from_mapping(doc: dict, *, where: str) -> LogProfile:
     if bad:
         raise ConfigError(f"{where}: unknown key(s) {sorted(bad)}")
     sig = doc.get("signals")
-    if not isinstance(sig, dict):
+    if sig is None:
         raise ConfigError(f"{where}: missing [signals]")
+    if not isinstance(sig, dict):
+        raise ConfigError(f"{where}: [signals] must be a table, got {type(sig).__name__} "
+                          f"{sig!r:.80}")
     bad = set(sig) - set(SIGNALS)
     if bad:
         raise ConfigError(f"{where}: [signals]: unknown signal(s) {sorted(bad)}; known "
