@@ -96,32 +96,15 @@ OD_MODE_DISPLAY = 0x6061
 OD_MAX_TORQUE = 0x6072
 
 
-def _read_od(path: Path, node_id: int) -> canopen.ObjectDictionary:
-    """Parse an EDS/DCF for ``node_id``; ValueError saying what is wrong with the file."""
+def load_od(path: Path, node_id: int, where: str) -> canopen.ObjectDictionary:
+    """Parse an EDS/DCF for ``node_id``; a missing or broken file is a ConfigError naming it."""
     if not Path(path).is_file():
-        raise ValueError(f"no object dictionary file at {str(path)!r}")
+        raise ConfigError(f"{where} eds: no object dictionary file at {str(path)!r}")
     try:
         return canopen.import_od(str(path), node_id)
     except Exception as exc:  # noqa: BLE001 - canopen raises many kinds here
-        raise ValueError(f"cannot read {str(path)!r}: {' '.join(str(exc).split())}") from exc
-
-
-def load_od(path: Path, node_id: int, where: str) -> canopen.ObjectDictionary:
-    """Parse an EDS/DCF for ``node_id``; a missing or broken file is a ConfigError naming it."""
-    try:
-        return _read_od(path, node_id)
-    except ValueError as exc:
-        raise ConfigError(f"{where} eds: {exc}") from exc
-
-
-def od_problem(path: Path, node_id: int) -> str | None:
-    """What is wrong with the object dictionary file ``path`` (None: it reads), for a
-    configuration's check."""
-    try:
-        _read_od(path, node_id)
-    except ValueError as exc:
-        return str(exc)
-    return None
+        raise ConfigError(f"{where} eds: cannot read {str(path)!r}: "
+                          f"{' '.join(str(exc).split())}") from exc
 
 
 @dataclass(frozen=True, slots=True)
@@ -816,4 +799,4 @@ class AmplifierGroup:
 
 
 __all__ = ["AmplifierGroup", "AmplifierFeedback", "GroupFeedback", "WriteStatus",
-           "FaultEvent", "StartReport", "load_od", "od_problem"]
+           "FaultEvent", "StartReport", "load_od"]

@@ -721,16 +721,6 @@ class Config:
 # The CAN driver keeps plain dataclasses (drivers/can/config.py; drivers never import uvd):
 # the [can] tables are declared here, validated with everything else and converted.
 
-def _check_eds(eds: Path, default: Path, node_id: int) -> list[tuple[str, str]]:
-    """An object dictionary other than the shipped one must read (at start the daemon, the
-    emulators and ``uvd zero-thrust`` parse it)."""
-    if eds == default:
-        return []
-    from drivers.can.amplifier import od_problem  # canopen: only for a file of one's own
-    problem = od_problem(eds.expanduser(), node_id)
-    return [("eds", problem)] if problem else []
-
-
 @dataclass(frozen=True)
 class CanAmplifiersSection:
     """The thruster amplifiers (``[can.amplifiers]``): one CiA 402 node per thruster."""
@@ -795,8 +785,6 @@ class CanAmplifiersSection:
         if t is not None and len(t) != len(self.node_ids):
             out.append(("thrust_per_permille_n", f"{len(t)} values for {len(self.node_ids)} "
                                                  "node ids (one per node id)"))
-        if self.node_ids:
-            out += _check_eds(self.eds, DEFAULT_AMPLIFIER_EDS, self.node_ids[0])
         return out  # every number is finite: the schema refuses nan and inf
 
     def convert(self) -> AmplifierConfig:
@@ -818,9 +806,6 @@ class CanDepthSection:
     density_kg_m3: float = setting(998.0, unit="kg/m³", gt=0, doc="water density ρ")
     gravity_m_s2: float = setting(9.80665, unit="m/s²", gt=0, doc="gravity g")
     max_age_ms: int = setting(500, unit="ms", min=1, doc="a sample older than this is stale")
-
-    def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
-        return _check_eds(self.eds, DEFAULT_PRESSURE_EDS, self.node_id) if self.enabled else []
 
     def convert(self) -> CanDepthConfig:
         return CanDepthConfig(**{**vars(self), "eds": self.eds.expanduser()})
