@@ -32,7 +32,9 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     callbacks = SessionCallbacks()
     with zenoh.open(conf) as s:
         token = s.liveliness().declare_token("uvd/sub1/alive")
-        pub = s.declare_publisher("uvd/sub1/estimate/aid6")
+        # BLOCK: what is counted below is every sample, and a busy machine must not drop one
+        pub = s.declare_publisher("uvd/sub1/estimate/aid6",
+                                  congestion_control=zenoh.CongestionControl.BLOCK)
         s.declare_subscriber("uvd/*/fault/*", callbacks(lambda x: faults.append(
             (str(x.key_expr), json.loads(x.payload.to_bytes())))))
         proc = subprocess.Popen(
@@ -40,8 +42,13 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
              "--warmup-s", "10", "--baseline-s", "100", "--seconds", "30",
              "--stats", str(tmp_path / "stats.json")],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        try:
-            time.sleep(3.0)  # the client connects and subscribes
+        lines = _lines_of(proc)
+        try:  # the client has subscribed (its line, and our publisher sees it): a fixed sleep
+            # of 3 s lost the first 19 samples beside four busy processes
+            deadline = time.monotonic() + 60.0
+            while not (any("watching" in x for x in lines) and pub.matching_status.matching) \
+                    and time.monotonic() < deadline:
+                time.sleep(0.05)
             rng = np.random.default_rng(3)
             for k in range(300):  # 300 simulated seconds, a drag step at 200 s
                 scale = {"drags": 1.5} if k >= 200 else None
@@ -54,13 +61,15 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
                 time.sleep(0.1)
             pub.put(b"not json")  # counted and dropped, never a crash
             pub.put(b"[1, 2]")  # JSON, not an object: the same
-            time.sleep(0.3)
+            _wait_for_line(lines, "not a JSON object")
             token.undeclare()
-            time.sleep(0.5)
+            _wait_for_line(lines, "sub1: gone")
         finally:
             proc.terminate()
-            out, _ = proc.communicate(timeout=10)
+            proc.wait(timeout=10)
     assert callbacks.close(s) == 0  # the session closed with the block; its threads end
+    time.sleep(0.2)  # the reader thread takes the last lines
+    out = "".join(lines)
     print(out)
     assert len(faults) == 1, faults
     key, d = faults[0]
@@ -87,6 +96,13 @@ def busy_machine():
     for p in procs:
         p.kill()
         p.wait()
+
+
+def _wait_for_line(lines: list[str], text: str, timeout_s: float = 30.0) -> None:
+    """Until a line holding ``text`` has come (a busy machine takes its time), or timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while not any(text in x for x in lines) and time.monotonic() < deadline:
+        time.sleep(0.05)
 
 
 def _lines_of(proc) -> list[str]:
