@@ -1,11 +1,11 @@
 """The black-box recorder and lockstep replay, against a real run of the daemon over sim-bridge.
 
 One HIL run with the recorder on (an operator mode change, an INS dropout that fires and
-clears a failsafe) is read back with MCAP's own streaming reader, every message validated
-against its JSON Schema, and replayed through the one cycle: the commands must come out
-bit-identical. A corrupted copy must show its first mismatch; other gains, other tracking;
-cut, foreign and incomplete files clear messages. A writer killed with SIGKILL leaves a file
-readable up to at most one second before the kill.
+clears a failsafe) is read back record by record (MCAP's own record readers), every message
+validated against its JSON Schema, and replayed through the one cycle: the commands must come
+out bit-identical. A corrupted copy must show its first mismatch; other gains, other tracking;
+cut, foreign and incomplete files clear messages; a damaged record costs only itself. A
+writer killed with SIGKILL leaves a file readable up to at most one second before the kill.
 """
 
 from __future__ import annotations
@@ -202,7 +202,7 @@ def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = N
              stray_channel: int | None = None) -> None:
     """Copy a recording message by message through MCAP's writer, ``edit``-ing each (None:
     left out; bytes: written as they are); ``schema_names`` renames channels' schemas,
-    ``stray_channel`` adds a message on a channel id never declared."""
+    ``stray_channel`` adds a message on a channel id never declared, before the 20th cycle."""
     from mcap.writer import CompressionType, Writer
     with dst.open("wb") as fh:
         w = Writer(fh, use_chunking=False, compression=CompressionType.NONE)
@@ -213,13 +213,16 @@ def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = N
             sid = w.register_schema(sname, "jsonschema", json.dumps(schema(
                 CHANNELS[topic][0])).encode())
             ids[topic] = w.register_channel(topic, "json", sid)
+        n_cycle = 0
         for k, (topic, t, msg) in enumerate(read_messages(src)):
+            if topic == "/uvd/cycle":
+                n_cycle += 1
+                if n_cycle == 20 and stray_channel is not None:
+                    w.add_message(stray_channel, t, b"{}", t, k)
             msg = edit(k, topic, msg)
             if msg is not None:
                 data = msg if isinstance(msg, bytes) else json.dumps(msg).encode()
                 w.add_message(ids[topic], t, data, t, k)
-            if k == 100 and stray_channel is not None:
-                w.add_message(stray_channel, t, b"{}", t, k)
         w.finish()
 
 
@@ -302,10 +305,16 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
     with pytest.raises(RecordingError, match="other-schema.mcap: channel /uvd/cycle has schema "
                                              "'uvd.cycle.v9'"):
         replay_lockstep(other)
+    # a message on a channel never declared (a damaged channel id): replay covers the 19
+    # cycles before it (it refused the whole file)
     stray = tmp_path / "stray.mcap"
     _rewrite(path, stray, same, stray_channel=99)
-    with pytest.raises(RecordingError, match="stray.mcap: message on unknown channel 99"):
-        replay_lockstep(stray)
+    with pytest.raises(RecordingError, match="stray.mcap: message on unknown channel 99 at "
+                                             "byte [0-9]+"):
+        list(read_messages(stray))
+    rep = replay_lockstep(stray)
+    assert (rep.cycles, rep.mismatches) == (19, 0) and rep.stopped.startswith(
+        "message on unknown channel 99 at byte "), rep.stopped
     no_thrust = tmp_path / "no-thrust.mcap"
     _rewrite(path, no_thrust, lambda k, topic, msg: {key: v for key, v in msg.items()
                                                      if key != "thrust"}
@@ -323,15 +332,17 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
                                                  "its schema"):
             write_report(bad, tmp_path / "report")
     assert main(["report", str(short_p), "--out", str(tmp_path / "report"), "--quiet"]) == 2
-    # a message that is not JSON (a damaged byte): replay, which needs every input, stops at
-    # it; the report skips and counts it and draws the rest (it refused the whole file)
+    # a message that is not JSON (a damaged byte): replay, which needs every input, covers
+    # the 20 cycles before it; the report skips and counts it and draws the rest (both
+    # refused the whole file)
     garbled = tmp_path / "garbled.mcap"
     n_cycle = iter(range(10**6))
     _rewrite(path, garbled, lambda k, topic, msg: json.dumps(msg).encode()[:-5]
              if topic == "/uvd/cycle" and next(n_cycle) == 20 else msg)
-    with pytest.raises(RecordingError, match="garbled.mcap: message on /uvd/cycle at [0-9]+ "
-                                             "ns is not JSON"):
-        replay_lockstep(garbled)
+    rep = replay_lockstep(garbled)
+    assert (rep.cycles, rep.mismatches) == (20, 0), rep.first_mismatch
+    assert rep.stopped.startswith("message on /uvd/cycle at ") and \
+        rep.stopped.endswith(" the replay covers the 20 cycles recorded before it"), rep.stopped
     n_recorded = sum(1 for _ in read_messages(path, ["/uvd/cycle"]))
     summary = write_report(garbled, tmp_path / "report-garbled")
     assert (summary["cycles"], summary["unreadable_messages"]) == (n_recorded - 1, 1)
@@ -341,6 +352,59 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
                  "--quiet"]) == 0
     assert "uvd report: 1 unreadable message(s) skipped (first: message on /uvd/cycle" in \
         capsys.readouterr().err
+
+
+def _record_offsets(data: bytes) -> list[tuple[int, int]]:
+    """(offset, opcode) of each record of an MCAP file's data section, walked by the format's
+    own framing (an opcode byte, a uint64 length), up to DataEnd."""
+    import struct
+    out, pos = [], 8
+    while pos < len(data):
+        op, length = struct.unpack_from("<BQ", data, pos)
+        if op == 0x0F:
+            break
+        out.append((pos, op))
+        pos += 9 + length
+    return out
+
+
+@pytest.mark.parametrize("damage, why", [
+    # a length that runs past the end: read as a cut, it silently lost the rest of the run
+    # (3662 of 4439 messages in one probe)
+    (lambda b, at: b.__setitem__(slice(at + 1, at + 9), (2**40).to_bytes(8, "little")),
+     "its length, 1099511627776 B, runs past the end of the file"),
+    # an opcode MCAP has not: its record is skipped, unseen
+    (lambda b, at: b.__setitem__(at, 0x85), "no MCAP record has opcode 0x85"),
+])
+def test_a_damaged_record_costs_only_itself(recorded, tmp_path, damage, why):
+    """A record's header damaged in the middle of a file (found by flipping single bytes of
+    a demo's recording: 9 of 300 made report and replay refuse the whole file, 5 lost most
+    of it silently): every other message is read, the damage is named with its byte; replay
+    covers the cycles before it, bit for bit."""
+    path, _, _, _ = recorded
+    data = path.read_bytes()
+    messages = [(at, op) for at, op in _record_offsets(data) if op == 0x05]
+    i, (at, _) = len(messages) // 2, messages[len(messages) // 2]
+    b = bytearray(data)
+    damage(b, at)
+    bad = tmp_path / "damaged.mcap"
+    bad.write_bytes(bytes(b))
+    every = list(read_messages(path))
+    notes: list[str] = []
+    assert list(read_messages(bad, unreadable=notes)) == every[:i] + every[i + 1:]
+    assert notes == [f"damaged MCAP record at byte {at} ({why}): "
+                     f"{messages[i + 1][0] - at} bytes skipped to the next record"]
+    with pytest.raises(RecordingError, match=f"damaged.mcap: damaged MCAP record at byte {at}"):
+        list(read_messages(bad))
+    n_before = sum(1 for topic, _, _ in every[:i] if topic == "/uvd/cycle")
+    rep = replay_lockstep(bad)
+    assert (rep.cycles, rep.mismatches) == (n_before, 0), rep.first_mismatch
+    assert rep.stopped == f"{notes[0]}: the replay covers the {n_before} cycles recorded " \
+                          "before it"
+    summary = write_report(bad, tmp_path / "report")
+    n_cycles = sum(1 for topic, _, _ in every if topic == "/uvd/cycle")
+    assert summary["cycles"] == n_cycles - (every[i][0] == "/uvd/cycle")
+    assert summary["unreadable_messages"] == 1 and summary["first_unreadable"] == notes[0]
 
 
 def test_sigkill_of_the_daemon_leaves_a_file_report_reads_to_within_a_second(tmp_path):

@@ -8,14 +8,22 @@ wrote through :func:`read_messages`.
 
 from __future__ import annotations
 
+import io
 import json
-import os
+import mmap
+import re
 import struct
 from collections.abc import Iterator, Sequence
 from functools import cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Header, Message, Schema
+from mcap.stream_reader import breakup_chunk
 
 __all__ = ["CHANNELS", "schema", "read_messages", "RecordingError"]
 
@@ -51,73 +59,208 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None, *,
                   ) -> Iterator[tuple[str, int, dict[str, Any]]]:
     """(topic, log time ns, decoded JSON) of every message of an MCAP file, in file order.
 
-    Reads with MCAP's streaming reader, so a file cut by a crash yields every message written
-    before the cut (the cut itself ends the iteration quietly).
+    Walks the data section record by record (:func:`_records`; MCAP's own record readers parse
+    each one), so a file cut by a crash yields every message written before the cut (the cut
+    itself ends the iteration quietly), and a damaged stretch in the middle — a record whose
+    length, kind or content does not read, a message on a channel never declared — costs
+    only itself: the walk goes on at the next record header that reads.
 
-    ``unreadable``: where a message that is not JSON goes instead of raising — one line naming
-    its topic and time, the message skipped (``uvd report`` counts them and draws the rest).
-    Replay leaves it None: it needs every input, and stops at the first.
+    ``unreadable``: where such a stretch and a message that is not JSON go instead of raising
+    — one line naming the byte or the topic and time, the message skipped (``uvd report``
+    counts them and draws the rest; replay covers the cycles before the first).
 
     Raises
     ------
     RecordingError
-        Not an MCAP file, a damaged record, a channel of uvd's topics with another schema or
-        encoding, a message on a channel never declared, or a message that is not JSON
-        unless ``unreadable`` takes it (the message names the file and the problem). Channels
-        of other topics are read as they are.
+        Not an MCAP file, a channel of uvd's topics with another schema or encoding, or (unless
+        ``unreadable`` takes it) a damaged record or a message that is not JSON (the message
+        names the file and the problem). Channels of other topics are read as they are.
     """
-    from mcap.exceptions import EndOfFile, McapError
-    from mcap.reader import StreamReader
-    from mcap.records import Channel, Message, Schema
-
     path = Path(path)
     want = None if topics is None else set(topics)
     channels: dict[int, str] = {}
     schemas: dict[int, str] = {}
+
+    def damaged(what: str, exc: Exception | None = None) -> None:
+        if unreadable is None:
+            raise RecordingError(f"{path}: {what}") from exc
+        unreadable.append(what)
+
     try:
         fh = path.open("rb")
     except OSError as exc:
         raise RecordingError(f"{path}: cannot open: {exc}") from exc
     with fh:
-        size = os.fstat(fh.fileno()).st_size
-        if fh.read(8) != b"\x89MCAP0\r\n":
+        if fh.read(8) != MAGIC:
             raise RecordingError(f"{path}: not an MCAP file (no MCAP magic at its start)")
-        fh.seek(0)
-        it = StreamReader(fh, validate_crcs=False).records
-        while True:
-            try:
-                rec = next(it)
-            except StopIteration:
-                return
-            except (EndOfFile, McapError, ValueError, struct.error) as exc:
-                if isinstance(exc, EndOfFile) or fh.tell() >= size:
-                    return  # a file cut by a crash: everything before the cut was read
-                raise RecordingError(f"{path}: damaged MCAP record: {exc}") from exc
-            if isinstance(rec, Schema):
-                schemas[rec.id] = rec.name
-            elif isinstance(rec, Channel):
-                want_schema = CHANNELS.get(rec.topic, (None,))[0]
-                got = schemas.get(rec.schema_id)
-                if want_schema is not None and (got != want_schema
-                                                or rec.message_encoding != "json"):
-                    raise RecordingError(
-                        f"{path}: channel {rec.topic} has schema {got!r} and encoding "
-                        f"{rec.message_encoding!r}; uvd writes {want_schema!r} as json "
-                        "(another program's file, or another version's)")
-                channels[rec.id] = rec.topic
-            elif isinstance(rec, Message):
-                topic = channels.get(rec.channel_id)
-                if topic is None:
-                    raise RecordingError(f"{path}: message on unknown channel {rec.channel_id}")
-                if want is not None and topic not in want:
+        with mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            for at, rec in _records(mm, channels):
+                if isinstance(rec, str):
+                    damaged(rec)
                     continue
-                try:
-                    msg = json.loads(rec.data)
-                except ValueError as exc:
-                    what = f"message on {topic} at {rec.log_time} ns is not JSON: {exc}"
-                    if unreadable is None:
-                        raise RecordingError(f"{path}: {what}") from exc
-                    unreadable.append(what)
-                    continue
-                yield topic, rec.log_time, msg
+                inner = [rec]
+                if isinstance(rec, Chunk):  # another writer's (uvd writes no chunks)
+                    try:
+                        inner = breakup_chunk(rec, validate_crc=True)
+                    except Exception as exc:  # noqa: BLE001 - a damaged chunk, in any way
+                        damaged(f"damaged MCAP chunk at byte {at}: {exc}", exc)
+                        continue
+                for r in inner:
+                    if isinstance(r, Schema):
+                        schemas[r.id] = r.name
+                    elif isinstance(r, Channel):
+                        want_schema = CHANNELS.get(r.topic, (None,))[0]
+                        got = schemas.get(r.schema_id)
+                        if want_schema is not None and (got not in (None, want_schema)
+                                                        or r.message_encoding != "json"):
+                            raise RecordingError(
+                                f"{path}: channel {r.topic} has schema {got!r} and encoding "
+                                f"{r.message_encoding!r}; uvd writes {want_schema!r} as json "
+                                "(another program's file, or another version's)")
+                        if want_schema is not None and got is None:  # its schema record lost
+                            damaged(f"channel {r.topic} at byte {at} names schema id "
+                                    f"{r.schema_id}, declared by no schema record read: its "
+                                    f"messages are taken as uvd's {want_schema}")
+                        channels[r.id] = r.topic
+                    elif isinstance(r, Message):
+                        topic = channels.get(r.channel_id)
+                        if topic is None:
+                            damaged(f"message on unknown channel {r.channel_id} at byte {at}")
+                            continue
+                        if want is not None and topic not in want:
+                            continue
+                        try:
+                            msg = json.loads(r.data)
+                        except ValueError as exc:
+                            damaged(f"message on {topic} at {r.log_time} ns is not JSON: "
+                                    f"{exc}", exc)
+                            continue
+                        yield topic, r.log_time, msg
 
+
+#: the 8 bytes an MCAP file begins (and a complete one ends) with
+MAGIC = b"\x89MCAP0\r\n"
+_HEAD = struct.Struct("<BQ")  # a record's opcode and the length of its content
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+#: MCAP's opcodes, 0x01 (Header) to 0x0F (DataEnd)
+_OPCODES = frozenset(range(0x01, 0x10))
+#: a byte JSON text never holds (below 0x20 but tab, line feed and carriage return): what
+#: uvd's messages are, and what every record header holds (its opcode, its length's zeros)
+_NOT_JSON_TEXT = re.compile(rb"[\x00-\x08\x0b\x0c\x0e-\x1f]")
+#: the records that end a data section (DataEnd, Footer) and their fixed lengths
+_END_LENGTH = {Opcode.DATA_END: 4, Opcode.FOOTER: 20}
+#: the records that belong to the summary section only, never to the data section
+_SUMMARY_ONLY = frozenset({Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX, Opcode.STATISTICS,
+                           Opcode.METADATA_INDEX, Opcode.SUMMARY_OFFSET})
+#: MCAP's readers of the records uvd reads beside messages
+_READERS = {Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read,
+            Opcode.HEADER: Header.read, Opcode.CHUNK: Chunk.read}
+#: where a record uvd can resynchronise on may begin: a schema, a channel or a message
+_SYNC = re.compile(rb"[\x03\x04\x05]")
+
+
+def _records(mm: mmap.mmap, channels: dict[int, str]) -> Iterator[tuple[int, object]]:
+    """(byte offset, record) of each record of an MCAP file's data section, in file order, up
+    to its DataEnd (or Footer) or the end of the file.
+
+    A record that does not read — its length runs past the end, an opcode MCAP does not have,
+    content its own reader (MCAP's) fails on — is (offset, text naming it and the bytes
+    skipped), and the walk goes on at the next offset where a record header reads and the
+    record after it does too (:func:`_resync`). Where none does, the file ends inside that
+    record — a file cut by a crash — and the walk ends quietly: everything before was read.
+    """
+    size, pos, after = len(mm), len(MAGIC), 0
+    while pos < size:
+        rec, end, why = _record_at(mm, pos, after)
+        if why is not None:
+            nxt = _resync(mm, pos + 1, channels)
+            if nxt is None:
+                return  # the file ends inside this record: cut by a crash
+            yield pos, (f"damaged MCAP record at byte {pos} ({why}): {nxt - pos} bytes "
+                        "skipped to the next record")
+            pos, after = nxt, Opcode.MESSAGE
+            continue
+        if end is None:  # DataEnd or Footer: the data section is over
+            return
+        if rec is not None:
+            yield pos, rec
+        pos, after = end, mm[pos]
+
+
+def _record_at(mm: mmap.mmap, pos: int, after: int = 0
+               ) -> tuple[object | None, int | None, str | None]:
+    """(record or None for a kind uvd does not read, offset of the next record or None at the
+    data section's end, None) of the record at ``pos``, ``after`` a record of that opcode (0:
+    the first); (None, None, why) if it does not read. Besides its own reader's (MCAP's)
+    checks: a kind in its place in a data section (a header first, a message index after a
+    chunk, no summary record), the end records of their fixed lengths, and the byte after the
+    record an opcode (or the end of the file, or a cut in the next header): a length that
+    runs into the middle of another record is found there, not taken for a long message."""
+    size = len(mm)
+    if pos + _HEAD.size > size:
+        return None, None, "the file ends inside its header"
+    op, length = _HEAD.unpack_from(mm, pos)
+    end = pos + _HEAD.size + length
+    if op not in _OPCODES:
+        return None, None, f"no MCAP record has opcode 0x{op:02x}"
+    name = Opcode(op).name.lower()
+    if end > size:
+        return None, None, f"its length, {length} B, runs past the end of the file"
+    if op in _SUMMARY_ONLY or (op == Opcode.HEADER) != (after == 0) or \
+            (op == Opcode.MESSAGE_INDEX and after not in (Opcode.CHUNK, Opcode.MESSAGE_INDEX)):
+        return None, None, f"a {name} record cannot stand there"
+    if op in _END_LENGTH:
+        if length != _END_LENGTH[op]:
+            return None, None, f"a {name} record of {length} B, not {_END_LENGTH[op]} B"
+        return None, None, None
+    if not _record_begins(mm, end):
+        return None, None, (f"its length, {length} B, ends at byte {end}, where no record "
+                            f"begins (0x{mm[end]:02x})")
+    if op == Opcode.MESSAGE:  # the bulk of a recording: its fixed fields read here
+        if length < _MESSAGE_HEAD.size:
+            return None, None, f"a message of {length} B, shorter than a message's header"
+        channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(
+            mm, pos + _HEAD.size)
+        data = mm[pos + _HEAD.size + _MESSAGE_HEAD.size:end]
+        if (bad := _NOT_JSON_TEXT.search(data)) is not None:  # a length that runs into the
+            # next record's binary header, or a byte of the text damaged into a control byte
+            return None, None, (f"its content holds byte 0x{bad[0][0]:02x} at offset "
+                                f"{bad.start()}, which no JSON text has")
+        return Message(channel_id=channel_id, sequence=sequence, log_time=log_time,
+                       publish_time=publish_time,
+                       data=data), end, None
+    reader = _READERS.get(op)
+    if reader is None:
+        return None, end, None  # a message index, an attachment, metadata: not uvd's
+    try:
+        rec = reader(ReadDataStream(io.BytesIO(mm[pos + _HEAD.size:end])))
+    except (McapError, ValueError, struct.error, UnicodeDecodeError) as exc:
+        return None, None, f"its {name} record does not read: {type(exc).__name__}: {exc}"
+    return rec, end, None
+
+
+def _record_begins(mm: mmap.mmap, at: int, damaged_opcode: bool = True) -> bool:
+    """Whether a record may begin at ``at``: the file ends there or inside the header there
+    (a cut), an opcode stands there, or — ``damaged_opcode`` — another byte stands there whose
+    length ends where an opcode stands: then the record before ``at`` is whole and the damage
+    is this one's, named when the walk reaches it. (A message's length too long is found by
+    its content instead, which then holds the next header's bytes: no JSON text has them.)"""
+    size = len(mm)
+    if at + _HEAD.size > size or mm[at] in _OPCODES:
+        return True
+    nxt = at + _HEAD.size + _HEAD.unpack_from(mm, at)[1]
+    return damaged_opcode and nxt <= size and _record_begins(mm, nxt, damaged_opcode=False)
+
+
+def _resync(mm: mmap.mmap, start: int, channels: dict[int, str]) -> int | None:
+    """The first offset from ``start`` where a record reads (:func:`_record_at`, which also
+    checks that a record begins right after it) — a message on a channel declared so far, or
+    a schema or channel; None if there is none. JSON text, what messages hold, has no byte
+    below 0x20, so only the binary headers of records are ever tried."""
+    for m in _SYNC.finditer(mm, start):
+        q = m.start()
+        rec, _, why = _record_at(mm, q, after=Opcode.MESSAGE)
+        if why is None and rec is not None and (
+                not isinstance(rec, Message) or rec.channel_id in channels):
+            return q
+    return None

@@ -61,23 +61,31 @@ class Recording:
     lifecycle: list[dict[str, Any]]
     reloads: list[dict[str, Any]]
     serial: list[tuple[str, int, bytes]]  # (source, receive t_ns, bytes), in arrival order
+    #: the first damaged record or message, where what is read ends (None: none)
+    damaged: str | None = None
 
 
 def load_recording(path: str | Path) -> Recording:
     """Read the channels a replay needs from one ``.mcap`` file.
 
+    A damaged record or a message that is not JSON ends what is read, as a cut does: every
+    cycle before it has its inputs in the bytes before its own record; ``damaged`` names it.
+
     Raises
     ------
     RecordingError
-        Not MCAP, damaged, or without a start record or cycles (the message names the file
-        and what is missing).
+        Not MCAP, or without a start record or cycles before any damage (the message names
+        the file and what is missing).
     """
     path = Path(path)
     start = None
     cycles, commands, lifecycle, reloads, serial = [], [], [], [], []
+    damage: list[str] = []
     for topic, _, msg in read_messages(path, ("/uvd/start", "/uvd/cycle", "/uvd/command",
                                               "/uvd/lifecycle", "/uvd/reload",
-                                              "/uvd/raw/serial")):
+                                              "/uvd/raw/serial"), unreadable=damage):
+        if damage:  # this message comes after the damage: what is read ends before it
+            break
         if topic == "/uvd/cycle":
             cycles.append(msg)
         elif topic == "/uvd/raw/serial":
@@ -95,12 +103,14 @@ def load_recording(path: str | Path) -> Recording:
             reloads.append(msg)
         elif start is None:
             start = msg
+    before = f" before {damage[0]}" if damage else ""
     if start is None or not start.get("config_toml"):
-        raise RecordingError(f"{path}: no start record with the configuration (/uvd/start) — "
-                             "not a uvd recording, or not the first file of a run")
+        raise RecordingError(f"{path}: no start record with the configuration (/uvd/start)"
+                             f"{before} — not a uvd recording, or not the first file of a run")
     if not cycles:
-        raise RecordingError(f"{path}: no cycle records (/uvd/cycle)")
-    return Recording(path, start, cycles, commands, lifecycle, reloads, serial)
+        raise RecordingError(f"{path}: no cycle records (/uvd/cycle){before}")
+    return Recording(path, start, cycles, commands, lifecycle, reloads, serial,
+                     damage[0] if damage else None)
 
 
 @dataclass
@@ -294,6 +304,9 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
                     report.first_mismatch = bad
         if progress is not None:
             progress(k + 1, n)
+    if report.stopped is None and rec.damaged is not None:
+        report.stopped = (f"{rec.damaged}: the replay covers the {report.cycles} cycles "
+                          "recorded before it")
     from uvd.blas import kernels
     report.blas = {"recorded": rec.start.get("blas"), "replayed": kernels()}
     report.tracking = {"recorded": tracking(rec.cycles[:report.cycles], recorded_thrust),
