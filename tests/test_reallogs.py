@@ -420,6 +420,33 @@ def test_a_corrupted_time_stamp_costs_its_own_sample(tmp_path):
         assert after.signals[name].as_dict() == before.signals[name].as_dict()
 
 
+def test_a_damaged_message_type_costs_nothing_after_it(tmp_path):
+    """The real ArduSub log with one message's type byte damaged into a type no FMT declares
+    (an XKF5 at byte 187506, 0x50 → 0x10): asked for by type, pymavlink's dataflash reader
+    went by its index, which ends there — 673 of the 1542 ATT, IMU, BARO and RCOU messages
+    after it were lost, silently. Read in turn, every one of them is read."""
+    src = _need(ARDUSUB) / "small.BIN"
+    prof, vehicle = load_profile("ardusub-bin"), load_vehicle("bluerov2-heavy")
+    _runs, before = runs_from_log(src, prof, vehicle)
+    data = bytearray(src.read_bytes())
+    assert data[187506:187509] == b"\xa3\x95\x50"  # a message's head: 0xA3 0x95, type XKF5
+    data[187508] = 0x10
+    bad = tmp_path / "damaged-type.BIN"
+    bad.write_bytes(bytes(data))
+    _runs, after = runs_from_log(bad, prof, vehicle)
+    for name in ("attitude", "angular_rate", "depth", "thrusters"):
+        assert after.signals[name].as_dict() == before.signals[name].as_dict(), name
+    assert after.signals["attitude"].messages == 237
+
+    def by_type(path: Path) -> int:  # the damage is the kind that cut the index short
+        from pymavlink import mavutil
+        conn = mavutil.mavlink_connection(str(path))
+        n = sum(1 for _ in iter(lambda: conn.recv_match(type="ATT", blocking=False), None))
+        conn.close()
+        return n
+    assert by_type(src) == 237 and by_type(bad) < 200
+
+
 def test_onto_grid_never_invents():
     from uvd.io.logrun import _onto_grid
 

@@ -150,7 +150,12 @@ def _read_mavlink(path: Path, topics: frozenset[str] | None, *, dataflash: bool
     except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on a bad header
         raise LogReadError(f"{path}: not a readable {kind}: {type(exc).__name__}: "
                            f"{exc}") from exc
-    want = None if topics is None else sorted(topics)
+    # a dataflash log is read message by message, the wanted ones kept here: asked for by
+    # type, pymavlink's dataflash reader goes by its index, which ends at the first message of
+    # a type no FMT declares — one damaged type byte in the real small.BIN lost 673 of its 1542
+    # ATT, IMU, BARO and RCOU messages, silently; read in turn, it skips the damaged bytes. A
+    # telemetry log has no index: asked for by type, it reads in half the time
+    want = None if topics is None or dataflash else sorted(topics)
     topic = "?"
     try:
         while True:
@@ -162,6 +167,8 @@ def _read_mavlink(path: Path, topics: frozenset[str] | None, *, dataflash: bool
             if msg is None:
                 break
             topic = msg.get_type()
+            if topics is not None and topic not in topics:
+                continue
             t = float(getattr(msg, "_timestamp", 0.0)) * 1e9   # a corrupted stamp: not a time
             yield topic, int(round(t)) if math.isfinite(t) else None, msg
     finally:
