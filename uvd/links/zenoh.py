@@ -192,8 +192,7 @@ class ZenohSink:
         try:
             report = fault_report(key, sample.payload.to_bytes())
         except ValueError as exc:
-            self._fault_taken()
-            self.faults_dropped += 1
+            self._fault_taken(dropped=True)
             log.warning("%s", exc)
             return
         self.faults_received += 1
@@ -203,9 +202,12 @@ class ZenohSink:
         else:
             self._fault_taken()
 
-    def _fault_taken(self) -> None:
+    def _fault_taken(self, dropped: bool = False) -> None:
+        """A waiting sample's place freed (zenoh's or the cycle's thread): taken by the cycle,
+        or ``dropped`` as malformed (counted under the same lock as a flooded one)."""
         with self._faults_lock:
             self._faults_waiting -= 1
+            self.faults_dropped += dropped
 
     def _publisher(self, key: str, schema_name: str):
         import zenoh
@@ -413,9 +415,10 @@ def fault_report(key: str, payload: bytes):
     if not math.isfinite(d["confidence"]):
         raise ValueError(f"{key}: fault sample's confidence is {d['confidence']!r} (a finite "
                          "number); dropped")
-    if d["confidence"] < 1.0:  # the detector's sum over its threshold: below 1, no detection
-        raise ValueError(f"{key}: fault sample's confidence {d['confidence']!r} is below 1 "
-                         "(uvd.fault.v1's minimum); dropped")
+    least = schema("uvd.fault.v1")["properties"]["confidence"]["minimum"]
+    if d["confidence"] < least:  # the detector's sum over its threshold: below 1, no detection
+        raise ValueError(f"{key}: fault sample's confidence {d['confidence']!r} is below "
+                         f"{least:g} (uvd.fault.v1's minimum); dropped")
     return FaultReport(d["kind"], d["channel"], None if rc is None else float(rc),
                        int(d["t_ns"]), float(d["confidence"]), since)
 
