@@ -252,12 +252,14 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
 
     from sim_bridge.instruments.models import InstrumentConfig
+    from uvd.cliargs import positive_float
 
     ap = argparse.ArgumentParser(description=main.__doc__)
     ap.add_argument("dir", type=Path, help="folder for the ins, dvl, depth symlinks")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--ins-protocol", choices=["stdbin", "ascii"], default="stdbin")
-    ap.add_argument("--seconds", type=float, default=float("inf"))
+    ap.add_argument("--seconds", type=positive_float, default=None,
+                    help="stop after this long (default: run until interrupted)")
     args = ap.parse_args(argv)
     H = np.eye(4)
     H[2, 3] = 2.0
@@ -269,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
     async def go():
         async with emu:
             print(" ".join(f"{k}={p.link}->{p.device}" for k, p in emu.ports.items()), flush=True)
-            await asyncio.sleep(args.seconds if args.seconds != float("inf") else 1e9)
+            await asyncio.sleep(1e9 if args.seconds is None else args.seconds)
     try:
         asyncio.run(go())
     except KeyboardInterrupt:
