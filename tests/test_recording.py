@@ -354,6 +354,24 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
         capsys.readouterr().err
 
 
+def test_a_raw_message_that_is_not_base64_ends_the_replay_there(recorded, tmp_path):
+    """Valid JSON whose bytes are not base64 (a damaged character: found by flipping bits of
+    a demo's recording) refused the whole replay; it ends there, as any damage does."""
+    path, _, _, _ = recorded
+    every = list(read_messages(path))
+    k = next(i for i, (topic, _, _) in enumerate(every)
+             if topic == "/uvd/raw/serial" and i > len(every) // 2)
+    bad = tmp_path / "not-base64.mcap"
+    _rewrite(path, bad, lambda i, topic, msg: {**msg, "data": "!" + msg["data"][1:]}
+             if i == k else msg)
+    n_before = sum(1 for topic, _, _ in every[:k] if topic == "/uvd/cycle")
+    rep = replay_lockstep(bad)
+    assert (rep.cycles, rep.mismatches) == (n_before, 0), rep.first_mismatch
+    assert rep.stopped == (f"a /uvd/raw/serial message at {every[k][2]['t_ns']} ns is malformed "
+                           "(Error: Only base64 data is allowed): the replay covers the "
+                           f"{n_before} cycles recorded before it")
+
+
 def _record_offsets(data: bytes) -> list[tuple[int, int]]:
     """(offset, opcode) of each record of an MCAP file's data section, walked by the format's
     own framing (an opcode byte, a uint64 length), up to DataEnd."""

@@ -92,9 +92,10 @@ def load_recording(path: str | Path) -> Recording:
             try:
                 serial.append((str(msg["source"]), int(msg["t_ns"]),
                                base64.b64decode(msg["data"], validate=True)))
-            except (KeyError, ValueError, TypeError) as exc:
-                raise RecordingError(f"{path}: a /uvd/raw/serial message is malformed: "
-                                     f"{exc}") from exc
+            except (KeyError, ValueError, TypeError) as exc:  # damaged: what is read ends
+                damage.append(f"a /uvd/raw/serial message at {msg.get('t_ns')!r:.30} ns is "
+                              f"malformed ({type(exc).__name__}: {exc})")
+                break
         elif topic == "/uvd/command":
             commands.append(msg)
         elif topic == "/uvd/lifecycle":
