@@ -196,17 +196,90 @@ def _profile_doc(name: str) -> dict:
         return tomllib.load(fh)
 
 
+def _by_record(path: Path) -> list[tuple[str, int]]:
+    """(topic, t_ns) of a bag read record by record, in file order."""
+    from uvd.io.logs import _read_ros1_by_record
+    return [(topic, t) for topic, t, _ in _read_ros1_by_record(path, None, "test")]
+
+
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("cut", [0.5, 0.97])
-def test_truncated_bag_named(tmp_path, cut):
+def test_a_bag_read_record_by_record_is_the_bag_rosbags_reads():
+    """Every message of the real bag, decoded alike (rosbags' type system from the bag's own
+    definitions), each topic in the same order as rosbags gives it by its index."""
+    from uvd.io.logs import _read_ros1_by_record
+    bag = _small_bag()
+    indexed = list(open_log(bag))
+    by_record = list(_read_ros1_by_record(bag, None, "test"))
+    assert len(by_record) == len(indexed) == 5071
+    for topic in {t for t, _, _ in indexed}:
+        a = [(t_ns, repr(m)) for t, t_ns, m in indexed if t == topic]
+        assert a == [(t_ns, repr(m)) for t, t_ns, m in by_record if t == topic], topic
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("cut, n", [(0.5, 2806), (0.97, 5071)])  # 0.97: inside the index
+def test_a_bag_cut_short_is_read_up_to_the_cut(tmp_path, cut, n, caplog):
+    """A bag cut short has lost its index (at its end): rosbags refuses it ("Bag index looks
+    damaged"); it was an error naming ROS 1's `rosbag reindex FILE`, which a lab without
+    ROS 1 cannot run. It is read record by record up to the cut, and said so."""
     data = _small_bag().read_bytes()
     bad = tmp_path / "truncated.bag"
     bad.write_bytes(data[:int(len(data) * cut)])
-    with pytest.raises(LogReadError, match=r"truncated\.bag") as err:
-        count_messages(bad)
-    # a bag cut short has lost its index (at its end): the way to mend it is named
-    assert "Bag index looks damaged" in str(err.value)
-    assert "`rosbag reindex FILE`" in str(err.value)
+    got = [(topic, t) for topic, t, _ in open_log(bad)]
+    assert len(got) == n and got == _by_record(_small_bag())[:n]
+    assert "Bag index looks damaged" in caplog.text and "as `rosbag reindex` would" in caplog.text
+    assert "B record by record; the last" in caplog.text
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("compression", ["BZ2", "LZ4"])
+def test_a_compressed_bag_cut_short_reads_its_whole_chunks(tmp_path, compression, caplog):
+    """A bag written by rosbags' writer in chunks of about 2 kB, compressed, then cut in its
+    fourth chunk: the three whole chunks are read, the cut one is skipped and named."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+    store = get_typestore(Stores.ROS1_NOETIC)
+    Float64 = store.types["std_msgs/msg/Float64"]
+    path = tmp_path / "z.bag"
+    w = Writer(path)
+    w.set_compression(getattr(Writer.CompressionFormat, compression))
+    w.chunk_threshold = 2000
+    with w:
+        conn = w.add_connection("/depth", Float64.__msgtype__, typestore=store)
+        for k in range(600):
+            w.write(conn, 10**9 + k * 10**7, store.serialize_ros1(Float64(data=0.5 * k),
+                                                                  Float64.__msgtype__))
+    data = path.read_bytes()
+    chunks = [m.start() for m in re.finditer(rb"compression=", data)]
+    assert len(chunks) > 4
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[:chunks[3] + 40])  # inside the fourth chunk
+    got = [(t, m.data) for _topic, t, m in open_log(cut)]
+    whole = [(t, m.data) for _topic, t, m in open_log(path)]
+    assert 0 < len(got) < len(whole) and got == whole[:len(got)]
+    assert f"skipped a {compression.lower()} chunk at byte " in caplog.text and "cut short" \
+        in caplog.text
+
+
+@pytest.mark.timeout(60)
+def test_a_recording_never_closed_is_read(tmp_path, caplog):
+    """What `rosbag record` leaves when the vehicle's power goes (NAME.bag.active): no index
+    (index_pos 0), the chunk's size never written (0), the file ending inside a record."""
+    d = bytearray(_small_bag().read_bytes())
+    i = d.index(b"index_pos=")
+    d[i + 10:i + 18] = bytes(8)
+    (hlen,) = struct.unpack_from("<I", d, 13)  # the bag header record, after the magic line
+    chunk = 13 + 8 + hlen + struct.unpack_from("<I", d, 13 + 4 + hlen)[0]
+    (chlen,) = struct.unpack_from("<I", d, chunk)
+    assert b"op=\x05" in d[chunk + 4:chunk + 4 + chlen]  # the one chunk
+    (size,) = struct.unpack_from("<I", d, chunk + 4 + chlen)
+    d[chunk + 4 + chlen:chunk + 8 + chlen] = bytes(4)
+    active = tmp_path / "run.bag.active"
+    active.write_bytes(bytes(d[:chunk + 8 + chlen + size - 1000]))
+    assert detect_format(active) == "ros1"
+    got = [(topic, t) for topic, t, _ in open_log(active)]
+    assert len(got) == 5062 and got == _by_record(_small_bag())[:5062]  # 9 cut off
+    assert "a recording never closed (.active)" in caplog.text
 
 
 @pytest.mark.timeout(60)

@@ -9,7 +9,9 @@ where that stamp is not a finite number (a corrupted file's).
 =================  =====================================  ========================================
 name               files                                  read by
 =================  =====================================  ========================================
-``ros1``           ROS 1 bag (``.bag``)                   rosbags (pure Python), ROS 1 Noetic types
+``ros1``           ROS 1 bag (``.bag``, ``.bag.active``)  rosbags (pure Python), ROS 1 Noetic types;
+                                                          without an index (cut short) record by
+                                                          record (:mod:`uvd.io.ros1_records`)
 ``ros2``           ROS 2 bag (folder, ``.db3``/``.mcap``) rosbags, ROS 2 Humble types
 ``mcap``           MCAP (``.mcap``) of ROS 2 (CDR), ROS 1  mcap's streaming reader; CDR/ROS 1
                    or JSON messages (uvd's black box)     by rosbags' type system, JSON by ``json``
@@ -27,6 +29,7 @@ works on the file, never on a stream that could wait.
 from __future__ import annotations
 
 import json
+import logging
 import math
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -35,6 +38,8 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from uvd.errors import LogReadError
+
+log = logging.getLogger(__name__)
 
 __all__ = ["LogFormat", "FORMATS", "log_formats", "detect_format", "open_log",
            "count_messages", "LogReadError"]
@@ -58,26 +63,75 @@ def _read_rosbag(path: Path, topics: frozenset[str] | None, store: str
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
+    if store == "ROS1_NOETIC" and path.name.lower().endswith(".active"):
+        yield from _read_ros1_by_record(path, topics, "a recording never closed (.active)")
+        return
     topic = "?"
     try:
-        with AnyReader([path], default_typestore=get_typestore(getattr(Stores, store))) as r:
-            conns = [c for c in r.connections if topics is None or c.topic in topics]
-            for conn, t_ns, raw in r.messages(connections=conns):
-                topic = conn.topic
-                try:
-                    msg = r.deserialize(raw, conn.msgtype)
-                except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds
-                    raise LogReadError(f"{path}: topic {topic}: message at t={t_ns} ns cannot "
-                                       f"be decoded as {conn.msgtype}: {exc}") from exc
-                yield topic, int(t_ns), msg
+        reader = AnyReader([path], default_typestore=get_typestore(getattr(Stores, store)))
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 - rosbags' errors, and its asserts on a bad index
+        if store == "ROS1_NOETIC" and "index" in str(exc).lower() and path.is_file():
+            yield from _read_ros1_by_record(path, topics, f"{type(exc).__name__}: {exc}")
+            return
+        raise LogReadError(f"{path}: not a readable ROS bag (truncated or corrupted?): "
+                           f"{type(exc).__name__}: {exc}") from exc
+    try:
+        conns = [c for c in reader.connections if topics is None or c.topic in topics]
+        for conn, t_ns, raw in reader.messages(connections=conns):
+            topic = conn.topic
+            try:
+                msg = reader.deserialize(raw, conn.msgtype)
+            except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds
+                raise LogReadError(f"{path}: topic {topic}: message at t={t_ns} ns cannot "
+                                   f"be decoded as {conn.msgtype}: {exc}") from exc
+            yield topic, int(t_ns), msg
     except LogReadError:
         raise
     except Exception as exc:  # noqa: BLE001 - rosbags' errors, and its asserts on a bad index
-        hint = ("; a ROS 1 bag whose recording was cut short (no index at its end) is mended "
-                "by ROS 1's `rosbag reindex FILE`"
-                if store == "ROS1_NOETIC" and "index" in str(exc).lower() else "")
         raise LogReadError(f"{path}: not a readable ROS bag (truncated or corrupted?) "
-                           f"near topic {topic}: {type(exc).__name__}: {exc}{hint}") from exc
+                           f"near topic {topic}: {type(exc).__name__}: {exc}") from exc
+    finally:
+        reader.close()
+
+
+def _read_ros1_by_record(path: Path, topics: frozenset[str] | None, why: str
+                         ) -> Iterator[tuple[str, int, object]]:
+    """A ROS 1 bag without its index (a recording cut short), read record by record
+    (:mod:`uvd.io.ros1_records`, as ROS 1's ``rosbag reindex`` would) and decoded by rosbags'
+    type system from each connection's own definition; where it ended is logged."""
+    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys.msg import get_types_from_msg, normalize_msgtype
+
+    from uvd.io.ros1_records import BagRecordError, Scan, read_records
+
+    log.warning("%s: %s — read record by record, as `rosbag reindex` would", path, why)
+    scan, store, types = Scan(), get_typestore(Stores.EMPTY), {}
+    try:
+        for conn, t_ns, raw in read_records(path, scan):
+            c = scan.connections.get(conn)
+            if c is None:
+                raise LogReadError(f"{path}: a message at t={t_ns} ns on connection {conn}, "
+                                   "which no connection record declares")
+            if topics is not None and c.topic not in topics:
+                continue
+            msgtype = types.get(conn)
+            if msgtype is None:
+                msgtype = types[conn] = normalize_msgtype(c.msgtype)
+                store.register(get_types_from_msg(c.definition, msgtype))
+            try:
+                msg = store.deserialize_ros1(raw, msgtype)
+            except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds
+                raise LogReadError(f"{path}: topic {c.topic}: message at t={t_ns} ns cannot "
+                                   f"be decoded as {msgtype}: {exc}") from exc
+            yield c.topic, t_ns, msg
+    except BagRecordError as exc:
+        raise LogReadError(f"{path}: not a readable ROS bag, without its index either: "
+                           f"{exc}") from exc
+    cut = "" if scan.ended_at == scan.size else \
+        f"; the last {scan.size - scan.ended_at} B are a record cut short"
+    log.warning("%s: read %d of %d B record by record%s%s", path, scan.ended_at, scan.size,
+                cut, "".join(f"; skipped {x}" for x in scan.skipped))
 
 
 def _read_ros1(path, topics):
@@ -245,6 +299,8 @@ def detect_format(path: str | Path) -> str:
             return "ros2"
         raise LogReadError(f"{path}: a folder but not a ROS 2 bag (no metadata.yaml)")
     suffix = path.suffix.lower()
+    if path.name.lower().endswith(".bag.active"):  # rosbag record's file while it records
+        return "ros1"
     for f in FORMATS.values():
         if suffix in f.suffixes:
             return f.name
