@@ -10,7 +10,8 @@ where that stamp is not a finite number (a corrupted file's).
 name               files                                  read by
 =================  =====================================  ========================================
 ``ros1``           ROS 1 bag (``.bag``, ``.bag.active``)  rosbags (pure Python), ROS 1 Noetic types;
-                                                          without an index (cut short) record by
+                                                          without an index (cut short), or the
+                                                          rest after a damaged record: record by
                                                           record (:mod:`uvd.io.ros1_records`)
 ``ros2``           ROS 2 bag (folder, ``.db3``/``.mcap``) rosbags, ROS 2 Humble types
 ``mcap``           MCAP (``.mcap``) of ROS 2 (CDR), ROS 1  mcap's streaming reader; CDR/ROS 1
@@ -76,6 +77,8 @@ def _read_rosbag(path: Path, topics: frozenset[str] | None, store: str
             return
         raise LogReadError(f"{path}: not a readable ROS bag (truncated or corrupted?): "
                            f"{type(exc).__name__}: {exc}") from exc
+    last_t, at_last, given = -1, set(), 0  # what was given (in rosbags' time order)
+    why = None  # what stopped rosbags half way, in a ROS 1 bag
     try:
         conns = [c for c in reader.connections if topics is None or c.topic in topics]
         for conn, t_ns, raw in reader.messages(connections=conns):
@@ -83,16 +86,35 @@ def _read_rosbag(path: Path, topics: frozenset[str] | None, store: str
             try:
                 msg = reader.deserialize(raw, conn.msgtype)
             except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds
-                raise LogReadError(f"{path}: topic {topic}: message at t={t_ns} ns cannot "
-                                   f"be decoded as {conn.msgtype}: {exc}") from exc
+                if store != "ROS1_NOETIC":
+                    raise LogReadError(f"{path}: topic {topic}: message at t={t_ns} ns cannot "
+                                       f"be decoded as {conn.msgtype}: {exc}") from exc
+                why = f"a message on {topic} at t={t_ns} ns does not decode: {exc}"
+                break
+            if t_ns != last_t:
+                last_t, at_last = t_ns, set()
+            at_last.add(topic)
+            given += 1
             yield topic, int(t_ns), msg
     except LogReadError:
         raise
     except Exception as exc:  # noqa: BLE001 - rosbags' errors, and its asserts on a bad index
-        raise LogReadError(f"{path}: not a readable ROS bag (truncated or corrupted?) "
-                           f"near topic {topic}: {type(exc).__name__}: {exc}") from exc
+        if store != "ROS1_NOETIC":
+            raise LogReadError(f"{path}: not a readable ROS bag (truncated or corrupted?) "
+                               f"near topic {topic}: {type(exc).__name__}: {exc}") from exc
+        why = f"{type(exc).__name__}: {exc}"
     finally:
         reader.close()
+    if why is None:
+        return
+    # a damaged record stopped rosbags half way: the rest, read record by record, which
+    # skips a damaged record to the next one that reads (what rosbags gave is not given
+    # again: every message before its last time stamp, and those at it)
+    rest = _read_ros1_by_record(path, topics, f"rosbags stopped after {given} messages "
+                                              f"({why}); the messages after them")
+    for name, t_ns, msg in rest:
+        if t_ns > last_t or (t_ns == last_t and name not in at_last):
+            yield name, t_ns, msg
 
 
 def _read_ros1_by_record(path: Path, topics: frozenset[str] | None, why: str
@@ -106,7 +128,7 @@ def _read_ros1_by_record(path: Path, topics: frozenset[str] | None, why: str
     from uvd.io.ros1_records import BagRecordError, Scan, read_records
 
     log.warning("%s: %s — read record by record, as `rosbag reindex` would", path, why)
-    scan, store, types = Scan(), get_typestore(Stores.EMPTY), {}
+    scan, store, types, undecoded = Scan(), get_typestore(Stores.EMPTY), {}, []
     try:
         for conn, t_ns, raw in read_records(path, scan):
             c = scan.connections.get(conn)
@@ -118,20 +140,28 @@ def _read_ros1_by_record(path: Path, topics: frozenset[str] | None, why: str
             msgtype = types.get(conn)
             if msgtype is None:
                 msgtype = types[conn] = normalize_msgtype(c.msgtype)
-                store.register(get_types_from_msg(c.definition, msgtype))
+                try:
+                    store.register(get_types_from_msg(c.definition, msgtype))
+                except Exception as exc:  # noqa: BLE001 - a damaged definition, any way
+                    log.warning("%s: topic %s: its message definition does not read (%s)",
+                                path, c.topic, exc)
             try:
                 msg = store.deserialize_ros1(raw, msgtype)
             except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds
-                raise LogReadError(f"{path}: topic {c.topic}: message at t={t_ns} ns cannot "
-                                   f"be decoded as {msgtype}: {exc}") from exc
+                undecoded.append(f"{c.topic} at t={t_ns} ns ({type(exc).__name__}: {exc})")
+                continue
             yield c.topic, t_ns, msg
     except BagRecordError as exc:
         raise LogReadError(f"{path}: not a readable ROS bag, without its index either: "
                            f"{exc}") from exc
     cut = "" if scan.ended_at == scan.size else \
         f"; the last {scan.size - scan.ended_at} B are a record cut short"
-    log.warning("%s: read %d of %d B record by record%s%s", path, scan.ended_at, scan.size,
-                cut, "".join(f"; skipped {x}" for x in scan.skipped))
+    skipped = "" if not scan.skipped else \
+        f"; skipped {len(scan.skipped)} stretch(es) that do not read (first: {scan.skipped[0]})"
+    log.warning("%s: read %d of %d B record by record%s%s%s", path, scan.ended_at, scan.size,
+                cut, skipped,
+                f"; {len(undecoded)} message(s) that do not decode skipped (first: "
+                f"{undecoded[0]})" if undecoded else "")
 
 
 def _read_ros1(path, topics):

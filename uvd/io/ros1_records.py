@@ -1,4 +1,5 @@
-"""A ROS 1 bag read record by record, in file order, without its index: a bag cut short.
+"""A ROS 1 bag read record by record, in file order, without its index: a bag cut short, or
+the rest of a damaged one.
 
 ``rosbag record`` writes a bag's index at its end when it closes; a recording cut short (a
 power cut on the vehicle, a crash: ``NAME.bag.active``) has none, and rosbags, which reads by
@@ -11,13 +12,17 @@ decoded by rosbags' type system from each connection's own message definition.
 
 An uncompressed chunk is read up to the last whole record before the cut (its declared size
 may be that of the whole chunk, or the placeholder of one never closed); a compressed chunk
-cut short is skipped and said so (what it holds cannot be told from part of it).
+cut short is skipped and said so (what it holds cannot be told from part of it). A record in
+a chunk that does not read — a damaged header, a length that does not end where another
+record begins — is skipped to the next offset where one does (``scan.skipped`` names it),
+as rosbags, which stops at the first, cannot.
 """
 
 from __future__ import annotations
 
 import bz2
 import mmap
+import re
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -25,6 +30,10 @@ from pathlib import Path
 
 MAGIC = b"#ROSBAG V2.0\n"
 _U32 = struct.Struct("<I")
+#: the longest record header taken for one (a message's is 38 B, a chunk's about 40)
+_HEADER_MAX = 4096
+#: a record header's op field of a message or a connection: where resynchronising looks
+_OP_FIELD = re.compile(rb"\x04\x00\x00\x00op=[\x02\x07]")
 OP_MESSAGE, OP_CHUNK, OP_CONNECTION = 0x02, 0x05, 0x07
 
 
@@ -92,10 +101,11 @@ def _op(fields: dict[str, bytes], where: int) -> int:
 
 def _connection(fields: dict[str, bytes], body: bytes | memoryview, where: int
                 ) -> tuple[int, Connection]:
-    info = _fields(bytes(body), where)
+    info = _fields(bytes(body), where)  # a damaged byte in a text: replaced, not fatal (its
+    # messages then may not decode, and are counted so by the reader)
     return _U32.unpack(fields["conn"])[0], Connection(
-        fields["topic"].decode(), info["type"].decode(),
-        info.get("message_definition", b"").decode())
+        fields["topic"].decode(errors="replace"), info["type"].decode(errors="replace"),
+        info.get("message_definition", b"").decode(errors="replace"))
 
 
 def _message(fields: dict[str, bytes], body: bytes | memoryview) -> tuple[int, int, bytes]:
@@ -103,18 +113,83 @@ def _message(fields: dict[str, bytes], body: bytes | memoryview) -> tuple[int, i
     return _U32.unpack(fields["conn"])[0], sec * 1_000_000_000 + nsec, bytes(body)
 
 
+def _reads(data: bytes | memoryview, pos: int, scan: Scan, depth: int = 1
+           ) -> tuple[int, dict[str, bytes], int, int] | None:
+    """(op, header fields, data start, next offset) of the chunk record at ``pos`` if it reads
+    whole — a connection or a message with its fields — and (``depth``) the record after it
+    reads too or is cut by the end of ``data``; None if not."""
+    try:
+        rec = _record(data, pos)
+    except BagRecordError:
+        return None
+    if rec is None or rec[3] > len(data):
+        return None
+    fields, start, _, nxt = rec
+    op = fields.get("op", b"")
+    if len(op) != 1 or len(fields.get("conn", b"")) != 4:
+        return None
+    if op[0] == OP_MESSAGE:
+        if len(fields.get("time", b"")) != 8 or (
+                depth and _U32.unpack(fields["conn"])[0] not in scan.connections):
+            return None  # (the record after a connection may be its first message)
+    elif op[0] != OP_CONNECTION or "topic" not in fields:
+        return None
+    if depth and nxt < len(data) and _reads(data, nxt, scan, 0) is None \
+            and not _frames(data, nxt):
+        return None  # no record header where its length ends: its length is wrong
+    return op[0], fields, start, nxt
+
+
+def _frames(data: bytes | memoryview, at: int) -> bool:
+    """Whether a record header stands at ``at`` (its content may be damaged, a record of its
+    own to skip): a header length no longer than ``_HEADER_MAX`` whose fields read and hold
+    an op, or that ``data`` ends inside (a cut)."""
+    if at + 4 > len(data):
+        return True
+    (hlen,) = _U32.unpack_from(data, at)
+    if hlen > _HEADER_MAX:
+        return False
+    if at + 4 + hlen > len(data):
+        return True
+    try:
+        return "op" in _fields(bytes(data[at + 4:at + 4 + hlen]), at)
+    except BagRecordError:
+        return False
+
+
+def _resync(data: bytes | memoryview, start: int, scan: Scan) -> int | None:
+    """The first offset from ``start`` where a chunk record reads (:func:`_reads`): tried only
+    where its header may begin, up to 255 bytes before an ``op`` field of a connection or a
+    message; None if there is none."""
+    raw = bytes(data)
+    for m in _OP_FIELD.finditer(raw, start):
+        for q in range(max(start, m.start() - 255), m.start() - 3):
+            if _reads(data, q, scan) is not None:
+                return q
+    return None
+
+
 def _inner(data: bytes | memoryview, scan: Scan, base: int
            ) -> Iterator[tuple[int, int, bytes]]:
     """(connection id, t_ns, raw) of the message records of one chunk's data, registering its
-    connections; stops quietly at a record the data ends inside."""
+    connections. A record that does not read is skipped to the next one that does (named in
+    ``scan.skipped``); where none does, the data ends inside it: the read stops quietly
+    (``scan.ended_at`` tells where)."""
     pos = 0
-    while (rec := _record(data, pos)) is not None and rec[3] <= len(data):
-        fields, start, _, nxt = rec
-        op = _op(fields, base + pos)
+    while pos < len(data):
+        got = _reads(data, pos, scan)
+        if got is None:
+            nxt = _resync(data, pos + 1, scan)
+            if nxt is None:
+                return
+            scan.skipped.append(f"{nxt - pos} damaged bytes at byte {base + pos}")
+            pos = nxt
+            continue
+        op, fields, start, nxt = got
         if op == OP_CONNECTION:
             conn, c = _connection(fields, data[start:nxt], base + start)
             scan.connections[conn] = c
-        elif op == OP_MESSAGE:
+        else:
             yield _message(fields, data[start:nxt])
         pos = nxt
         scan.ended_at = base + pos
