@@ -130,6 +130,36 @@ def test_files_that_cannot_be_played_and_a_daemon_that_never_comes(recorded, tmp
     assert res.playing == {"error": "no daemon appeared on the bus within 0.5 s"}
 
 
+def test_a_damaged_record_ends_what_is_played(recorded, tmp_path):
+    """A record whose length runs past the end in the middle of the file: the run is played
+    up to its last cycle before it, and the result says where it stopped (it was refused)."""
+    import struct
+
+    from uvd.telemetry.recording import read_messages
+    path, _ = recorded
+    data = bytearray(path.read_bytes())
+    pos, messages = 8, []
+    while pos < len(data):  # MCAP's framing: an opcode, a uint64 length
+        op, length = struct.unpack_from("<BQ", data, pos)
+        if op == 0x0F:
+            break
+        if op == 0x05:
+            messages.append(pos)
+        pos += 9 + length
+    i = len(messages) // 2
+    data[messages[i] + 1:messages[i] + 9] = (2**40).to_bytes(8, "little")
+    bad = tmp_path / "damaged.mcap"
+    bad.write_bytes(bytes(data))
+    n_before = sum(1 for topic, _, _ in list(read_messages(path))[:i] if topic == "/uvd/cycle")
+    rec = load_wire(bad)
+    assert len(rec.cycles) == n_before > 0
+    assert rec.damaged.startswith(f"damaged MCAP record at byte {messages[i]} (its length")
+    res = replay_realtime(bad, tmp_path / "w", interface="virtual",
+                          channel=f"nobody-{os.getpid()}", wait_s=0.5)
+    assert res.stopped == f"{rec.damaged}: the run is played up to the {n_before} cycles " \
+                          "recorded before it"
+
+
 def test_compare_commands_cycle_by_cycle():
     rec = [{1: 0, 2: 0}, {1: 10, 2: -5}, {1: 30, 2: 0}, {1: 0, 2: 0}, {1: 0, 2: 0}]
     c = compare_commands(rec, rec, cycles=4)

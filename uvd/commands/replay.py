@@ -151,6 +151,8 @@ def _run_realtime(args) -> int:
             print(f"  {k:>8}: position MNE {t['position_mne']:.4f}, velocity MNE "
                   f"{t['velocity_mne']:.4f} over {t['cycles']} armed cycles, thrust RMS "
                   f"{t['thrust_rms_n']:.1f} N")
+    if res.stopped:
+        print(f"  stopped: {res.stopped}")
     if res.operator_commands:
         print(f"  not re-issued (no wire for them yet): operator commands "
               f"{', '.join(res.operator_commands)} — commands after them differ")

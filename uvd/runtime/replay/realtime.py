@@ -82,24 +82,32 @@ class WireRecording:
     cycles: list[dict[str, Any]]
     operator_commands: list[str]  # names of the recorded commands besides auto-arm
     nodes: tuple[int, ...]
+    #: the first damaged record or message, where what is read ends (None: none)
+    damaged: str | None = None
 
 
 def load_wire(path: str | Path) -> WireRecording:
     """Read the raw channels, the start record and the cycles of a recording.
 
+    A damaged record or a malformed message ends what is read, as a cut does (the run is
+    played up to its last cycle before it); ``damaged`` names it.
+
     Raises
     ------
     RecordingError
-        Not MCAP, no start record, no raw CAN frames, or a malformed raw message (the message
-        names the file and the problem).
+        Not MCAP, or no start record, no raw CAN frames or no cycles before any damage (the
+        message names the file and the problem).
     """
     import can
 
     path = Path(path)
     start, serial, received, cycles, others = None, [], [], [], []
     sent: list[tuple[int, int, bytes]] = []  # (t_ns, id, data) of the daemon's frames
+    damage: list[str] = []
     for topic, _, m in read_messages(path, ("/uvd/start", "/uvd/raw/serial", "/uvd/raw/can",
-                                            "/uvd/cycle", "/uvd/command")):
+                                            "/uvd/cycle", "/uvd/command"), unreadable=damage):
+        if damage:  # this message comes after the damage: what is read ends before it
+            break
         try:
             if topic == "/uvd/raw/serial":
                 serial.append((int(m["t_ns"]), str(m["source"]),
@@ -120,17 +128,19 @@ def load_wire(path: str | Path) -> WireRecording:
                     others.append(str(m.get("command")))
             elif start is None:
                 start = m
-        except (KeyError, ValueError, TypeError) as exc:
-            raise RecordingError(f"{path}: a {topic} message is malformed: "
-                                 f"{type(exc).__name__}: {exc}") from exc
+        except (KeyError, ValueError, TypeError) as exc:  # damaged: what is read ends
+            damage.append(f"a {topic} message at {m.get('t_ns')!r:.30} ns is malformed "
+                          f"({type(exc).__name__}: {exc})")
+            break
+    before = f" before {damage[0]}" if damage else ""
     if start is None or not start.get("config_toml"):
-        raise RecordingError(f"{path}: no start record with the configuration (/uvd/start) — "
-                             "not a uvd recording, or not the first file of a run")
+        raise RecordingError(f"{path}: no start record with the configuration (/uvd/start)"
+                             f"{before} — not a uvd recording, or not the first file of a run")
     if not sent:
-        raise RecordingError(f"{path}: no CAN frames sent by the daemon (/uvd/raw/can): "
-                             "nothing to align a live daemon with")
+        raise RecordingError(f"{path}: no CAN frames sent by the daemon (/uvd/raw/can)"
+                             f"{before}: nothing to align a live daemon with")
     if not cycles:
-        raise RecordingError(f"{path}: no cycle records (/uvd/cycle)")
+        raise RecordingError(f"{path}: no cycle records (/uvd/cycle){before}")
     # the run up to its last cycle: the recorded shutdown (drives disabled, NMT) is not played
     end = int(cycles[-1]["t_ns"]) + 100_000_000
     serial = sorted(e for e in serial if e[0] <= end)
@@ -157,7 +167,7 @@ def load_wire(path: str | Path) -> WireRecording:
     for t, cid in aligning[i:]:
         tx.setdefault(cid, []).append(t)
     return WireRecording(path, start["config_toml"], serial, gated, tx, sent_ids, commands,
-                         cycles, others, nodes)
+                         cycles, others, nodes, damage[0] if damage else None)
 
 
 def _commands(frames, nodes) -> list[dict[int, int]]:
@@ -396,6 +406,8 @@ class RealtimeResult:
     tracking: dict[str, Any] = field(default_factory=dict)
     operator_commands: list[str] = field(default_factory=list)
     daemon_exit: int | None = None
+    #: where the recording's damage ended what was played (None: it was played whole)
+    stopped: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -431,7 +443,10 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
     bus = open_bus(CanBusConfig(**bus_cfg))
     ports = {name: PtyPort(work / name) for name in ("ins", "dvl", "depth")}
     result = RealtimeResult(str(rec.path), str(cfg_path),
-                            operator_commands=rec.operator_commands)
+                            operator_commands=rec.operator_commands,
+                            stopped=None if rec.damaged is None else
+                            f"{rec.damaged}: the run is played up to the {len(rec.cycles)} "
+                            "cycles recorded before it")
     before = set((work / "live").glob("*.mcap"))  # a reused folder: earlier runs' files
     proc = log = None
     try:
