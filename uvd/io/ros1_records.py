@@ -58,7 +58,8 @@ class Scan:
     #: the end of the last whole record read: the file's size when every record was whole
     ended_at: int = 0
     size: int = 0
-    #: what was skipped, one line each (a compressed chunk cut short)
+    #: what was skipped, one line each (a damaged stretch of a chunk, a compressed chunk cut
+    #: short)
     skipped: list[str] = field(default_factory=list)
 
 
@@ -116,8 +117,10 @@ def _message(fields: dict[str, bytes], body: bytes | memoryview) -> tuple[int, i
 def _reads(data: bytes | memoryview, pos: int, scan: Scan, depth: int = 1
            ) -> tuple[int, dict[str, bytes], int, int] | None:
     """(op, header fields, data start, next offset) of the chunk record at ``pos`` if it reads
-    whole — a connection or a message with its fields — and (``depth``) the record after it
-    reads too or is cut by the end of ``data``; None if not."""
+    whole — a connection, or a message with its fields on a connection declared so far — and
+    (``depth``) where it ends, the data ends, or a record reads, or at least a record header
+    stands (:func:`_frames`: a damaged record of its own, skipped when reached); None if
+    not."""
     try:
         rec = _record(data, pos)
     except BagRecordError:
