@@ -32,7 +32,7 @@ def register(sub) -> None:
 def _run(args) -> int:
     import zenoh
 
-    from uvd.fdc.client import REACH_S, open_client, reached_through, unreached
+    from uvd.fdc.client import ReachNote, open_client, reached_through
     from uvd.zenoh_callbacks import SessionCallbacks
     lock = threading.Lock()
     last_line: dict[str, float] = {}
@@ -82,16 +82,12 @@ def _run(args) -> int:
                                                 history=True)
         via = reached_through(args.connect, args.zenoh_config)
         out(f"watching uvd/{v}/… through {via} (Ctrl-C to stop)")
-        t0 = time.monotonic()
-        deadline = t0 + args.seconds if args.seconds > 0 else math.inf
-        told = False
+        deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
+        reach = ReachNote(session, via, "uvd watch")  # say so, and go on trying
         while time.monotonic() < deadline:
             time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
-            if not told and time.monotonic() - t0 >= REACH_S:   # say so, and go on trying
-                told = True
-                note = unreached(session, via, "uvd watch")
-                if note is not None:
-                    print(note, file=sys.stderr, flush=True)
+            if (note := reach.due()) is not None:
+                print(note, file=sys.stderr, flush=True)
     except KeyboardInterrupt:
         pass
     finally:

@@ -139,14 +139,26 @@ def reached_through(connect: list[str], config_file: str | None = None) -> str:
     return ", ".join(connect) or config_file or "tcp/127.0.0.1:7447"
 
 
-def unreached(session, via: str, who: str) -> str | None:
-    """The note a client prints, :data:`REACH_S` after it opened, when its session has reached
-    no router or peer (a wrong endpoint, no daemon yet: a peer's session opens anyway and
-    waits in silence); None when it has. The client goes on trying either way."""
-    if list(session.info.routers_zid()) or list(session.info.peers_zid()):
-        return None
-    return (f"{who}: nothing reached through {via} in {REACH_S:g} s (is the daemon running, "
-            "its [telemetry.zenoh] listen that endpoint?); still trying")
+class ReachNote:
+    """The note a client prints once, :data:`REACH_S` after it opened, when its session has
+    reached no router or peer (a wrong endpoint, no daemon yet: a peer's session opens anyway
+    and waits in silence). The client goes on trying either way."""
+
+    def __init__(self, session, via: str, who: str) -> None:
+        self.session, self.via, self.who = session, via, who
+        self._due: float | None = time.monotonic() + REACH_S
+
+    def due(self) -> str | None:
+        """The note, the first time it is asked for after REACH_S if nothing was reached;
+        None before, after, or when something was."""
+        if self._due is None or time.monotonic() < self._due:
+            return None
+        self._due = None
+        info = self.session.info
+        if list(info.routers_zid()) or list(info.peers_zid()):
+            return None
+        return (f"{self.who}: nothing reached through {self.via} in {REACH_S:g} s (is the "
+                "daemon running, its [telemetry.zenoh] listen that endpoint?); still trying")
 
 
 def open_client(connect: list[str], config_file: str | None = None):
@@ -382,18 +394,13 @@ def main(argv: list[str] | None = None) -> int:
         stop = threading.Event()
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: stop.set())
-        t0 = time.monotonic()
-        deadline = t0 + args.seconds if args.seconds > 0 else math.inf
-        told = False
+        deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
+        reach = ReachNote(session, reached_through(args.connect, args.zenoh_config), "uvd-fdc")
         while not stop.wait(min(0.2, max(0.0, deadline - time.monotonic()))):
             if time.monotonic() >= deadline:
                 break
-            if not told and time.monotonic() - t0 >= REACH_S:
-                told = True
-                note = unreached(session, reached_through(args.connect, args.zenoh_config),
-                                 "uvd-fdc")
-                if note is not None:
-                    say(note)
+            if (note := reach.due()) is not None:
+                say(note)
             with lock:
                 unknown = [v for v, B in thrusters.items() if B is None and v not in asked]
             for vehicle in unknown:
