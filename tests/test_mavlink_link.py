@@ -22,6 +22,10 @@ mav = mavlink
 class Peer:
     def __init__(self, system: int = 255) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        # room for a burst: a 256-chunk STATUSTEXT is ~330 kB of datagrams in the kernel's
+        # count, more than the default 208 kB, and under load this thread may read late (one
+        # fresh clone beside other work lost chunk 255 so: "no STATUSTEXT within 10.0 s")
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(0.05)
         self.enc = mavlink.MAVLink(None, system, 190)
