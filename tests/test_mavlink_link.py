@@ -22,9 +22,10 @@ mav = mavlink
 class Peer:
     def __init__(self, system: int = 255) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        # room for a burst: a 256-chunk STATUSTEXT is ~330 kB of datagrams in the kernel's
-        # count, more than the default 208 kB, and under load this thread may read late (one
-        # fresh clone beside other work lost chunk 255 so: "no STATUSTEXT within 10.0 s")
+        # room for what arrives while this thread reads late under load: a 256-chunk
+        # STATUSTEXT at 250 a second is ~330 kB of datagrams in the kernel's count within a
+        # second, more than the default 208 kB (one fresh clone beside other work lost
+        # chunk 255 of an unpaced burst so: "no STATUSTEXT within 10.0 s")
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(0.05)
@@ -254,7 +255,76 @@ def test_a_text_beyond_256_chunks_is_cut_there_and_the_link_goes_on():
         assert "dry" in st.wait("STATUSTEXT", lambda m: "dry" in m.text).text
         assert link.counters["errors"] == 0
 
-    run_link(scenario)
+    run_link(scenario, statustext_hz=250.0)
+
+
+def test_a_long_text_is_paced_not_one_burst():
+    """A 40-chunk text at ``statustext_hz`` 20 through the running link: all 40 chunks, in
+    order, one id; the last no sooner than the 30 beyond the first TEXT_BURST (10) allow at
+    20 a second (1.5 s after the text was written)."""
+    from uvd.links.mavlink.link import TEXT_BURST
+    hz, n = 20.0, 40
+    reason = "".join(f"{i:02d}" * 25 for i in range(n - 1))
+
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        t_written = time.monotonic()
+        asyncio.run(link.write([{"type": "lifecycle", "from": "STANDBY", "to": "ARMED",
+                                 "cause": reason}]))
+        got = [st.wait("STATUSTEXT", lambda m, i=i: m.chunk_seq == i, timeout=10.0)
+               for i in range(n)]
+        t_last = time.monotonic()
+        assert len({m.id for m in got}) == 1 and got[0].id != 0
+        assert "".join(m.text for m in got).endswith(reason)
+        assert t_last - t_written >= (n - TEXT_BURST) / hz - 0.01
+
+    run_link(scenario, statustext_hz=hz)
+
+
+def test_the_pacing_is_a_token_bucket_on_the_link_clock():
+    """The link's pacing driven by a given clock (its thread not started), sending on a real
+    socket to a station: TEXT_BURST chunks at once, then ``statustext_hz`` a second, never
+    more than TEXT_BURST after a pause; the next text after the last chunk of the one before."""
+    from uvd.links.mavlink.link import TEXT_BURST
+    station = Peer()
+    link = MavlinkLink(
+        MavlinkSection(enabled=True, listen="", params_file="", statustext_hz=20.0,
+                       connect=(f"127.0.0.1:{station.port}",)),
+        CommandQueue(), lambda: load_config(DEFAULT_CONFIG),
+        thresholds={"ins": 0.25, "dvl": 1.0, "depth": 0.5, "feedback": 0.5},
+        max_thrust_n=[20.0] * 6)
+    link._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    def arrived():
+        out = []
+        while True:
+            try:
+                data = station.sock.recv(4096)
+            except TimeoutError:
+                return out
+            out += [m for m in station.dec.parse_buffer(data) or []
+                    if m.get_type() == "STATUSTEXT"]
+    try:
+        link._text(("info", "a" * 50 * 40))  # 40 chunks
+        link._text(("info", "next"))
+        t = link._tokens_t
+        link._send_texts(t)
+        assert [m.chunk_seq for m in arrived()] == list(range(TEXT_BURST))
+        link._send_texts(t + 0.5)  # 10 more at 20 a second
+        assert [m.chunk_seq for m in arrived()] == list(range(10, 20))
+        link._send_texts(t + 0.52)
+        assert [m.chunk_seq for m in arrived()] == []  # 0.4 of a token
+        link._send_texts(t + 60.0)  # a long pause: the bucket holds TEXT_BURST, no more
+        assert [m.chunk_seq for m in arrived()] == list(range(20, 30))
+        link._send_texts(t + 61.0)  # the last 10: the bucket is empty again
+        assert [m.chunk_seq for m in arrived()] == list(range(30, 40))
+        link._send_texts(t + 61.1)  # two tokens: the next text, one chunk
+        got = arrived()
+        assert [(m.chunk_seq, m.id, m.text) for m in got] == [(0, 0, "next")]
+        assert link.counters["sent"] == 41 and link.counters["send_errors"] == 0
+    finally:
+        link._sock.close()
+        station.sock.close()
 
 
 def test_an_amplifier_fault_accommodated_is_told_as_a_warning():

@@ -15,7 +15,8 @@ sending side and the pymavlink codecs; it
 * sends HEARTBEAT and SYS_STATUS at ``heartbeat_hz``; ATTITUDE, LOCAL_POSITION_NED,
   SCALED_PRESSURE, VFR_HUD, SERVO_OUTPUT_RAW and ACTUATOR_OUTPUT_STATUS at ``state_hz``;
   NAMED_VALUE_FLOAT of the online estimates at ``estimate_hz`` — to every station heard within
-  ``station_timeout_s``, to the ``connect`` addresses and down the serial line;
+  ``station_timeout_s``, to the ``connect`` addresses and down the serial line; STATUSTEXT
+  chunks at most ``statustext_hz``, so that a long text is never one burst;
 * turns what stations send into commands of :mod:`uvd.runtime.commands` on the daemon's one
   command queue (``App.commands``) — the cycle applies them at its next start — and answers
   each with COMMAND_ACK (and a STATUSTEXT with the reason of a refusal) once the cycle has
@@ -84,6 +85,8 @@ APPLIED_MODES = {"standby": 0, "pdc": 1, "ambc": 2, "two-step-1": 3, "two-step-2
                  "observe": 5, "manual": 6, "hold-depth": 7, "zero-thrust": 8}
 _SEVERITY = {"emergency": 0, "alert": 1, "critical": 2, "error": 3, "warning": 4,
              "notice": 5, "info": 6}
+#: STATUSTEXT chunks that go at once before ``statustext_hz`` paces them
+TEXT_BURST = 10
 _STATE_STATUS = {"BOOT": 1, "STANDBY": 3, "ARMED": 4, "FAILSAFE": 5, "SHUTDOWN": 7}
 #: SYS_STATUS sensor bits: INS (gyro, accelerometer, magnetometer), DVL (as optical flow:
 #: velocity over ground), depth (absolute pressure), amplifiers (motor outputs)
@@ -222,6 +225,8 @@ class MavlinkLink:
         self._texts: collections.deque = collections.deque(maxlen=64)
         self._replies: collections.deque = collections.deque(maxlen=256)
         self._text_id = 0
+        self._chunks: collections.deque = collections.deque()  # of the text being sent
+        self._tokens, self._tokens_t = TEXT_BURST, time.monotonic()
         self._sock: socket.socket | None = None
         self._serial = None
         self.rx_serial = mavlink.MAVLink(None, cfg.system_id, cfg.component_id,
@@ -357,8 +362,7 @@ class MavlinkLink:
                 if c.estimate_hz > 0 and now >= next_est:
                     next_est = now + 1.0 / c.estimate_hz
                     self._send_estimates()
-                while self._texts:
-                    self._statustext(*self._texts.popleft())
+                self._send_texts(now)
                 if self.signing is not None and now >= next_ts:
                     next_ts = now + 10.0
                     self._save_timestamp()
@@ -644,7 +648,7 @@ class MavlinkLink:
             if res.ok:  # a refusal's reason goes out with the command record
                 why = self._persist({p.key: value})
                 if why is not None:
-                    self._statustext("warning", why)
+                    self._text(("warning", why))
             self._param_value(p)
         self._queue(SetParams({p.key: value}, source=f"mavlink {m.get_srcSystem()}"), done)
 
@@ -690,16 +694,33 @@ class MavlinkLink:
             except Exception:  # noqa: BLE001 - OSError, or pyserial's timeout on a full line
                 self.counters["send_errors"] += 1
 
-    def _statustext(self, severity: str, text: str) -> None:
-        """One STATUSTEXT, in 50-character chunks sharing an id when longer (MAVLink 2); the
-        text in plain ASCII (:func:`ascii_text`), which every ground station shows as sent.
-        MAVLink numbers the chunks in one byte: a text beyond 256 chunks is cut there."""
+    def _send_texts(self, now: float) -> None:
+        """The queued texts' STATUSTEXT chunks, paced: at most ``statustext_hz`` a second
+        after a first :data:`TEXT_BURST` at once (a token bucket). A text is cut into chunks
+        only when the one before has gone, so the bounded text queue is where a flood of
+        texts drops (counted ``statustext_dropped``)."""
+        self._tokens = min(TEXT_BURST, self._tokens
+                           + (now - self._tokens_t) * self.cfg.statustext_hz)
+        self._tokens_t = now
+        while self._tokens >= 1.0:
+            if not self._chunks:
+                if not self._texts:
+                    return
+                self._chunks.extend(self._statustext(*self._texts.popleft()))
+            self._send(self._chunks.popleft())
+            self._tokens -= 1.0
+
+    def _statustext(self, severity: str, text: str) -> list[Any]:
+        """One text's STATUSTEXT messages: 50-character chunks sharing an id when longer
+        (MAVLink 2); the text in plain ASCII (:func:`ascii_text`), which every ground station
+        shows as sent. MAVLink numbers the chunks in one byte: a text beyond 256 chunks is
+        cut there."""
         data = ascii_text(text).encode("ascii")
         chunks = [data[i:i + 50] for i in range(0, len(data), 50)][:256] or [b""]
         self._text_id = self._text_id % 65535 + 1
         tid = self._text_id if len(chunks) > 1 else 0
-        for i, ch in enumerate(chunks):
-            self._send(self.tx.statustext_encode(_SEVERITY[severity], ch, tid, i))
+        return [self.tx.statustext_encode(_SEVERITY[severity], ch, tid, i)
+                for i, ch in enumerate(chunks)]
 
     def _ms(self) -> int:
         return int((time.monotonic() - self._t0) * 1000) & 0xFFFFFFFF
