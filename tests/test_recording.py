@@ -14,6 +14,7 @@ import asyncio
 import base64
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -315,23 +316,21 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
     rep = replay_lockstep(stray)
     assert (rep.cycles, rep.mismatches) == (19, 0) and rep.stopped.startswith(
         "message on unknown channel 99 at byte "), rep.stopped
+    # no cycle a reader can use (every one without its thrust): both refuse, by name
     no_thrust = tmp_path / "no-thrust.mcap"
     _rewrite(path, no_thrust, lambda k, topic, msg: {key: v for key, v in msg.items()
                                                      if key != "thrust"}
              if topic == "/uvd/cycle" else msg)
-    with pytest.raises(RecordingError, match="no-thrust.mcap: a record does not hold"):
+    with pytest.raises(RecordingError, match="no-thrust.mcap: no cycle records \\(/uvd/cycle\\) "
+                                             "before a /uvd/cycle record at [0-9]+ ns is "
+                                             "malformed \\(thrust is not a row of finite "
+                                             "numbers\\)"):
         replay_lockstep(no_thrust)
-    # valid JSON, but not what the schema promises: the report names it too (a fuzzed byte
-    # that shortened one cycle's position made it a numpy ValueError's traceback)
-    short_p = tmp_path / "short-p.mcap"
-    n_cycle = iter(range(10**6))
-    _rewrite(path, short_p, lambda k, topic, msg: {**msg, "p": msg["p"][:2]}
-             if topic == "/uvd/cycle" and next(n_cycle) == 20 else msg)
-    for bad in (no_thrust, short_p):
-        with pytest.raises(RecordingError, match=f"{bad.name}: a record does not hold what "
-                                                 "its schema"):
-            write_report(bad, tmp_path / "report")
-    assert main(["report", str(short_p), "--out", str(tmp_path / "report"), "--quiet"]) == 2
+    with pytest.raises(RecordingError, match="no-thrust.mcap: no cycle records \\(/uvd/cycle\\) "
+                                             "\\([0-9]+ malformed, first: /uvd/cycle record at "
+                                             "[0-9]+ ns: thrust is not a row of finite numbers\\)"):
+        write_report(no_thrust, tmp_path / "report")
+    assert main(["report", str(no_thrust), "--out", str(tmp_path / "report"), "--quiet"]) == 2
     # a message that is not JSON (a damaged byte): replay, which needs every input, covers
     # the 20 cycles before it; the report skips and counts it and draws the rest (both
     # refused the whole file)
@@ -352,6 +351,82 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
                  "--quiet"]) == 0
     assert "uvd report: 1 unreadable message(s) skipped (first: message on /uvd/cycle" in \
         capsys.readouterr().err
+
+
+@pytest.mark.parametrize("edit, why", [
+    # a fuzzed byte that shortened one cycle's position: a numpy traceback once, then the
+    # whole file refused by name
+    (lambda msg: {**msg, "p": msg["p"][:2]}, "p is not 3 numbers"),
+    # found by replacing one field of one record with other JSON: both printed a traceback
+    (lambda msg: {**msg, "inputs": 7}, "inputs 7 is not an object"),
+    (lambda msg: {**msg, "t_ns": str(msg["t_ns"])}, "t_ns '[0-9]+' is not a 64-bit integer"),
+    (lambda msg: [msg["t_ns"]], "a JSON list, not an object"),
+])
+def test_a_malformed_cycle_record_is_skipped_by_the_report_and_ends_the_replay(
+        recorded, tmp_path, capsys, edit, why):
+    """A cycle record that is valid JSON but not what uvd.cycle.v1 promises: the report
+    skips and counts it and draws the rest (it refused the whole file, or printed a
+    traceback); the replay, which needs every cycle, covers the 20 before it, bit for bit."""
+    path, _, _, _ = recorded
+    bad = tmp_path / "malformed.mcap"
+    n_cycle = iter(range(10**6))
+    _rewrite(path, bad, lambda k, topic, msg: edit(msg)
+             if topic == "/uvd/cycle" and next(n_cycle) == 20 else msg)
+    rep = replay_lockstep(bad)
+    assert (rep.cycles, rep.mismatches) == (20, 0), rep.first_mismatch
+    assert re.fullmatch(f"a /uvd/cycle record at .* ns is malformed \\({why}\\): the replay "
+                        "covers the 20 cycles recorded before it", rep.stopped), rep.stopped
+    n_recorded = sum(1 for _ in read_messages(path, ["/uvd/cycle"]))
+    summary = write_report(bad, tmp_path / "report")
+    assert (summary["cycles"], summary["malformed_records"]) == (n_recorded - 1, 1)
+    assert re.fullmatch(f"/uvd/cycle record at [0-9]+ ns: {why}", summary["first_malformed"])
+    capsys.readouterr()
+    assert main(["report", str(bad), "--out", str(tmp_path / "report"), "--quiet"]) == 0
+    assert re.search(f"uvd report: 1 malformed record\\(s\\) skipped \\(first: /uvd/cycle "
+                     f"record at [0-9]+ ns: {why}\\)", capsys.readouterr().err)
+
+
+def test_an_armed_cycle_without_a_valid_position_is_drawn(recorded, tmp_path):
+    """An armed cycle whose position is null (NaN, as the daemon writes a navigation state
+    that is not valid; the schema allows it) and whose reference is too: drawn with the rest,
+    nothing skipped (the report refused the whole file: an object array's TypeError)."""
+    path, _, _, cycles = recorded
+    k = next(i for i, r in enumerate(cycles) if r["state"] == "ARMED" and r["p_ref"] is not None)
+    n_cycle = iter(range(10**6))
+    nan_p = tmp_path / "nan-p.mcap"
+    _rewrite(path, nan_p, lambda i, topic, msg: {**msg, "p": [None] * 3, "p_ref": [None] * 3}
+             if topic == "/uvd/cycle" and next(n_cycle) == k else msg)
+    summary = write_report(nan_p, tmp_path / "report")
+    assert summary["cycles"] == sum(1 for _ in read_messages(path, ["/uvd/cycle"]))
+    assert "malformed_records" not in summary and "tracking.png" in summary["figures"]
+
+
+def test_malformed_inputs_and_commands_end_the_replay_there(recorded, tmp_path):
+    """What a replay reads beyond the cycle record's own fields: its inputs (an amplifier
+    status that is not an object: an AttributeError's traceback) and the operator's commands
+    (arguments that are not an object: a TypeError's) — the replay ends at the first."""
+    path, _, _, cycles = recorded
+    bad = tmp_path / "bad-actuators.mcap"
+    n_cycle = iter(range(10**6))
+    _rewrite(path, bad, lambda k, topic, msg: {**msg, "inputs": {**msg["inputs"],
+                                                                 "actuators": 7}}
+             if topic == "/uvd/cycle" and next(n_cycle) == 20 else msg)
+    rep = replay_lockstep(bad)
+    assert (rep.cycles, rep.mismatches) == (20, 0), rep.first_mismatch
+    assert rep.stopped.startswith(f"cycle 20 (t = {cycles[20]['t_ns']} ns): its inputs are "
+                                  "malformed (AttributeError: ") and rep.stopped.endswith(
+        ": the replay covers the 20 cycles recorded before it"), rep.stopped
+    every = list(read_messages(path))
+    k = next(i for i, (topic, _, _) in enumerate(every)
+             if topic == "/uvd/command" and i > len(every) // 2)
+    bad = tmp_path / "bad-command.mcap"
+    _rewrite(path, bad, lambda i, topic, msg: {**msg, "args": 5} if i == k else msg)
+    n_before = sum(1 for topic, _, _ in every[:k] if topic == "/uvd/cycle")
+    rep = replay_lockstep(bad)
+    assert (rep.cycles, rep.mismatches) == (n_before, 0), rep.first_mismatch
+    assert rep.stopped == (f"a /uvd/command record at {every[k][2]['t_ns']} ns is malformed "
+                           f"({every[k][2]['command']}: args 5 are not an object): the "
+                           f"replay covers the {n_before} cycles recorded before it")
 
 
 def test_a_raw_message_that_is_not_base64_ends_the_replay_there(recorded, tmp_path):

@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import re
 import threading
 from pathlib import Path
 
@@ -158,6 +159,25 @@ def test_a_damaged_record_ends_what_is_played(recorded, tmp_path):
                           channel=f"nobody-{os.getpid()}", wait_s=0.5)
     assert res.stopped == f"{rec.damaged}: the run is played up to the {n_before} cycles " \
                           "recorded before it"
+
+
+def test_a_malformed_cycle_record_ends_what_is_played(recorded, tmp_path):
+    """A cycle record that is valid JSON but not what uvd.cycle.v1 promises (its attitude cut
+    short), or not an object at all: what is played ends before it, as damage does."""
+    from tests.test_recording import _rewrite
+    path, _ = recorded
+    for edit, why in ((lambda msg: {**msg, "R": msg["R"][:2]},
+                       "a /uvd/cycle message at [0-9]+ ns is malformed \\(ValueError: R is not "
+                       "3×3 numbers\\)"),
+                      (lambda msg: [msg], "a /uvd/cycle message is malformed \\(a JSON list, "
+                                          "not an object\\)")):
+        n_cycle = iter(range(10**6))
+        bad = tmp_path / "malformed.mcap"
+        _rewrite(path, bad, lambda k, topic, msg, edit=edit, n_cycle=n_cycle: edit(msg)
+                 if topic == "/uvd/cycle" and next(n_cycle) == 20 else msg)
+        rec = load_wire(bad)
+        assert len(rec.cycles) == 20
+        assert re.fullmatch(why, rec.damaged), rec.damaged
 
 
 def test_compare_commands_cycle_by_cycle():

@@ -41,4 +41,7 @@ def _run(args) -> int:
     if summary.get("unreadable_messages"):
         print(f"uvd report: {summary['unreadable_messages']} unreadable message(s) skipped "
               f"(first: {summary['first_unreadable']})", file=sys.stderr)
+    if summary.get("malformed_records"):
+        print(f"uvd report: {summary['malformed_records']} malformed record(s) skipped "
+              f"(first: {summary['first_malformed']})", file=sys.stderr)
     return 0

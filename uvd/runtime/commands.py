@@ -157,7 +157,10 @@ def command_from_record(rec: Mapping[str, Any]) -> Any:
     cls = _BY_NAME.get(str(rec.get("command")))
     if cls is None:
         raise ValueError(f"unknown command {rec.get('command')!r} (one of {', '.join(_BY_NAME)})")
-    args = dict(rec.get("args") or {})
+    args = rec.get("args") or {}
+    if not isinstance(args, Mapping):
+        raise ValueError(f"{cls.__name__}: args {args!r:.40} are not an object")
+    args = dict(args)
     for key in ("u", "names"):
         if isinstance(args.get(key), list):
             args[key] = tuple(args[key])

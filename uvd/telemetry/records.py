@@ -33,7 +33,7 @@ import numpy as np
 from uvd.geometry import R_to_euler
 
 __all__ = ["CycleRecord", "estimate_record", "euler_of", "eta_of_record", "CYCLE",
-           "tracking_error_norms"]
+           "tracking_error_norms", "is_int64", "array_shape", "cycle_record_problem"]
 
 CYCLE = "cycle"
 
@@ -212,9 +212,12 @@ def euler_of(R: Any) -> tuple[float, float, float]:
     return R_to_euler(np.asarray(R, dtype=float).reshape(3, 3))
 
 
-def eta_of_record(d: Mapping[str, Any]) -> np.ndarray:
-    """[north, east, down, roll, pitch, heading] of a cycle record in hub or JSON form."""
-    return np.array([*np.asarray(d["p"], dtype=float), *euler_of(d["R"])])
+def eta_of_record(d: Mapping[str, Any], *, ref: bool = False) -> np.ndarray:
+    """[north, east, down, roll, pitch, heading] of a cycle record in hub or JSON form (JSON's
+    null, as a navigation state that is not valid is written: NaN); of its reference with
+    ``ref``."""
+    p, R = (d["p_ref"], d["R_ref"]) if ref else (d["p"], d["R"])
+    return np.array([*np.asarray(p, dtype=float), *euler_of(R)])
 
 
 def tracking_error_norms(d: Mapping[str, Any]) -> tuple[float, float]:
@@ -228,3 +231,59 @@ def tracking_error_norms(d: Mapping[str, Any]) -> tuple[float, float]:
     _, e_psi, e_v, _ = error_coordinates(H, np.asarray(d["v"], float), Hr,
                                          np.asarray(d["v_ref"], float))
     return float(np.linalg.norm(e_psi)), float(np.linalg.norm(e_v))
+
+
+def is_int64(x: Any) -> bool:
+    """``x`` is an integer a clock in ns can be (int64; JSON's ``true`` is not one)."""
+    return isinstance(x, int) and not isinstance(x, bool) and -2 ** 63 <= x < 2 ** 63
+
+
+#: a cycle record's arrays (uvd.cycle.v1) and their shapes; the reference's may be null
+_CYCLE_ARRAYS = {"p": (3,), "R": (3, 3), "v": (6,), "u": (6,)}
+_REFERENCE_ARRAYS = {"p_ref": (3,), "R_ref": (3, 3), "v_ref": (6,)}
+
+
+def array_shape(x: Any) -> tuple[int, ...] | None:
+    """The shape of ``x`` as an array of numbers (null as NaN); None: not one."""
+    if isinstance(x, (str, bytes, Mapping)):
+        return None
+    try:
+        return np.asarray(x, dtype=float).shape
+    except (TypeError, ValueError):
+        return None
+
+
+def cycle_record_problem(d: Any) -> str | None:
+    """What makes ``d`` (a cycle record read back, JSON form) not what uvd.cycle.v1 promises in
+    the fields its readers use — ``uvd report`` skips and counts such a record, a replay ends
+    there; None: nothing. The time and receive stamps are int64, ``state``, ``action`` and
+    ``mode`` strings, ``dt`` a finite number, ``p``, ``R``, ``v``, ``u`` of their shapes (null:
+    NaN, as an invalid navigation state is written), ``thrust`` one row of finite numbers,
+    the reference's three arrays all there or all null, ``inputs`` an object or null."""
+    if not isinstance(d, Mapping):
+        return f"a JSON {type(d).__name__}, not an object"
+    if not is_int64(d.get("t_ns")):
+        return f"t_ns {d.get('t_ns')!r:.40} is not a 64-bit integer"
+    for k in ("state", "action", "mode"):
+        if not isinstance(d.get(k), str):
+            return f"{k} {d.get(k)!r:.40} is not a string"
+    dt = d.get("dt")
+    if not isinstance(dt, (int, float)) or isinstance(dt, bool) or not math.isfinite(dt):
+        return f"dt {dt!r:.40} is not a finite number"
+    for k in ("ins_rx_ns", "dvl_rx_ns", "depth_rx_ns"):
+        if d.get(k) is not None and not is_int64(d[k]):
+            return f"{k} {d[k]!r:.40} is not a 64-bit integer"
+    ref = [d.get(k) is not None for k in _REFERENCE_ARRAYS]
+    if any(ref) and not all(ref):
+        return "a reference needs p_ref, R_ref and v_ref together"
+    want = {**_CYCLE_ARRAYS, **(_REFERENCE_ARRAYS if all(ref) else {})}
+    for k, shape in want.items():
+        if array_shape(d.get(k)) != shape:
+            return f"{k} is not {'×'.join(map(str, shape))} numbers"
+    thrust = array_shape(d.get("thrust"))
+    if thrust is None or len(thrust) != 1 or thrust[0] == 0 \
+            or not np.all(np.isfinite(np.asarray(d["thrust"], dtype=float))):
+        return "thrust is not a row of finite numbers"
+    if d.get("inputs") is not None and not isinstance(d["inputs"], Mapping):
+        return f"inputs {d['inputs']!r:.40} is not an object"
+    return None

@@ -19,18 +19,25 @@ The figures the experiments' ``--plots`` draw too come from :mod:`uvd.io.figures
 
 from __future__ import annotations
 
+import collections
 import html
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from uvd.geometry import R_to_euler, wrap_angles
+from uvd.geometry import wrap_angles
 from uvd.io.figures import estimates_figure, mne_figure
 from uvd.telemetry.recording import RecordingError, read_messages
-from uvd.telemetry.records import tracking_error_norms
+from uvd.telemetry.records import (
+    array_shape,
+    cycle_record_problem,
+    eta_of_record,
+    is_int64,
+    tracking_error_norms,
+)
 
 __all__ = ["write_report"]
 
@@ -38,23 +45,79 @@ _DOF = ("north (m)", "east (m)", "down (m)", "roll (deg)", "pitch (deg)", "headi
 _ACTIONS = ("none", "warn", "fallback", "hold-depth", "zero-thrust", "disarm")
 
 
-def _eta(p, R) -> np.ndarray:
-    return np.array([*p, *R_to_euler(np.asarray(R, dtype=float))])
-
-
 def _load(path: Path) -> dict[str, list]:
-    """The report's channels of ``path``; ``out["unreadable"]``: the messages that were not
-    JSON (a damaged byte), skipped and counted — the rest of the run is drawn."""
-    out: dict[str, list] = {"cycle": [], "estimate": [], "failsafe": [], "lifecycle": [],
-                            "start": []}
+    """The report's channels of ``path``. Skipped and counted, the rest of the run drawn:
+    ``out["unreadable"]``, the messages that were not JSON (a damaged byte);
+    ``out["malformed"]``, the records that are JSON but not what their schema promises in a
+    field the report draws (:func:`_problem`)."""
+    out: dict[str, list] = {"cycle": [], "estimate": [], "failsafe": [], "start": []}
     topics = {f"/uvd/{k}": k for k in out}
     unreadable: list[str] = []
-    for topic, _, msg in read_messages(path, list(topics), unreadable=unreadable):
-        out[topics[topic]].append(msg)
-    out["unreadable"] = unreadable
+    malformed: list[str] = []
+    for topic, t_ns, msg in read_messages(path, list(topics), unreadable=unreadable):
+        why = _problem(topics[topic], msg)
+        if why is None:
+            out[topics[topic]].append(msg)
+        else:
+            malformed.append(f"{topic} record at {t_ns} ns: {why}")
+    out["cycle"] = _one_thruster_count(out["cycle"], malformed)
+    out["unreadable"], out["malformed"] = unreadable, malformed
     if not out["cycle"]:
-        raise RecordingError(f"{path}: no cycle records (/uvd/cycle): nothing to report")
+        why = f" ({len(malformed)} malformed, first: {malformed[0]})" if malformed else ""
+        raise RecordingError(f"{path}: no cycle records (/uvd/cycle){why}: nothing to report")
     return out
+
+
+def _problem(kind: str, msg: Any) -> str | None:
+    """What makes a record unfit for the report (None: nothing): a cycle record as
+    :func:`~uvd.telemetry.records.cycle_record_problem` judges it, with its measured propeller
+    speeds a row of numbers; an estimate's, a failsafe event's or the start record's fields
+    the report reads."""
+    if kind == "cycle":
+        why = cycle_record_problem(msg)
+        if why is not None:
+            return why
+        act = (msg.get("inputs") or {}).get("actuators")
+        if act is not None and not isinstance(act, Mapping):
+            return "inputs.actuators is not an object"
+        w = None if act is None else act.get("omega_rad_s")
+        if w is not None and len(array_shape(w) or ()) != 1:
+            return "inputs.actuators.omega_rad_s is not a row of numbers"
+        return None
+    if not isinstance(msg, Mapping):
+        return f"a JSON {type(msg).__name__}, not an object"
+    if kind in ("estimate", "failsafe") and not is_int64(msg.get("t_ns")):
+        return f"t_ns {msg.get('t_ns')!r:.40} is not a 64-bit integer"
+    if kind == "failsafe" and not all(isinstance(msg.get(k), str) for k in ("kind", "trigger")):
+        return "kind or trigger is not a string"
+    if kind == "estimate" and msg.get("theta") is not None \
+            and array_shape(msg["theta"]) not in ((16,), (241,)):
+        return "theta is not 16 or 241 numbers"
+    return None
+
+
+def _one_thruster_count(cycles: list[dict], malformed: list[str]) -> list[dict]:
+    """The cycles whose thrust (and measured propeller speeds) have the run's number of
+    thrusters, the most common; the others join ``malformed``."""
+    counts = collections.Counter(len(r["thrust"]) for r in cycles)
+    if len(counts) <= 1 and all(_speeds(r) in (None, *counts) for r in cycles):
+        return cycles
+    n = counts.most_common(1)[0][0]
+    keep = []
+    for r in cycles:
+        m = len(r["thrust"])
+        if m == n and _speeds(r) in (None, n):
+            keep.append(r)
+        else:
+            malformed.append(f"/uvd/cycle record at {r['t_ns']} ns: {m} thrusts and "
+                             f"{_speeds(r)} propeller speeds, the run's others {n}")
+    return keep
+
+
+def _speeds(r: Mapping[str, Any]) -> int | None:
+    """How many measured propeller speeds a (checked) cycle record holds (None: none)."""
+    w = ((r.get("inputs") or {}).get("actuators") or {}).get("omega_rad_s")
+    return None if w is None else len(w)
 
 
 def _k_thrust(start: list[dict]) -> np.ndarray | None:
@@ -84,9 +147,10 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
     Raises
     ------
     RecordingError
-        The recording cannot be read, holds no cycles, or holds a record that is not what
-        its schema promises (valid JSON, but a field missing or of the wrong shape: the
-        report names the file and the error, as ``uvd replay`` does).
+        The recording cannot be read or holds no cycles that can be drawn. A message that is
+        not JSON, or a record that is not what its schema promises (valid JSON, but a field
+        missing or of the wrong shape), is skipped and counted: the summary's
+        ``unreadable_messages`` and ``malformed_records`` with the first of each.
     """
     import matplotlib
     matplotlib.use("Agg")
@@ -102,7 +166,7 @@ def write_report(recording: str | Path, out_dir: str | Path, *,
     data = _load(path)
     try:
         return _draw(plt, path, out, data, params, say)
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
         if isinstance(exc, (RecordingError, UvdError)):  # the parameters' own errors
             raise
         plt.close("all")
@@ -150,6 +214,9 @@ def _draw(plt, path: Path, out: Path, data: dict[str, list], params, say) -> dic
     if data["unreadable"]:  # uvd report says so on stderr, --quiet or not
         summary["unreadable_messages"] = len(data["unreadable"])
         summary["first_unreadable"] = data["unreadable"][0]
+    if data["malformed"]:
+        summary["malformed_records"] = len(data["malformed"])
+        summary["first_malformed"] = data["malformed"][0]
     if xval is not None:
         summary["xval"] = xval
     _write_html(out / "index.html", summary, figures)
@@ -159,8 +226,8 @@ def _draw(plt, path: Path, out: Path, data: dict[str, list], params, say) -> dic
 def _tracking_figures(plt, save, cyc: list, t: np.ndarray, armed: np.ndarray) -> None:
     """Reference vs navigation per DOF with their difference, and the MNE windows (Fig. 5.4)."""
     ta = t[armed]
-    eta = np.array([_eta(r["p"], r["R"]) for r, a in zip(cyc, armed, strict=True) if a])
-    ref = np.array([_eta(r["p_ref"], r["R_ref"]) for r, a in zip(cyc, armed, strict=True)
+    eta = np.array([eta_of_record(r) for r, a in zip(cyc, armed, strict=True) if a])
+    ref = np.array([eta_of_record(r, ref=True) for r, a in zip(cyc, armed, strict=True)
                     if a])
     err = eta - ref
     err[:, 3:] = wrap_angles(err[:, 3:])

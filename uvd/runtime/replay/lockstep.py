@@ -45,7 +45,7 @@ from uvd.runtime.schema import with_values
 from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
 from uvd.telemetry.recording import RecordingError, read_messages
-from uvd.telemetry.records import tracking_error_norms
+from uvd.telemetry.records import cycle_record_problem, is_int64, tracking_error_norms
 
 __all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport", "tracking"]
 
@@ -68,8 +68,10 @@ class Recording:
 def load_recording(path: str | Path) -> Recording:
     """Read the channels a replay needs from one ``.mcap`` file.
 
-    A damaged record or a message that is not JSON ends what is read, as a cut does: every
-    cycle before it has its inputs in the bytes before its own record; ``damaged`` names it.
+    A damaged record, a message that is not JSON or a record that is not what its schema
+    promises in a field the replay reads (:func:`_problem`) ends what is read, as a cut does:
+    every cycle before it has its inputs in the bytes before its own record; ``damaged``
+    names it.
 
     Raises
     ------
@@ -86,6 +88,10 @@ def load_recording(path: str | Path) -> Recording:
                                               "/uvd/raw/serial"), unreadable=damage):
         if damage:  # this message comes after the damage: what is read ends before it
             break
+        why = _problem(topic, msg)
+        if why is not None:  # valid JSON, not what its schema promises: damage as well
+            damage.append(f"a {topic} record at {_msg_time(msg)} ns is malformed ({why})")
+            break
         if topic == "/uvd/cycle":
             cycles.append(msg)
         elif topic == "/uvd/raw/serial":
@@ -93,7 +99,7 @@ def load_recording(path: str | Path) -> Recording:
                 serial.append((str(msg["source"]), int(msg["t_ns"]),
                                base64.b64decode(msg["data"], validate=True)))
             except (KeyError, ValueError, TypeError) as exc:  # damaged: what is read ends
-                damage.append(f"a /uvd/raw/serial message at {msg.get('t_ns')!r:.30} ns is "
+                damage.append(f"a /uvd/raw/serial message at {_msg_time(msg)} ns is "
                               f"malformed ({type(exc).__name__}: {exc})")
                 break
         elif topic == "/uvd/command":
@@ -112,6 +118,40 @@ def load_recording(path: str | Path) -> Recording:
         raise RecordingError(f"{path}: no cycle records (/uvd/cycle){before}")
     return Recording(path, start, cycles, commands, lifecycle, reloads, serial,
                      damage[0] if damage else None)
+
+
+def _msg_time(msg: Any) -> str:
+    """A record's ``t_ns`` for a message naming it (whatever a damaged one holds)."""
+    return f"{msg.get('t_ns')!r:.30}" if isinstance(msg, Mapping) else "?"
+
+
+def _problem(topic: str, msg: Any) -> str | None:
+    """What makes a record unfit for a replay, in the fields the replay reads (None:
+    nothing); the raw serial messages are judged where they are decoded."""
+    if topic == "/uvd/cycle":
+        return cycle_record_problem(msg)
+    if not isinstance(msg, Mapping):
+        return f"a JSON {type(msg).__name__}, not an object"
+    if topic == "/uvd/start":
+        for k, types in (("config_toml", str), ("config_path", (str, type(None))),
+                         ("params_kept", (Mapping, type(None))),
+                         ("estimators", (Mapping, type(None)))):
+            if not isinstance(msg.get(k), types):
+                return f"{k} {msg.get(k)!r:.40} is not what uvd.start.v1 holds"
+        return None
+    if topic in ("/uvd/command", "/uvd/lifecycle", "/uvd/reload") \
+            and not is_int64(msg.get("t_ns")):
+        return f"t_ns {msg.get('t_ns')!r:.40} is not a 64-bit integer"
+    if topic == "/uvd/command":
+        try:
+            command_from_record(msg)
+        except ValueError as exc:
+            return str(exc)
+    if topic == "/uvd/reload" and not (msg.get("applied") is None or (
+            isinstance(msg["applied"], list) and all(isinstance(k, str)
+                                                     for k in msg["applied"]))):
+        return f"applied {msg['applied']!r:.40} is not a list of keys"
+    return None
 
 
 @dataclass
@@ -221,7 +261,7 @@ def replay_lockstep(path: str | Path, *, config: str | Path | None = None,
     rec = load_recording(path)
     try:
         return _replay(rec, config, progress)
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
         if isinstance(exc, (RecordingError, ConfigError)):
             raise
         raise RecordingError(f"{rec.path}: a record does not hold what uvd.cycle.v1 / "
@@ -281,8 +321,14 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
                 if s is None:
                     report.missing_samples += 1
                 got[src] = s
-        inp = inputs_from_record(t, r["inputs"], got.get("ins"), got.get("dvl"),
-                                 got.get("depth"))
+        try:
+            inp = inputs_from_record(t, r["inputs"], got.get("ins"), got.get("dvl"),
+                                     got.get("depth"))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            report.stopped = (f"cycle {k} (t = {t} ns): its inputs are malformed "
+                              f"({type(exc).__name__}: {exc}): the replay covers the "
+                              f"{report.cycles} cycles recorded before it")
+            break
         res = sup.update(inp, float(r["dt"]))
         thrust = res.out.thrust_n
         want = np.asarray(r["thrust"], dtype=float)

@@ -38,7 +38,7 @@ import sys
 import threading
 import time
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from uvd.telemetry.recording import RecordingError, read_messages
+from uvd.telemetry.records import cycle_record_problem
 
 __all__ = ["WireRecording", "load_wire", "RealtimePlayer", "live_config",
            "compare_commands", "TOLERANCE_PERMILLE", "replay_realtime"]
@@ -108,6 +109,10 @@ def load_wire(path: str | Path) -> WireRecording:
                                             "/uvd/cycle", "/uvd/command"), unreadable=damage):
         if damage:  # this message comes after the damage: what is read ends before it
             break
+        if not isinstance(m, Mapping):
+            damage.append(f"a {topic} message is malformed (a JSON {type(m).__name__}, not an "
+                          "object)")
+            break
         try:
             if topic == "/uvd/raw/serial":
                 serial.append((int(m["t_ns"]), str(m["source"]),
@@ -122,6 +127,9 @@ def load_wire(path: str | Path) -> WireRecording:
                 else:
                     sent.append((t, cid, data))
             elif topic == "/uvd/cycle":
+                why = cycle_record_problem(m)
+                if why is not None:
+                    raise ValueError(why)
                 cycles.append(m)
             elif topic == "/uvd/command":
                 if m.get("source") != "uvd run --arm":
@@ -133,7 +141,8 @@ def load_wire(path: str | Path) -> WireRecording:
                           f"({type(exc).__name__}: {exc})")
             break
     before = f" before {damage[0]}" if damage else ""
-    if start is None or not start.get("config_toml"):
+    if start is None or not start.get("config_toml") \
+            or not isinstance(start["config_toml"], str):
         raise RecordingError(f"{path}: no start record with the configuration (/uvd/start)"
                              f"{before} — not a uvd recording, or not the first file of a run")
     if not sent:
