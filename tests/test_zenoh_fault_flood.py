@@ -107,3 +107,35 @@ def test_a_sample_below_the_schemas_confidence_is_dropped_not_queued(caplog):
     assert queue.stats()["accepted"] == 0
     assert f"{KEY}: fault sample's confidence -5.0 is below 1 (uvd.fault.v1's minimum); " \
         "dropped" in [r.getMessage() for r in caplog.records]
+
+
+def test_a_flood_of_malformed_samples_is_counted_each_and_told_not_line_by_line(caplog):
+    """2000 malformed samples (a client with a wrong schema, say): each counted dropped and
+    none queued; the log tells the first and every 1000th with the count so far (it wrote a
+    line per sample: a flooding client flooded the journal)."""
+    port = free_port()
+    queue = cmd.CommandQueue()
+    sink = ZenohSink("rov9", zenoh_config(listen=[f"tcp/127.0.0.1:{port}"]), faults=queue.put)
+    bad = json.dumps({**json.loads(SAMPLE), "t_ns": "5"})
+
+    async def main() -> None:
+        await sink.open()
+        try:
+            with zenoh.open(zenoh_config(connect=[f"tcp/127.0.0.1:{port}"])) as fdc:
+                await _put_until(fdc, bad, lambda: sink.faults_dropped > 0)
+                before = sink.faults_dropped
+                for _ in range(2000):
+                    fdc.put(KEY, bad)
+                await _until(lambda: sink.faults_dropped >= before + 2000, 20.0)
+        finally:
+            await sink.aclose()
+
+    with caplog.at_level(logging.WARNING, logger="uvd.links.zenoh"):
+        asyncio.run(asyncio.wait_for(main(), 60.0))
+    dropped = sink.faults_dropped
+    assert dropped >= 2001 and sink.faults_received == 0 and sink.faults_flooded == 0, dropped
+    assert queue.stats()["accepted"] == 0
+    told = [r.getMessage() for r in caplog.records if "fault sample's t_ns" in r.getMessage()]
+    why = f"{KEY}: fault sample's t_ns is '5' (uvd.fault.v1 wants an integer); dropped"
+    assert told[0] == why, told
+    assert told[1:] == [f"{why} ({n} malformed so far)" for n in range(1000, dropped + 1, 1000)]

@@ -47,6 +47,7 @@ import numpy as np
 from uvd.geometry import R_to_euler, wrap_angle
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
+from uvd.telemetry.records import is_int64
 from uvd.zenoh_callbacks import SessionCallbacks
 from uvd.zenoh_names import vehicle_key_problem
 
@@ -120,7 +121,8 @@ class ZenohSink:
     faults : callable, optional
         ``faults(report)``: subscribe to ``uvd/<vehicle>/fault/**`` and hand each well-formed
         sample, as a :class:`~uvd.runtime.commands.FaultReport`, to it (the daemon's command
-        queue's ``put``); a malformed one is logged, counted (``faults_dropped``) and dropped,
+        queue's ``put``); a malformed one is counted (``faults_dropped``,
+        ``faults_malformed``), told in the log at the first and every 1000th, and dropped,
         and so is one that arrives while :data:`FAULTS_WAITING_MAX` samples still wait for the
         cycle (``faults_flooded`` too): a flooding client never fills the command queue the
         operator's Disarm goes through.
@@ -159,6 +161,7 @@ class ZenohSink:
         self.faults_received = 0
         self.faults_dropped = 0
         self.faults_flooded = 0
+        self.faults_malformed = 0
         self._faults_waiting = 0
         self._faults_lock = threading.Lock()
 
@@ -192,8 +195,9 @@ class ZenohSink:
         try:
             report = fault_report(key, sample.payload.to_bytes())
         except ValueError as exc:
-            self._fault_taken(dropped=True)
-            log.warning("%s", exc)
+            n = self._fault_taken(dropped=True)
+            if n == 1 or n % 1000 == 0:  # likewise told at the first and every 1000th
+                log.warning("%s%s", exc, "" if n == 1 else f" ({n} malformed so far)")
             return
         self.faults_received += 1
         waiting = self.faults(report)
@@ -202,12 +206,15 @@ class ZenohSink:
         else:
             self._fault_taken()
 
-    def _fault_taken(self, dropped: bool = False) -> None:
+    def _fault_taken(self, dropped: bool = False) -> int:
         """A waiting sample's place freed (zenoh's or the cycle's thread): taken by the cycle,
-        or ``dropped`` as malformed (counted under the same lock as a flooded one)."""
+        or ``dropped`` as malformed (counted under the same lock as a flooded one); returns
+        how many were malformed so far."""
         with self._faults_lock:
             self._faults_waiting -= 1
             self.faults_dropped += dropped
+            self.faults_malformed += dropped
+            return self.faults_malformed
 
     def _publisher(self, key: str, schema_name: str):
         import zenoh
@@ -410,7 +417,7 @@ def fault_report(key: str, payload: bytes):
                          "integer); dropped")
     # a clock in ns fits 64 bits, a confidence is finite (JSON's NaN and Infinity are not)
     for name, x in (("t_ns", d["t_ns"]), ("explanation.since_t_ns", since)):
-        if x is not None and not -2 ** 63 <= x < 2 ** 63:
+        if x is not None and not is_int64(x):
             raise ValueError(f"{key}: fault sample's {name} {x} is beyond 64 bits; dropped")
     if not math.isfinite(d["confidence"]):
         raise ValueError(f"{key}: fault sample's confidence is {d['confidence']!r} (a finite "

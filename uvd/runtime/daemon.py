@@ -190,7 +190,8 @@ class Daemon:
         if getattr(z, "faults", None) is not None:  # and as they arrived (dropped: not taken)
             out["fault_samples_in"] = {"received": z.faults_received,
                                        "dropped": z.faults_dropped,
-                                       "flooded": z.faults_flooded}
+                                       "flooded": z.faults_flooded,
+                                       "malformed": z.faults_malformed}
         out["shutdown"] = self.app.shutdown_report
         return out
 
