@@ -281,6 +281,30 @@ def test_a_long_text_is_paced_not_one_burst():
     run_link(scenario, statustext_hz=hz)
 
 
+def test_a_flood_of_command_texts_never_crowds_out_the_vehicles_events():
+    """400 refused commands' texts (a client flooding: found with 19 300 uvd-fdc samples in
+    4 s, whose 328 accepted reports' texts pushed the disarm's lifecycle text out of the one
+    paced queue) and one lifecycle transition among them: the transition's text goes out; the
+    flood's texts beyond the queue are counted dropped."""
+    def refused(i):
+        return {"type": "command", "t_ns": i, "command": "FaultReport", "ok": False,
+                "reason": f"flood {i}"}
+
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        asyncio.run(link.write([refused(i) for i in range(200)]
+                               + [{"type": "lifecycle", "from": "ARMED", "to": "STANDBY",
+                                   "cause": "disarm (ground station)"}]
+                               + [refused(i) for i in range(200, 400)]))
+        told = st.wait("STATUSTEXT", lambda m: "ARMED -> STANDBY" in m.text, timeout=5.0)
+        assert told.text == "ARMED -> STANDBY: disarm (ground station)"
+        assert told.severity == mav.MAV_SEVERITY_NOTICE
+        assert link.counters["statustext_dropped"] >= 400 - 2 * 64 - TEXT_BURST
+
+    from uvd.links.mavlink.link import TEXT_BURST
+    run_link(scenario, statustext_hz=20.0)
+
+
 def test_the_pacing_is_a_token_bucket_on_the_link_clock():
     """The link's pacing driven by a given clock (its thread not started), sending on a real
     socket to a station: TEXT_BURST chunks at once, then ``statustext_hz`` a second, never

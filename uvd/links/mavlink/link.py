@@ -222,6 +222,9 @@ class MavlinkLink:
         self.pending: dict[str, Any] = {}
         self._cycle: Mapping[str, Any] | None = None
         self._estimate: Mapping[str, Any] | None = None
+        #: texts of the vehicle's own events (failsafe, lifecycle), sent before the others:
+        #: what stations and clients send (refusals, η reports) cannot crowd them out
+        self._events: collections.deque = collections.deque(maxlen=64)
         self._texts: collections.deque = collections.deque(maxlen=64)
         self._replies: collections.deque = collections.deque(maxlen=256)
         self._text_id = 0
@@ -236,8 +239,8 @@ class MavlinkLink:
         self._stop = threading.Event()
         self._t0 = time.monotonic()
 
-    def _text(self, item: tuple[str, str]) -> None:
-        self._push(self._texts, item, "statustext")
+    def _text(self, item: tuple[str, str], *, event: bool = False) -> None:
+        self._push(self._events if event else self._texts, item, "statustext")
 
     def _push(self, queue: collections.deque, item: Any, what: str) -> None:
         """Append to a bounded deque; when full its oldest item is dropped and counted."""
@@ -297,9 +300,9 @@ class MavlinkLink:
                 # "accommodated": the amplifier source of η (thruster, η, source, given up)
                 sev = "warning" if r["kind"] in ("fired", "action", "accommodated") else "info"
                 self._text((sev, f"failsafe {r['kind']}: {r['trigger']} -> "
-                                         f"{r['action']} ({r['reason']})"))
+                                 f"{r['action']} ({r['reason']})"), event=True)
             elif kind == "lifecycle":
-                self._text(("notice", f"{r['from']} -> {r['to']}: {r['cause']}"))
+                self._text(("notice", f"{r['from']} -> {r['to']}: {r['cause']}"), event=True)
             elif kind == "command" and not r.get("ok"):
                 self._text(("warning", f"{r['command']} refused: {r['reason']}"))
             elif kind == "command" and r.get("command") in ("SetThrusterEta", "FaultReport"):
@@ -696,17 +699,19 @@ class MavlinkLink:
 
     def _send_texts(self, now: float) -> None:
         """The queued texts' STATUSTEXT chunks, paced: at most ``statustext_hz`` a second
-        after a first :data:`TEXT_BURST` at once (a token bucket). A text is cut into chunks
-        only when the one before has gone, so the bounded text queue is where a flood of
-        texts drops (counted ``statustext_dropped``)."""
+        after a first :data:`TEXT_BURST` at once (a token bucket); the vehicle's events first.
+        A text is cut into chunks only when the one before has gone, so the bounded text
+        queues are where a flood of texts drops, oldest first (counted
+        ``statustext_dropped``)."""
         self._tokens = min(TEXT_BURST, self._tokens
                            + (now - self._tokens_t) * self.cfg.statustext_hz)
         self._tokens_t = now
         while self._tokens >= 1.0:
             if not self._chunks:
-                if not self._texts:
+                queue = self._events or self._texts
+                if not queue:
                     return
-                self._chunks.extend(self._statustext(*self._texts.popleft()))
+                self._chunks.extend(self._statustext(*queue.popleft()))
             self._send(self._chunks.popleft())
             self._tokens -= 1.0
 
