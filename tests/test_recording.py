@@ -386,6 +386,21 @@ def test_a_malformed_cycle_record_is_skipped_by_the_report_and_ends_the_replay(
                      f"record at [0-9]+ ns: {why}\\)", capsys.readouterr().err)
 
 
+def test_a_cycle_with_another_number_of_thrusters_is_skipped_by_the_report(recorded, tmp_path):
+    """One cycle whose thrust has 5 values where the run's others have 6 (each row a valid
+    record alone): the report counts it malformed, by the run's own count, and draws the rest
+    (numpy could not stack the rows: a ValueError refused the whole file)."""
+    path, _, _, cycles = recorded
+    n_cycle = iter(range(10**6))
+    short = tmp_path / "five-thrusts.mcap"
+    _rewrite(path, short, lambda i, topic, msg: {**msg, "thrust": msg["thrust"][:5]}
+             if topic == "/uvd/cycle" and next(n_cycle) == 20 else msg)
+    summary = write_report(short, tmp_path / "report")
+    assert summary["malformed_records"] == 1
+    assert re.fullmatch("/uvd/cycle record at [0-9]+ ns: 5 thrusts( and 6 propeller speeds)? "
+                        "where the run's others have 6", summary["first_malformed"])
+
+
 def test_an_armed_cycle_without_a_valid_position_is_drawn(recorded, tmp_path):
     """An armed cycle whose position is null (NaN, as the daemon writes a navigation state
     that is not valid; the schema allows it) and whose reference is too: drawn with the rest,

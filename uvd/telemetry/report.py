@@ -99,18 +99,18 @@ def _problem(kind: str, msg: Any) -> str | None:
 def _one_thruster_count(cycles: list[dict], malformed: list[str]) -> list[dict]:
     """The cycles whose thrust (and measured propeller speeds) have the run's number of
     thrusters, the most common; the others join ``malformed``."""
-    counts = collections.Counter(len(r["thrust"]) for r in cycles)
-    if len(counts) <= 1 and all(_speeds(r) in (None, *counts) for r in cycles):
+    if not cycles:
         return cycles
-    n = counts.most_common(1)[0][0]
+    n = collections.Counter(len(r["thrust"]) for r in cycles).most_common(1)[0][0]
     keep = []
     for r in cycles:
-        m = len(r["thrust"])
-        if m == n and _speeds(r) in (None, n):
+        m, w = len(r["thrust"]), _speeds(r)
+        if m == n and w in (None, n):
             keep.append(r)
         else:
-            malformed.append(f"/uvd/cycle record at {r['t_ns']} ns: {m} thrusts and "
-                             f"{_speeds(r)} propeller speeds, the run's others {n}")
+            speeds = "" if w is None else f" and {w} propeller speeds"
+            malformed.append(f"/uvd/cycle record at {r['t_ns']} ns: {m} thrusts{speeds} where "
+                             f"the run's others have {n}")
     return keep
 
 
