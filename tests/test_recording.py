@@ -401,6 +401,29 @@ def test_a_cycle_with_another_number_of_thrusters_is_skipped_by_the_report(recor
                         "where the run's others have 6", summary["first_malformed"])
 
 
+def test_estimates_the_report_does_not_draw_are_not_called_malformed(recorded, tmp_path):
+    """An estimate whose θ̂ has another length (another estimator's) is valid and left out of
+    the figure, as before; one whose θ̂ is not a row of numbers is counted malformed."""
+    path, _, _, _ = recorded
+    n_estimate = iter(range(10**6))
+    theta = {0: [1.0] * 9, 1: "x"}  # the first estimate's θ̂, the second's
+
+    def edit(i, topic, msg):
+        if topic != "/uvd/estimate":
+            return msg
+        k = next(n_estimate)
+        return {**msg, "theta": theta[k]} if k in theta else msg
+    edited = tmp_path / "estimates.mcap"
+    _rewrite(path, edited, edit)
+    drawable = sum(1 for _, _, m in read_messages(path, ["/uvd/estimate"])
+                   if m.get("theta") is not None and len(m["theta"]) in (16, 241))
+    summary = write_report(edited, tmp_path / "report")
+    assert summary["malformed_records"] == 1
+    assert re.fullmatch("/uvd/estimate record at [0-9]+ ns: theta is not a row of numbers",
+                        summary["first_malformed"])
+    assert summary["estimates"] == drawable - 2 > 0
+
+
 def test_an_armed_cycle_without_a_valid_position_is_drawn(recorded, tmp_path):
     """An armed cycle whose position is null (NaN, as the daemon writes a navigation state
     that is not valid; the schema allows it) and whose reference is too: drawn with the rest,
