@@ -12,7 +12,7 @@ import time
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from uvd.links.mavlink.link import MavlinkLink
+from uvd.links.mavlink.link import TEXT_BURST, MavlinkLink
 from uvd.runtime.commands import CommandQueue, HoldPose, ManualWrench
 from uvd.runtime.config import DEFAULT_CONFIG, MavlinkSection, load_config
 
@@ -262,7 +262,6 @@ def test_a_long_text_is_paced_not_one_burst():
     """A 40-chunk text at ``statustext_hz`` 20 through the running link: all 40 chunks, in
     order, one id; the last no sooner than the 30 beyond the first TEXT_BURST (10) allow at
     20 a second (1.5 s after the text was written)."""
-    from uvd.links.mavlink.link import TEXT_BURST
     hz, n = 20.0, 40
     reason = "".join(f"{i:02d}" * 25 for i in range(n - 1))
 
@@ -301,7 +300,6 @@ def test_a_flood_of_command_texts_never_crowds_out_the_vehicles_events():
         assert told.severity == mav.MAV_SEVERITY_NOTICE
         assert link.counters["statustext_dropped"] >= 400 - 2 * 64 - TEXT_BURST
 
-    from uvd.links.mavlink.link import TEXT_BURST
     run_link(scenario, statustext_hz=20.0)
 
 
@@ -309,7 +307,6 @@ def test_the_pacing_is_a_token_bucket_on_the_link_clock():
     """The link's pacing driven by a given clock (its thread not started), sending on a real
     socket to a station: TEXT_BURST chunks at once, then ``statustext_hz`` a second, never
     more than TEXT_BURST after a pause; the next text after the last chunk of the one before."""
-    from uvd.links.mavlink.link import TEXT_BURST
     station = Peer()
     link = MavlinkLink(
         MavlinkSection(enabled=True, listen="", params_file="", statustext_hz=20.0,
