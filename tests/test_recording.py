@@ -390,7 +390,7 @@ def test_a_cycle_with_another_number_of_thrusters_is_skipped_by_the_report(recor
     """One cycle whose thrust has 5 values where the run's others have 6 (each row a valid
     record alone): the report counts it malformed, by the run's own count, and draws the rest
     (numpy could not stack the rows: a ValueError refused the whole file)."""
-    path, _, _, cycles = recorded
+    path, _, _, _ = recorded
     n_cycle = iter(range(10**6))
     short = tmp_path / "five-thrusts.mcap"
     _rewrite(path, short, lambda i, topic, msg: {**msg, "thrust": msg["thrust"][:5]}
