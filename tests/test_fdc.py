@@ -98,6 +98,49 @@ def busy_machine():
         p.wait()
 
 
+@pytest.mark.slow
+def test_a_flood_of_malformed_samples_is_counted_each_and_told_once_a_thousand(tmp_path):
+    """2500 samples on one estimate key that are not JSON, and one that is JSON but not an
+    object: each counted dropped; told at the first and every 1000th of the key for each
+    reason (it printed a line per sample), and in the count at the end."""
+    import zenoh
+
+    port = free_port()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    key = "uvd/sub2/estimate/aid6"
+    with zenoh.open(conf) as s:
+        pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvd.fdc.client", "--connect", f"tcp/127.0.0.1:{port}",
+             "--seconds", "60", "--stats", str(tmp_path / "stats.json")],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        lines = _lines_of(proc)
+        try:
+            deadline = time.monotonic() + 60.0
+            while not (any("watching" in x for x in lines) and pub.matching_status.matching) \
+                    and time.monotonic() < deadline:
+                time.sleep(0.05)
+            for _ in range(2500):
+                pub.put(b"not json")
+            pub.put(b"[1, 2]")
+            _wait_for_line(lines, "not a JSON object")
+        finally:
+            proc.terminate()
+            proc.wait(timeout=10)
+    time.sleep(0.2)  # the reader thread takes the last lines
+    told = [x.strip() for x in lines if x.startswith(f"{key}: not JSON")]
+    assert len(told) == 3 and told[0].endswith("; dropped"), told
+    assert [x.rsplit("; dropped", 1)[1] for x in told[1:]] == [" (1000 so far)",
+                                                               " (2000 so far)"], told
+    assert f"{key}: not a JSON object; dropped\n" in lines
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["dropped"] == {key: 2501}
+    assert f"uvd-fdc: dropped 2501 malformed samples ({key} 2501)\n" in lines
+
+
 def _wait_for_line(lines: list[str], text: str, timeout_s: float = 30.0) -> None:
     """Until a line holding ``text`` has come (a busy machine takes its time), or timeout_s."""
     deadline = time.monotonic() + timeout_s

@@ -45,12 +45,19 @@ class LinkStats:
         self.lost: dict[str, int] = {}
         self.last_seq: dict[str, int] = {}
         self.dropped: dict[str, int] = {}
+        self._dropped_for: dict[tuple[str, str], int] = {}
         self.latency_s: list[float] = []
 
-    def drop(self, key: str) -> None:
-        """Count a sample of ``key`` dropped as malformed."""
+    def drop(self, key: str, why: str, detail: str = "") -> str | None:
+        """Count a sample of ``key`` dropped as malformed for ``why``; the line that tells it
+        (``detail`` of this one), at the first and every 1000th of the key for that reason:
+        a flood of malformed samples is not a line each (None: not told)."""
         with self._lock:
             self.dropped[key] = self.dropped.get(key, 0) + 1
+            n = self._dropped_for[key, why] = self._dropped_for.get((key, why), 0) + 1
+        if n == 1 or n % 1000 == 0:
+            return f"{key}: {why}{detail}; dropped" + ("" if n == 1 else f" ({n} so far)")
+        return None
 
     def take(self, key: str, payload: dict) -> None:
         now = time.time()
@@ -237,6 +244,10 @@ def main(argv: list[str] | None = None) -> int:
         with lock:
             print(text, flush=True)
 
+    def tell(line: str | None) -> None:
+        if line is not None:
+            say(line)
+
     def on_estimate(sample) -> None:
         parts = str(sample.key_expr).split("/")
         if len(parts) != 4:
@@ -275,8 +286,8 @@ def main(argv: list[str] | None = None) -> int:
                 found += det.update(payload) if stream == "estimate" else \
                     det.update_state(payload)
             except (KeyError, TypeError, ValueError) as exc:
-                print(f"{key}: malformed {stream} ({exc}); dropped", flush=True)
-                link.drop(key)
+                if (line := link.drop(key, f"malformed {stream}", f" ({exc})")) is not None:
+                    print(line, flush=True)  # the lock is held: not say()
         return found
 
     def release(vehicle: str | None = None) -> None:
@@ -343,12 +354,10 @@ def main(argv: list[str] | None = None) -> int:
         try:
             payload = json.loads(sample.payload.to_bytes())
         except ValueError as exc:
-            say(f"{sample.key_expr}: not JSON ({exc}); dropped")
-            link.drop(str(sample.key_expr))
+            tell(link.drop(str(sample.key_expr), "not JSON", f" ({exc})"))
             return None
         if not isinstance(payload, dict):
-            say(f"{sample.key_expr}: not a JSON object; dropped")
-            link.drop(str(sample.key_expr))
+            tell(link.drop(str(sample.key_expr), "not a JSON object"))
             return None
         return payload
 
@@ -357,8 +366,7 @@ def main(argv: list[str] | None = None) -> int:
         t_ns = payload.get("t_ns")
         if isinstance(t_ns, int) and not isinstance(t_ns, bool):
             return t_ns
-        say(f"{sample.key_expr}: no integer t_ns ({t_ns!r}); dropped")
-        link.drop(str(sample.key_expr))
+        tell(link.drop(str(sample.key_expr), "no integer t_ns", f" ({t_ns!r:.40})"))
         return None
 
     def on_state(sample) -> None:
