@@ -80,7 +80,7 @@ def _problem(kind: str, msg: Any) -> str | None:
         act = (msg.get("inputs") or {}).get("actuators")
         if act is not None and not isinstance(act, Mapping):
             return "inputs.actuators is not an object"
-        w = None if act is None else act.get("omega_rad_s")
+        w = _speeds(msg)
         if w is not None and len(array_shape(w) or ()) != 1:
             return "inputs.actuators.omega_rad_s is not a row of numbers"
         return None
@@ -104,7 +104,8 @@ def _one_thruster_count(cycles: list[dict], malformed: list[str]) -> list[dict]:
     n = collections.Counter(len(r["thrust"]) for r in cycles).most_common(1)[0][0]
     keep = []
     for r in cycles:
-        m, w = len(r["thrust"]), _speeds(r)
+        w = _speeds(r)
+        m, w = len(r["thrust"]), None if w is None else len(w)
         if m == n and w in (None, n):
             keep.append(r)
         else:
@@ -114,10 +115,10 @@ def _one_thruster_count(cycles: list[dict], malformed: list[str]) -> list[dict]:
     return keep
 
 
-def _speeds(r: Mapping[str, Any]) -> int | None:
-    """How many measured propeller speeds a (checked) cycle record holds (None: none)."""
-    w = ((r.get("inputs") or {}).get("actuators") or {}).get("omega_rad_s")
-    return None if w is None else len(w)
+def _speeds(r: Mapping[str, Any]) -> Any:
+    """The measured propeller speeds a cycle record holds (None: none), its inputs and their
+    amplifier status objects (:func:`_problem` checks that they are)."""
+    return ((r.get("inputs") or {}).get("actuators") or {}).get("omega_rad_s")
 
 
 def _k_thrust(start: list[dict]) -> np.ndarray | None:
@@ -269,8 +270,7 @@ def _thrust_figure(plt, save, cyc: list, t: np.ndarray, start: Any) -> None:
     if k is not None:
         rows = []
         for r in cyc:
-            act = (r.get("inputs") or {}).get("actuators") or {}
-            w = act.get("omega_rad_s")
+            w = _speeds(r)
             rows.append(np.full(thrust.shape[1], np.nan) if w is None
                         else k * np.asarray(w, float) * np.abs(np.asarray(w, float)))
         realised = np.array(rows)
