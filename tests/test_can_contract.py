@@ -180,7 +180,19 @@ def test_injected_fault_is_seen_as_named_fault_within_one_cycle(drv, rig):
             seen_after = i + 1
             break
     assert seen_after == 1, (seen_after, fb.faults, time.monotonic() - t_inj)
-    assert set(fb.faults) == {3}
+    assert set(fb.faults) == {3} and not fb.enabled[2]
+    # The drive's statusword comes with its next TPDO (the answer to a SYNC), not with the
+    # EMCY: a loaded machine may hear the EMCY a cycle before it. Frames arrive in the order
+    # sent, so every TPDO heard after the EMCY was sent after the fault: the first must say
+    # FAULT.
+    t_before = fb.nodes[2].t_ns
+    for _ in range(20):  # cycles
+        drv.group.write(np.full(N, 20.0))
+        time.sleep(0.01)
+        fb = drv.group.read()
+        if fb.nodes[2].t_ns > t_before:
+            break
+    assert fb.nodes[2].t_ns > t_before, "no TPDO from node 3 in 20 cycles after its EMCY"
     assert fb.nodes[2].state == cia402.FAULT and not fb.enabled[2]
     assert fb.enabled[[0, 1, 3, 4, 5]].all()
     # the driver zeroes the faulted node's target and keeps driving the others
