@@ -1,5 +1,6 @@
-"""uvd-fdc's client as a separate process between two Zenoh sessions on loopback (a publisher
-of estimates, a listener for faults), in real time and beside busy processes. The detector
+"""uvd-fdc's client (and ``uvd watch``) as a separate process between two Zenoh sessions on
+loopback (a publisher of estimates, a listener for faults), in real time and beside busy
+processes. The detector
 itself, in this process: tests/test_fdc_detector.py."""
 
 from __future__ import annotations
@@ -139,6 +140,53 @@ def test_a_flood_of_malformed_samples_is_counted_each_and_told_once_a_thousand(t
     stats = json.loads((tmp_path / "stats.json").read_text())
     assert stats["dropped"] == {key: 2501}
     assert f"uvd-fdc: dropped 2501 malformed samples ({key} 2501)\n" in lines
+
+
+@pytest.mark.slow
+def test_uvd_watch_tells_a_flood_of_unreadable_samples_once_a_thousand():
+    """``uvd watch`` (a client like uvd-fdc) printed a line per unreadable sample: 2500 state
+    samples that are not JSON and one that is a list are now told at the first and every
+    1000th, an event without text once, and all counted when Ctrl-C ends it."""
+    import signal
+
+    import zenoh
+
+    port = free_port()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    state, event = "uvd/sub3/state", "uvd/sub3/event"
+    with zenoh.open(conf) as s:
+        pub = s.declare_publisher(state, congestion_control=zenoh.CongestionControl.BLOCK)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvd", "watch", "--connect", f"tcp/127.0.0.1:{port}",
+             "--seconds", "60"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        lines = _lines_of(proc)
+        try:
+            deadline = time.monotonic() + 60.0
+            while not (any("watching" in x for x in lines) and pub.matching_status.matching) \
+                    and time.monotonic() < deadline:
+                time.sleep(0.05)
+            for _ in range(2500):
+                pub.put(b"not json")
+            pub.put(b"[1, 2]")
+            s.put(event, b"{}")
+            _wait_for_line(lines, f"{event}: unreadable event")
+            _wait_for_line(lines, "(2000 so far)")
+            proc.send_signal(signal.SIGINT)  # Ctrl-C
+            assert proc.wait(timeout=20) == 0
+        finally:
+            proc.kill()
+            proc.wait()
+    time.sleep(0.2)  # the reader thread takes the last lines
+    told = [x.strip() for x in lines if x.startswith(f"{state}: unreadable state sample")]
+    assert len(told) == 3 and told[0].endswith("; dropped"), told
+    assert [x.rsplit("; dropped", 1)[1] for x in told[1:]] == [" (1000 so far)",
+                                                               " (2000 so far)"], told
+    assert f"{event}: unreadable event ('text'); dropped\n" in lines, lines[-5:]
+    assert (f"uvd watch: dropped 2502 unreadable samples ({event} 1, {state} 2501)\n"
+            in lines), lines[-5:]
 
 
 def _wait_for_line(lines: list[str], text: str, timeout_s: float = 30.0) -> None:

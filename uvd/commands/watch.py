@@ -3,7 +3,8 @@
 Watches vehicles over Zenoh (docs/zenoh.md) as any client would — through the documented key
 space and JSON payloads only, nothing of the daemon's classes: one line a second per vehicle
 (pose, mode, action, thrust), every event as it comes, and the vehicles coming and going
-(liveliness).
+(liveliness). An unreadable sample is told at the first and every 1000th of its key for each
+kind, as uvd-fdc tells them, and all are counted at the end.
 """
 
 from __future__ import annotations
@@ -32,14 +33,16 @@ def register(sub) -> None:
 def _run(args) -> int:
     import zenoh
 
-    from uvd.fdc.client import ReachNote, open_client, reached_through
+    from uvd.fdc.client import LinkStats, ReachNote, open_client, reached_through
     from uvd.zenoh_callbacks import SessionCallbacks
     lock = threading.Lock()
     last_line: dict[str, float] = {}
+    unreadable = LinkStats()  # only its count of samples dropped
 
-    def out(text: str) -> None:
-        with lock:
-            print(text, flush=True)
+    def out(text: str | None) -> None:
+        if text is not None:
+            with lock:
+                print(text, flush=True)
 
     def on_state(sample) -> None:
         try:
@@ -55,14 +58,14 @@ def _run(args) -> int:
                 f"{rpy[1]:6.1f} heading {rpy[2]:7.1f} deg  |thrust| max "
                 f"{max(abs(x) for x in m['thrust']):6.1f} N")
         except (ValueError, KeyError, TypeError) as exc:
-            out(f"{sample.key_expr}: unreadable state sample ({exc})")
+            out(unreadable.drop(str(sample.key_expr), "unreadable state sample", f" ({exc})"))
 
     def on_event(sample) -> None:
         try:
             m = json.loads(sample.payload.to_bytes())
             out(f"{str(sample.key_expr).split('/')[1]:>12} event: {m['text']}")
         except (ValueError, KeyError, TypeError) as exc:
-            out(f"{sample.key_expr}: unreadable event ({exc})")
+            out(unreadable.drop(str(sample.key_expr), "unreadable event", f" ({exc})"))
 
     def on_alive(sample) -> None:
         what = "up" if sample.kind == zenoh.SampleKind.PUT else "gone"
@@ -92,5 +95,9 @@ def _run(args) -> int:
         pass
     finally:
         callbacks.close(session)  # and their threads ended: none left at exit
+    if dropped := unreadable.summary()["dropped"]:
+        each = ", ".join(f"{k} {n}" for k, n in sorted(dropped.items()))
+        print(f"uvd watch: dropped {sum(dropped.values())} unreadable samples ({each})",
+              file=sys.stderr, flush=True)
     sys.stdout.flush()
     return 0
