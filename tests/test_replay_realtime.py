@@ -163,14 +163,15 @@ def test_a_damaged_record_ends_what_is_played(recorded, tmp_path):
 
 def test_a_malformed_cycle_record_ends_what_is_played(recorded, tmp_path):
     """A cycle record that is valid JSON but not what uvd.cycle.v1 promises (its attitude cut
-    short), or not an object at all: what is played ends before it, as damage does."""
+    short), or not an object at all: what is played ends before it, as damage does, named as
+    the lockstep replay names it (one judgement, uvd.runtime.replay.records)."""
     from tests.test_recording import _rewrite
     path, _ = recorded
     for edit, why in ((lambda msg: {**msg, "R": msg["R"][:2]},
-                       "a /uvd/cycle message at [0-9]+ ns is malformed \\(ValueError: R is not "
-                       "3×3 numbers\\)"),
-                      (lambda msg: [msg], "a /uvd/cycle message is malformed \\(a JSON list, "
-                                          "not an object\\)")):
+                       "a /uvd/cycle record at [0-9]+ ns is malformed \\(R is not 3×3 "
+                       "numbers\\)"),
+                      (lambda msg: [msg], "a /uvd/cycle record at [0-9]+ ns is malformed "
+                                          "\\(a JSON list, not an object\\)")):
         n_cycle = iter(range(10**6))
         bad = tmp_path / "malformed.mcap"
         _rewrite(path, bad, lambda k, topic, msg, edit=edit, n_cycle=n_cycle: edit(msg)
@@ -178,6 +179,28 @@ def test_a_malformed_cycle_record_ends_what_is_played(recorded, tmp_path):
         rec = load_wire(bad)
         assert len(rec.cycles) == 20
         assert re.fullmatch(why, rec.damaged), rec.damaged
+
+
+def test_both_replays_end_at_the_same_malformed_record_in_the_same_words(recorded, tmp_path):
+    """A command record whose arguments are not an object: the lockstep replay ended there,
+    the realtime one read on past it (each judged records its own way). One judgement now
+    (uvd.runtime.replay.records): both end at it and name it alike."""
+    from tests.test_recording import _rewrite
+    from uvd.runtime.replay.lockstep import load_recording
+    from uvd.telemetry.recording import read_messages
+    path, _ = recorded
+    every = list(read_messages(path))
+    first_cycle = next(i for i, (topic, _, _) in enumerate(every) if topic == "/uvd/cycle")
+    k = next(i for i, (topic, _, _) in enumerate(every)
+             if topic == "/uvd/command" and i > first_cycle)
+    bad = tmp_path / "bad-command.mcap"
+    _rewrite(path, bad, lambda i, topic, msg: {**msg, "args": 5} if i == k else msg)
+    wire, lockstep = load_wire(bad), load_recording(bad)
+    assert wire.damaged == lockstep.damaged == (
+        f"a /uvd/command record at {every[k][1]} ns is malformed "
+        f"({every[k][2]['command']}: args 5 are not an object)")
+    n_before = sum(1 for topic, _, _ in every[:k] if topic == "/uvd/cycle")
+    assert len(wire.cycles) == len(lockstep.cycles) == n_before
 
 
 def test_compare_commands_cycle_by_cycle():

@@ -25,7 +25,6 @@ unknown), a depth sensor on CAN (its samples are not raw serial bytes).
 
 from __future__ import annotations
 
-import base64
 import math
 import tempfile
 from collections.abc import Callable, Mapping
@@ -41,11 +40,17 @@ from uvd.runtime.build import make_cycle
 from uvd.runtime.commands import SetParams, command_from_record
 from uvd.runtime.config import Config, load_config
 from uvd.runtime.cycle import inputs_from_record
+from uvd.runtime.replay.records import (
+    judged_messages,
+    malformed_message,
+    require_start,
+    serial_entry,
+)
 from uvd.runtime.schema import with_values
 from uvd.runtime.sensors import decoders
 from uvd.runtime.supervisor import Supervisor
-from uvd.telemetry.recording import RecordingError, read_messages
-from uvd.telemetry.records import cycle_record_problem, is_int64, tracking_error_norms
+from uvd.telemetry.recording import RecordingError
+from uvd.telemetry.records import tracking_error_norms
 
 __all__ = ["Recording", "load_recording", "replay_lockstep", "ReplayReport", "tracking"]
 
@@ -69,9 +74,9 @@ def load_recording(path: str | Path) -> Recording:
     """Read the channels a replay needs from one ``.mcap`` file.
 
     A damaged record, a message that is not JSON or a record that is not what its schema
-    promises in a field the replay reads (:func:`_problem`) ends what is read, as a cut does:
-    every cycle before it has its inputs in the bytes before its own record; ``damaged``
-    names it.
+    promises in a field the replay reads (:func:`~uvd.runtime.replay.records.record_problem`)
+    ends what is read, as a cut does: every cycle before it has its inputs in the bytes
+    before its own record; ``damaged`` names it.
 
     Raises
     ------
@@ -83,25 +88,18 @@ def load_recording(path: str | Path) -> Recording:
     start = None
     cycles, commands, lifecycle, reloads, serial = [], [], [], [], []
     damage: list[str] = []
-    for topic, _, msg in read_messages(path, ("/uvd/start", "/uvd/cycle", "/uvd/command",
-                                              "/uvd/lifecycle", "/uvd/reload",
-                                              "/uvd/raw/serial"), unreadable=damage):
-        if damage:  # this message comes after the damage: what is read ends before it
-            break
-        why = _problem(topic, msg)
-        if why is not None:  # valid JSON, not what its schema promises: damage as well
-            damage.append(f"a {topic} record at {_msg_time(msg)} ns is malformed ({why})")
-            break
+    topics = ("/uvd/start", "/uvd/cycle", "/uvd/command", "/uvd/lifecycle", "/uvd/reload",
+              "/uvd/raw/serial")
+    for topic, t_ns, msg in judged_messages(path, topics, damage):
         if topic == "/uvd/cycle":
             cycles.append(msg)
         elif topic == "/uvd/raw/serial":
             try:
-                serial.append((str(msg["source"]), int(msg["t_ns"]),
-                               base64.b64decode(msg["data"], validate=True)))
+                t_rx, source, data = serial_entry(msg)
             except (KeyError, ValueError, TypeError) as exc:  # damaged: what is read ends
-                damage.append(f"a /uvd/raw/serial message at {_msg_time(msg)} ns is "
-                              f"malformed ({type(exc).__name__}: {exc})")
+                damage.append(malformed_message(topic, t_ns, exc))
                 break
+            serial.append((source, t_rx, data))
         elif topic == "/uvd/command":
             commands.append(msg)
         elif topic == "/uvd/lifecycle":
@@ -111,47 +109,11 @@ def load_recording(path: str | Path) -> Recording:
         elif start is None:
             start = msg
     before = f" before {damage[0]}" if damage else ""
-    if start is None or not start.get("config_toml"):
-        raise RecordingError(f"{path}: no start record with the configuration (/uvd/start)"
-                             f"{before} — not a uvd recording, or not the first file of a run")
+    require_start(path, start, before)
     if not cycles:
         raise RecordingError(f"{path}: no cycle records (/uvd/cycle){before}")
     return Recording(path, start, cycles, commands, lifecycle, reloads, serial,
                      damage[0] if damage else None)
-
-
-def _msg_time(msg: Any) -> str:
-    """A record's ``t_ns`` for a message naming it (whatever a damaged one holds)."""
-    return f"{msg.get('t_ns')!r:.30}" if isinstance(msg, Mapping) else "?"
-
-
-def _problem(topic: str, msg: Any) -> str | None:
-    """What makes a record unfit for a replay, in the fields the replay reads (None:
-    nothing); the raw serial messages are judged where they are decoded."""
-    if topic == "/uvd/cycle":
-        return cycle_record_problem(msg)
-    if not isinstance(msg, Mapping):
-        return f"a JSON {type(msg).__name__}, not an object"
-    if topic == "/uvd/start":
-        for k, types in (("config_toml", str), ("config_path", (str, type(None))),
-                         ("params_kept", (Mapping, type(None))),
-                         ("estimators", (Mapping, type(None)))):
-            if not isinstance(msg.get(k), types):
-                return f"{k} {msg.get(k)!r:.40} is not what uvd.start.v1 holds"
-        return None
-    if topic in ("/uvd/command", "/uvd/lifecycle", "/uvd/reload") \
-            and not is_int64(msg.get("t_ns")):
-        return f"t_ns {msg.get('t_ns')!r:.40} is not a 64-bit integer"
-    if topic == "/uvd/command":
-        try:
-            command_from_record(msg)
-        except ValueError as exc:
-            return str(exc)
-    if topic == "/uvd/reload" and not (msg.get("applied") is None or (
-            isinstance(msg["applied"], list) and all(isinstance(k, str)
-                                                     for k in msg["applied"]))):
-        return f"applied {msg['applied']!r:.40} is not a list of keys"
-    return None
 
 
 @dataclass

@@ -38,15 +38,20 @@ import sys
 import threading
 import time
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from uvd.runtime.replay.records import (
+    judged_messages,
+    malformed_message,
+    require_start,
+    serial_entry,
+)
 from uvd.telemetry.recording import RecordingError, read_messages
-from uvd.telemetry.records import cycle_record_problem
 
 __all__ = ["WireRecording", "load_wire", "RealtimePlayer", "live_config",
            "compare_commands", "TOLERANCE_PERMILLE", "replay_realtime"]
@@ -90,8 +95,10 @@ class WireRecording:
 def load_wire(path: str | Path) -> WireRecording:
     """Read the raw channels, the start record and the cycles of a recording.
 
-    A damaged record or a malformed message ends what is read, as a cut does (the run is
-    played up to its last cycle before it); ``damaged`` names it.
+    A damaged message, or a record that is not what its schema promises in a field a replay
+    reads (:func:`~uvd.runtime.replay.records.record_problem`, as the lockstep replay judges
+    it), ends what is read, as a cut does (the run is played up to its last cycle before
+    it); ``damaged`` names it.
 
     Raises
     ------
@@ -105,46 +112,35 @@ def load_wire(path: str | Path) -> WireRecording:
     start, serial, received, cycles, others = None, [], [], [], []
     sent: list[tuple[int, int, bytes]] = []  # (t_ns, id, data) of the daemon's frames
     damage: list[str] = []
-    for topic, _, m in read_messages(path, ("/uvd/start", "/uvd/raw/serial", "/uvd/raw/can",
-                                            "/uvd/cycle", "/uvd/command"), unreadable=damage):
-        if damage:  # this message comes after the damage: what is read ends before it
-            break
-        if not isinstance(m, Mapping):
-            damage.append(f"a {topic} message is malformed (a JSON {type(m).__name__}, not an "
-                          "object)")
-            break
-        try:
-            if topic == "/uvd/raw/serial":
-                serial.append((int(m["t_ns"]), str(m["source"]),
-                               base64.b64decode(m["data"], validate=True)))
-            elif topic == "/uvd/raw/can":
-                data = base64.b64decode(m["data"], validate=True)
-                cid, t = int(m["id"]), int(m["t_ns"])
-                if m["rx"]:
-                    received.append((t, can.Message(
-                        arbitration_id=cid, data=data, is_extended_id=bool(m["extended"]),
-                        is_remote_frame=bool(m["remote"]), is_error_frame=bool(m["error"]))))
-                else:
-                    sent.append((t, cid, data))
-            elif topic == "/uvd/cycle":
-                why = cycle_record_problem(m)
-                if why is not None:
-                    raise ValueError(why)
-                cycles.append(m)
-            elif topic == "/uvd/command":
-                if m.get("source") != "uvd run --arm":
-                    others.append(str(m.get("command")))
-            elif start is None:
+    topics = ("/uvd/start", "/uvd/raw/serial", "/uvd/raw/can", "/uvd/cycle", "/uvd/command")
+    for topic, t_ns, m in judged_messages(path, topics, damage):
+        if topic == "/uvd/cycle":
+            cycles.append(m)
+        elif topic == "/uvd/command":
+            if m.get("source") != "uvd run --arm":
+                others.append(str(m.get("command")))
+        elif topic == "/uvd/start":
+            if start is None:
                 start = m
-        except (KeyError, ValueError, TypeError) as exc:  # damaged: what is read ends
-            damage.append(f"a {topic} message at {m.get('t_ns')!r:.30} ns is malformed "
-                          f"({type(exc).__name__}: {exc})")
-            break
+        else:
+            try:
+                if topic == "/uvd/raw/serial":
+                    serial.append(serial_entry(m))
+                else:
+                    data = base64.b64decode(m["data"], validate=True)
+                    cid, t = int(m["id"]), int(m["t_ns"])
+                    if m["rx"]:
+                        received.append((t, can.Message(
+                            arbitration_id=cid, data=data, is_extended_id=bool(m["extended"]),
+                            is_remote_frame=bool(m["remote"]),
+                            is_error_frame=bool(m["error"]))))
+                    else:
+                        sent.append((t, cid, data))
+            except (KeyError, ValueError, TypeError) as exc:  # damaged: what is read ends
+                damage.append(malformed_message(topic, t_ns, exc))
+                break
     before = f" before {damage[0]}" if damage else ""
-    if start is None or not start.get("config_toml") \
-            or not isinstance(start["config_toml"], str):
-        raise RecordingError(f"{path}: no start record with the configuration (/uvd/start)"
-                             f"{before} — not a uvd recording, or not the first file of a run")
+    require_start(path, start, before)
     if not sent:
         raise RecordingError(f"{path}: no CAN frames sent by the daemon (/uvd/raw/can)"
                              f"{before}: nothing to align a live daemon with")
