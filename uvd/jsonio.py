@@ -42,3 +42,9 @@ def write_json(path: Path, data: Any) -> None:
     tmp = path.with_suffix(path.suffix + ".tmp")
     tmp.write_text(json.dumps(to_jsonable(data), indent=2) + "\n")
     tmp.replace(path)
+
+
+def is_int64(x: Any) -> bool:
+    """``x`` is an integer a clock in ns can be (int64; JSON's ``true`` is not one): what a
+    record's time stamp must be, wherever records are read."""
+    return isinstance(x, int) and not isinstance(x, bool) and -2 ** 63 <= x < 2 ** 63

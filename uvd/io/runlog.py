@@ -16,6 +16,7 @@ import numpy as np
 
 from uvd.errors import ConfigError
 from uvd.estimation.runlog import RunLog
+from uvd.jsonio import is_int64
 
 _META_KEYS = ("name", "input_interp", "source", "format")
 
@@ -85,8 +86,7 @@ def _cycle_sample(rec) -> tuple | None:
     t_ns = rec.get("t_ns")
     if [a.shape for a in arr] not in ([(3,), (9,), (6,), (6,)], [(3,), (3, 3), (6,), (6,)]) \
             or not all(np.all(np.isfinite(a)) for a in arr) \
-            or not isinstance(t_ns, int) or isinstance(t_ns, bool) \
-            or not -2**63 <= t_ns < 2**63:  # a time stamp as the daemon writes it: int64 ns
+            or not is_int64(t_ns):  # a time stamp as the daemon writes it
         raise ValueError("malformed cycle record")
     return rec["t_ns"], arr[0], arr[1].reshape(3, 3), arr[2], arr[3]
 

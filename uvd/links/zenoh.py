@@ -45,9 +45,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from uvd.geometry import R_to_euler, wrap_angle
-from uvd.jsonio import to_jsonable
+from uvd.jsonio import is_int64, to_jsonable
 from uvd.telemetry._worker import DaemonWorker
-from uvd.telemetry.records import is_int64
 from uvd.zenoh_callbacks import SessionCallbacks
 from uvd.zenoh_names import vehicle_key_problem
 

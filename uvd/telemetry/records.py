@@ -31,9 +31,10 @@ from typing import Any
 import numpy as np
 
 from uvd.geometry import R_to_euler
+from uvd.jsonio import is_int64
 
 __all__ = ["CycleRecord", "estimate_record", "euler_of", "eta_of_record", "CYCLE",
-           "tracking_error_norms", "is_int64", "array_shape", "cycle_record_problem"]
+           "tracking_error_norms", "array_shape", "cycle_record_problem"]
 
 CYCLE = "cycle"
 
@@ -231,11 +232,6 @@ def tracking_error_norms(d: Mapping[str, Any]) -> tuple[float, float]:
     _, e_psi, e_v, _ = error_coordinates(H, np.asarray(d["v"], float), Hr,
                                          np.asarray(d["v_ref"], float))
     return float(np.linalg.norm(e_psi)), float(np.linalg.norm(e_v))
-
-
-def is_int64(x: Any) -> bool:
-    """``x`` is an integer a clock in ns can be (int64; JSON's ``true`` is not one)."""
-    return isinstance(x, int) and not isinstance(x, bool) and -2 ** 63 <= x < 2 ** 63
 
 
 #: a cycle record's arrays (uvd.cycle.v1) and their shapes; the reference's may be null

@@ -30,12 +30,12 @@ import numpy as np
 
 from uvd.geometry import wrap_angles
 from uvd.io.figures import estimates_figure, mne_figure
+from uvd.jsonio import is_int64
 from uvd.telemetry.recording import RecordingError, read_messages
 from uvd.telemetry.records import (
     array_shape,
     cycle_record_problem,
     eta_of_record,
-    is_int64,
     tracking_error_norms,
 )
 

@@ -16,9 +16,10 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from uvd.jsonio import is_int64
 from uvd.runtime.commands import command_from_record
 from uvd.telemetry.recording import RecordingError, read_messages
-from uvd.telemetry.records import cycle_record_problem, is_int64
+from uvd.telemetry.records import cycle_record_problem
 
 
 def judged_messages(path: str | Path, topics: tuple[str, ...],
