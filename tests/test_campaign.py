@@ -4,6 +4,7 @@ campaign killed mid-run and started again)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import signal
@@ -69,6 +70,30 @@ def _spec(axes: dict, **head):
     # found by probing (session 21): said "[campaign]: missing"
     ({"campaign": 5}, ["[campaign]: must be a table, got int 5"]),
     ({"campaign": [1]}, ["[campaign]: must be a table, got list [1]"]),
+    # found by probing (session 24): each ran, as a row's error (a negative seed, onset before
+    # the baseline, a plant of no mass) or as figures of no meaning (negative gains, a run
+    # shorter than 0, η above 1, a drag scale below 0, a misspelt case never used)
+    ({"campaign": {"name": "t", "kind": "control"}, "axes": {"seed": [0, -1]}},
+     ["axes.seed: -1 must be ≥ 0 (run 1)"]),
+    ({"campaign": {"name": "t", "kind": "control"}, "axes": {"mass_error": -1.0}},
+     ["axes.mass_error: -1.0 must be > -1 (run 0)"]),
+    ({"campaign": {"name": "t", "kind": "control"}, "axes": {"kd": [100.0, -5.0]}},
+     ["axes.kd: -5.0 must be ≥ 0 (run 1)"]),
+    ({"campaign": {"name": "t", "kind": "control"}, "axes": {"duration_h": -0.5}},
+     ["axes.duration_h: -0.5 must be > 0"]),
+    ({"campaign": {"name": "t", "kind": "fdc"}, "axes": {"onset_min": 10.0}},
+     ["axes.onset_min: 10.0 must be ≥ 25: the detector learns its baseline until then"]),
+    ({"campaign": {"name": "t", "kind": "fdc", "sampling": "random", "runs": 50, "seed": 1},
+      "axes": {"fault": ["thruster", "drag"],
+               "fault_size": {"by": "fault", "thruster": {"uniform": [0.5, 1.5]},
+                              "drag": 1.5}}},
+     ["axes.fault_size: 1.", "must be in [0, 1] for a thruster fault (run "]),
+    ({"campaign": {"name": "t", "kind": "fdc"},
+      "axes": {"fault": "drag", "fault_size": -0.5}},
+     ["axes.fault_size: -0.5 must be > 0 for a drag fault (run 0)"]),
+    ({"campaign": {"name": "t", "kind": "fdc"},
+      "axes": {"fault": ["drag"], "fault_size": {"by": "fault", "drag": 1.5, "darg": 2.0}}},
+     ["axes.fault_size.darg: fault never takes this value; it takes none, thruster"]),
 ])
 def test_a_bad_campaign_file_is_refused_by_name(data, words):
     with pytest.raises(CampaignError) as err:
@@ -176,8 +201,12 @@ def test_a_scheduler_that_cannot_be_reached_or_has_no_worker_is_named(tmp_path):
 def test_two_runs_on_a_local_cluster_the_test_starts_one_raising(tmp_path):
     from dask.distributed import LocalCluster
 
-    # mass_error −1 makes the plant's mass 0: PlantFault refuses it, inside the run
-    spec = _spec({**TINY, "mass_error": [0.0, -1.0]})
+    # mass_error −1 makes the plant's mass 0: PlantFault refuses it, inside the run. A
+    # campaign file may not hold it (axes.mass_error must be > -1), so the spec is built here
+    # with that run as a Dask client's own code could submit it
+    good_spec = _spec({**TINY, "mass_error": [0.0, 0.5]})
+    spec = dataclasses.replace(good_spec, runs=(good_spec.runs[0],
+                                                {**good_spec.runs[1], "mass_error": -1.0}))
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
                       dashboard_address="127.0.0.1:0") as cluster:
         out = run_campaign(spec, tmp_path, scheduler=cluster.scheduler_address)

@@ -23,38 +23,66 @@ from dataclasses import replace
 
 import numpy as np
 
-from uvd.campaign.spec import Axis
+from uvd.campaign.spec import Axis, within
 
 #: the configuration of each vehicle an fdc run may take (its demo configuration)
 FDC_VEHICLES = {"jhu-rov": "sim.toml", "bluerov2-heavy": "sim-bluerov2.toml"}
 FAULT_KINDS = ("none", "thruster", "drag", "mass", "buoyancy")
 
+#: what a fault's size must be, by its kind (buoyancy: any N added to g)
+_FAULT_SIZES = {"thruster": within(0.0, 1.0), "drag": within(0.0, above=True),
+                "mass": within(-1.0, above=True)}
+
+
+def _fault_size_problem(size: float, run) -> str | None:
+    check = _FAULT_SIZES.get(run["fault"])
+    why = None if check is None else check(size, run)
+    return None if why is None else f"{why} for a {run['fault']} fault"
+
+
+def _onset_problem(onset: float, run) -> str | None:
+    start = _monitored_from_min()
+    return None if onset >= start else \
+        f"must be ≥ {start:g}: the detector learns its baseline until then"
+
+
+#: a random generator's seed (numpy takes no negative one)
+SEED = Axis(int, 0, None, "the plant's and instruments' random generator", within(0))
+
 FDC_AXES = {
     "vehicle": Axis(str, "jhu-rov", tuple(FDC_VEHICLES), "the vehicle and its demo config"),
-    "seed": Axis(int, 0, None, "the plant's and instruments' random generator"),
+    "seed": SEED,
     "fault": Axis(str, "none", FAULT_KINDS, "what fails at onset_min"),
     "fault_size": Axis(float, 0.0, None, "thruster: its remaining effectiveness η (0 dead); "
                                          "drag: D's scale; mass: M's relative increase; "
-                                         "buoyancy: N added to g (the net buoyancy)"),
+                                         "buoyancy: N added to g (the net buoyancy)",
+                       _fault_size_problem),
     "fault_thruster": Axis(int, 0, None, "the failing thruster (index modulo the vehicle's "
                                          "count)"),
     "onset_min": Axis(float, 30.0, None, "simulated minutes before the fault (≥ 25: the "
-                                         "detector learns its baseline from 5 to 25)"),
-    "after_min": Axis(float, 30.0, None, "simulated minutes after onset_min"),
-    "noise_scale": Axis(float, 1.0, None, "every instrument's noise σ times this"),
+                                         "detector learns its baseline from 5 to 25)",
+                      _onset_problem),
+    "after_min": Axis(float, 30.0, None, "simulated minutes after onset_min",
+                      within(0.0, above=True)),
+    "noise_scale": Axis(float, 1.0, None, "every instrument's noise σ times this",
+                        within(0.0)),
     "reference": Axis(str, "reftraj1", ("reftraj1", "reftraj2"), "the trajectory tracked "
                                                                  "(Table 5.1)"),
 }
 
 CONTROL_AXES = {
     "controller": Axis(str, "two-step", ("pdc", "two-step"), "PDC or the two-step AMBC"),
-    "seed": Axis(int, 0, None, "the plant's and instruments' random generator"),
-    "duration_h": Axis(float, 1.0, None, "simulated hours (two-step: step 1 is 1/12 of it)"),
-    "mass_error": Axis(float, 0.0, None, "the plant's M is the vehicle file's × (1 + this)"),
-    "drag_error": Axis(float, 0.0, None, "the plant's D is the vehicle file's × (1 + this)"),
-    "kp": Axis(float, 300.0, None, "k_p"),
-    "kd": Axis(float, 100.0, None, "k_d (two-step: of step 1; step 2 keeps 1000)"),
-    "window_min": Axis(float, 15.0, None, "the tracking figures' window: the run's last minutes"),
+    "seed": SEED,
+    "duration_h": Axis(float, 1.0, None, "simulated hours (two-step: step 1 is 1/12 of it)",
+                       within(0.0, above=True)),
+    "mass_error": Axis(float, 0.0, None, "the plant's M is the vehicle file's × (1 + this)",
+                       within(-1.0, above=True)),
+    "drag_error": Axis(float, 0.0, None, "the plant's D is the vehicle file's × (1 + this)",
+                       within(-1.0, above=True)),
+    "kp": Axis(float, 300.0, None, "k_p", within(0.0)),
+    "kd": Axis(float, 100.0, None, "k_d (two-step: of step 1; step 2 keeps 1000)", within(0.0)),
+    "window_min": Axis(float, 15.0, None, "the tracking figures' window: the run's last minutes",
+                       within(0.0, above=True)),
 }
 
 #: minutes from the start before uvd-fdc judges (its warm-up and baseline,
@@ -97,9 +125,6 @@ def run_fdc(inputs: dict) -> dict:
     fault = inputs["fault"]
     onset, after = inputs["onset_min"], inputs["after_min"]
     start = _monitored_from_min()
-    if onset < start:
-        raise ValueError(f"onset_min {onset:g} is before the detector's baseline ends "
-                         f"({start:g} min)")
     thruster = inputs["fault_thruster"] % load_config(config).load_vehicle().n_thrusters
     args, kind = _fault_args(fault, inputs["fault_size"], thruster)
     v = SimVehicle(None if fault == "none" else fault, onset, inputs["seed"], config=config,

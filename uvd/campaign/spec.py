@@ -19,8 +19,9 @@
     fault_size = {by = "fault", thruster = {uniform = [0.0, 0.8]}, drag = 1.5, ...}
 
 An axis given ``by`` another takes the value (or draw) named by that axis's value in the same
-run. Every axis is checked against the kind's own list of axes (name, type, allowed values);
-a missing one takes the kind's default. Errors name the file, the key and the reason
+run. Every axis is checked against the kind's own list of axes (name, type, allowed values,
+range — in every run, as a draw may leave it in some only); a missing one takes the kind's
+default. Errors name the file, the key and the reason
 (:class:`CampaignError`).
 """
 
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,15 +52,38 @@ class CampaignError(UvdError, ValueError):
     """A campaign file or value is invalid; the message names the file, key and reason."""
 
 
+#: what is wrong with one axis's value in a run (None: nothing), given the run's inputs (a
+#: fault's size depends on its kind)
+Check = Callable[[Any, Mapping[str, Any]], str | None]
+
+
 @dataclass(frozen=True)
 class Axis:
-    """One input of a run function: its type (``float``, ``int``, ``str``), default, and the
-    values a ``str`` axis may take (None: any)."""
+    """One input of a run function: its type (``float``, ``int``, ``str``), default, the
+    values a ``str`` axis may take (None: any), and ``check``: what a value must be beyond
+    its type (e.g. :func:`within`), checked in every run when the file is read."""
 
     type: type
     default: Any
     choices: tuple[str, ...] | None = None
     doc: str = ""
+    check: Check | None = None
+
+
+def within(lo: float | None = None, hi: float | None = None, *, above: bool = False) -> Check:
+    """The check that a number lies in [lo, hi] — (lo, hi] when ``above`` — either end
+    None: unbounded."""
+    if lo is not None and hi is not None:
+        text = f"in {'(' if above else '['}{lo:g}, {hi:g}]"
+    elif lo is not None:
+        text = f"{'>' if above else '≥'} {lo:g}"
+    else:
+        text = f"≤ {hi:g}"
+
+    def check(x: Any, run: Mapping[str, Any]) -> str | None:
+        low = lo is not None and (x <= lo if above else x < lo)
+        return f"must be {text}" if low or (hi is not None and x > hi) else None
+    return check
 
 
 @dataclass(frozen=True)
@@ -216,6 +241,12 @@ def parse(data: dict, kinds: dict[str, dict[str, Axis]], source: str = "") -> Ca
                     isinstance(axes_raw[by], dict) and "by" in axes_raw[by]):
                 raise CampaignError(f"{where}.by: {by!r} is not another plain axis of this "
                                     "campaign")
+            choices = kind_axes[by].choices if by in kind_axes else None
+            stray = sorted(k for k in raw if k != "by" and choices is not None
+                           and k not in choices)
+            if stray:  # a misspelt case, whose value would never be used
+                raise CampaignError(f"{where}.{stray[0]}: {by} never takes this value; it "
+                                    f"takes {', '.join(choices)}")
             cases = {k: _parse_values(kind_axes, ax, v, sampling, f"{where}.{k}")
                      for k, v in raw.items() if k != "by"}
             parsed[ax] = ("by", by, cases)
@@ -241,6 +272,15 @@ def _resolve_by(parsed, run: dict, rng, source: str, grid: bool) -> None:
         run[ax] = _draw(case, rng)
 
 
+def _check_run(kind_axes: dict[str, Axis], run: dict, i: int, source: str) -> None:
+    """Refuse a run whose value of an axis fails the axis's check, naming the axis, the value
+    and the run (a draw may leave the range in some runs only)."""
+    for name, ax in kind_axes.items():
+        if ax.check is not None and (why := ax.check(run[name], run)) is not None:
+            raise CampaignError(f"{_where(source, f'axes.{name}')}: {run[name]!r} {why} "
+                                f"(run {i})")
+
+
 def _expand(parsed, kind_axes, sampling: str, seed: int, n_runs: int | None,
             source: str) -> list[dict]:
     defaults = {k: a.default for k, a in kind_axes.items()}
@@ -256,6 +296,7 @@ def _expand(parsed, kind_axes, sampling: str, seed: int, n_runs: int | None,
         for combo in itertools.product(*lists):
             run = {**defaults, **dict(zip(names, combo, strict=True))}
             _resolve_by(parsed, run, None, source, grid=True)
+            _check_run(kind_axes, run, len(runs), source)
             runs.append(run)
         return runs
     for i in range(n_runs):
@@ -264,6 +305,7 @@ def _expand(parsed, kind_axes, sampling: str, seed: int, n_runs: int | None,
         for k in sorted(plain):
             run[k] = _draw(plain[k], rng)
         _resolve_by(parsed, run, rng, source, grid=False)
+        _check_run(kind_axes, run, i, source)
         runs.append(run)
     return runs
 
