@@ -114,16 +114,10 @@ def test_a_flood_of_malformed_samples_is_counted_each_and_told_once_a_thousand(t
     key = "uvd/sub2/estimate/aid6"
     with zenoh.open(conf) as s:
         pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "uvd.fdc.client", "--connect", f"tcp/127.0.0.1:{port}",
-             "--seconds", "60", "--stats", str(tmp_path / "stats.json")],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        lines = _lines_of(proc)
+        proc, lines = _watching_client(["-m", "uvd.fdc.client", "--connect",
+                                        f"tcp/127.0.0.1:{port}", "--seconds", "60", "--stats",
+                                        str(tmp_path / "stats.json")], pub)
         try:
-            deadline = time.monotonic() + 60.0
-            while not (any("watching" in x for x in lines) and pub.matching_status.matching) \
-                    and time.monotonic() < deadline:
-                time.sleep(0.05)
             for _ in range(2500):
                 pub.put(b"not json")
             pub.put(b"[1, 2]")
@@ -159,15 +153,9 @@ def test_uvd_watch_tells_a_flood_of_unreadable_samples_once_a_thousand():
     state, event = "uvd/sub3/state", "uvd/sub3/event"
     with zenoh.open(conf) as s:
         pub = s.declare_publisher(state, congestion_control=zenoh.CongestionControl.BLOCK)
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "uvd", "watch", "--connect", f"tcp/127.0.0.1:{port}",
-             "--seconds", "60"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        lines = _lines_of(proc)
+        proc, lines = _watching_client(["-m", "uvd", "watch", "--connect",
+                                        f"tcp/127.0.0.1:{port}", "--seconds", "60"], pub)
         try:
-            deadline = time.monotonic() + 60.0
-            while not (any("watching" in x for x in lines) and pub.matching_status.matching) \
-                    and time.monotonic() < deadline:
-                time.sleep(0.05)
             for _ in range(2500):
                 pub.put(b"not json")
             pub.put(b"[1, 2]")
@@ -187,6 +175,19 @@ def test_uvd_watch_tells_a_flood_of_unreadable_samples_once_a_thousand():
     assert f"{event}: unreadable event ('text'); dropped\n" in lines, lines[-5:]
     assert (f"uvd watch: dropped 2502 unreadable samples ({event} 1, {state} 2501)\n"
             in lines), lines[-5:]
+
+
+def _watching_client(argv: list[str], pub) -> tuple[subprocess.Popen, list[str]]:
+    """A Zenoh client process (``python`` ``argv``) and its lines as they come, once it says
+    it is watching and ``pub`` reaches it (at most 60 s: a busy machine takes its time)."""
+    proc = subprocess.Popen([sys.executable, *argv], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    lines = _lines_of(proc)
+    deadline = time.monotonic() + 60.0
+    while not (any("watching" in x for x in lines) and pub.matching_status.matching) \
+            and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return proc, lines
 
 
 def _wait_for_line(lines: list[str], text: str, timeout_s: float = 30.0) -> None:
