@@ -281,9 +281,12 @@ def test_nonfinite_and_out_of_range_commands_never_reach_the_bus(drv, rig):
     statuses = run_cycles(drv.group, 5, cmd)
     assert statuses[-1].nonfinite == 3 and statuses[-1].clamped == 2
     np.testing.assert_array_equal(statuses[-1].targets_permille, [0, 0, 0, 1000, -1000, 100])
-    time.sleep(0.03)
-    emu = rig.call("stats")["nodes"]
-    assert [emu[str(i)]["applied_permille"] for i in rig.node_ids] == [0, 0, 0, 1000, -1000, 100]
+    def applied() -> list[int]:
+        emu = rig.call("stats")["nodes"]
+        return [emu[str(i)]["applied_permille"] for i in rig.node_ids]
+    # the drives apply a target at the SYNC after it: read them once they have (bounded)
+    ok, _ = wait_for(lambda: applied() == [0, 0, 0, 1000, -1000, 100], 1.0)
+    assert ok, applied()
     assert drv.group.write("not a command").nonfinite == N
     assert drv.group.write([1.0, 2.0]).nonfinite == N  # wrong shape: zero, not a crash
 
@@ -292,11 +295,14 @@ def test_shutdown_zeroes_and_disables(drv, rig):
     drv.enable()
     run_cycles(drv.group, 30, np.full(N, 50.0))
     drv.group.shutdown()
-    time.sleep(0.05)
-    emu = rig.call("stats")["nodes"]
-    assert {v["state"] for v in emu.values()} == {cia402.SWITCH_ON_DISABLED}
-    assert {v["thrust_command_n"] for v in emu.values()} == {0.0}
-    assert {v["nmt"] for v in emu.values()} == {"pre_operational"}
+
+    def shut(emu) -> bool:
+        return ({v["state"] for v in emu.values()} == {cia402.SWITCH_ON_DISABLED}
+                and {v["thrust_command_n"] for v in emu.values()} == {0.0}
+                and {v["nmt"] for v in emu.values()} == {"pre_operational"})
+    # the last node's NMT command is not answered: it arrives when the emulator takes it
+    done, _ = wait_for(lambda: shut(rig.call("stats")["nodes"]), 1.0)
+    assert done, rig.call("stats")["nodes"]
 
 
 def test_depth_over_can(drv, rig):

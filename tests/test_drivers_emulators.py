@@ -250,15 +250,17 @@ def test_depth_sensor_answers_commands(tmp_path):
                 await asyncio.sleep(0.4)
                 assert r.drain() == []  # P3: a single reply
                 assert r.write(digiquartz.command("P4"))
+                t0 = time.monotonic()
                 await asyncio.sleep(0.6)
                 many = r.drain()
-                return unit, one, many
+                return unit, one, many, time.monotonic() - t0
 
-    unit, one, many = asyncio.run(go())
+    unit, one, many, dt = asyncio.run(go())
     assert unit.frame.kind == "param" and unit.frame.name == "UN" and unit.frame.value == 2
     assert one.frame.kind == "pressure"
     conv = cfg.depth
     d = conv.to_sample(one.frame, one.t_ns).depth_m
     H_t, _ = truth(one.t_ns - emu.t0_ns)
     assert abs(d - H_t[2, 3]) < DEPTH_TOL + 0.01  # P3 is answered at the next model sample
-    assert 2 <= len(many) <= 7  # 7 Hz for 0.6 s
+    # 7 Hz for the 0.6 s asked (longer on a loaded machine: bounded by the time it took)
+    assert 2 <= len(many) <= 7 * dt + 1, (len(many), dt)

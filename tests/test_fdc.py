@@ -43,7 +43,7 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
              "--warmup-s", "10", "--baseline-s", "100", "--seconds", "30",
              "--stats", str(tmp_path / "stats.json")],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        lines = _lines_of(proc)
+        lines = _Lines(proc)
         try:  # the client has subscribed (its line, and our publisher sees it): a fixed sleep
             # of 3 s lost the first 19 samples beside four busy processes
             deadline = time.monotonic() + 60.0
@@ -69,7 +69,7 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
             proc.terminate()
             proc.wait(timeout=10)
     assert callbacks.close(s) == 0  # the session closed with the block; its threads end
-    time.sleep(0.2)  # the reader thread takes the last lines
+    lines.wait_end()
     out = "".join(lines)
     print(out)
     assert len(faults) == 1, faults
@@ -125,7 +125,7 @@ def test_a_flood_of_malformed_samples_is_counted_each_and_told_once_a_thousand(t
         finally:
             proc.terminate()
             proc.wait(timeout=10)
-    time.sleep(0.2)  # the reader thread takes the last lines
+    lines.wait_end()
     told = [x.strip() for x in lines if x.startswith(f"{key}: not JSON")]
     assert len(told) == 3 and told[0].endswith("; dropped"), told
     assert [x.rsplit("; dropped", 1)[1] for x in told[1:]] == [" (1000 so far)",
@@ -167,7 +167,7 @@ def test_uvd_watch_tells_a_flood_of_unreadable_samples_once_a_thousand():
         finally:
             proc.kill()
             proc.wait()
-    time.sleep(0.2)  # the reader thread takes the last lines
+    lines.wait_end()
     told = [x.strip() for x in lines if x.startswith(f"{state}: unreadable state sample")]
     assert len(told) == 3 and told[0].endswith("; dropped"), told
     assert [x.rsplit("; dropped", 1)[1] for x in told[1:]] == [" (1000 so far)",
@@ -182,7 +182,7 @@ def _watching_client(argv: list[str], pub) -> tuple[subprocess.Popen, list[str]]
     it is watching and ``pub`` reaches it (at most 60 s: a busy machine takes its time)."""
     proc = subprocess.Popen([sys.executable, *argv], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
-    lines = _lines_of(proc)
+    lines = _Lines(proc)
     deadline = time.monotonic() + 60.0
     while not (any("watching" in x for x in lines) and pub.matching_status.matching) \
             and time.monotonic() < deadline:
@@ -197,13 +197,21 @@ def _wait_for_line(lines: list[str], text: str, timeout_s: float = 30.0) -> None
         time.sleep(0.05)
 
 
-def _lines_of(proc) -> list[str]:
+class _Lines(list):
     """The lines ``proc`` prints, collected by a thread as they come."""
-    import threading
-    lines: list[str] = []
-    threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")),
-                     daemon=True).start()
-    return lines
+
+    def __init__(self, proc) -> None:
+        import threading
+        super().__init__()
+        self._reader = threading.Thread(
+            target=lambda: self.extend(iter(proc.stdout.readline, "")), daemon=True)
+        self._reader.start()
+
+    def wait_end(self, timeout_s: float = 10.0) -> None:
+        """Until the process's output has ended (it has exited) and every line is in: a
+        fixed 0.2 s counted on the reader thread being scheduled in it."""
+        self._reader.join(timeout_s)
+        assert not self._reader.is_alive(), "the process's output did not end"
 
 
 @pytest.mark.slow
@@ -252,7 +260,7 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path, busy_m
              "--warmup-s", "10", "--baseline-s", "150", "--seconds", "90",
              "--stats", str(tmp_path / "stats.json")],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        lines = _lines_of(proc)
+        lines = _Lines(proc)
         try:  # the client has subscribed to both streams (its line, and our publishers see it)
             deadline = time.monotonic() + 60.0
             while not (any("watching" in x for x in lines) and est.matching_status.matching
@@ -283,7 +291,7 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path, busy_m
             proc.terminate()
             proc.wait(timeout=10)
     assert callbacks.close(s) == 0  # the session closed with the block; its threads end
-    time.sleep(0.2)  # the reader thread takes the last lines
+    lines.wait_end()
     out = "".join(lines)
     print(out)
     stats = json.loads((tmp_path / "stats.json").read_text())

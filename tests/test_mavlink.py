@@ -180,9 +180,11 @@ def test_a_station_and_mavproxy_see_arm_switch_tune_and_drive_the_submarine(brid
 
             # operator loss: the station stops its heartbeats
             s.beating = False
-            last_hb = d.mavlink.operator_heartbeat_ns
             st = s.wait("STATUSTEXT", lambda m: "operator_heartbeat_lost" in m.text,
                         timeout=OPERATOR_TIMEOUT_S + 5.0)
+            # read after the failsafe: a heartbeat on its way when the beats stopped is the
+            # last one the daemon heard (read before, it was up to a beat early)
+            last_hb = d.mavlink.operator_heartbeat_ns
             ev = [e for e in d.supervisor.failsafe_events()
                   if e.get("trigger") == "operator_heartbeat_lost" and e.get("kind") == "fired"]
             assert ev and ev[0]["action"] == "hold-depth"

@@ -125,7 +125,9 @@ def test_connect_endpoint_telemetry_manual_setpoint_and_refusals():
         other = Peer(system=42)
         other.send(other.enc.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0), link.port)
         other.sock.close()
-        time.sleep(0.2)
+        deadline = time.monotonic() + 5.0  # the datagram passes the receiver and the thread
+        while link.counters["not_a_gcs"] < 1 and time.monotonic() < deadline:
+            time.sleep(0.01)
         assert queued(link, timeout=0.2) == [] and link.counters["not_a_gcs"] == 1
 
     run_link(scenario)

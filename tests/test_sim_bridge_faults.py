@@ -29,13 +29,16 @@ def test_plant_and_thruster_faults_at_chosen_times(tmp_path):
         assert st["plant_fault"]["drag_scale"] == 1.5
         assert st["thruster_health"][3] == 0.5  # node 4 is the fourth amplifier
 
+        # 3 s ahead: the next call's answer is back long before (0.3 s was a race with a
+        # loaded machine's scheduling), then polled until it is applied
         ans = proc.call("plant_fault", mass_scale=1.1, g_delta=-20.0, b_delta=[0, 0, 5],
-                        at_s=0.3)
+                        at_s=3.0)
         assert ans["ok"] and ans["scheduled_ns"] > ans["t_ns"]
         assert proc.call("stats")["plant_fault"]["mass_scale"] == 1.0  # not yet
         assert proc.call("health", node=4, value=0.0)["ok"]  # at once
-        time.sleep(1.0)
-        st = proc.call("stats")
+        deadline = time.monotonic() + 15.0
+        while (st := proc.call("stats"))["scheduled"] and time.monotonic() < deadline:
+            time.sleep(0.1)
         assert st["plant_fault"] == {"drag_scale": 1.0, "mass_scale": 1.1, "g_delta": -20.0,
                                      "b_delta": [0.0, 0.0, 5.0]}
         assert st["thruster_health"][3] == 0.0

@@ -112,8 +112,10 @@ def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path)
                     await asyncio.sleep(0.1)
 
             d, cycles = run_scenario(cfg, scenario)
-        time.sleep(0.5)
-        info["alive_after"] = w.alive()
+        end = time.monotonic() + 5.0  # the token's removal travels to the watcher (bounded)
+        while (alive_after := w.alive()) and time.monotonic() < end:
+            time.sleep(0.05)
+        info["alive_after"] = alive_after
     finally:
         w.callbacks.close(w.session)
     assert not w.invalid, w.invalid[:5]
