@@ -71,8 +71,9 @@ def _spec(axes: dict, **head):
     ({"campaign": 5}, ["[campaign]: must be a table, got int 5"]),
     ({"campaign": [1]}, ["[campaign]: must be a table, got list [1]"]),
     # found by probing (session 24): each ran, as a row's error (a negative seed, onset before
-    # the baseline, a plant of no mass) or as figures of no meaning (negative gains, a run
-    # shorter than 0, η above 1, a drag scale below 0, a misspelt case never used)
+    # the baseline, a plant of no mass), as figures of no meaning (negative gains, a run
+    # shorter than 0, η above 1, a drag scale below 0, a misspelt case never used) or for
+    # ever (1e30 simulated hours)
     ({"campaign": {"name": "t", "kind": "control"}, "axes": {"seed": [0, -1]}},
      ["axes.seed: -1 must be ≥ 0 (run 1)"]),
     ({"campaign": {"name": "t", "kind": "control"}, "axes": {"mass_error": -1.0}},
@@ -80,7 +81,7 @@ def _spec(axes: dict, **head):
     ({"campaign": {"name": "t", "kind": "control"}, "axes": {"kd": [100.0, -5.0]}},
      ["axes.kd: -5.0 must be ≥ 0 (run 1)"]),
     ({"campaign": {"name": "t", "kind": "control"}, "axes": {"duration_h": -0.5}},
-     ["axes.duration_h: -0.5 must be > 0"]),
+     ["axes.duration_h: -0.5 must be in (0, 1000]"]),
     ({"campaign": {"name": "t", "kind": "fdc"}, "axes": {"onset_min": 10.0}},
      ["axes.onset_min: 10.0 must be ≥ 25: the detector learns its baseline until then"]),
     ({"campaign": {"name": "t", "kind": "fdc", "sampling": "random", "runs": 50, "seed": 1},
@@ -91,6 +92,12 @@ def _spec(axes: dict, **head):
     ({"campaign": {"name": "t", "kind": "fdc"},
       "axes": {"fault": "drag", "fault_size": -0.5}},
      ["axes.fault_size: -0.5 must be > 0 for a drag fault (run 0)"]),
+    ({"campaign": {"name": "t", "kind": "control"}, "axes": {"duration_h": 1e30}},
+     ["axes.duration_h: 1e+30 must be in (0, 1000] (run 0)"]),
+    ({"campaign": {"name": "t", "kind": "fdc"}, "axes": {"after_min": [30.0, 1e30]}},
+     ["axes.after_min: 1e+30 must be in (0, 60000] (run 1)"]),
+    ({"campaign": {"name": "t", "kind": "fdc"}, "axes": {"onset_min": 9e18}},
+     ["axes.onset_min: 9e+18 must be ≤ 60000 (run 0)"]),
     ({"campaign": {"name": "t", "kind": "fdc"},
       "axes": {"fault": ["drag"], "fault_size": {"by": "fault", "drag": 1.5, "darg": 2.0}}},
      ["axes.fault_size.darg: fault never takes this value; it takes none, thruster"]),

@@ -42,9 +42,14 @@ def _fault_size_problem(size: float, run) -> str | None:
 
 def _onset_problem(onset: float, run) -> str | None:
     start = _monitored_from_min()
-    return None if onset >= start else \
-        f"must be ≥ {start:g}: the detector learns its baseline until then"
+    if onset < start:
+        return f"must be ≥ {start:g}: the detector learns its baseline until then"
+    return within(hi=MAX_HOURS * 60.0)(onset, run)
 
+
+#: the most simulated time a run may ask for: a slip such as ``after_min = 1e30`` is refused by
+#: name instead of running for ever (1000 h is ~2 h of one core at the lockstep's speed)
+MAX_HOURS = 1000.0
 
 #: a random generator's seed (numpy takes no negative one)
 SEED = Axis(int, 0, None, "the plant's and instruments' random generator", within(0))
@@ -63,7 +68,7 @@ FDC_AXES = {
                                          "detector learns its baseline from 5 to 25)",
                       _onset_problem),
     "after_min": Axis(float, 30.0, None, "simulated minutes after onset_min",
-                      within(0.0, above=True)),
+                      within(0.0, MAX_HOURS * 60.0, above=True)),
     "noise_scale": Axis(float, 1.0, None, "every instrument's noise σ times this",
                         within(0.0)),
     "reference": Axis(str, "reftraj1", ("reftraj1", "reftraj2"), "the trajectory tracked "
@@ -74,7 +79,7 @@ CONTROL_AXES = {
     "controller": Axis(str, "two-step", ("pdc", "two-step"), "PDC or the two-step AMBC"),
     "seed": SEED,
     "duration_h": Axis(float, 1.0, None, "simulated hours (two-step: step 1 is 1/12 of it)",
-                       within(0.0, above=True)),
+                       within(0.0, MAX_HOURS, above=True)),
     "mass_error": Axis(float, 0.0, None, "the plant's M is the vehicle file's × (1 + this)",
                        within(-1.0, above=True)),
     "drag_error": Axis(float, 0.0, None, "the plant's D is the vehicle file's × (1 + this)",
@@ -82,7 +87,7 @@ CONTROL_AXES = {
     "kp": Axis(float, 300.0, None, "k_p", within(0.0)),
     "kd": Axis(float, 100.0, None, "k_d (two-step: of step 1; step 2 keeps 1000)", within(0.0)),
     "window_min": Axis(float, 15.0, None, "the tracking figures' window: the run's last minutes",
-                       within(0.0, above=True)),
+                       within(0.0, MAX_HOURS * 60.0, above=True)),
 }
 
 #: minutes from the start before uvd-fdc judges (its warm-up and baseline,
