@@ -133,6 +133,11 @@ port = "/dev/ttyUSB2"
      "'garbage' is not <protocol>/<address>"),
     ("[telemetry.zenoh]\nconnect = [\"tcp/127.0.0.1:7447\", \"tcp/10.0.0.1\"]",
      "telemetry.zenoh.connect[1]", "has no port 1-65535"),
+    # found by probing (session 24): check-config said OK to a loop too slow for the drives'
+    # command timeout, which would fault every drive between two commands
+    ("[loop]\nrate_hz = 1", "can.amplifiers.command_timeout_ms",
+     "200 ms is shorter than two cycles of [loop] rate_hz 1 (2000 ms): the drives would "
+     "time out between commands"),
 ])
 def test_single_mistakes(tmp_path, snippet, key, words):
     _, errs = errors_of(tmp_path, snippet + "\n" + MINIMAL)

@@ -693,6 +693,14 @@ class Config:
                                               "[telemetry.zenoh] enabled = true"))
         if self.sensors.depth.source == "can" and not self.can.depth.enabled:
             out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
+        amps, period_ms = self.can.amplifiers, 1e3 / self.loop.rate_hz
+        if amps.configure and amps.command_timeout_ms < 2.0 * period_ms:
+            # the drives would zero their output and fault between two commands (or at the
+            # first late one): nothing could be driven
+            out.append(("can.amplifiers.command_timeout_ms",
+                        f"{amps.command_timeout_ms} ms is shorter than two cycles of [loop] "
+                        f"rate_hz {self.loop.rate_hz:g} ({2.0 * period_ms:g} ms): the drives "
+                        "would time out between commands"))
         try:
             vehicle = self.load_vehicle(ctx.base_dir)
         except (ConfigError, ValueError, OSError) as exc:
@@ -755,7 +763,8 @@ class CanAmplifiersSection:
     command_timeout_ms: int = setting(200, unit="ms", min=10, max=10_000,
                                       doc="RPDO deadline written to each amplifier (0x1400:05): "
                                           "without a command for this long it zeroes its "
-                                          "output, sends EMCY 0x8250 and faults")
+                                          "output, sends EMCY 0x8250 and faults; at least two "
+                                          "cycles of [loop] rate_hz")
     max_failed_cycles: int = setting(5, min=1, max=1000,
                                      doc="consecutive cycles without feedback (per node) or "
                                          "with a failed send (per group) before a fault")
