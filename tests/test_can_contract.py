@@ -128,6 +128,11 @@ def test_cyclic_commands_and_feedback_every_cycle(drv, rig):
     assert cycle_until(drv.group, lambda: np.allclose(drv.group.read().thrust_est_n, want,
                                                       rtol=0.02, atol=0.05), 3.0, cmd), \
         drv.group.read().thrust_est_n
+    # valid: every drive has answered the latest SYNC — each on its own, in its own time
+    syncs = drv.group.counters["syncs_sent"]
+    answered, _ = wait_for(lambda: min(drv.group.stats()["tpdo_rx_by_node"].values())
+                           >= syncs, 1.0)
+    assert answered, drv.group.stats()["tpdo_rx_by_node"]
     fb = drv.group.read()
     assert fb.valid.all() and fb.ok, fb.faults
 
