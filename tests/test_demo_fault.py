@@ -27,10 +27,20 @@ def test_a_thruster_the_vehicle_does_not_have_is_a_command_line_error(thruster, 
     """``uvd demo --fault thruster:9:…`` on the six-thruster JHU ROV says so in one line and
     exits 2, before any process starts (it was a Python traceback)."""
     from uvd.cli import main
-    assert main(["demo", "--duration", "1", "--fault", f"thruster:{thruster}:0.5@30"]) == 2
+    assert main(["demo", "--duration", "60", "--fault", f"thruster:{thruster}:0.5@30"]) == 2
     err = capsys.readouterr().err
     assert err.strip() == (f"uvd demo: error: --fault: thruster {thruster} is not one of 1…6 "
                            "of jhu-rov")
+
+
+def test_a_fault_after_the_run_is_a_command_line_error(capsys):
+    """``--fault …@100`` in a 3 s demo ran the whole demo and ended "no reallocation", exit 1
+    (found by probing the option's values); it is refused before anything starts."""
+    from uvd.cli import main
+    assert main(["demo", "--duration", "3", "--fault", "thruster:4:0.5@100"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "uvd demo: --fault 'thruster:4:0.5@100': T 100 s is not within the run's 3 s of armed "
+        "tracking (--duration)")
 
 
 @pytest.mark.parametrize("options", [["--false-alarm"], ["--accept", "auto"],

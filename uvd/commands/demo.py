@@ -549,6 +549,10 @@ def _run(args) -> int:
         except ValueError as exc:
             print(f"uvd demo: {exc}", file=sys.stderr)
             return 2
+        if fault.at_s >= args.duration:  # it ran the whole demo and ended "no reallocation"
+            print(f"uvd demo: --fault {args.fault!r}: T {fault.at_s:g} s is not within the "
+                  f"run's {args.duration:g} s of armed tracking (--duration)", file=sys.stderr)
+            return 2
     if args.config is not None:   # the user's file judged before anything starts
         from uvd.runtime.config import ConfigValidationError, load_config
         try:
