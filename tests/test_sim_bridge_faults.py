@@ -73,19 +73,23 @@ def test_plant_and_thruster_faults_at_chosen_times(tmp_path):
         proc.kill()
 
 
-@pytest.mark.parametrize("command, words", [
+@pytest.mark.parametrize("at, command, words", [
     # quote-free words: the error reaches the test inside a dict's repr (its quotes escaped),
     # and sim-bridge's stderr copy of it may not be read yet (seen under load)
-    ('{"op": "helth", "node": 4}', "helth: unknown op"),
-    ('{"op": "health", "node": 9, "value": 0.5}', "node 9 is not one of [1, 2, 3, 4, 5, 6]"),
-    ('{"drag_scale": 1.5}', "not a JSON object with an"),     # was the KeyError's bare 'op'
-    ('[1]', "not a JSON object with an"),
+    ("20", '{"op": "helth", "node": 4}', "helth: unknown op"),
+    ("20", '{"op": "health", "node": 9, "value": 0.5}',
+     "node 9 is not one of [1, 2, 3, 4, 5, 6]"),
+    ("20", '{"drag_scale": 1.5}', "not a JSON object with an"),  # was the KeyError's bare 'op'
+    ("20", '[1]', "not a JSON object with an"),
+    # after the end of the run: it was never carried out, silently (session 24)
+    ("60", '{"op": "ping"}', "60 s is not within --duration 30 s"),
 ])
-def test_a_bad_at_command_stops_sim_bridge_at_its_start(tmp_path, command, words):
-    """``sim-bridge --at 60 JSON`` with a command it could not carry out: exit at start with
-    the command named (it ran, and logged a warning 60 s later)."""
+def test_a_bad_at_command_stops_sim_bridge_at_its_start(tmp_path, at, command, words):
+    """``sim-bridge --at S JSON`` with a command it could not carry out, or S after the end
+    of ``--duration``: exit at start with the command named (it ran, and logged a warning
+    when its time came, or never)."""
     proc = BridgeProcess(write_local_config(tmp_path), duration_s=30.0,
-                         extra=["--at", "60", command])
+                         extra=["--at", at, command])
     try:
         with pytest.raises(TransportError, match=re.escape(words)):
             proc.start(timeout_s=90.0)
