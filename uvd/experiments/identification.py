@@ -769,6 +769,8 @@ larger γ₃ only makes ĝ chase the transient drag errors."""
 
 def run_aid_truth(opts: ExperimentOptions) -> dict:
     minutes = 60.0 if opts.hours is None else opts.hours * 60.0
+    # --hours 0.0001 was least squares' ValueError (4 samples) after the run, with a traceback
+    _at_least_a_minute("aid-truth", opts, [(None, {"minutes": minutes})])
     ds = truth_dataset(minutes)
     progress = opts.progress
     progress(f"aid-truth: {minutes:.0f} simulated minutes, ideal instruments and thrusters")
