@@ -96,6 +96,20 @@ def main(argv: list[str] | None = None) -> int:
     return _run(build_parser().parse_args(argv))
 
 
+def _late_at(args) -> str | None:
+    """The first ``--at S`` at or after ``--duration``: it would never be carried out (None:
+    none; an S that is not a number is named by the bridge's own check)."""
+    for seconds, text in args.at:
+        try:
+            late = args.duration is not None and float(seconds) >= args.duration
+        except ValueError:
+            late = False
+        if late:
+            return (f"sim-bridge: --at {seconds} {text}: {seconds} s is not within --duration "
+                    f"{args.duration:g} s (it would never be carried out)")
+    return None
+
+
 def _run(args) -> int:
     from sim_bridge.control_channel import JsonLines, serve_commands
 
@@ -104,17 +118,10 @@ def _run(args) -> int:
     logging.getLogger("canopen").setLevel(logging.WARNING)
     sys.setswitchinterval(0.0005)  # answer a SYNC promptly while other threads hold the GIL
     emit = JsonLines()
-    for seconds, text in args.at:  # one that would come after the end is never carried out
-        try:
-            late = args.duration is not None and float(seconds) >= args.duration
-        except ValueError:
-            late = False  # the bridge's own check names it below
-        if late:
-            msg = (f"sim-bridge: --at {seconds} {text}: {seconds} s is not within --duration "
-                   f"{args.duration:g} s (it would never be carried out)")
-            print(msg, file=sys.stderr)
-            emit({"event": "error", "error": msg})
-            return 2
+    if (msg := _late_at(args)) is not None:
+        print(msg, file=sys.stderr)
+        emit({"event": "error", "error": msg})
+        return 2
 
     from uvd.errors import UvdError
     from uvd.runtime.config import ConfigValidationError, load_config
