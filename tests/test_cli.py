@@ -1,11 +1,18 @@
-"""The command line: help, version, the hardware-in-the-loop demo."""
+"""The command line: help, version, the hardware-in-the-loop demo, stopped by a signal."""
 
+import contextlib
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
+from pathlib import Path
+
+import pytest
 
 from uvd import __version__
-from uvd.cli import main
+from uvd.cli import Stopped, main, unwinding_signals
 
 
 def test_help_lists_commands(capsys):
@@ -44,3 +51,76 @@ def test_demo_is_hardware_in_the_loop_without_failsafe(tmp_path, capsys):
     assert res["tracking"]["position_mae"]["heading"] < 0.35
     assert set(res["lockstep"]["ratio"]) == {"x", "y", "z", "roll", "pitch", "heading"}
     assert res["memory"]["daemon_peak_rss_mb"] > 0 and "daemon_rss_growth_mb" in res["memory"]
+
+
+def _children(pid: int) -> list[int]:
+    """The live processes whose parent is ``pid`` (from /proc)."""
+    kids = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:  # "pid (comm) state ppid ...": comm may hold spaces, so split after its ')'
+            ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        if ppid == pid:
+            kids.append(int(d.name))
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_signals_unwind_a_command_as_ctrl_c_does():
+    """A real SIGTERM (then SIGHUP) inside :func:`unwinding_signals` raises Stopped, which is
+    a KeyboardInterrupt (every command's Ctrl-C path applies); the handlers before are back
+    after it."""
+    before = signal.getsignal(signal.SIGTERM)
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        cleaned = []
+        with pytest.raises(Stopped) as err, unwinding_signals():
+            try:
+                os.kill(os.getpid(), sig)
+                time.sleep(5.0)  # the handler raises within this
+            finally:
+                cleaned.append(sig)
+        assert err.value.signum == sig and isinstance(err.value, KeyboardInterrupt)
+        assert cleaned == [sig]
+    assert signal.getsignal(signal.SIGTERM) == before
+
+
+def test_a_demo_stopped_by_sigterm_leaves_no_process_behind(tmp_path):
+    """``kill PID`` of a running ``uvd demo`` (the signal to the demo alone, not its process
+    group, as a job runner or a user's kill sends it): the daemon it started is stopped as
+    systemd would, sim-bridge too, and the demo ends by that SIGTERM. Before, the demo died at
+    once and its daemon ran on, orphaned, for the rest of its 360 s bound."""
+    proc = subprocess.Popen([sys.executable, "-m", "uvd", "demo", "--duration", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    kids: list[int] = []
+    try:
+        deadline = time.monotonic() + 240.0
+        for line in proc.stdout:  # "armed ... after start": both processes up
+            if "armed" in line and "after start" in line or time.monotonic() > deadline:
+                break
+        kids = _children(proc.pid)
+        assert len(kids) >= 2, f"the demo's processes: {kids}"
+        os.kill(proc.pid, signal.SIGTERM)
+        out, err = proc.communicate(timeout=30.0)
+        assert proc.returncode == -signal.SIGTERM, err[-2000:]
+        assert "uvd demo: stopped by SIGTERM" in err, err[-2000:]
+        t0 = time.monotonic()
+        while any(_alive(k) for k in kids) and time.monotonic() - t0 < 10.0:
+            time.sleep(0.1)
+        assert not [k for k in kids if _alive(k)], "left behind"
+    finally:
+        for k in kids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(k, signal.SIGKILL)
+        proc.kill()
+        proc.wait(timeout=10.0)

@@ -8,9 +8,13 @@ A registered handler returns an exit code (0 on success).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import os
 import pkgutil
+import signal
 import sys
+import threading
 
 from uvd import __version__
 from uvd.blas import single_threaded_blas
@@ -34,6 +38,44 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: the signals that stop a command as Ctrl-C does (a terminal closed, ``kill``, ``timeout``)
+UNWIND_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+class Stopped(KeyboardInterrupt):
+    """SIGTERM or SIGHUP in a command: raised in the main thread, it unwinds as Ctrl-C does,
+    so every ``finally`` runs — the processes a command started (the demo's daemon and
+    sim-bridge, a campaign's Dask workers) are stopped, not left behind."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _stop(signum: int, _frame) -> None:
+    for s in UNWIND_SIGNALS:  # a second signal while unwinding ends the process at once
+        signal.signal(s, signal.SIG_DFL)
+    raise Stopped(signum)
+
+
+@contextlib.contextmanager
+def unwinding_signals():
+    """Within: :data:`UNWIND_SIGNALS` raise :class:`Stopped` (main thread only; the handlers
+    before are put back after). A command that handles its own signals (``uvd run``: SIGHUP
+    reloads) sets ``own_signals`` and runs without."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = {s: signal.getsignal(s) for s in UNWIND_SIGNALS}
+    for s in UNWIND_SIGNALS:
+        signal.signal(s, _stop)
+    try:
+        yield
+    finally:
+        for s, h in before.items():
+            signal.signal(s, signal.SIG_DFL if h is None else h)
+
+
 def main(argv: list[str] | None = None) -> int:
     single_threaded_blas()  # before any command module imports numpy
     parser = build_parser()
@@ -43,10 +85,23 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(handler(args) or 0)
+        if getattr(args, "own_signals", False):
+            return int(handler(args) or 0)
+        with unwinding_signals():
+            return int(handler(args) or 0)
     except UvdError as exc:
         print(f"uvd {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except Stopped as exc:
+        # cleaned up: now end as the signal's default would, so that the parent (a shell,
+        # systemd, timeout) sees the process stopped by it
+        name = signal.Signals(exc.signum).name
+        print(f"uvd {args.command}: stopped by {name}", file=sys.stderr)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        signal.signal(exc.signum, signal.SIG_DFL)
+        os.kill(os.getpid(), exc.signum)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         print(f"uvd {args.command}: interrupted", file=sys.stderr)
         return 130

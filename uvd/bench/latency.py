@@ -21,10 +21,10 @@ figure and is far above a SocketCAN adapter's.
 from __future__ import annotations
 
 import bisect
+import contextlib
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -36,6 +36,7 @@ import numpy as np
 
 from uvd.bench import Bench, percentiles
 from uvd.cliargs import nonnegative_int, positive_float
+from uvd.runtime.process import stop_daemon
 
 
 def _add(p) -> None:
@@ -110,14 +111,14 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
         time.sleep(duration_s)
         t_end = time.monotonic_ns()
         writes = bridge.call("writes", name="ins", timeout_s=10.0).get("write_end_ns", [])
-        daemon.send_signal(signal.SIGTERM)
-        daemon.wait(timeout=10.0)
+        stop_daemon(daemon, 10.0)
         log.close()
         done.set()
         th.join(2.0)
     finally:
         if daemon is not None and daemon.poll() is None:
-            daemon.kill()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                stop_daemon(daemon)
         if bridge is not None:
             bridge.stop(timeout_s=5.0)
             bridge.kill()

@@ -30,7 +30,6 @@ import math
 import os
 import queue
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -46,6 +45,7 @@ from uvd.bench import host_steal_s
 from uvd.cliargs import nonnegative_int, output_file, output_folder, positive_float
 from uvd.jsonio import write_json
 from uvd.lockstep import hil_tracking
+from uvd.runtime.process import stop_daemon
 
 #: lockstep runs (seeds seed … seed + SPREAD_SEEDS − 1) whose spread the HIL run is set against
 SPREAD_SEEDS = 5
@@ -317,13 +317,7 @@ def _stop(daemon, bridge, pump) -> tuple[int, float, dict]:
     """SIGTERM to the daemon as systemd would (killed after 5 s), then the bridge; returns
     the daemon's exit code, how long it took to stop and the bridge's statistics."""
     t_sig = time.monotonic()
-    if daemon.poll() is None:
-        daemon.send_signal(signal.SIGTERM)
-    try:
-        code = daemon.wait(timeout=5.0)
-    except subprocess.TimeoutExpired:
-        daemon.kill()
-        code = daemon.wait(timeout=5.0)
+    code = stop_daemon(daemon)
     stop_s = time.monotonic() - t_sig
     pump(0.5)
     bridge_stats = bridge.stop(timeout_s=10.0) or {}
@@ -460,9 +454,8 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         if fault_run is not None:
             fault_run.finish()
         if daemon is not None and daemon.poll() is None:
-            daemon.kill()
             with contextlib.suppress(subprocess.TimeoutExpired):
-                daemon.wait(timeout=5.0)
+                stop_daemon(daemon)
         if bridge is not None:
             bridge.kill()
         if tmp is not None:

@@ -28,7 +28,7 @@ def register(sub) -> None:
                    help="write the run's summary (loop statistics, failsafe events) at exit")
     p.add_argument("--log-level", default="INFO",
                    choices=("DEBUG", "INFO", "WARNING", "ERROR"))
-    p.set_defaults(handler=_run)
+    p.set_defaults(handler=_run, own_signals=True)  # SIGTERM stops, SIGHUP reloads
 
 
 def _run(args) -> int:

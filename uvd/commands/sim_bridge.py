@@ -41,7 +41,7 @@ def register(sub) -> None:
                                           "protocols (as the sim-bridge command)",
                        description=__doc__.split("\n\n")[0])
     _add_arguments(p)
-    p.set_defaults(handler=_run)
+    p.set_defaults(handler=_run, own_signals=True)  # SIGTERM and SIGINT end its run
 
 
 def bridge_config(cfg):

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import signal
 import subprocess
 import sys
 import tempfile
@@ -29,6 +28,7 @@ from typing import Any
 
 from uvd.experiments import Experiment, ExperimentOptions
 from uvd.experiments.fault_tolerance import DOFS, SETTLE_S, _config_dir, _fmt, run_duration
+from uvd.runtime.process import stop_daemon
 
 CONFIG = "sim-bluerov2.toml"
 THRUSTER = 4
@@ -74,12 +74,12 @@ def run_hil(config_name: str, k: int, *, fault: bool, t_fault_s: float = T_FAULT
                      f"{duration_s:g} s")
             time.sleep(max(0.0, (released + int(duration_s * 1e9) - time.monotonic_ns()) * 1e-9))
             stop_ns = time.monotonic_ns()
-            daemon.send_signal(signal.SIGTERM)
-            code = daemon.wait(timeout=60.0)
+            code = stop_daemon(daemon, 60.0)
             bridge.stop(timeout_s=10.0)
         finally:
             if daemon is not None and daemon.poll() is None:
-                daemon.kill()
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    stop_daemon(daemon)
             bridge.kill()
         truth = read_truth(truth_path)
         tel = run_dir / "telemetry.jsonl"

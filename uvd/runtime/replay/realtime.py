@@ -31,7 +31,6 @@ import base64
 import contextlib
 import math
 import os
-import signal
 import struct
 import subprocess
 import sys
@@ -45,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from uvd.runtime.process import stop_daemon
 from uvd.runtime.replay.records import (
     judged_messages,
     malformed_message,
@@ -470,7 +470,7 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
                                            len(rec.cycles))
     finally:
         if proc is not None:
-            result.daemon_exit = _stop(proc)
+            result.daemon_exit = stop_daemon(proc, 15.0)
         if log is not None:
             log.close()
         for p in ports.values():
@@ -483,16 +483,6 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
         cyc = [m for _, _, m in read_messages(live[0], ["/uvd/cycle"])][:len(rec.cycles)]
         result.tracking["live"] = tracking(cyc, [c["thrust"] for c in cyc])
     return result
-
-
-def _stop(proc: subprocess.Popen) -> int:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-    try:
-        return proc.wait(15.0)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        return proc.wait(5.0)
 
 
 def default_work_dir(recording: Path) -> Path:
