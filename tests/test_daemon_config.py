@@ -130,3 +130,49 @@ def test_a_can_start_failure_after_the_bus_opened_ends_without_a_traceback(tmp_p
     assert r.returncode == 1
     assert "start failed (ConfigError: [can.amplifiers] eds: node 1: no enabled RPDO maps " \
            "both controlword 0x6040 and target torque 0x6071" in r.stderr
+
+
+def test_a_second_daemon_on_a_can_bus_in_use_does_not_start(tmp_path):
+    """``uvd run`` by hand beside an armed daemon on the same CAN bus (its instruments its own,
+    as networked ones would be) fails its start before it opens the bus, naming the daemon
+    that holds it; the armed one flies on untouched. Before the claim (session 25) the second
+    daemon's start put all six drives in NMT pre-operational and the armed one disarmed on
+    amplifier_fault. The claim is the kernel's: the first daemon gone, the bus is free."""
+    from hil_daemon import running_bridge
+
+    from sim_bridge.bridge import write_local_config
+    from uvd.io.toml import read_toml
+    with running_bridge(tmp_path / "A") as (cfg_a, _pa), \
+            running_bridge(tmp_path / "B") as (_cfg_b, _pb):
+        twin = write_local_config(tmp_path / "B", changes={
+            "can": read_toml(cfg_a)["can"], "mavlink": {"enabled": False},
+            "telemetry": {"jsonl": {"enabled": False}, "zenoh": {"enabled": False}}})
+        first_log = tmp_path / "first.log"
+        with first_log.open("w") as err:
+            first = subprocess.Popen([sys.executable, "-m", "uvd", "run", "--config",
+                                      str(cfg_a), "--arm", "--duration", "120"], stderr=err)
+        try:
+            deadline = time.monotonic() + 120.0
+            while "→ ARMED" not in first_log.read_text() and time.monotonic() < deadline:
+                time.sleep(0.1)
+            assert "→ ARMED" in first_log.read_text(), first_log.read_text()[-2000:]
+            r = subprocess.run([sys.executable, "-m", "uvd", "run", "--config", str(twin),
+                                "--duration", "30"], capture_output=True, text=True,
+                               timeout=240)
+            time.sleep(1.0)  # a cycle of the first daemon after the second's start (10 Hz)
+            assert first.poll() is None
+            log = first_log.read_text()
+        finally:
+            first.terminate()
+            first.wait(timeout=20)
+        assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr[-2000:]
+        assert (f"start failed (TransportError: can: another daemon (process {first.pid}) "
+                "already drives udp_multicast ") in r.stderr, r.stderr[-2000:]
+        # at its start, never in STANDBY (where it would have configured the amplifiers)
+        assert "lifecycle BOOT → SHUTDOWN" in r.stderr and "STANDBY" not in r.stderr
+        assert "failsafe fired" not in log and "CAN fault" not in log, log[-2000:]
+        assert first.returncode == 0
+        r = subprocess.run([sys.executable, "-m", "uvd", "run", "--config", str(twin),
+                            "--duration", "3"], capture_output=True, text=True, timeout=240)
+        assert r.returncode == 0, r.stderr[-2000:]
+        assert "lifecycle BOOT → STANDBY" in r.stderr, r.stderr[-2000:]

@@ -6,22 +6,71 @@ sensor as one component, and the amplifiers' feedback as the cycle's typed
 from __future__ import annotations
 
 import asyncio
+import errno
 import gc
+import hashlib
 import logging
+import socket
+import struct
 
 import numpy as np
 
+from uvd.errors import TransportError
 from uvd.runtime.config import Config
 from uvd.runtime.cycle import ActuatorStatus
 from uvd.runtime.mailbox import Mailbox
 
-__all__ = ["CanComponent", "GcFreeze", "actuator_status"]
+__all__ = ["CanComponent", "GcFreeze", "actuator_status", "claim_bus"]
 
 log = logging.getLogger("uvd.daemon")
 
 #: feedback faults the failsafe handles as missing feedback (``feedback_missing``), not as
 #: amplifier faults: a silent node is an absence of data
 _FEEDBACK_FAULTS = frozenset({"feedback_lost", "heartbeat_lost"})
+
+
+def claim_bus(bus) -> socket.socket | None:
+    """One daemon a CAN bus (``bus``: the ``[can.bus]`` section): an abstract UNIX socket
+    named for the bus, bound and held while the daemon runs; the kernel frees it when the
+    process ends, however it ends. A second daemon on the bus (``uvd run`` by hand beside the
+    service) would configure the same amplifiers, restart them over NMT and send its zero
+    targets between the first's: its start fails here, before it opens the bus, naming the
+    process that holds it. None for ``virtual``, a bus within one process. ``uvd zero-thrust``
+    claims nothing: it is how a vehicle is stopped, whoever runs."""
+    if bus.interface == "virtual":
+        return None
+    where = f"{bus.interface} {bus.channel}"
+    if bus.interface == "udp_multicast":
+        where += f" port {bus.port}"
+    # an abstract name holds 107 bytes: a longer channel (an slcan adapter's by-id path) by
+    # its digest
+    key = where if len(where) <= 90 else hashlib.sha256(where.encode()).hexdigest()
+    name = f"\0uvd-can {key}"
+    claim = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        claim.bind(name)
+        claim.listen(4)
+    except OSError as exc:
+        claim.close()
+        if exc.errno != errno.EADDRINUSE:
+            raise TransportError(f"can: cannot claim {where} for this daemon: {exc}") from exc
+        raise TransportError(f"can: another daemon ({_holder(name)}) already drives {where}: two "
+                             "daemons would command the same amplifiers (stop it first, e.g. "
+                             "systemctl stop uvd)") from None
+    return claim
+
+
+def _holder(name: str) -> str:
+    """Who holds the claim ``name``: "process N" from its socket's credentials."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.settimeout(0.5)
+        try:
+            s.connect(name)
+            pid, _, _ = struct.unpack("3i", s.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
+                                                         struct.calcsize("3i")))
+        except OSError:
+            return "another process"
+    return f"process {pid}"
 
 
 def actuator_status(fb, first_write_ns: int) -> ActuatorStatus:
@@ -100,6 +149,7 @@ class CanComponent:
         self.vehicle = vehicle
         self.depth_box = depth_box
         self.bus = None
+        self.claim = None  # the bus held for this daemon (claim_bus)
         self.group = None
         self.depth = None
         self.recorder = None
@@ -143,6 +193,7 @@ class CanComponent:
             log.warning("CAN depth sensor %d: no sample within 1 s", c.depth.node_id)
 
     async def start(self) -> None:
+        self.claim = claim_bus(self.cfg.can.bus)  # before any frame goes out
         self._open_bus()
         await asyncio.to_thread(self._open)  # SDO configuration: blocking, bounded
 
@@ -186,6 +237,9 @@ class CanComponent:
             self.bus.close()
         if self.recorder is not None:
             self.recorder.stop(timeout=0.5)
+        if self.claim is not None:
+            self.claim.close()
+            self.claim = None
 
     async def stop(self) -> None:
         await asyncio.to_thread(self.close_now)
