@@ -128,11 +128,18 @@ def test_a_frozen_estimate_is_published_and_logged_once(tmp_path, caplog):
     lane = next(la for la in d.app.hub._lanes if la.sink.name == "jsonl")
     st = d.state.est[0]
     d.state.est = (replace(st, frozen=True, freeze_reason="M̂ not positive definite at t = 9 s"),)
+    # two-step AMBC's "frozen" is its last update skipped (saturation, reversal hold, dead
+    # zone): published as it is, never logged as having stopped adapting (it was, with an
+    # empty reason and AID's explanation, session 25)
+    d.state.ctrl = replace(d.state.ctrl, ambc=replace(d.state.ctrl.ambc, frozen=True))
     with caplog.at_level("WARNING", logger="uvd.daemon"):
         d.estimates.publish(123)
         d.estimates.publish(456)
-    recs = [r for r in lane.queue.drain()  # not the start record nor the controller's
+    drained = lane.queue.drain()
+    recs = [r for r in drained  # not the start record nor the controller's
             if r["type"] == "estimate" and r["source"] == "estimator"]
+    ctrl = [r for r in drained if r["type"] == "estimate" and r["source"] == "controller"]
+    assert [(r["estimator"], r["frozen"]) for r in ctrl] == [("two-step-ambc", True)] * 2
     assert [r["t_ns"] for r in recs] == [123, 456]
     assert all(r["frozen"] and "t = 9 s" in r["freeze_reason"] for r in recs)
     np.testing.assert_array_equal(recs[0]["theta"], st.theta)

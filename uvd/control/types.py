@@ -52,7 +52,9 @@ class Diagnostics(NamedTuple):
         Extreme eigenvalues of M̂ (None where M̂ is not adapted, e.g. step 1 of two-step AMBC,
         whose quasi-static model (5.37) holds M̂ = 0).
     frozen : bool
-        Adaptation stopped; ``freeze_reason`` says why.
+        An estimator's adaptation stopped for good (AID: M̂ would have lost positive
+        definiteness); ``freeze_reason`` says why. An adaptive controller's: its last update
+        was skipped (AMBC: saturation, the reversal hold, the dead zone), no reason given.
     phase : int or None
         Two-step AMBC's step (1 or 2).
     steps, skipped, resyncs : int or None

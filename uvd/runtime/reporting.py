@@ -86,7 +86,9 @@ class Estimates:
 
     def publish(self, t_ns: int) -> None:
         for rec in self.records(t_ns):
-            if rec["frozen"] and rec["estimator"] not in self._frozen_logged:
+            # an estimator's freeze is for good; a controller's a skipped update, not logged
+            if rec["frozen"] and rec["source"] == "estimator" \
+                    and rec["estimator"] not in self._frozen_logged:
                 self._frozen_logged.add(rec["estimator"])
                 log.warning("%s stopped adapting: %s (the estimate kept is the last with M̂ "
                             "positive definite)", rec["estimator"], rec["freeze_reason"])
