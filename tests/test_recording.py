@@ -671,6 +671,76 @@ def test_a_stalled_disk_drops_counts_and_never_delays_the_loop(tmp_path):
     assert written > 100 and peak < 0.02e6 + 64 * 400  # the bound plus one batch
 
 
+#: the black box and the JSON lines through the hub, as in the daemon, while no file may grow
+#: (RLIMIT_FSIZE 1 byte: each write fails in the kernel, EFBIG, as on a full disk) from the
+#: 100th record to the 400th
+_FULL_DISK = """
+import asyncio, json, resource, signal, sys
+from pathlib import Path
+from uvd.links.jsonl import JsonLinesSink
+from uvd.links.mcap import McapRecorder
+from uvd.telemetry.recording import read_messages
+from uvd.telemetry.sink import TelemetryHub
+
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # past the limit a write fails, no signal
+out = Path(sys.argv[1])
+
+
+async def main():
+    rec = McapRecorder(out / "rec", flush_interval_s=0.02)
+    hub = TelemetryHub([rec, JsonLinesSink(out / "t.jsonl")], queue_size=4096,
+                       flush_interval_s=0.01)
+    task = asyncio.create_task(hub.run())
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    for k in range(600):
+        if k == 100:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (1, hard))
+        if k == 400:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        hub.publish({"type": "failsafe", "t_ns": 10**9 + k, "kind": "fired", "trigger": "t",
+                     "action": "warn", "reason": f"record {k}"}, always=True)
+        await asyncio.sleep(0.002)
+    for _ in range(250):  # on disk while running (what a crash would leave), up to 5 s
+        on_disk = (sum(1 for _ in read_messages(rec.files[0], ["/uvd/failsafe"])),
+                   len((out / "t.jsonl").read_bytes().splitlines()))
+        if on_disk == (600, 600):
+            break
+        await asyncio.sleep(0.02)
+    await hub.aclose(timeout_s=5.0)
+    await task
+    print(json.dumps({k: v.get("sink") for k, v in hub.stats().items()}))
+    print(json.dumps(on_disk))
+
+asyncio.run(main())
+"""
+
+
+def test_a_full_disk_is_told_and_the_files_go_on_whole_when_it_has_room(tmp_path):
+    """Writes that fail in the kernel for 300 records' time: each file is cut back to its
+    last whole write, told in the log once (and when writing resumes), and the bytes wait;
+    when the disk takes them again, both files hold all 600 records in order, nothing lost.
+    Before (session 25) nothing was told, and after the spell nothing more reached either file
+    until the close — the black box's flush task had ended at the first failed write, the
+    lines waited in a 64 kB buffer: a crash then would have lost them all."""
+    r = subprocess.run([sys.executable, "-c", _FULL_DISK, str(tmp_path)], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+    stats, on_disk = (json.loads(x) for x in r.stdout.splitlines()[-2:])
+    assert on_disk == [600, 600]  # written while running, not only at the close
+    (mcap,) = sorted((tmp_path / "rec").glob("*.mcap"))
+    for path in (mcap, tmp_path / "t.jsonl"):
+        told = [line for line in r.stderr.splitlines() if str(path) in line]
+        assert len(told) == 2, r.stderr[-3000:]  # the spell's first failure, and its end
+        assert "recording: cannot write" in told[0] and "File too large" in told[0]
+        assert "written again after" in told[1]
+    for name in ("mcap", "jsonl"):
+        assert stats[name]["write_errors"] >= 2 and stats[name]["lost_bytes"] == 0, stats
+    want = [f"record {k}" for k in range(600)]
+    assert [m["reason"] for _, _, m in read_messages(mcap, ["/uvd/failsafe"])] == want
+    lines = (tmp_path / "t.jsonl").read_text().splitlines()
+    assert [json.loads(line)["reason"] for line in lines] == want
+
+
 @pytest.mark.parametrize("how", ["time", "size"])
 def test_files_rotate_by_time_or_size_each_with_the_start_record(tmp_path, how):
     """Through the hub, as in the daemon: a new file past ``rotate_s`` of record time or

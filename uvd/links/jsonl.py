@@ -5,7 +5,9 @@ Records are encoded in the event loop in time-bounded slices (the sink yields ev
 the sink's own daemon thread, so a slow disk never stalls the event loop, and a hung disk
 cannot keep the daemon from exiting.
 Numpy arrays become lists, NaN/inf become ``null`` (:func:`uvd.jsonio.to_jsonable`); anything
-else JSON cannot represent is written as its ``str``. On close the file is flushed and
+else JSON cannot represent is written as its ``str``. Each batch goes to the operating system
+in one write; one that fails (a full disk) leaves the file at its last whole line and waits
+for the disk, told in the log (:mod:`uvd.telemetry.appendfile`). On close the file is
 ``fsync``-ed, so a clean shutdown leaves only complete lines.
 """
 
@@ -13,7 +15,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -21,6 +22,7 @@ from typing import Any
 
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
+from uvd.telemetry.appendfile import AppendFile
 
 __all__ = ["JsonLinesSink"]
 
@@ -40,30 +42,35 @@ class JsonLinesSink:
         Longest stretch of encoding before yielding to the event loop.
     fsync_on_close : bool
         ``os.fsync`` the file when closing.
+    max_pending_mb : float
+        Lines kept for a disk that fails writes; past that they are given up (counted).
     """
 
     def __init__(self, path: str | Path, *, name: str = "jsonl", truncate: bool = False,
-                 slice_s: float = 2e-4, fsync_on_close: bool = True) -> None:
+                 slice_s: float = 2e-4, fsync_on_close: bool = True,
+                 max_pending_mb: float = 16.0) -> None:
         self.path = Path(path)
         self.name = name
         self.truncate = truncate
         self.slice_s = float(slice_s)
         self.fsync_on_close = fsync_on_close
         self.lines = 0
-        self._fh = None
+        self._opened = False
+        self._file = AppendFile(int(max_pending_mb * 1e6))
         self._worker = DaemonWorker(f"uvd-sink-{name}")
 
-    def _open(self):
+    def _open(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        return self.path.open("w" if self.truncate else "a", encoding="utf-8",
-                              buffering=1 << 16)
+        with self.path.open("wb" if self.truncate else "ab"):
+            pass  # a file that cannot be written is the open's error, named
 
     async def open(self) -> None:
-        if self._fh is None:
-            self._fh = await self._worker.submit(self._open)
+        if not self._opened:
+            await self._worker.submit(self._open)
+            self._opened = True
 
     async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
-        if self._fh is None:
+        if not self._opened:
             raise RuntimeError(f"sink {self.name} is not open")
         parts: list[str] = []
         t0 = time.perf_counter()
@@ -74,26 +81,27 @@ class JsonLinesSink:
                 await asyncio.sleep(0)
                 t0 = time.perf_counter()
         if parts:
-            await self._worker.submit(self._fh.write, "\n".join(parts) + "\n")
+            data = ("\n".join(parts) + "\n").encode("utf-8")
+            await self._worker.submit(self._file.write, self.path, data)
             self.lines += len(parts)
 
     async def flush(self) -> None:
-        if self._fh is not None:
-            await self._worker.submit(self._fh.flush)
+        return None  # every write reached the operating system (or waits in _file)
 
     def _close(self) -> None:
-        fh, self._fh = self._fh, None
-        if fh is None:
-            return
-        try:
-            fh.flush()
-            if self.fsync_on_close:
-                os.fsync(fh.fileno())
-        finally:
-            fh.close()
+        if self.fsync_on_close:
+            self._file.write(self.path, b"", close=True)
+        self._file.close()
 
     async def aclose(self) -> None:
+        if not self._opened:
+            self._worker.close()
+            return
         try:
             await self._worker.submit(self._close)
         finally:
+            self._opened = False
             self._worker.close()
+
+    def stats(self) -> dict[str, Any]:
+        return {"lines": self.lines, **self._file.stats()}

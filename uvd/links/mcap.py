@@ -37,7 +37,6 @@ import base64
 import collections
 import json
 import math
-import os
 import threading
 import time
 from collections.abc import Mapping, Sequence
@@ -46,6 +45,7 @@ from typing import Any
 
 from uvd.jsonio import to_jsonable
 from uvd.telemetry._worker import DaemonWorker
+from uvd.telemetry.appendfile import AppendFile
 from uvd.telemetry.recording import CHANNELS, schema
 
 __all__ = ["McapRecorder"]
@@ -157,7 +157,9 @@ class McapRecorder:
         self.files: list[Path] = []
         self._writer = None
         self._buf: _Buffer | None = None
-        self._fh = None
+        # the worker's file; what waits in it after failed writes counts against the bound
+        # twice over, so that write() drops records before whole bytes are given up
+        self._file = AppendFile(2 * self.max_pending)
         self._channels: dict[str, int] = {}
         self._seq: dict[int, int] = {}
         self._start_rec: Mapping[str, Any] | None = None
@@ -218,19 +220,11 @@ class McapRecorder:
         self._writer = None
 
     def _write_bytes(self, path: Path, data: bytes, close: bool) -> None:
-        """Worker thread: append ``data`` to ``path`` (the file open while it is current)."""
-        if self._fh is None or self._fh.name != str(path):
-            if self._fh is not None:
-                self._fh.close()
-            path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = open(path, "ab")  # noqa: SIM115 - kept open across calls
-        if data:
-            self._fh.write(data)
-            self._fh.flush()
-        if close:
-            os.fsync(self._fh.fileno())
-            self._fh.close()
-            self._fh = None
+        """Worker thread: append ``data`` to ``path`` (the file open while it is current). A
+        failed write never raises: :class:`~uvd.telemetry.appendfile.AppendFile` keeps the
+        file whole to its last write and the bytes for the disk; past ``max_pending_mb``
+        waiting, :meth:`write` drops records (``stalled_dropped``)."""
+        self._file.write(path, data, close)
 
     def _add(self, topic: str, t_ns: int, obj: Any) -> None:
         data = json.dumps(obj, separators=(",", ":"), default=str, allow_nan=False).encode()
@@ -261,7 +255,7 @@ class McapRecorder:
     async def write(self, records: Sequence[Mapping[str, Any]]) -> None:
         if self._writer is None:
             raise RuntimeError(f"sink {self.name} is not open")
-        if self._buf.pending > self.max_pending:  # the disk is stalled: the worker took nothing
+        if self._stalled():
             self.stalled_dropped += len(records)
             return
         # the raw bytes first: a cycle's record follows the bytes its samples came from in
@@ -274,6 +268,10 @@ class McapRecorder:
                 await asyncio.sleep(0)
                 t0 = time.perf_counter()
         self._drain_raw()
+
+    def _stalled(self) -> bool:
+        """The disk takes nothing (hung, or failing): more than ``max_pending_mb`` wait."""
+        return self._buf.pending + len(self._file.unwritten) > self.max_pending
 
     def _take(self, r: Mapping[str, Any]) -> None:
         """Serialise one hub record onto its channel (a cycle record onto the pose too)."""
@@ -328,9 +326,10 @@ class McapRecorder:
         """Hand what is serialised to the operating system (a worker thread writes it)."""
         if self._writer is None:
             return
-        self._drain_raw()
+        if not self._stalled():  # else the raw frames wait in their bounded queue
+            self._drain_raw()
         data = self._buf.take()
-        if data:
+        if data or self._file.unwritten:
             await self._worker.submit(self._write_bytes, self.files[-1], data, False)
 
     async def aclose(self) -> None:
@@ -349,4 +348,4 @@ class McapRecorder:
     def stats(self) -> dict[str, Any]:
         return {"files": [str(p) for p in self.files], "messages": self.messages,
                 "raw_taken": self.raw_taken, "raw_dropped": self.raw_dropped,
-                "stalled_dropped": self.stalled_dropped}
+                "stalled_dropped": self.stalled_dropped, **self._file.stats()}

@@ -6,7 +6,8 @@ O(number of sinks), no lock, no await, no I/O — and when a sink's queue is ful
 record is dropped and counted, so the loop never waits for a slow consumer and the freshest
 data survives. A pump task per sink (owned by the application's TaskGroup through
 :meth:`TelemetryHub.run`) drains its queue every ``flush_interval_s`` and hands batches to the
-sink; a sink that fails is counted and retried with the next batch, never propagated.
+sink; a sink that fails is counted, logged (its first failed batch, every 1000th, and when it
+writes again) and retried with the next batch, never propagated.
 
 Records must not be mutated after they are published (the core returns new arrays every cycle,
 so this holds by construction).
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import time
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
@@ -26,6 +28,11 @@ from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 __all__ = ["TelemetrySink", "BoundedQueue", "TelemetryHub", "SinkStats"]
+
+log = logging.getLogger("uvd.telemetry")
+
+#: after a sink's first failed batch, one in this many is logged
+_LOG_EVERY = 1000
 
 
 @runtime_checkable
@@ -116,6 +123,7 @@ class _Lane:
         self.open_lock = asyncio.Lock()
         self.wake = asyncio.Event()
         self.lock = asyncio.Lock()  # one drain at a time keeps batches in order
+        self.failing = 0  # failed batches in a row (a full disk, a lost peer)
 
 
 class TelemetryHub:
@@ -189,6 +197,8 @@ class TelemetryHub:
                     lane.open_failed = True
                     lane.stats.errors += 1
                     lane.stats.last_error = f"open: {type(exc).__name__}: {exc}"
+                    log.warning("telemetry: sink %s did not open (%s: %s); its records are "
+                                "dropped", lane.sink.name, type(exc).__name__, exc)
         return lane.opened
 
     async def _pump(self, lane: _Lane) -> None:
@@ -211,11 +221,21 @@ class TelemetryHub:
                 await lane.sink.write(batch)
                 lane.stats.written += len(batch)
                 lane.stats.batches += 1
-            except Exception as exc:  # counted; the records of that batch are lost
+            except Exception as exc:  # counted and told; the records of that batch are lost
                 lane.stats.errors += 1
                 lane.stats.last_error = f"write: {type(exc).__name__}: {exc}"
                 lane.stats.dropped += len(batch)
+                lane.failing += 1
+                if lane.failing == 1 or lane.failing % _LOG_EVERY == 0:
+                    log.warning("telemetry: sink %s cannot write (%s: %s); %d failed batches "
+                                "in a row, %d records dropped so far", lane.sink.name,
+                                type(exc).__name__, exc, lane.failing, lane.stats.dropped)
                 return
+            if lane.failing:
+                log.warning("telemetry: sink %s writes again after %d failed batches (%d "
+                            "records dropped so far)", lane.sink.name, lane.failing,
+                            lane.stats.dropped)
+                lane.failing = 0
 
     async def run(self) -> None:
         """Pump every sink until :meth:`aclose` (run it as one task of the TaskGroup)."""
@@ -258,7 +278,8 @@ class TelemetryHub:
         return self.stats()
 
     def stats(self) -> dict[str, dict[str, Any]]:
-        """Per-sink counters: published, dropped (queue full or failed write), written…"""
+        """Per-sink counters: published, dropped (queue full or failed write), written…, and
+        under ``sink`` the sink's own (``stats()``: a file's failed writes, a link's counts)."""
         out = {}
         for lane in self._lanes:
             st = lane.stats
@@ -266,5 +287,8 @@ class TelemetryHub:
             st.queued = len(lane.queue)
             d = st.as_dict()
             d["dropped"] = lane.queue.dropped + st.dropped
+            own = getattr(lane.sink, "stats", None)
+            if callable(own):
+                d["sink"] = own()
             out[lane.sink.name] = d
         return out

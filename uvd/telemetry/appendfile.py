@@ -1,0 +1,118 @@
+"""A file written only at its end, from one thread, whose failed writes never raise — what the
+daemon's record files (the MCAP black box, the JSON lines) write through.
+
+A full disk or an I/O error fails a write. The file is then cut back to its last whole write,
+so that it stays readable to there (a reader never meets half a record in the middle), and the
+bytes are kept and written first when the disk takes them again: the file goes on whole, with
+nothing missing. Kept up to ``max_pending`` bytes; past that they are given up and counted.
+Told in the log at a spell's first failure, every :data:`LOG_EVERY` th, when writing resumes,
+and when bytes are given up; counted in ``write_errors`` and ``lost_bytes``.
+
+Before (session 25), by reading and on a full 1 MB tmpfs: the black box's flush task ended
+at the first failed write, so nothing more reached the file even after space came back, and
+nothing was logged; the JSON lines sink's failures were counted, never told, and its 64 kB
+buffer turned them into a flip-flop of failed and "successful" batches.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import time
+from pathlib import Path
+
+__all__ = ["AppendFile", "LOG_EVERY"]
+
+log = logging.getLogger("uvd.recording")
+
+#: after a spell's first failed write, one in this many is logged (a full disk fails them all)
+LOG_EVERY = 100
+
+
+class AppendFile:
+    """Append bytes to one file at a time (:meth:`write` to another path closes the first).
+
+    Parameters
+    ----------
+    max_pending : int
+        Bytes kept for the disk after failed writes; past that they are given up (counted).
+    """
+
+    def __init__(self, max_pending: int) -> None:
+        self.max_pending = int(max_pending)
+        self.path: Path | None = None
+        self.unwritten = b""  # what failed writes left, written first next time
+        self.write_errors = 0
+        self.lost_bytes = 0
+        self.last_write_error = ""
+        self._fh = None
+        self._failing_since = 0.0
+
+    def write(self, path: Path, data: bytes, close: bool = False) -> bool:
+        """Append ``data`` (after any bytes kept from failed writes) to ``path``, creating its
+        folder; ``close``: fsync and close it after. True when everything reached the file."""
+        if self.path != path:
+            self.close()
+            self.path = path
+        todo = self.unwritten + data if self.unwritten else data
+        size = None
+        try:
+            if self._fh is None:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                self._fh = open(path, "ab", buffering=0)  # noqa: SIM115 - kept open
+            size = os.fstat(self._fh.fileno()).st_size
+            view = memoryview(todo)
+            while view:
+                view = view[self._fh.write(view):]
+            if close:
+                os.fsync(self._fh.fileno())
+        except OSError as exc:
+            if size is not None:  # cut back to the last whole write
+                with contextlib.suppress(OSError):
+                    os.ftruncate(self._fh.fileno(), size)
+            self._failed(path, todo, exc)
+            if close:
+                self.close()
+            return False
+        if self.unwritten:
+            log.warning("recording: %s written again after %.1f s of failed writes (%d so far)",
+                        path, time.monotonic() - self._failing_since, self.write_errors)
+            self.unwritten = b""
+            self._failing_since = 0.0
+        if close:
+            self.close()
+        return True
+
+    def _failed(self, path: Path, todo: bytes, exc: OSError) -> None:
+        self.write_errors += 1
+        self.last_write_error = f"{path}: {exc}"
+        first = not self._failing_since  # of this spell of failures
+        if first:
+            self._failing_since = time.monotonic()
+        self.unwritten = todo
+        if len(todo) > self.max_pending:
+            self._give_up()
+        if first or self.write_errors % LOG_EVERY == 0:
+            log.warning("recording: cannot write %s (%d failed writes): %s; the file ends at its "
+                        "last whole write, %d bytes wait for the disk", path, self.write_errors,
+                        exc, len(self.unwritten))
+
+    def _give_up(self) -> None:
+        if self.unwritten:
+            self.lost_bytes += len(self.unwritten)
+            log.warning("recording: %d bytes never written to %s were given up",
+                        len(self.unwritten), self.path)
+            self.unwritten = b""
+
+    def close(self) -> None:
+        """Close the current file; bytes it could not take are given up (counted)."""
+        self._give_up()
+        if self._fh is not None:
+            with contextlib.suppress(OSError):
+                self._fh.close()
+        self._fh = self.path = None
+
+    def stats(self) -> dict[str, int | str]:
+        return {"write_errors": self.write_errors, "lost_bytes": self.lost_bytes,
+                "last_write_error": self.last_write_error}
