@@ -322,8 +322,15 @@ class SimBridge:
 
     def _flush_truth(self) -> None:
         if self._truth_fh is not None and self._truth_buf:
-            self._truth_fh.write(np.asarray(self._truth_buf).tobytes())
-            self._truth_fh.flush()
+            try:
+                self._truth_fh.write(np.asarray(self._truth_buf).tobytes())
+                self._truth_fh.flush()
+            except OSError as exc:  # a full disk: the vehicle goes on, its truth log ends
+                log.error("truth log %s: %s; the simulation goes on without it",
+                          self.truth_path, exc)  # (it ended the plant's task: the
+                with contextlib.suppress(OSError):  # instruments fell silent, session 25)
+                    self._truth_fh.close()
+                self._truth_fh = None
         self._truth_buf.clear()
 
     def place(self, H: np.ndarray | None = None, hold: bool | None = None) -> None:

@@ -124,3 +124,31 @@ def test_a_demo_stopped_by_sigterm_leaves_no_process_behind(tmp_path):
                 os.kill(k, signal.SIGKILL)
         proc.kill()
         proc.wait(timeout=10.0)
+
+
+def _no_file_may_grow() -> None:
+    """In the child: RLIMIT_FSIZE 1 byte — a write past it fails in the kernel (EFBIG), as
+    on a full disk — with SIGXFSZ ignored (its default would end the process)."""
+    import resource
+    resource.setrlimit(resource.RLIMIT_FSIZE, (1, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+
+
+def test_a_failed_write_is_an_error_that_says_so_not_a_traceback(tmp_path):
+    """A command whose output cannot be written (a full disk) ends with exit 1 and one line;
+    a --json OUT names its path and leaves no temporary file. Both were tracebacks
+    (session 25: `uvd demo --record` on a full disk, writing demo.json)."""
+    doc = tmp_path / "config.md"
+    r = subprocess.run([sys.executable, "-m", "uvd", "check-config", "--doc-out", str(doc)],
+                       capture_output=True, text=True, timeout=120,
+                       preexec_fn=_no_file_may_grow)
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr[-2000:]
+    assert "uvd check-config: error: [Errno 27] File too large" in r.stderr
+    out = tmp_path / "figures.json"
+    r = subprocess.run([sys.executable, "-c", "import sys\nfrom uvd.jsonio import write_json\n"
+                        "try:\n    write_json(sys.argv[1], {'x': list(range(100))})\n"
+                        "except OSError as exc:\n    print(exc)", str(out)],
+                       capture_output=True, text=True, timeout=120,
+                       preexec_fn=_no_file_may_grow)
+    assert r.stdout.strip() == f"[Errno 27] cannot write {out}: File too large", r.stderr
+    assert not out.exists() and not list(tmp_path.glob("*.tmp"))

@@ -92,6 +92,9 @@ def main(argv: list[str] | None = None) -> int:
     except UvdError as exc:
         print(f"uvd {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # a full disk, an unwritable file: said, not a traceback
+        print(f"uvd {args.command}: error: {exc}", file=sys.stderr)
+        return 1
     except Stopped as exc:
         # cleaned up: now end as the signal's default would, so that the parent (a shell,
         # systemd, timeout) sees the process stopped by it

@@ -35,13 +35,19 @@ def to_jsonable(obj: Any) -> Any:
 
 
 def write_json(path: Path, data: Any) -> None:
+    """``data`` as indented JSON in ``path``, whole or not at all (a temporary file beside it,
+    renamed); a write that fails (a full disk) leaves no temporary file and names the path."""
     path = Path(path)
     if path.exists() and path.is_dir():
         raise IsADirectoryError(f"--json takes a file path, and {path} is a folder")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(to_jsonable(data), indent=2) + "\n")
-    tmp.replace(path)
+    try:
+        tmp.write_text(json.dumps(to_jsonable(data), indent=2) + "\n")
+        tmp.replace(path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise OSError(exc.errno, f"cannot write {path}: {exc.strerror or exc}") from exc
 
 
 def is_int64(x: Any) -> bool:
