@@ -485,3 +485,23 @@ def test_an_fdc_run_stops_at_its_first_alarm():
     assert simulated_s < 30.0 * 60.0  # stopped before the planned end
     assert f["first_t_s"] - 1e-6 <= simulated_s <= f["first_t_s"] + EVERY_S + 1e-6, f
     assert f["alarms"] >= 1
+
+
+def test_a_row_that_cannot_be_written_is_named_and_leaves_no_temporary_file(tmp_path):
+    """A full disk (here RLIMIT_FSIZE of 1 byte: each write fails in the kernel) at a row: the
+    error names the row's file and no ``.tmp`` is left (session 25, on a full tmpfs: pyarrow's
+    message named no file; ``uvd campaign`` then ended in that line, and resumed without redoing
+    a run once there was room)."""
+    code = ("import resource, signal, sys\n"
+            "from uvd.campaign.store import RowStore\n"
+            "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+            "store = RowStore(sys.argv[1])\n"
+            "hard = resource.getrlimit(resource.RLIMIT_FSIZE)[1]\n"
+            "resource.setrlimit(resource.RLIMIT_FSIZE, (1, hard))\n"
+            "try:\n    store.write({'key': 'k1', 'x': list(range(1000))})\n"
+            "except OSError as exc:\n    print(exc)\n")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True,
+                       text=True, timeout=120)
+    row = tmp_path / "rows" / "k1.parquet"
+    assert r.stdout.startswith(f"[Errno 27] cannot write the row {row}: "), r.stderr[-2000:]
+    assert list((tmp_path / "rows").iterdir()) == []

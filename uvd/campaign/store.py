@@ -106,13 +106,19 @@ class RowStore:
         return {p.stem for p in self.rows_dir.glob("*.parquet")}
 
     def write(self, row: dict) -> None:
-        """Write one row (atomically: a temporary file, then a rename)."""
+        """Write one row (atomically: a temporary file, then a rename); a write that fails (a
+        full disk) leaves no temporary file and names the row's path."""
         import pyarrow as pa
         import pyarrow.parquet as pq
         path = self.rows_dir / f"{row['key']}.parquet"
         tmp = path.with_suffix(f".tmp{os.getpid()}")
-        pq.write_table(pa.Table.from_pylist([row]), tmp)
-        os.replace(tmp, path)
+        try:
+            pq.write_table(pa.Table.from_pylist([row]), tmp)
+            os.replace(tmp, path)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise OSError(exc.errno, f"cannot write the row {path}: {exc.strerror or exc}") \
+                from exc
 
     def rows(self, keys: list[str] | None = None) -> list[dict]:
         """The stored rows (of ``keys`` only, when given, in that order), else by index."""
