@@ -109,3 +109,25 @@ def test_a_priority_or_cpu_that_cannot_be_is_a_command_line_error(options, words
     with pytest.raises(SystemExit) as exit_:
         main(options)
     assert exit_.value.code == 2 and words in capsys.readouterr().err
+
+
+def test_a_truth_log_that_cannot_be_written_ends_and_the_vehicle_goes_on(tmp_path):
+    """A truth log on a full disk (/dev/full: every write fails, ENOSPC): sim-bridge says so
+    once and simulates on. The failed write used to end the plant's task, so the
+    instruments fell silent and a daemon over it fired its staleness failsafes (session 25:
+    ``uvd demo --record`` on a 2 MB tmpfs)."""
+    from pathlib import Path
+    proc = BridgeProcess(write_local_config(tmp_path), duration_s=30.0,
+                         truth_log=Path("/dev/full")).start(timeout_s=90.0)
+    try:
+        time.sleep(1.5)  # the log is written every 100 plant steps (1 s at 100 Hz)
+        first = proc.call("stats")["counters"]["plant_steps"]
+        time.sleep(1.0)
+        steps = proc.call("stats")["counters"]["plant_steps"] - first
+        assert steps >= 50, steps  # 100 at 100 Hz; a stopped plant takes none
+        told = proc.stderr_tail()
+        assert told.count("truth log /dev/full: [Errno 28] No space left on device; the "
+                          "simulation goes on without it") == 1, told
+    finally:
+        proc.stop(timeout_s=5.0)
+        proc.kill()
