@@ -741,6 +741,23 @@ def test_a_full_disk_is_told_and_the_files_go_on_whole_when_it_has_room(tmp_path
     assert [json.loads(line)["reason"] for line in lines] == want
 
 
+def test_failures_by_turns_are_told_by_spells_not_by_writes():
+    """A disk that fills and empties by turns (each write fails, the next succeeds): the
+    first ten spells are told (start and end), then every 100th failure only — 1000 flips
+    are 10 + 10 + 10 lines, not 2000; one long spell is its start, every 100th and its end."""
+    from uvd.telemetry.appendfile import FailureSpells
+    s = FailureSpells(every=100)
+    lines = 0
+    for _ in range(1000):
+        lines += s.failed()
+        lines += s.recovered()
+    assert (lines, s.total, s.spells) == (10 + 10 + 10, 1000, 1000)
+    s = FailureSpells(every=100)
+    told = [s.failed() for _ in range(250)]
+    assert [k for k, t in enumerate(told) if t] == [0, 99, 199] and s.recovered()
+    assert not s.recovered()  # no spell to end
+
+
 @pytest.mark.parametrize("how", ["time", "size"])
 def test_files_rotate_by_time_or_size_each_with_the_start_record(tmp_path, how):
     """Through the hub, as in the daemon: a new file past ``rotate_s`` of record time or

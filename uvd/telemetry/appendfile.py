@@ -5,8 +5,9 @@ A full disk or an I/O error fails a write. The file is then cut back to its last
 so that it stays readable to there (a reader never meets half a record in the middle), and the
 bytes are kept and written first when the disk takes them again: the file goes on whole, with
 nothing missing. Kept up to ``max_pending`` bytes; past that they are given up and counted.
-Told in the log at a spell's first failure, every :data:`LOG_EVERY` th, when writing resumes,
-and when bytes are given up; counted in ``write_errors`` and ``lost_bytes``.
+Told in the log at a spell's first failure and when writing resumes (the first ten spells:
+:class:`FailureSpells`), every :data:`LOG_EVERY` th failure, and when bytes are given up;
+counted in ``write_errors`` and ``lost_bytes``.
 
 Before (session 25), by reading and on a full 1 MB tmpfs: the black box's flush task ended
 at the first failed write, so nothing more reached the file even after space came back, and
@@ -22,12 +23,39 @@ import os
 import time
 from pathlib import Path
 
-__all__ = ["AppendFile", "LOG_EVERY"]
+__all__ = ["AppendFile", "FailureSpells", "LOG_EVERY"]
 
 log = logging.getLogger("uvd.recording")
 
 #: after a spell's first failed write, one in this many is logged (a full disk fails them all)
 LOG_EVERY = 100
+
+
+class FailureSpells:
+    """When to tell of failures that come in spells (a full disk, a lost peer): each spell's
+    first failure and its end for the first ``told`` spells, and every ``every`` th failure
+    throughout — a disk that fills and empties by turns is not a line a write."""
+
+    def __init__(self, every: int, told: int = 10) -> None:
+        self.every = int(every)
+        self.told = int(told)
+        self.total = 0  # failures
+        self.in_a_row = 0  # of this spell
+        self.spells = 0
+
+    def failed(self) -> bool:
+        """Count a failure; True when it is to be told."""
+        self.total += 1
+        self.in_a_row += 1
+        if self.in_a_row == 1:
+            self.spells += 1
+        return (self.in_a_row == 1 and self.spells <= self.told) or self.total % self.every == 0
+
+    def recovered(self) -> bool:
+        """A success: True when it ends a spell that is to be told (then the spell is over)."""
+        ended = self.in_a_row > 0
+        self.in_a_row = 0
+        return ended and self.spells <= self.told
 
 
 class AppendFile:
@@ -43,11 +71,15 @@ class AppendFile:
         self.max_pending = int(max_pending)
         self.path: Path | None = None
         self.unwritten = b""  # what failed writes left, written first next time
-        self.write_errors = 0
         self.lost_bytes = 0
         self.last_write_error = ""
         self._fh = None
+        self._spells = FailureSpells(LOG_EVERY)
         self._failing_since = 0.0
+
+    @property
+    def write_errors(self) -> int:
+        return self._spells.total
 
     def write(self, path: Path, data: bytes, close: bool = False) -> bool:
         """Append ``data`` (after any bytes kept from failed writes) to ``path``, creating its
@@ -75,25 +107,24 @@ class AppendFile:
             if close:
                 self.close()
             return False
-        if self.unwritten:
+        if self._spells.recovered():
             log.warning("recording: %s written again after %.1f s of failed writes (%d so far)",
                         path, time.monotonic() - self._failing_since, self.write_errors)
-            self.unwritten = b""
-            self._failing_since = 0.0
+        self.unwritten = b""
+        self._failing_since = 0.0
         if close:
             self.close()
         return True
 
     def _failed(self, path: Path, todo: bytes, exc: OSError) -> None:
-        self.write_errors += 1
+        tell = self._spells.failed()
         self.last_write_error = f"{path}: {exc}"
-        first = not self._failing_since  # of this spell of failures
-        if first:
+        if not self._failing_since:
             self._failing_since = time.monotonic()
         self.unwritten = todo
         if len(todo) > self.max_pending:
             self._give_up()
-        if first or self.write_errors % LOG_EVERY == 0:
+        if tell:
             log.warning("recording: cannot write %s (%d failed writes): %s; the file ends at its "
                         "last whole write, %d bytes wait for the disk", path, self.write_errors,
                         exc, len(self.unwritten))

@@ -6,8 +6,9 @@ O(number of sinks), no lock, no await, no I/O — and when a sink's queue is ful
 record is dropped and counted, so the loop never waits for a slow consumer and the freshest
 data survives. A pump task per sink (owned by the application's TaskGroup through
 :meth:`TelemetryHub.run`) drains its queue every ``flush_interval_s`` and hands batches to the
-sink; a sink that fails is counted, logged (its first failed batch, every 1000th, and when it
-writes again) and retried with the next batch, never propagated.
+sink; a sink that fails is counted, logged (a spell's first failed batch and its end for the
+first ten spells, every 1000th failed batch) and retried with the next batch, never
+propagated.
 
 Records must not be mutated after they are published (the core returns new arrays every cycle,
 so this holds by construction).
@@ -26,6 +27,8 @@ from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
+
+from uvd.telemetry.appendfile import FailureSpells
 
 __all__ = ["TelemetrySink", "BoundedQueue", "TelemetryHub", "SinkStats"]
 
@@ -123,7 +126,7 @@ class _Lane:
         self.open_lock = asyncio.Lock()
         self.wake = asyncio.Event()
         self.lock = asyncio.Lock()  # one drain at a time keeps batches in order
-        self.failing = 0  # failed batches in a row (a full disk, a lost peer)
+        self.failing = FailureSpells(_LOG_EVERY)  # failed batches (a full disk, a lost peer)
 
 
 class TelemetryHub:
@@ -225,17 +228,15 @@ class TelemetryHub:
                 lane.stats.errors += 1
                 lane.stats.last_error = f"write: {type(exc).__name__}: {exc}"
                 lane.stats.dropped += len(batch)
-                lane.failing += 1
-                if lane.failing == 1 or lane.failing % _LOG_EVERY == 0:
+                if lane.failing.failed():
                     log.warning("telemetry: sink %s cannot write (%s: %s); %d failed batches "
                                 "in a row, %d records dropped so far", lane.sink.name,
-                                type(exc).__name__, exc, lane.failing, lane.stats.dropped)
+                                type(exc).__name__, exc, lane.failing.in_a_row,
+                                lane.stats.dropped)
                 return
-            if lane.failing:
-                log.warning("telemetry: sink %s writes again after %d failed batches (%d "
-                            "records dropped so far)", lane.sink.name, lane.failing,
-                            lane.stats.dropped)
-                lane.failing = 0
+            if lane.failing.recovered():
+                log.warning("telemetry: sink %s writes again (%d records dropped so far)",
+                            lane.sink.name, lane.stats.dropped)
 
     async def run(self) -> None:
         """Pump every sink until :meth:`aclose` (run it as one task of the TaskGroup)."""
