@@ -405,7 +405,8 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
                 except queue.Empty:
                     return
                 if "failsafe fired" in line or "lifecycle" in line or "ERROR" in line \
-                        or "SCHED_FIFO" in line:
+                        or "SCHED_FIFO" in line or "recording: " in line \
+                        or "telemetry: sink" in line:  # a full disk, told by spells
                     events.append(line)
                     progress(f"  daemon: {line.split(': ', 1)[-1]}")
 
