@@ -99,6 +99,7 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
         log = (run_dir / "daemon.log").open("w")
         daemon = subprocess.Popen(
             [sys.executable, "-m", "uvd", "run", "--config", str(cfg_path), "--arm",
+             "--stop-with-parent", str(os.getpid()),
              "--duration", str(duration_s + 80.0)], stdout=subprocess.DEVNULL, stderr=log,
             env=dict(os.environ, PYTHONUNBUFFERED="1"))
         t0 = time.monotonic()

@@ -391,6 +391,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         summary_path = run_dir / "daemon-summary.json"
         daemon = subprocess.Popen(
             [sys.executable, "-m", "uvd", "run", "--config", str(cfg_path), "--arm",
+             "--stop-with-parent", str(os.getpid()),
              "--duration", str(bound), "--summary-json", str(summary_path)],
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
             text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))

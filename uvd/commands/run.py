@@ -26,6 +26,9 @@ def register(sub) -> None:
                    help="stop by itself after S seconds (default: run until signalled)")
     p.add_argument("--summary-json", type=output_file, default=None, metavar="OUT",
                    help="write the run's summary (loop statistics, failsafe events) at exit")
+    p.add_argument("--stop-with-parent", type=int, default=None, metavar="PID",
+                   help="stop as on SIGTERM when process PID, which started this one, ends "
+                        "however it ends (a command that runs a daemon: uvd demo)")
     p.add_argument("--log-level", default="INFO",
                    choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     p.set_defaults(handler=_run, own_signals=True)  # SIGTERM stops, SIGHUP reloads
@@ -38,7 +41,12 @@ def _run(args) -> int:
     from uvd.jsonio import write_json
     from uvd.runtime.app import setup_logging
     from uvd.runtime.config import ConfigValidationError, load_config
+    from uvd.runtime.process import stop_with_parent
 
+    if args.stop_with_parent is not None and not stop_with_parent(args.stop_with_parent):
+        print(f"uvd run: process {args.stop_with_parent}, which started it, has ended: not "
+              "starting", file=sys.stderr)
+        return 1
     try:
         cfg = load_config(args.config)
     except ConfigValidationError as exc:

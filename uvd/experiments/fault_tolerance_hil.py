@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -61,6 +62,7 @@ def run_hil(config_name: str, k: int, *, fault: bool, t_fault_s: float = T_FAULT
             with (run_dir / "daemon.log").open("w") as err:
                 daemon = subprocess.Popen(
                     [sys.executable, "-m", "uvd", "run", "--config", str(cfg_path), "--arm",
+                     "--stop-with-parent", str(os.getpid()),
                      "--duration", str(bound)], stdin=subprocess.DEVNULL,
                     stdout=subprocess.DEVNULL, stderr=err)
             released = _released(bridge, daemon, run_dir)

@@ -460,7 +460,8 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
         if start_daemon:
             log = (work / "daemon.log").open("wb")  # noqa: SIM115 - closed below
             proc = subprocess.Popen(  # noqa: S603 - our own interpreter and module
-                [sys.executable, "-m", "uvd", "run", "--config", str(cfg_path), "--arm"],
+                [sys.executable, "-m", "uvd", "run", "--config", str(cfg_path), "--arm",
+                 "--stop-with-parent", str(os.getpid())],
                 stdout=subprocess.DEVNULL, stderr=log)
         elif ready is not None:
             ready(cfg_path)
