@@ -100,7 +100,9 @@ def test_a_bad_at_command_stops_sim_bridge_at_its_start(tmp_path, at, command, w
 @pytest.mark.parametrize("options, words", [
     (["--realtime", "200"], "argument --realtime: '200' is not an integer in 1..99"),
     (["--realtime", "0"], "argument --realtime: '0' is not an integer in 1..99"),
-    (["--cpu", "-1"], "argument --cpu: '-1' is not an integer >= 0"),
+    (["--cpu", "-1"], "argument --cpu: '-1' is not an integer in 0..1023"),
+    (["--cpu", "99999999999999999999"],
+     "argument --cpu: '99999999999999999999' is not an integer in 0..1023"),
 ])
 def test_a_priority_or_cpu_that_cannot_be_is_a_command_line_error(options, words, capsys):
     """SCHED_FIFO has priorities 1..99 and CPUs count from 0: these were carried to the

@@ -74,6 +74,11 @@ def int_in(lo: int, hi: int):
     return parse
 
 
+#: a CPU's number: Linux's CPU sets hold 1024 (a larger one overflowed the system call's
+#: C long: sim-bridge --cpu 99999999999999999999 ended in a traceback, session 25)
+cpu_number = int_in(0, 1023)
+
+
 def _cannot_make_folder(folder: Path) -> str | None:
     """Why files cannot be made in ``folder`` (made first where missing), or None if they can:
     its nearest existing ancestor must be a writable folder."""

@@ -43,6 +43,7 @@ import numpy as np
 
 from uvd.bench import Bench, host_steal_s, percentiles
 from uvd.cliargs import (
+    cpu_number,
     nonnegative_float,
     nonnegative_int,
     output_folder,
@@ -359,7 +360,7 @@ def _add(p) -> None:
                    help="coarse wait ends this long before the deadline (default per timer)")
     p.add_argument("--sched-fifo", type=nonnegative_int, default=0, metavar="PRIO",
                    help="SCHED_FIFO priority for the benchmark (default 0 = normal)")
-    p.add_argument("--cpu", type=int, action="append", default=[],
+    p.add_argument("--cpu", type=cpu_number, action="append", default=[],
                    help="pin to this CPU (repeatable)")
     p.add_argument("--warmup", type=nonnegative_float, default=0.5,
                    help="seconds run before measuring (default 0.5)")

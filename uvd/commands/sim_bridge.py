@@ -27,7 +27,7 @@ import threading
 from pathlib import Path
 
 from uvd.blas import single_threaded_blas
-from uvd.cliargs import int_in, nonnegative_int, output_file, positive_float
+from uvd.cliargs import cpu_number, int_in, nonnegative_int, output_file, positive_float
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -85,7 +85,7 @@ def _add_arguments(p) -> None:
     p.add_argument("--realtime", type=int_in(1, 99), nargs="?", const=10, default=0, metavar="PRIO",
                    help="SCHED_FIFO priority (10 without a value) if permitted: the emulated "
                         "devices answer on time whatever else the machine runs")
-    p.add_argument("--cpu", type=nonnegative_int, action="append", default=[], metavar="N",
+    p.add_argument("--cpu", type=cpu_number, action="append", default=[], metavar="N",
                    help="run on this CPU (repeatable): keep the emulated devices off the "
                         "daemon's CPU, as separate hardware would be")
 
