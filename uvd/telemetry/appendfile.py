@@ -9,10 +9,10 @@ Told in the log at a spell's first failure and when writing resumes (the first t
 :class:`FailureSpells`), every :data:`LOG_EVERY` th failure, and when bytes are given up;
 counted in ``write_errors`` and ``lost_bytes``.
 
-Before (session 25), by reading and on a full 1 MB tmpfs: the black box's flush task ended
-at the first failed write, so nothing more reached the file even after space came back, and
-nothing was logged; the JSON lines sink's failures were counted, never told, and its 64 kB
-buffer turned them into a flip-flop of failed and "successful" batches.
+Before (session 25; on a full 1 MB tmpfs, and tests/test_recording.py): nothing was logged;
+the black box's flush task ended at the first failed write, so nothing more reached the file
+until the close, even after space came back, and the JSON lines waited in a 64 kB buffer — a
+crash would have lost them.
 """
 
 from __future__ import annotations
