@@ -89,8 +89,7 @@ class JsonLinesSink:
         return None  # every write reached the operating system (or waits in _file)
 
     def _close(self) -> None:
-        if self.fsync_on_close:
-            self._file.write(self.path, b"", close=True)
+        self._file.write(self.path, b"", close=self.fsync_on_close)  # what waits: a last try
         self._file.close()
 
     async def aclose(self) -> None:
