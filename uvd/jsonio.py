@@ -1,9 +1,12 @@
-"""JSON output shared by every ``--json OUT`` option (OUT is always a file path)."""
+"""JSON output shared by every ``--json OUT`` option (OUT is always a file path), and the
+one way a result file is written whole or not at all (:func:`write_whole`)."""
 
 from __future__ import annotations
 
 import json
 import math
+import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -41,13 +44,22 @@ def write_json(path: Path, data: Any) -> None:
     if path.exists() and path.is_dir():
         raise IsADirectoryError(f"--json takes a file path, and {path} is a folder")
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
+    text = json.dumps(to_jsonable(data), indent=2) + "\n"
+    write_whole(path, lambda tmp: tmp.write_text(text), path.with_suffix(path.suffix + ".tmp"))
+
+
+def write_whole(path: Path, write: Callable[[Path], Any], tmp: Path,
+                what: str | None = None) -> None:
+    """``write(tmp)``, then ``tmp`` renamed over ``path``: the file is whole or not there. A
+    write that fails (a full disk) leaves no temporary file, and its OSError names ``what``
+    (``path`` by default)."""
     try:
-        tmp.write_text(json.dumps(to_jsonable(data), indent=2) + "\n")
-        tmp.replace(path)
+        write(tmp)
+        os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
-        raise OSError(exc.errno, f"cannot write {path}: {exc.strerror or exc}") from exc
+        raise OSError(exc.errno, f"cannot write {what or path}: {exc.strerror or exc}") \
+            from exc
 
 
 def is_int64(x: Any) -> bool:

@@ -18,6 +18,7 @@ from functools import cache
 from pathlib import Path
 
 from uvd.campaign.spec import CampaignError
+from uvd.jsonio import write_whole
 
 #: columns that say how a run went on this machine, not what it computed: left out when rows
 #: are compared across worker counts or orders
@@ -111,14 +112,9 @@ class RowStore:
         import pyarrow as pa
         import pyarrow.parquet as pq
         path = self.rows_dir / f"{row['key']}.parquet"
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        try:
-            pq.write_table(pa.Table.from_pylist([row]), tmp)
-            os.replace(tmp, path)
-        except OSError as exc:
-            tmp.unlink(missing_ok=True)
-            raise OSError(exc.errno, f"cannot write the row {path}: {exc.strerror or exc}") \
-                from exc
+        table = pa.Table.from_pylist([row])
+        write_whole(path, lambda tmp: pq.write_table(table, tmp),
+                    path.with_suffix(f".tmp{os.getpid()}"), what=f"the row {path}")
 
     def rows(self, keys: list[str] | None = None) -> list[dict]:
         """The stored rows (of ``keys`` only, when given, in that order), else by index."""
