@@ -70,6 +70,48 @@ def test_recorder_config_errors(tmp_path):
     assert CanRecorder.from_config(CanLogConfig()) is None
 
 
+class _DiskFullFor:
+    """python-can's own writer, except that frames ``first``..``last`` fail as on a full disk."""
+
+    def __init__(self, writer, first: int, last: int) -> None:
+        self.writer, self.first, self.last, self.n = writer, first, last, 0
+
+    def on_message_received(self, msg: can.Message) -> None:
+        k, self.n = self.n, self.n + 1
+        if self.first <= k <= self.last:
+            raise OSError(28, "No space left on device")
+        self.writer.on_message_received(msg)
+
+    def stop(self) -> None:
+        self.writer.stop()
+
+
+@pytest.mark.timeout(30)
+def test_a_failing_can_log_is_told_by_spells_and_its_recovery_too(tmp_path, caplog):
+    """400 failed writes in a row (frames 10..409) and then 190 good ones: the spell's first
+    failure, every 100th and the recovery are told — six lines, not three and then silence
+    (as before: nothing after the third failure, not even that it writes again)."""
+    path = tmp_path / "bus.log"
+    caplog.set_level("WARNING", logger="drivers.can.logging")
+    rec = CanRecorder(path)
+    rec._writer = _DiskFullFor(rec._writer, 10, 409)  # before any frame reaches the thread
+    sent = frames(600)
+    for m in sent:
+        rec.record(m, is_rx=True)
+    rec.stop()
+    assert rec.write_errors == 400 and isinstance(rec.write_errors, int)
+    assert rec.written == 200 and rec.dropped == 0
+    got = [int(m.data[0]) for m in can.LogReader(str(path))]
+    assert got == [i % 256 for i in list(range(10)) + list(range(410, 600))]
+    lines = [r.getMessage() for r in caplog.records if r.name == "drivers.can.logging"]
+    assert len(lines) <= 6, lines
+    again = [line for line in lines if "written again" in line]
+    assert len(again) == 1 and str(path) in again[0] and "400 so far" in again[0], lines
+    assert str(path) in lines[0] and "No space left on device" in lines[0] \
+        and "(1 failed write" in lines[0], lines
+    assert sum("(400 failed writes" in line for line in lines) == 1, lines  # every 100th
+
+
 @pytest.mark.timeout(60)
 def test_exchange_recorded_by_uvd_is_read_by_python_can_tools(tmp_path):
     rig = start_rig("virtual", pressure_node=None)

@@ -9,7 +9,10 @@ started under the configured name.
 Recording is off the control cycle's critical path: :meth:`CanRecorder.record` only puts the
 frame on a bounded queue; a writer thread does the file I/O. If the disk cannot keep up and
 the queue fills, frames are dropped from the *log* (counted in ``dropped``), never delayed on
-the bus.
+the bus. A write that fails (a full disk) loses its frame from the log (counted in
+``write_errors``); failures are told in spells, as the daemon's record files tell theirs
+(:class:`uvd.telemetry.appendfile.FailureSpells`): a spell's first failure and its end (the
+first ten spells), and every :data:`LOG_EVERY` th failure throughout.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
+import time
 from pathlib import Path
 
 import can
@@ -25,6 +29,37 @@ from drivers.can.config import LOG_SUFFIXES, CanLogConfig
 from uvd.errors import ConfigError, TransportError
 
 log = logging.getLogger(__name__)
+
+#: after a spell's first failed write, one in this many is logged (a full disk fails them all)
+LOG_EVERY = 100
+
+
+class _FailureSpells:
+    """When to tell of failed writes: :class:`uvd.telemetry.appendfile.FailureSpells`' rules
+    (a spell's first failure and its end for the first ``told`` spells, every ``every`` th
+    failure throughout), restated here because drivers import nothing of uvd but uvd.errors
+    and uvd.geometry (tests/test_layers.py)."""
+
+    def __init__(self, every: int, told: int = 10) -> None:
+        self.every = int(every)
+        self.told = int(told)
+        self.total = 0  # failures
+        self.in_a_row = 0  # of this spell
+        self.spells = 0
+
+    def failed(self) -> bool:
+        """Count a failure; True when it is to be told."""
+        self.total += 1
+        self.in_a_row += 1
+        if self.in_a_row == 1:
+            self.spells += 1
+        return (self.in_a_row == 1 and self.spells <= self.told) or self.total % self.every == 0
+
+    def recovered(self) -> bool:
+        """A success: True when it ends a spell that is to be told (then the spell is over)."""
+        ended = self.in_a_row > 0
+        self.in_a_row = 0
+        return ended and self.spells <= self.told
 
 
 class CanRecorder:
@@ -55,7 +90,8 @@ class CanRecorder:
         self.max_bytes = int(max_bytes)
         self.written = 0
         self.dropped = 0
-        self.write_errors = 0
+        self._spells = _FailureSpells(LOG_EVERY)
+        self._failing_since = 0.0
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             if self.max_bytes > 0:
@@ -90,6 +126,11 @@ class CanRecorder:
         self.record(msg, is_rx=True)
 
     @property
+    def write_errors(self) -> int:
+        """Frames whose write to the file failed (lost from the log)."""
+        return self._spells.total
+
+    @property
     def rollovers(self) -> int:
         """How many times the file was rotated."""
         return int(getattr(self._writer, "rollover_count", 0))
@@ -101,11 +142,19 @@ class CanRecorder:
                 return
             try:
                 self._writer.on_message_received(msg)
-                self.written += 1
             except Exception as exc:  # noqa: BLE001 - a log problem must not stop the bus
-                self.write_errors += 1
-                if self.write_errors <= 3:
-                    log.warning("CAN log %s: %s", self.path, exc)
+                if not self._failing_since:
+                    self._failing_since = time.monotonic()
+                if self._spells.failed():
+                    log.warning("CAN log: cannot write %s (%d failed writes): %s; those frames "
+                                "are not in the log", self.path, self.write_errors, exc)
+                continue
+            self.written += 1
+            if self._spells.recovered():
+                log.warning("CAN log: %s written again after %.1f s of failed writes "
+                            "(%d so far)", self.path, time.monotonic() - self._failing_since,
+                            self.write_errors)
+            self._failing_since = 0.0
 
     def stop(self, timeout: float = 5.0) -> None:
         """Write what is queued, close the file (idempotent)."""
