@@ -147,7 +147,9 @@ def test_a_failed_write_is_an_error_that_says_so_not_a_traceback(tmp_path):
                        capture_output=True, text=True, timeout=120,
                        preexec_fn=_no_file_may_grow)
     assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr[-2000:]
-    assert "uvd check-config: error: [Errno 27] File too large" in r.stderr
+    assert r.stderr == f"uvd check-config: error: [Errno 27] cannot write {doc}: File too " \
+        "large\n"
+    assert not doc.exists() and not list(tmp_path.glob("*.tmp"))
     out = tmp_path / "figures.json"
     r = subprocess.run([sys.executable, "-c", "import sys\nfrom uvd.jsonio import write_json\n"
                         "try:\n    write_json(sys.argv[1], {'x': list(range(100))})\n"
@@ -156,3 +158,52 @@ def test_a_failed_write_is_an_error_that_says_so_not_a_traceback(tmp_path):
                        preexec_fn=_no_file_may_grow)
     assert r.stdout.strip() == f"[Errno 27] cannot write {out}: File too large", r.stderr
     assert not out.exists() and not list(tmp_path.glob("*.tmp"))
+
+
+def _files_may_grow_to(limit: int):
+    """In the child: RLIMIT_FSIZE ``limit`` bytes (a disk with room for that much), SIGXFSZ
+    ignored."""
+    def preexec() -> None:
+        import resource
+        resource.setrlimit(resource.RLIMIT_FSIZE,
+                           (limit, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    return preexec
+
+
+def test_check_config_doc_out_that_cannot_be_written_leaves_the_old_docs_whole(tmp_path):
+    """--doc-out over existing docs on a disk too full for them: exit 1, one line naming the
+    file that could not be written, the old file whole and no temporary file. Before, the
+    error named no file and config.md was left cut short (written in place)."""
+    from uvd.runtime.config import render_config_doc
+
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    doc, mav = docs / "config.md", docs / "mavlink.md"
+    doc.write_text("old config reference\n")
+    # a mavlink.md larger than the new config.md: room for the one, not for the other
+    from uvd.links.mavlink.params import BEGIN, END
+    old_mav = f"# MAVLink\n{BEGIN}\nold table\n{END}\n" + "notes\n" * 8000
+    mav.write_text(old_mav)
+    new_doc = render_config_doc() + "\n"
+    assert len(old_mav) > len(new_doc.encode())
+    cmd = [sys.executable, "-m", "uvd", "check-config", "--doc-out", str(doc)]
+
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120,
+                       preexec_fn=_files_may_grow_to(100))
+    assert r.returncode == 1 and r.stderr == \
+        f"uvd check-config: error: [Errno 27] cannot write {doc}: File too large\n", r.stderr
+    assert doc.read_text() == "old config reference\n" and mav.read_text() == old_mav
+    assert sorted(p.name for p in docs.iterdir()) == ["config.md", "mavlink.md"]
+
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120,
+                       preexec_fn=_files_may_grow_to(len(new_doc.encode())))
+    assert r.returncode == 1 and r.stderr == \
+        f"uvd check-config: error: [Errno 27] cannot write {mav}: File too large\n", r.stderr
+    assert r.stdout == f"uvd check-config: wrote {doc}\n"
+    assert doc.read_text(encoding="utf-8") == new_doc and mav.read_text() == old_mav
+    assert sorted(p.name for p in docs.iterdir()) == ["config.md", "mavlink.md"]
+
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert mav.read_text().endswith("notes\n" * 8000) and "old table" not in mav.read_text()

@@ -6,7 +6,8 @@ Validation is exactly what ``uvd run`` does at start (:func:`uvd.runtime.config.
 without opening a port or a bus: on success it prints a one-line summary and exits 0; on
 failure every problem is printed as ``FILE: dotted.key: reason`` and it exits 2.
 ``--doc-out`` writes ``docs/config.md`` generated from the schema (and refreshes the MAVLink
-parameter list in the ``mavlink.md`` beside it).
+parameter list in the ``mavlink.md`` beside it), each whole or not at all: a write that fails
+(a full disk) leaves the old file as it was and names the file.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import sys
 from pathlib import Path
 
 from uvd.cliargs import output_file
+from uvd.jsonio import write_whole
 
 
 def register(sub) -> None:
@@ -45,17 +47,23 @@ def _run(args) -> int:
         return 2
     if args.doc_out is not None:
         args.doc_out.parent.mkdir(parents=True, exist_ok=True)
-        args.doc_out.write_text(render_config_doc() + "\n", encoding="utf-8")
+        _write_text(args.doc_out, render_config_doc() + "\n")
         print(f"uvd check-config: wrote {args.doc_out}")
         mav = args.doc_out.with_name("mavlink.md")  # its parameter list, from the same schema
         if mav.is_file():
             from uvd.links.mavlink.params import refresh_doc
-            mav.write_text(refresh_doc(mav.read_text(encoding="utf-8")), encoding="utf-8")
+            _write_text(mav, refresh_doc(mav.read_text(encoding="utf-8")))
             print(f"uvd check-config: refreshed the parameter list in {mav}")
     files = [args.file] if args.file is not None else []
     if args.shipped:
         files += shipped_configs()
     return max((_check(f, args.dump) for f in files), default=0)
+
+
+def _write_text(path: Path, text: str) -> None:
+    """``text`` in ``path``, whole or not at all (:func:`uvd.jsonio.write_whole`)."""
+    write_whole(path, lambda tmp: tmp.write_text(text, encoding="utf-8"),
+                path.with_suffix(path.suffix + ".tmp"))
 
 
 def _check(file, dump: bool) -> int:
