@@ -186,6 +186,40 @@ def test_toml_file_errors_and_atomic_save(tmp_path):
     assert sorted(x.name for x in tmp_path.iterdir()) == ["p.toml"]
 
 
+def test_a_save_the_disk_cannot_take_names_the_file_and_leaves_the_old_one(tmp_path):
+    """On a disk too full for it (a child with RLIMIT_FSIZE 100 bytes, SIGXFSZ ignored: a
+    write past it fails in the kernel, EFBIG): the OSError names the file, the file there
+    keeps its old content and no temporary file is left. Before, the error named no file."""
+    import subprocess
+    import sys
+
+    from uvd.io.params import params_to_toml
+
+    f = tmp_path / "p.toml"
+    f.write_text("# old\n")
+    child = ("import resource, signal, sys\n"
+             "from uvd.io.params import save_params\n"
+             "from uvd.model.params import UVParams\n"
+             "hard = resource.getrlimit(resource.RLIMIT_FSIZE)[1]\n"
+             "resource.setrlimit(resource.RLIMIT_FSIZE, (100, hard))\n"
+             "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+             "try:\n"
+             "    save_params(UVParams.decoupled([1] * 6, [-1] * 6, 2.0, [0, 0, 1]), sys.argv[1])\n"
+             "except OSError as exc:\n"
+             "    print(type(exc).__name__, exc)\n")
+    r = subprocess.run([sys.executable, "-c", child, str(f)], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0 and r.stdout == \
+        f"OSError [Errno 27] cannot write {f}: File too large\n", r.stdout + r.stderr
+    assert f.read_text() == "# old\n"
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["p.toml"]
+    # and a save that succeeds writes exactly what it did
+    p = P.UVParams.decoupled([1] * 6, [-1] * 6, 2.0, [0, 0, 1])
+    save_params(p, f, title="t", extra="\n[x]\ny = 1\n")
+    assert f.read_text(encoding="utf-8") == params_to_toml(p, title="t") + "\n[x]\ny = 1\n"
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["p.toml"]
+
+
 def test_a_g_beyond_int64_is_read_as_the_number_it_is(tmp_path):
     # found by probing (session 21): g = 2**70 in a parameter file passed the check as a
     # number, then reached UVParams as a Python int: numpy made it an object array and

@@ -15,6 +15,7 @@ import numpy as np
 
 from uvd.errors import ParameterError
 from uvd.io.toml import TomlFileError, read_toml
+from uvd.jsonio import write_whole
 from uvd.model.params import UVParams
 
 
@@ -126,18 +127,24 @@ def save_params(p: UVParams, path: str | Path, *, title: str = "", extra: str = 
     """Write :func:`params_to_toml` to ``path`` atomically.
 
     The text goes to a temporary file in the same folder, is flushed to disk and renamed over
-    ``path``: a reader (or a crash mid-write) sees the old file or the new one, never half.
+    ``path`` (:func:`uvd.jsonio.write_whole`): a reader (or a crash mid-write) sees the old file
+    or the new one, never half; a write that fails (a full disk) leaves the old file and no
+    temporary one, and its OSError names ``path``.
     ``extra``: further TOML tables after ``[parameters]`` (e.g. what was identified).
     """
     path = Path(path)
+    text = params_to_toml(p, title=title) + extra
     tmp = path.with_name(f".{path.name}.tmp")
-    try:
+
+    def write(tmp: Path) -> None:
         with tmp.open("w", encoding="utf-8") as fh:
-            fh.write(params_to_toml(p, title=title) + extra)
+            fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
+
+    try:
+        write_whole(path, write, tmp)  # an OSError (a full disk) names the path, leaves no tmp
+    except BaseException:  # and neither does a Ctrl-C mid-write
         tmp.unlink(missing_ok=True)
         raise
 
