@@ -16,14 +16,15 @@ Layers, top to bottom (a module may import its own layer and any layer below it)
   5. uvd.core
   6. uvd.control, uvd.estimation
   7. uvd.model
-  8. drivers            (imports nothing of uvd but uvd.errors and uvd.geometry)
+  8. drivers            (imports nothing of uvd but uvd.errors, uvd.geometry and uvd.spells)
 
 ``sim_bridge`` may import drivers, uvd.model, uvd.io, uvd.control and the utilities — nothing
 of uvd.runtime: it takes a configuration of its own (sim_bridge.config); only the top two
 layers may import sim_bridge. The utilities (uvd.errors, uvd.jsonio, uvd.blas, uvd._jitcache,
 uvd.progress, uvd.netports, uvd.geometry, uvd.rtthreads, uvd.shipped, uvd.zenoh_callbacks,
-uvd.zenoh_names, uvd.cliargs, the ``uvd`` package) are importable from anywhere in uvd and
-import no other layer. drivers imports nothing of uvd but uvd.errors and uvd.geometry; uvd.fdc
+uvd.zenoh_names, uvd.cliargs, uvd.spells, the ``uvd`` package) are importable from anywhere in
+uvd and import no other layer. drivers imports nothing of uvd but uvd.errors, uvd.geometry
+and uvd.spells; uvd.fdc
 (uvd-fdc, a process of its own) nothing but itself, uvd.zenoh_callbacks, uvd.zenoh_names and
 uvd.cliargs.
 """
@@ -52,17 +53,18 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 )
 UTILITIES = ("uvd", "uvd.errors", "uvd.jsonio", "uvd.blas", "uvd._jitcache", "uvd.progress",
              "uvd.netports", "uvd.geometry", "uvd.rtthreads", "uvd.shipped", "uvd.zenoh_callbacks",
-             "uvd.zenoh_names", "uvd.cliargs")
+             "uvd.zenoh_names", "uvd.cliargs", "uvd.spells")
 #: uvd-fdc imports nothing of uvd but itself and this: how any process of the project ends a
 #: Zenoh session's callback threads (zenoh-python's, not uvd's: it imports nothing of the
 #: project, checked below) — the daemon's Zenoh face needs it as much as uvd-fdc does
 #: — and, as pure utilities that import nothing of the project either, the key space's and
 #: endpoints' rules (the daemon's configuration checks the same) and the command line's types
 FDC_MAY_IMPORT = ("uvd.zenoh_callbacks", "uvd.zenoh_names", "uvd.cliargs")
-#: drivers never import uvd, except two pure modules that import nothing of the project: the
-#: design card's one error hierarchy (UvdError and the matching built-ins) and the attitude
-#: conventions every layer shares (Euler ⇄ R, η, the one angle wrap)
-DRIVERS_MAY_IMPORT = ("uvd.errors", "uvd.geometry")
+#: drivers never import uvd, except three pure modules that import nothing of the project: the
+#: design card's one error hierarchy (UvdError and the matching built-ins), the attitude
+#: conventions every layer shares (Euler ⇄ R, η, the one angle wrap) and when failures in
+#: spells are told (the CAN log's, as the record files')
+DRIVERS_MAY_IMPORT = ("uvd.errors", "uvd.geometry", "uvd.spells")
 SIM_BRIDGE_MAY_IMPORT = ("sim_bridge", "drivers", "uvd.model", "uvd.io", "uvd.control")
 #: the layers that may import sim_bridge (lockstep, its experiments, benchmarks, `uvd demo`)
 SIM_BRIDGE_IMPORTED_BY = (0, 1)
@@ -146,7 +148,7 @@ def rule_broken(importer: str, imported: str) -> str | None:
     if src == len(LAYERS) - 1:  # drivers
         if dst == src or _within(imported, DRIVERS_MAY_IMPORT):
             return None
-        return "drivers never import uvd (but uvd.errors)"
+        return "drivers never import uvd (but uvd.errors, uvd.geometry, uvd.spells)"
     if dst == "utility":
         return None
     return "imports point downward only" if dst < src else None

@@ -21,6 +21,7 @@ import sys
 import threading
 import time
 from collections import Counter
+from itertools import pairwise
 from pathlib import Path
 
 import jsonschema
@@ -661,13 +662,14 @@ def test_a_stalled_disk_drops_counts_and_never_delays_the_loop(tmp_path):
 
     worst, peak = asyncio.run(asyncio.wait_for(main(), 30.0))
     st = hub.stats()["mcap"]
-    written = sum(1 for _ in read_messages(rec.files[0], ["/uvd/failsafe"]))
+    written = sum(1 for _ in read_messages(rec.files[0], ["/uvd/failsafe", "/uvd/sink"]))
     print(f"publish + tap worst {worst * 1e6:.0f} µs; pending peak {peak} B; written "
           f"{written}, dropped by the recorder {rec.stalled_dropped}, by the hub queue "
           f"{st['dropped']}, raw frames dropped {rec.raw_dropped}")
     assert worst < 0.01  # a wait for the disk would be seconds
     assert rec.stalled_dropped > 0 and rec.raw_dropped > 0
-    assert written + rec.stalled_dropped + st["dropped"] == n
+    assert written + rec.stalled_dropped + st["dropped"] == st["published"]
+    assert st["published"] > n  # the stall told: a "sink" record (and its end, if in time)
     assert written > 100 and peak < 0.02e6 + 64 * 400  # the bound plus one batch
 
 
@@ -702,7 +704,7 @@ async def main():
         await asyncio.sleep(0.002)
     for _ in range(250):  # on disk while running (what a crash would leave), up to 5 s
         on_disk = (sum(1 for _ in read_messages(rec.files[0], ["/uvd/failsafe"])),
-                   len((out / "t.jsonl").read_bytes().splitlines()))
+                   sum(b'"failsafe"' in x for x in (out / "t.jsonl").read_bytes().splitlines()))
         if on_disk == (600, 600):
             break
         await asyncio.sleep(0.02)
@@ -737,15 +739,17 @@ def test_a_full_disk_is_told_and_the_files_go_on_whole_when_it_has_room(tmp_path
         assert stats[name]["write_errors"] >= 2 and stats[name]["lost_bytes"] == 0, stats
     want = [f"record {k}" for k in range(600)]
     assert [m["reason"] for _, _, m in read_messages(mcap, ["/uvd/failsafe"])] == want
-    lines = (tmp_path / "t.jsonl").read_text().splitlines()
-    assert [json.loads(line)["reason"] for line in lines] == want
+    lines = [json.loads(line) for line in (tmp_path / "t.jsonl").read_text().splitlines()]
+    assert [r["reason"] for r in lines if r["type"] == "failsafe"] == want
+    told = {(r["sink"], r["ok"]) for r in lines if r["type"] == "sink"}
+    assert {("mcap", False), ("jsonl", False)} <= told, told  # the operator told of both
 
 
 def test_failures_by_turns_are_told_by_spells_not_by_writes():
     """A disk that fills and empties by turns (each write fails, the next succeeds): the
     first ten spells are told (start and end), then every 100th failure only — 1000 flips
     are 10 + 10 + 10 lines, not 2000; one long spell is its start, every 100th and its end."""
-    from uvd.telemetry.appendfile import FailureSpells
+    from uvd.spells import FailureSpells
     s = FailureSpells(every=100)
     lines = 0
     for _ in range(1000):
@@ -799,3 +803,85 @@ def test_files_rotate_by_time_or_size_each_with_the_start_record(tmp_path, how):
         with f.open("rb") as fh:
             assert make_reader(fh).get_summary() is not None
     assert got == n
+
+
+def _statustexts(station, until_text: str, timeout_s: float) -> list[tuple[int, str]]:
+    """The station's STATUSTEXTs (severity, whole text: chunks of one id joined) up to the
+    first whose text starts with ``until_text`` (AssertionError after ``timeout_s``)."""
+    texts: list[tuple[int, str]] = []
+    chunks: dict[int, list[str]] = {}
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        m = station.conn.recv_match(type="STATUSTEXT", blocking=True, timeout=0.1)
+        if m is None:
+            continue
+        if m.id == 0:
+            texts.append((m.severity, m.text))
+        else:  # chunks of 50 characters; the last is shorter (or its text ends in NUL)
+            chunks.setdefault(m.id, []).append(m.text)
+            if len(m.text) < 50:
+                texts.append((m.severity, "".join(chunks.pop(m.id))))
+        if texts and texts[-1][1].startswith(until_text):
+            return texts
+    raise AssertionError(f"no STATUSTEXT {until_text!r} within {timeout_s} s: {texts}")
+
+
+def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_again(tmp_path):
+    """A real ``uvd run`` over sim-bridge, recording, with a ground station on MAVLink: its
+    files may not grow (``prlimit`` RLIMIT_FSIZE 1 byte on the daemon's pid, EFBIG in the
+    kernel as a full disk fails) and then may again. The station is told both (STATUSTEXT,
+    WARNING then NOTICE), the black box holds both ``/uvd/sink`` records and every cycle of
+    the spell, the daemon flies on and ends cleanly. Before (session 26) the operator was told
+    nothing: only the daemon's log said so."""
+    import resource
+
+    from tests.mavlink_gcs import Station
+    from uvd.netports import free_port
+    from uvd.telemetry.sink import TELL_HOLD_S
+
+    port = free_port("udp", "127.0.0.1")
+    changes = {"recording": {"enabled": True, "dir": str(tmp_path / "rec")},
+               "mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
+                           "params_file": str(tmp_path / "params.toml"),
+                           "signing_timestamp_file": str(tmp_path / "signing.ts")}}
+    log_lines: list[str] = []
+    with running_bridge(tmp_path, changes) as (cfg_path, _):
+        proc = subprocess.Popen([sys.executable, "-m", "uvd", "run", "--config", str(cfg_path),
+                                 "--duration", "120"], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, text=True,
+                                cwd=Path(__file__).parents[1])
+        reader = threading.Thread(target=lambda: log_lines.extend(proc.stderr), daemon=True)
+        reader.start()
+        station = Station(port)
+        try:
+            station.heartbeat(timeout=60.0)
+            soft, hard = resource.prlimit(proc.pid, resource.RLIMIT_FSIZE)
+            time.sleep(1.0)  # a second of cycles on disk before
+            resource.prlimit(proc.pid, resource.RLIMIT_FSIZE, (1, hard))
+            t_full = time.monotonic()
+            told = _statustexts(station, "telemetry sink mcap cannot write", 10.0)
+            failing = told[-1]
+            time.sleep(2.0)  # two seconds of cycles that wait for the disk
+            resource.prlimit(proc.pid, resource.RLIMIT_FSIZE, (soft, hard))
+            told = _statustexts(station, "telemetry sink mcap writes again", TELL_HOLD_S + 10)
+            again = told[-1]
+            assert proc.poll() is None, "the daemon ended"
+        finally:
+            station.close()
+            proc.terminate()
+            code = proc.wait(timeout=20)
+            reader.join(5.0)
+    print(f"told {time.monotonic() - t_full:.1f} s after the limit: {failing}; {again}")
+    assert code == 0, "".join(log_lines)[-3000:]
+    assert failing[0] == 4 and "File too large" in failing[1]  # MAV_SEVERITY_WARNING
+    assert again[0] == 5 and "records dropped" in again[1]  # MAV_SEVERITY_NOTICE
+    assert "Traceback" not in "".join(log_lines)
+    (f,) = (tmp_path / "rec").glob("*.mcap")
+    sinks = [m for _, _, m in read_messages(f, ["/uvd/sink"])]
+    assert [(m["sink"], m["ok"]) for m in sinks] == [("mcap", False), ("mcap", True)]
+    assert sinks[1]["records_dropped"] == 0 and sinks[1]["bytes_given_up"] == 0, sinks
+    for m in sinks:
+        jsonschema.validate(m, schema("uvd.sink.v1"))
+    t = [t_ns for _, t_ns, _ in read_messages(f, ["/uvd/cycle"])]
+    spell = [a for a in t if sinks[0]["t_ns"] <= a <= sinks[1]["t_ns"]]
+    assert len(spell) > 20 and max(b - a for a, b in pairwise(t)) < 0.5e9  # none lost

@@ -7,6 +7,7 @@ import asyncio
 import json
 import math
 import time
+from itertools import pairwise
 
 import numpy as np
 
@@ -119,8 +120,65 @@ def test_a_failing_sink_is_counted_and_others_carry_on():
 
     stats = run(main())
     assert stats["bad"]["errors"] >= 1 and "link down" in stats["bad"]["last_error"]
-    assert stats["bad"]["written"] + stats["bad"]["dropped"] == 100
-    assert len(good.records) == 100 and stats["good"]["errors"] == 0
+    assert stats["bad"]["written"] + stats["bad"]["dropped"] == stats["bad"]["published"]
+    told = [r for r in good.records if r.get("type") == "sink"]
+    assert [r["i"] for r in good.records if "i" in r] == list(range(100))
+    assert stats["good"]["errors"] == 0
+    # the operator told, once (a change at most every TELL_HOLD_S): the bad sink fails
+    assert [(r["sink"], r["ok"]) for r in told] == [("bad", False)], told
+    assert "link down" in told[0]["text"] and told[0]["write_errors"] >= 1
+    assert stats["bad"]["published"] == 100 + len(told)
+
+
+def test_a_sink_failing_by_turns_is_told_at_most_once_a_hold_and_its_last_state_told():
+    """A sink whose writes fail and succeed by turns every 20 ms for 1 s, then work: the
+    operator is told of it (``"sink"`` records to every sink) at most once every
+    ``tell_hold_s`` (0.3 s here, 10 s in the daemon), failing first and working again last —
+    not 50 changes. A sink that cannot open is told once. Each told record names the sink,
+    says ok or not, and what fails."""
+
+    class Flaky(ListSink):
+        down = False
+
+        async def write(self, records):
+            if self.down:
+                raise OSError("No space left on device")
+            self.records.extend(records)
+
+    class Closed(ListSink):
+        async def open(self):
+            raise PermissionError("[Errno 13] Permission denied: '/var/lib/uvd/rec'")
+
+    flaky, good, closed = Flaky("flaky"), ListSink("good"), Closed("closed")
+    hold = 0.3
+
+    async def main():
+        hub = TelemetryHub([flaky, good, closed], flush_interval_s=0.005, tell_hold_s=hold)
+        pump = asyncio.create_task(hub.run())
+        for k in range(50):
+            flaky.down = k % 2 == 0
+            hub.publish({"i": k})
+            await asyncio.sleep(0.02)
+        flaky.down = False
+        for k in range(50, 80):  # 0.6 s working: the hold ends, the last change is told
+            hub.publish({"i": k})
+            await asyncio.sleep(0.02)
+        stats = await hub.aclose(1.0)
+        await asyncio.wait_for(pump, 2.0)
+        return stats
+
+    stats = run(main())
+    told = [r for r in good.records if r.get("type") == "sink"]
+    assert [(r["sink"], r["ok"]) for r in told if r["sink"] == "closed"] == [("closed", False)]
+    assert "did not open" in next(r["text"] for r in told if r["sink"] == "closed")
+    flips = [r for r in told if r["sink"] == "flaky"]
+    oks = [r["ok"] for r in flips]
+    assert oks[0] is False and oks[-1] is True and 2 <= len(oks) <= 1 + 1.6 / hold, oks
+    assert all(a != b for a, b in pairwise(oks))  # each a change
+    gaps = [(b["t_ns"] - a["t_ns"]) / 1e9 for a, b in pairwise(flips)]
+    assert min(gaps) >= hold, gaps
+    assert "No space left on device" in flips[0]["problem"] and flips[-1]["problem"] == ""
+    assert "writes again after" in flips[-1]["text"] and stats["flaky"]["errors"] >= 20
 
 
 def test_closing_is_bounded_even_if_a_sink_hangs():

@@ -153,3 +153,21 @@ def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path)
         assert not ok and len(err) == 1 and "uvd/rov7/params" in err[0]["error"]
     assert "colour" in info["bad"][1][0]["error"] and "gains" in info["bad_what"][1][0]["error"]
     assert d.app.hub.stats()["zenoh"]["errors"] == 0
+
+
+def test_a_sink_told_failing_is_an_event_that_fits_the_schema():
+    """The hub's ``"sink"`` record (a recording that fails, or works again) becomes an
+    ``event`` sample of kind ``sink`` whose text is the one the operator reads over MAVLink
+    too, and which fits ``uvd.event.v1``."""
+    from uvd.links.zenoh import _event
+    from uvd.telemetry.recording import schema
+
+    rec = {"type": "sink", "t_ns": 5, "sink": "mcap", "ok": False,
+           "problem": "/data/rec/uvd-1.mcap: [Errno 28] No space left on device",
+           "text": "telemetry sink mcap cannot write: /data/rec/uvd-1.mcap: [Errno 28] No "
+                   "space left on device", "records_dropped": 0, "write_errors": 1,
+           "bytes_given_up": 0}
+    jsonschema.validate(rec, schema("uvd.sink.v1"))
+    body = _event("sink", rec)
+    assert body["kind"] == "sink" and body["text"] == rec["text"]
+    jsonschema.validate({"seq": 0, "t_ns": 5, "vehicle": "rov", **body}, schema("uvd.event.v1"))

@@ -11,7 +11,7 @@ frame on a bounded queue; a writer thread does the file I/O. If the disk cannot 
 the queue fills, frames are dropped from the *log* (counted in ``dropped``), never delayed on
 the bus. A write that fails (a full disk) loses its frame from the log (counted in
 ``write_errors``); failures are told in spells, as the daemon's record files tell theirs
-(:class:`uvd.telemetry.appendfile.FailureSpells`): a spell's first failure and its end (the
+(:class:`uvd.spells.FailureSpells`): a spell's first failure and its end (the
 first ten spells), and every :data:`LOG_EVERY` th failure throughout.
 """
 
@@ -27,39 +27,12 @@ import can
 
 from drivers.can.config import LOG_SUFFIXES, CanLogConfig
 from uvd.errors import ConfigError, TransportError
+from uvd.spells import FailureSpells
 
 log = logging.getLogger(__name__)
 
 #: after a spell's first failed write, one in this many is logged (a full disk fails them all)
 LOG_EVERY = 100
-
-
-class _FailureSpells:
-    """When to tell of failed writes: :class:`uvd.telemetry.appendfile.FailureSpells`' rules
-    (a spell's first failure and its end for the first ``told`` spells, every ``every`` th
-    failure throughout), restated here because drivers import nothing of uvd but uvd.errors
-    and uvd.geometry (tests/test_layers.py)."""
-
-    def __init__(self, every: int, told: int = 10) -> None:
-        self.every = int(every)
-        self.told = int(told)
-        self.total = 0  # failures
-        self.in_a_row = 0  # of this spell
-        self.spells = 0
-
-    def failed(self) -> bool:
-        """Count a failure; True when it is to be told."""
-        self.total += 1
-        self.in_a_row += 1
-        if self.in_a_row == 1:
-            self.spells += 1
-        return (self.in_a_row == 1 and self.spells <= self.told) or self.total % self.every == 0
-
-    def recovered(self) -> bool:
-        """A success: True when it ends a spell that is to be told (then the spell is over)."""
-        ended = self.in_a_row > 0
-        self.in_a_row = 0
-        return ended and self.spells <= self.told
 
 
 class CanRecorder:
@@ -90,7 +63,7 @@ class CanRecorder:
         self.max_bytes = int(max_bytes)
         self.written = 0
         self.dropped = 0
-        self._spells = _FailureSpells(LOG_EVERY)
+        self._spells = FailureSpells(LOG_EVERY)
         self._failing_since = 0.0
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)

@@ -102,5 +102,10 @@ class JsonLinesSink:
             self._opened = False
             self._worker.close()
 
+    def trouble(self) -> str | None:
+        """The failure of the file's writes going on (the path and the error), None when the
+        last write reached the file (the hub tells the operator of it)."""
+        return self._file.failing
+
     def stats(self) -> dict[str, Any]:
         return {"lines": self.lines, **self._file.stats()}

@@ -269,6 +269,16 @@ class McapRecorder:
                 t0 = time.perf_counter()
         self._drain_raw()
 
+    def trouble(self) -> str | None:
+        """What keeps records from the file now — a failing disk (the path and the error) or
+        a hung one — None when nothing does (the hub tells the operator of it)."""
+        if self._file.failing:
+            return self._file.failing
+        if self._buf is not None and self._stalled():
+            return (f"{self._file.path or self.directory}: the disk takes nothing "
+                    f"({self.max_pending / 1e6:g} MB wait); records are dropped")
+        return None
+
     def _stalled(self) -> bool:
         """The disk takes nothing (hung, or failing): more than ``max_pending_mb`` wait."""
         return self._buf.pending + len(self._file.unwritten) > self.max_pending

@@ -298,7 +298,7 @@ class ZenohSink:
                     self._estimates[body["estimator"]] = body
                 key = f"{self.prefix}/estimate/{body['estimator']}"
                 items.append((key, ENCODINGS["estimate"], self._stamp(key, t_ns, body)))
-            elif kind in ("failsafe", "lifecycle", "command", "reload", "start"):
+            elif kind in ("failsafe", "lifecycle", "command", "reload", "sink", "start"):
                 key = f"{self.prefix}/event"
                 items.append((key, ENCODINGS["event"], self._stamp(key, t_ns, _event(kind, r))))
         if items:
@@ -441,6 +441,8 @@ def _event(kind: str, r: Mapping[str, Any]) -> dict[str, Any]:
     elif kind == "reload":
         text = "reload: " + ("applied " + ", ".join(r.get("applied") or ()) if r.get("ok")
                              else f"refused ({r.get('error')})")
+    elif kind == "sink":
+        text = str(r["text"])
     else:
         text = f"started (uvd {r.get('version')})"
     rec = {k: v for k, v in r.items() if k != "config_toml"}

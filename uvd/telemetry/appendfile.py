@@ -6,7 +6,7 @@ so that it stays readable to there (a reader never meets half a record in the mi
 bytes are kept and written first when the disk takes them again: the file goes on whole, with
 nothing missing. Kept up to ``max_pending`` bytes; past that they are given up and counted.
 Told in the log at a spell's first failure and when writing resumes (the first ten spells:
-:class:`FailureSpells`), every :data:`LOG_EVERY` th failure, and when bytes are given up;
+:class:`uvd.spells.FailureSpells`), every :data:`LOG_EVERY` th failure, and when bytes are given up;
 counted in ``write_errors`` and ``lost_bytes``.
 
 Before (session 25; on a full 1 MB tmpfs, and tests/test_recording.py): nothing was logged;
@@ -23,39 +23,14 @@ import os
 import time
 from pathlib import Path
 
-__all__ = ["AppendFile", "FailureSpells", "LOG_EVERY"]
+from uvd.spells import FailureSpells
+
+__all__ = ["AppendFile", "LOG_EVERY"]
 
 log = logging.getLogger("uvd.recording")
 
 #: after a spell's first failed write, one in this many is logged (a full disk fails them all)
 LOG_EVERY = 100
-
-
-class FailureSpells:
-    """When to tell of failures that come in spells (a full disk, a lost peer): each spell's
-    first failure and its end for the first ``told`` spells, and every ``every`` th failure
-    throughout — a disk that fills and empties by turns is not a line a write."""
-
-    def __init__(self, every: int, told: int = 10) -> None:
-        self.every = int(every)
-        self.told = int(told)
-        self.total = 0  # failures
-        self.in_a_row = 0  # of this spell
-        self.spells = 0
-
-    def failed(self) -> bool:
-        """Count a failure; True when it is to be told."""
-        self.total += 1
-        self.in_a_row += 1
-        if self.in_a_row == 1:
-            self.spells += 1
-        return (self.in_a_row == 1 and self.spells <= self.told) or self.total % self.every == 0
-
-    def recovered(self) -> bool:
-        """A success: True when it ends a spell that is to be told (then the spell is over)."""
-        ended = self.in_a_row > 0
-        self.in_a_row = 0
-        return ended and self.spells <= self.told
 
 
 class AppendFile:
@@ -80,6 +55,12 @@ class AppendFile:
     @property
     def write_errors(self) -> int:
         return self._spells.total
+
+    @property
+    def failing(self) -> str | None:
+        """The failure of the spell going on (the path and the error), None when the last
+        write reached the file."""
+        return self.last_write_error if self._spells.in_a_row else None
 
     def write(self, path: Path, data: bytes, close: bool = False) -> bool:
         """Append ``data`` (after any bytes kept from failed writes) to ``path``, creating its

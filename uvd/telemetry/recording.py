@@ -37,6 +37,7 @@ CHANNELS: dict[str, tuple[str, str | None]] = {
     "/uvd/lifecycle": ("uvd.lifecycle.v1", "lifecycle"),
     "/uvd/command": ("uvd.command.v1", "command"),
     "/uvd/reload": ("uvd.reload.v1", "reload"),
+    "/uvd/sink": ("uvd.sink.v1", "sink"),
     "/uvd/raw/serial": ("uvd.raw_serial.v1", None),
     "/uvd/raw/can": ("uvd.can_frame.v1", None),
 }

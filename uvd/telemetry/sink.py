@@ -8,7 +8,9 @@ data survives. A pump task per sink (owned by the application's TaskGroup throug
 :meth:`TelemetryHub.run`) drains its queue every ``flush_interval_s`` and hands batches to the
 sink; a sink that fails is counted, logged (a spell's first failed batch and its end for the
 first ten spells, every 1000th failed batch) and retried with the next batch, never
-propagated.
+propagated. The operator is told when a sink starts failing — it did not open, its writes
+fail, or its own ``trouble()`` names a failing or hung disk — and when it works again: a
+``"sink"`` record to every sink (:meth:`TelemetryHub._tell`).
 
 Records must not be mutated after they are published (the core returns new arrays every cycle,
 so this holds by construction).
@@ -22,13 +24,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import time
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
-from uvd.telemetry.appendfile import FailureSpells
+from uvd.spells import FailureSpells
 
 __all__ = ["TelemetrySink", "BoundedQueue", "TelemetryHub", "SinkStats"]
 
@@ -36,6 +39,10 @@ log = logging.getLogger("uvd.telemetry")
 
 #: after a sink's first failed batch, one in this many is logged
 _LOG_EVERY = 1000
+
+#: the operator is told of a sink's failing and working again at most once in this many
+#: seconds a sink (the first change at once): a disk at the edge of full is not a flood
+TELL_HOLD_S = 10.0
 
 
 @runtime_checkable
@@ -127,6 +134,9 @@ class _Lane:
         self.wake = asyncio.Event()
         self.lock = asyncio.Lock()  # one drain at a time keeps batches in order
         self.failing = FailureSpells(_LOG_EVERY)  # failed batches (a full disk, a lost peer)
+        self.told: str | None = None  # the problem the operator was last told of (None: ok)
+        self.told_at = -math.inf  # monotonic s
+        self.failing_since = 0.0
 
 
 class TelemetryHub:
@@ -145,10 +155,14 @@ class TelemetryHub:
         Default decimation: a sink takes one cycle record in N (events published with
         ``always=True`` are never decimated). Per sink with :meth:`add_sink` /
         :meth:`set_every_n`.
+    tell_hold_s : float
+        Least time between two changes told of one sink (failing, working again).
     """
 
     def __init__(self, sinks: Iterable[TelemetrySink] = (), *, queue_size: int = 1024,
-                 flush_interval_s: float = 0.05, batch: int = 256, every_n: int = 1) -> None:
+                 flush_interval_s: float = 0.05, batch: int = 256, every_n: int = 1,
+                 tell_hold_s: float = TELL_HOLD_S) -> None:
+        self.tell_hold_s = float(tell_hold_s)
         self.queue_size = int(queue_size)
         self.flush_interval_s = float(flush_interval_s)
         self.batch = int(batch)
@@ -202,6 +216,7 @@ class TelemetryHub:
                     lane.stats.last_error = f"open: {type(exc).__name__}: {exc}"
                     log.warning("telemetry: sink %s did not open (%s: %s); its records are "
                                 "dropped", lane.sink.name, type(exc).__name__, exc)
+                    self._tell(lane)
         return lane.opened
 
     async def _pump(self, lane: _Lane) -> None:
@@ -212,6 +227,43 @@ class TelemetryHub:
                 await asyncio.wait_for(lane.wake.wait(), self.flush_interval_s)
             lane.wake.clear()
             await self._drain(lane)
+            self._tell(lane)
+
+    def _tell(self, lane: _Lane) -> None:
+        """Tell the operator when ``lane``'s sink starts failing (it did not open, its writes
+        fail, its disk fails or hangs: the sink's own ``trouble()``) and when it works again:
+        a ``"sink"`` record to every sink — on Zenoh an ``event``, over MAVLink a STATUSTEXT,
+        in the black box ``/uvd/sink``. At most one change every ``tell_hold_s`` a sink;
+        what is told follows what is, so the last change is told when the hold ends."""
+        if lane.open_failed or lane.failing.in_a_row:
+            problem = lane.stats.last_error
+        else:
+            own = getattr(lane.sink, "trouble", None)
+            problem = own() if callable(own) else None
+        now = time.monotonic()
+        if problem and not lane.failing_since:
+            lane.failing_since = now
+        if (problem is None) == (lane.told is None) or now - lane.told_at < self.tell_hold_s:
+            return
+        name = lane.sink.name
+        st = self.stats()[name]
+        own_stats = st.get("sink") or {}
+        counts = {"records_dropped": int(st["dropped"]) + int(own_stats.get("stalled_dropped",
+                                                                             0)),
+                  "write_errors": int(own_stats.get("write_errors", 0)) + lane.failing.total,
+                  "bytes_given_up": int(own_stats.get("lost_bytes", 0))}
+        if problem:
+            text = f"telemetry sink {name} " + (
+                f"did not open: {problem}" if lane.open_failed else f"cannot write: {problem}")
+        else:
+            text = (f"telemetry sink {name} writes again after "
+                    f"{now - lane.failing_since:.1f} s ({counts['records_dropped']} records "
+                    f"dropped, {counts['bytes_given_up']} bytes given up so far)")
+            lane.failing_since = 0.0
+        lane.told, lane.told_at = problem, now
+        self.publish({"type": "sink", "t_ns": time.monotonic_ns(), "sink": name,
+                      "ok": problem is None, "problem": problem or "", "text": text,
+                      **counts}, always=True)
 
     async def _drain(self, lane: _Lane) -> None:
         async with lane.lock:

@@ -3,8 +3,10 @@ command receiver, never on the loop's critical path.
 
 :class:`MavlinkLink` is a :class:`~uvd.telemetry.sink.TelemetrySink` of the daemon's hub: its
 ``write`` (event loop, off the cycle) only keeps the newest cycle and estimate records and
-queues a STATUSTEXT for each failsafe event, lifecycle transition and refused command, and a
-WARNING for each thruster effectiveness set or cleared (thruster, η, source, DOFs given up). The
+queues a STATUSTEXT for each failsafe event, lifecycle transition and refused command, a
+WARNING for each thruster effectiveness set or cleared (thruster, η, source, DOFs given up),
+and for a telemetry sink that cannot open or write (a full disk under the black box), a
+NOTICE when it writes again. The
 UDP socket at ``listen`` is read by a process of its own (:mod:`uvd.links.mavlink.receiver`),
 which judges every datagram and forwards only good MAVLink, so that a flood of garbage never
 holds this process's interpreter lock against the loop. One daemon thread owns the socket's
@@ -303,6 +305,8 @@ class MavlinkLink:
                                  f"{r['action']} ({r['reason']})"), event=True)
             elif kind == "lifecycle":
                 self._text(("notice", f"{r['from']} -> {r['to']}: {r['cause']}"), event=True)
+            elif kind == "sink":  # a recording that fails, or works again
+                self._text(("notice" if r["ok"] else "warning", str(r["text"])), event=True)
             elif kind == "command" and not r.get("ok"):
                 self._text(("warning", f"{r['command']} refused: {r['reason']}"))
             elif kind == "command" and r.get("command") in ("SetThrusterEta", "FaultReport"):
