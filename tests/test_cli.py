@@ -160,6 +160,22 @@ def test_a_failed_write_is_an_error_that_says_so_not_a_traceback(tmp_path):
     assert not out.exists() and not list(tmp_path.glob("*.tmp"))
 
 
+def test_a_write_interrupted_by_ctrl_c_leaves_the_old_file_and_no_temporary(tmp_path):
+    """``uvd.jsonio.write_whole`` (every result file, parameter file and doc the commands
+    write): a KeyboardInterrupt mid-write leaves the old file as it was and no temporary."""
+    from uvd.jsonio import write_whole
+    path, tmp = tmp_path / "params.toml", tmp_path / ".params.toml.tmp"
+    path.write_text("old\n")
+
+    def write(t):
+        t.write_text("half")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_whole(path, write, tmp)
+    assert path.read_text() == "old\n" and not tmp.exists()
+
+
 def _files_may_grow_to(limit: int):
     """In the child: RLIMIT_FSIZE ``limit`` bytes (a disk with room for that much), SIGXFSZ
     ignored."""

@@ -51,8 +51,8 @@ def write_json(path: Path, data: Any) -> None:
 def write_whole(path: Path, write: Callable[[Path], Any], tmp: Path,
                 what: str | None = None) -> None:
     """``write(tmp)``, then ``tmp`` renamed over ``path``: the file is whole or not there. A
-    write that fails (a full disk) leaves no temporary file, and its OSError names ``what``
-    (``path`` by default)."""
+    write that fails (a full disk) or is interrupted (Ctrl-C) leaves no temporary file; an
+    OSError names ``what`` (``path`` by default)."""
     try:
         write(tmp)
         os.replace(tmp, path)
@@ -60,6 +60,9 @@ def write_whole(path: Path, write: Callable[[Path], Any], tmp: Path,
         tmp.unlink(missing_ok=True)
         raise OSError(exc.errno, f"cannot write {what or path}: {exc.strerror or exc}") \
             from exc
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def is_int64(x: Any) -> bool:

@@ -142,11 +142,7 @@ def save_params(p: UVParams, path: str | Path, *, title: str = "", extra: str = 
             fh.flush()
             os.fsync(fh.fileno())
 
-    try:
-        write_whole(path, write, tmp)  # an OSError (a full disk) names the path, leaves no tmp
-    except BaseException:  # and neither does a Ctrl-C mid-write
-        tmp.unlink(missing_ok=True)
-        raise
+    write_whole(path, write, tmp)
 
 
 def linear_damping_toml(diag, comment: str) -> str:
