@@ -94,7 +94,8 @@ class HoldPose:
 
 @dataclass(frozen=True)
 class ResetFailsafe:
-    """Reset latched failsafe triggers (all when ``names`` is None)."""
+    """Reset latched failsafe triggers whose condition no longer holds (every active latched
+    one when ``names`` is None: MAVLink's MAV_CMD_USER_2, ``uvd reset-failsafe``)."""
 
     names: tuple[str, ...] | None = None
     source: str = ""

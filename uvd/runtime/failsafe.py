@@ -659,7 +659,10 @@ def reset(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState,
     Parameters
     ----------
     names : iterable of str, optional
-        Triggers to reset; all active ones when None.
+        Triggers to reset; when None, every active latched one (a trigger that clears by
+        itself is left to do so: resetting one whose condition holds is refused anyway, and
+        an operator's "reset" of a vehicle whose INS gives no rates would otherwise never
+        succeed).
 
     Returns
     -------
@@ -671,7 +674,8 @@ def reset(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState,
     """
     by_name = {d.name: d for d in registry}
     wanted = list(names) if names is not None else [
-        n for n, ts in state.triggers.items() if ts.active]
+        n for n, ts in state.triggers.items() if ts.active and n in by_name
+        and by_name[n].latch]
     new = dict(state.triggers)
     events: list[FailsafeEvent] = []
     refused: list[tuple[str, str]] = []

@@ -140,7 +140,10 @@ def builtin_checks(th: Thresholds) -> tuple[ArmingCheck, ...]:
 
     def failsafe_clear(h: Health, d: Decision | None) -> tuple[bool, str]:
         if d is not None and d.action >= Action.HOLD_DEPTH:
-            return False, f"failsafe {d.action.label} active: {d.causes}"
+            latched = [a.name for a in d.active if a.latched and a.action >= Action.HOLD_DEPTH]
+            hint = f" ({', '.join(latched)} latched: reset it once its cause is gone, " \
+                "uvd reset-failsafe or MAVLink command 31011)" if latched else ""
+            return False, f"failsafe {d.action.label} active: {d.causes}{hint}"
         if d is not None and d.waiting:  # a source never heard from would fire once armed
             return False, f"waiting for a first sample: {', '.join(d.waiting)}"
         return True, "no failsafe at hold-depth or above, no source waited for"

@@ -68,6 +68,7 @@ from uvd.runtime.commands import (
     Disarm,
     HoldPose,
     ManualWrench,
+    ResetFailsafe,
     SetMode,
     SetParams,
     SetThrusterEta,
@@ -141,6 +142,12 @@ class _Out:
 #: vehicle's order), param2 η ∈ [0, 1] (1 clears it) — MAV_CMD_USER_1, as no standard command
 #: carries it (docs/mavlink.md)
 MAV_CMD_THRUSTER_ETA = 31010
+
+#: COMMAND_LONG that resets the latched failsafe triggers whose condition no longer holds
+#: (param1 0: all of them) — MAV_CMD_USER_2, as no standard command carries it; without it a
+#: latched trigger (a leak, a drive's fault, a bus-off) keeps the vehicle disarmed until the
+#: daemon restarts (docs/mavlink.md)
+MAV_CMD_RESET_FAILSAFE = 31011
 
 #: the farthest a SET_POSITION_TARGET_LOCAL_NED position may lie from the local origin, per
 #: axis (m): the navigation frame's range ([navigation] initial_north_m, initial_east_m)
@@ -523,6 +530,12 @@ class MavlinkLink:
                                 "not a thruster number")
                 return
             c = SetThrusterEta(int(m.param1), float(m.param2), source=source)
+        elif m.command == MAV_CMD_RESET_FAILSAFE:
+            if m.param1 != 0.0:
+                self._refuse(m, f"failsafe reset refused: param1 {m.param1:g} must be 0 (every "
+                                "latched trigger)")
+                return
+            c = ResetFailsafe(source=source)
         else:
             self.counters["unsupported_commands"] += 1
             self._ack(m, mav.MAV_RESULT_UNSUPPORTED)

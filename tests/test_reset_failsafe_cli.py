@@ -1,0 +1,91 @@
+"""``uvd reset-failsafe``: the operator resets a latched failsafe trigger of a running daemon
+from the command line, over its MAVLink link (a real daemon against a live ``sim-bridge``, a
+leak flooded and dried there; the command line and a ground station each in their own
+thread, as separate stations would be)."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import pytest
+
+from tests.hil_daemon import ListSink, run_scenario, running_bridge, until
+from tests.mavlink_gcs import Station, mav
+from uvd.cli import main
+from uvd.netports import free_port
+from uvd.runtime.config import load_config
+from uvd.runtime.lifecycle import State
+
+pytestmark = pytest.mark.timeout(240)
+
+
+def test_a_latched_leak_is_reset_from_the_shell_once_dry_and_the_vehicle_arms_again(
+        tmp_path, capsys):
+    """Flooded: the daemon disarms and latches ``leak``. Still wet, the reset is refused by
+    name (exit 1) and arming is denied; dry, the reset is accepted (exit 0, the station told
+    "failsafe reset: leak …") and a ground station arms the vehicle again. Before (session
+    26) no station and no command could reset a latched trigger: the vehicle stayed disarmed
+    until the daemon restarted."""
+    port = free_port("udp", "127.0.0.1")
+    changes = {"mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
+                           "params_file": "", "operator_timeout_s": 0.0,
+                           "signing_timestamp_file": str(tmp_path / "signing.ts")}}
+    seen = {}
+    with running_bridge(tmp_path, changes) as (cfg_path, proc):
+        cfg = load_config(cfg_path)
+
+        def reset():
+            return main(["reset-failsafe", "--config", str(cfg_path), "--timeout", "10"])
+
+        def fired(d, kind):
+            return [e for e in d.supervisor.failsafe_events() if e["type"] == "failsafe"
+                    and e["kind"] == kind and e["trigger"] == "leak"]
+
+        async def scenario(d):
+            station = Station(port)
+            try:
+                await asyncio.to_thread(station.heartbeat)
+                assert (await asyncio.to_thread(proc.call, "leak", wet=True))["ok"]
+                await until(lambda: fired(d, "fired"), 5.0, "leak")
+                await until(lambda: d.supervisor.state is State.STANDBY, 2.0, "disarmed")
+                seen["wet"] = await asyncio.to_thread(reset)
+                seen["arm_wet"] = (await asyncio.to_thread(station.arm)).result
+                assert (await asyncio.to_thread(proc.call, "leak", wet=False))["ok"]
+                await asyncio.sleep(1.0)  # dry for 10 polls: still latched
+                seen["latched_dry"] = "leak" in {a.name for a in d.supervisor.decision.active}
+                seen["dry"] = await asyncio.to_thread(reset)
+                seen["reset_events"] = fired(d, "reset")
+                seen["arm_dry"] = (await asyncio.to_thread(station.arm)).result
+                t_end = time.monotonic() + 5.0
+                while d.supervisor.state is not State.ARMED and time.monotonic() < t_end:
+                    await asyncio.sleep(0.05)
+                seen["state"] = d.supervisor.state
+                seen["nothing_latched"] = await asyncio.to_thread(reset)
+            finally:
+                station.close()
+
+        sink = ListSink()
+        run_scenario(cfg, scenario, timeout_s=150.0, sink=sink)
+    out = capsys.readouterr().out
+    print(out)
+    assert seen["wet"] == 1 and seen["arm_wet"] == mav.MAV_RESULT_DENIED
+    refusals = [r["reason"] for r in sink.records if r.get("type") == "command"
+                and r["command"] == "Arm" and not r["ok"]
+                and str(r.get("source")).startswith("mavlink")]
+    assert refusals == ["arming refused: failsafe_clear: failsafe disarm active: leak: leak "
+                        "detected (leak latched: reset it once its cause is gone, uvd "
+                        "reset-failsafe or MAVLink command 31011)"]  # the operator told how
+    assert "failsafe reset: denied\n  ResetFailsafe refused: leak: condition still true: " \
+           "leak detected" in out
+    assert seen["latched_dry"] and seen["dry"] == 0
+    assert "failsafe reset: accepted\n  failsafe reset: leak -> disarm (operator reset)" in out
+    assert [e["reason"] for e in seen["reset_events"]] == ["operator reset"]
+    assert seen["arm_dry"] == mav.MAV_RESULT_ACCEPTED and seen["state"] is State.ARMED
+    assert seen["nothing_latched"] == 0  # none latched: nothing to refuse
+
+
+def test_reset_failsafe_refuses_a_silent_link(capsys):
+    port = free_port("udp", "::1")  # nobody listens there
+    assert main(["reset-failsafe", "--to", f"127.0.0.1:{port}", "--timeout", "0.5"]) == 2
+    assert f"no vehicle heartbeat from 127.0.0.1:{port} within 0.5 s" in capsys.readouterr().err

@@ -1,0 +1,127 @@
+"""A command of the operator's sent to a running daemon from a shell, as any ground station
+sends it (docs/mavlink.md): what ``uvd eta`` and ``uvd reset-failsafe`` share.
+
+pymavlink over UDP to ``[mavlink] listen`` of ``--config`` (or ``--to``), signed with
+``signing_key_file`` when the configuration has one, as system ``--system`` (one of
+``gcs_system_ids``): it sends its HEARTBEAT, waits for the vehicle's, sends one COMMAND_LONG,
+waits for its COMMAND_ACK and gathers the daemon's STATUSTEXTs about it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from uvd.cliargs import int_in, positive_float
+
+#: how long texts are gathered after the COMMAND_ACK, at most, and how long a quiet spell
+#: after the last text ends it
+TEXTS_S, QUIET_S = 2.0, 0.3
+
+
+def add_station_options(p: argparse.ArgumentParser) -> None:
+    """``--config``, ``--to``, ``--system``, ``--timeout``."""
+    p.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="the daemon's configuration: its [mavlink] listen address and signing "
+                        "key (default: the embedded config/sim.toml)")
+    p.add_argument("--to", type=_udp_address, default=None, metavar="HOST:PORT",
+                   help="the link's UDP address (default: [mavlink] listen)")
+    p.add_argument("--system", type=int_in(1, 255), default=255,
+                   help="this station's MAVLink system id (default 255)")
+    p.add_argument("--timeout", type=positive_float, default=5.0,
+                   help="seconds to wait for each answer (default 5)")
+
+
+def _udp_address(text: str) -> str:
+    """``--to``: ADDRESS:PORT as the configuration's [mavlink] listen is written."""
+    from uvd.runtime.config import check_udp_address
+    bad = check_udp_address(text, "--to")
+    if bad:
+        raise argparse.ArgumentTypeError(bad[0][1])
+    return text
+
+
+def station_of(args) -> tuple[str, int, bytes | None]:
+    """The daemon's (host, port, signing key or None) from ``--config`` / ``--to``. Raises
+    ValueError (or a UvdError of the configuration) when there is none."""
+    from uvd.runtime.config import load_config
+    cfg = load_config(args.config).mavlink
+    addr = args.to or cfg.listen
+    if not addr:
+        raise ValueError("no address: [mavlink] listen is empty and --to is not given")
+    host, _, port = addr.rpartition(":")
+    key = None
+    if cfg.signing_key_file:
+        from uvd.links.mavlink.signing import load_key
+        key = load_key(cfg.signing_key_file)
+    return host, int(port), key
+
+
+def send_command(host: str, port: int, command: int, params: Sequence[float],
+                 about: Callable[[str], bool], *, name: str, system: int = 255,
+                 key: bytes | None = None, timeout_s: float = 5.0) -> tuple[str, list[str]]:
+    """Send COMMAND_LONG ``command`` (``params``: param1…) and wait for its answer:
+    (``"accepted"``/``"denied"``/…, the daemon's STATUSTEXTs for which ``about(text)`` holds,
+    whole — chunks of one id joined — in the order they came). Raises TimeoutError when the
+    vehicle's heartbeat or the COMMAND_ACK does not come within ``timeout_s``; ``name``: the
+    command's in that message."""
+    if ":" in host:
+        raise ValueError(f"{host}:{port}: uvd {name} speaks IPv4 only (pymavlink's UDP "
+                         "connection); reach the daemon on an IPv4 address ([mavlink] listen)")
+    os.environ.setdefault("MAVLINK20", "1")  # pymavlink's MAVLink 2 dialects
+    from pymavlink import mavutil
+
+    mav = mavutil.mavlink
+    conn = mavutil.mavlink_connection(f"udpout:{host}:{port}", source_system=system,
+                                      source_component=mav.MAV_COMP_ID_MISSIONPLANNER,
+                                      dialect="ardupilotmega")
+    conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+    if key is not None:
+        conn.setup_signing(key, sign_outgoing=True)
+    try:
+        def wait(kind, cond, what):
+            deadline = time.monotonic() + timeout_s
+            next_beat = 0.0
+            while time.monotonic() < deadline:
+                if time.monotonic() >= next_beat:  # a station the link hears
+                    conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                    next_beat = time.monotonic() + 0.5
+                m = conn.recv_match(type=kind, blocking=True, timeout=0.1)
+                if m is not None and cond(m):
+                    return m
+            raise TimeoutError(f"no {what} from {host}:{port} within {timeout_s:g} s")
+
+        hb = wait("HEARTBEAT", lambda m: m.get_srcSystem() != system
+                  and m.type != mav.MAV_TYPE_GCS, "vehicle heartbeat")
+        target = (hb.get_srcSystem(), hb.get_srcComponent())
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        conn.mav.command_long_send(*target, command, 0, *p)
+        ack = wait("COMMAND_ACK", lambda m: m.command == command, "COMMAND_ACK")
+        result = mav.enums["MAV_RESULT"][ack.result].name.removeprefix("MAV_RESULT_").lower()
+        return result, _texts(conn, about, min(timeout_s, TEXTS_S))
+    finally:
+        conn.close()
+
+
+def _texts(conn, about: Callable[[str], bool], within_s: float) -> list[str]:
+    """The whole STATUSTEXTs ``about`` picks, up to ``within_s``, or :data:`QUIET_S` after the
+    last such text was whole (STATUSTEXT chunks: 50 characters, the last one shorter)."""
+    texts: list[str] = []
+    parts: dict[int, str] = {}
+    end = time.monotonic() + within_s
+    quiet_end = end
+    while time.monotonic() < min(end, quiet_end):
+        m = conn.recv_match(type="STATUSTEXT", blocking=True, timeout=0.05)
+        if m is None:
+            continue
+        text = parts.pop(m.id, "") + m.text
+        if m.id and len(m.text) == 50:
+            parts[m.id] = text  # more chunks to come
+            continue
+        if about(text):
+            texts.append(text)
+            quiet_end = time.monotonic() + QUIET_S
+    return texts
