@@ -138,7 +138,7 @@ def test_a_malformed_arm_or_mode_command_is_refused_never_guessed():
     went ARMED → STANDBY "disarm: ground station" on it; DO_SET_MODE with NaN got no answer
     at all (int(NaN) raised in the handler). Both are now DENIED with a STATUSTEXT, counted,
     and nothing reaches the cycle; 1 and 0 still arm and disarm."""
-    from uvd.runtime.commands import Arm, Disarm
+    from uvd.runtime.commands import Arm, Disarm, ResetFailsafe
 
     def scenario(link, st):
         st.wait("HEARTBEAT")
@@ -147,7 +147,9 @@ def test_a_malformed_arm_or_mode_command_is_refused_never_guessed():
                 (mav.MAV_CMD_COMPONENT_ARM_DISARM, nan, 0.0, "arm/disarm refused: param1 nan"),
                 (mav.MAV_CMD_COMPONENT_ARM_DISARM, 0.7, 0.0, "arm/disarm refused: param1 0.7"),
                 (mav.MAV_CMD_DO_SET_MODE, nan, 4.0, "mode refused: base mode nan"),
-                (mav.MAV_CMD_DO_SET_MODE, 1.0, float("inf"), "custom mode inf must")):
+                (mav.MAV_CMD_DO_SET_MODE, 1.0, float("inf"), "custom mode inf must"),
+                (31011, 3.0, 0.0, "failsafe reset refused: param1 3 must be 0"),
+                (31011, nan, 0.0, "failsafe reset refused: param1 nan")):
             st.send(st.enc.command_long_encode(1, 1, command, 0, p1, p2, 0, 0, 0, 0, 0),
                     link.port)
             ack = st.wait("COMMAND_ACK")
@@ -155,12 +157,15 @@ def test_a_malformed_arm_or_mode_command_is_refused_never_guessed():
             text = st.wait("STATUSTEXT", lambda m: "refused" in m.text).text
             assert says in text, text
         assert queued(link, timeout=0.3) == []
-        assert link.counters["commands_refused"] == 4 and link.counters["bad_messages"] == 0
+        assert link.counters["commands_refused"] == 6 and link.counters["bad_messages"] == 0
         for p1, kind in ((1.0, Arm), (0.0, Disarm)):
             st.send(st.enc.command_long_encode(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, p1,
                                                0, 0, 0, 0, 0, 0), link.port)
             (c,) = queued(link)
             assert isinstance(c, kind)
+        st.send(st.enc.command_long_encode(1, 1, 31011, 0, 0, 0, 0, 0, 0, 0, 0), link.port)
+        (c,) = queued(link)
+        assert c == ResetFailsafe(None, source="mavlink 255/190")
 
     run_link(scenario)
 
@@ -236,6 +241,24 @@ def test_a_long_reason_goes_out_in_statustext_chunks():
         assert len({p.id for p in parts}) == 1 and parts[0].id > 0
         assert parts[0].severity == mav.MAV_SEVERITY_WARNING
         assert "".join(p.text for p in parts) == text
+
+    run_link(scenario)
+
+
+def test_a_text_of_whole_chunks_ends_with_an_empty_one():
+    """A station knows a STATUSTEXT's last chunk by a NUL in it (MAVLink's STATUSTEXT): a
+    text of exactly two chunks (100 characters) is followed by an empty third of the same id,
+    else a station waits for more. Before (session 26) the text never ended."""
+    reason = "z" * (100 - len("failsafe fired: leak -> disarm ()"))
+
+    def scenario(link, st):
+        st.wait("HEARTBEAT")
+        asyncio.run(link.write([{"type": "failsafe", "kind": "fired", "trigger": "leak",
+                                 "action": "disarm", "reason": reason}]))
+        parts = [st.wait("STATUSTEXT", lambda m, i=i: m.chunk_seq == i) for i in range(3)]
+        assert len({p.id for p in parts}) == 1 and parts[0].id > 0
+        assert [len(p.text) for p in parts] == [50, 50, 0]
+        assert "".join(p.text for p in parts) == f"failsafe fired: leak -> disarm ({reason})"
 
     run_link(scenario)
 
@@ -328,7 +351,7 @@ def test_the_pacing_is_a_token_bucket_on_the_link_clock():
             out += [m for m in station.dec.parse_buffer(data) or []
                     if m.get_type() == "STATUSTEXT"]
     try:
-        link._text(("info", "a" * 50 * 40))  # 40 chunks
+        link._text(("info", "a" * (50 * 40 - 1)))  # 40 chunks, the last one short
         link._text(("info", "next"))
         t = link._tokens_t
         link._send_texts(t)

@@ -735,10 +735,14 @@ class MavlinkLink:
     def _statustext(self, severity: str, text: str) -> list[Any]:
         """One text's STATUSTEXT messages: 50-character chunks sharing an id when longer
         (MAVLink 2); the text in plain ASCII (:func:`ascii_text`), which every ground station
-        shows as sent. MAVLink numbers the chunks in one byte: a text beyond 256 chunks is
-        cut there."""
+        shows as sent. A station knows a chunk is the last by a NUL in it: a text of a whole
+        number of chunks ends with an empty one. MAVLink numbers the chunks in one byte: a
+        text beyond 256 chunks is cut there."""
         data = ascii_text(text).encode("ascii")
-        chunks = [data[i:i + 50] for i in range(0, len(data), 50)][:256] or [b""]
+        chunks = [data[i:i + 50] for i in range(0, len(data), 50)] or [b""]
+        if len(chunks) > 1 and len(chunks[-1]) == 50:
+            chunks.append(b"")  # all NUL: the text ended with the chunk before
+        chunks = chunks[:256]
         self._text_id = self._text_id % 65535 + 1
         tid = self._text_id if len(chunks) > 1 else 0
         return [self.tx.statustext_encode(_SEVERITY[severity], ch, tid, i)
