@@ -78,8 +78,8 @@ from uvd.geometry import R_to_euler
 from uvd.io.toml import dump_toml
 from uvd.netports import free_port
 
-__all__ = ["SimBridge", "SensorFaults", "TRUTH_COLUMNS", "read_truth", "write_local_config",
-           "BridgeProcess", "SENSOR_MODES", "hil_scheduling"]
+__all__ = ["SimBridge", "PlantStopped", "SensorFaults", "TRUTH_COLUMNS", "read_truth",
+           "write_local_config", "BridgeProcess", "SENSOR_MODES", "hil_scheduling"]
 
 log = logging.getLogger("sim_bridge")
 
@@ -144,6 +144,11 @@ class _PlantBank:
 
 
 # ----------------------------------------------------------------------------- the bridge
+
+class PlantStopped(RuntimeError):
+    """The plant's task ended on an error: the simulated vehicle is gone (its instruments
+    silent), so sim-bridge ends too, naming it, rather than answer on as if alive."""
+
 
 class SimBridge:
     """Plant + instruments + CAN nodes in real time (module docstring).
@@ -456,6 +461,11 @@ class SimBridge:
             why = self.faults.problem(kw.get("name"), kw.get("mode", "ok"))
             if why:
                 return why
+            if kw.get("name") == "depth" and kw.get("mode") == "nan" \
+                    and "depth" in self.emulators.ports:
+                return ("depth: a Digiquartz line carries no NaN, so the instrument cannot "
+                        "send one (use silence, garbage or stuck here; nan in a lockstep "
+                        "scenario)")
             if seconds is not None and (isinstance(seconds, bool)
                                         or not isinstance(seconds, (int, float))
                                         or not (math.isfinite(seconds) and seconds >= 0.0)):
@@ -528,14 +538,21 @@ class SimBridge:
             gc.freeze()  # a full collection of this heap stalls every thread for ~70 ms
             if on_ready is not None:
                 on_ready(self.ready_info())
-            try:
-                if duration_s is not None:
-                    await asyncio.wait_for(self._stop.wait(), duration_s)
-                else:
-                    await self._stop.wait()
-            except TimeoutError:
-                pass
+            stopped = asyncio.get_running_loop().create_task(self._stop.wait())
+            await asyncio.wait({plant_task, stopped}, timeout=duration_s,
+                               return_when=asyncio.FIRST_COMPLETED)
+            stopped.cancel()
             self._stop.set()
+            if plant_task.done() and not plant_task.cancelled() \
+                    and plant_task.exception() is not None:
+                # a simulator whose vehicle stopped must not run on silent, answering its
+                # control channel as if alive (session 26: a depth NaN ended the plant's task
+                # unseen, and every instrument fell silent for good)
+                exc = plant_task.exception()
+                log.error("the plant's task ended", exc_info=exc)
+                raise PlantStopped(f"the simulated vehicle stopped at plant step "
+                                   f"{self.counters['plant_steps']}: {type(exc).__name__}: "
+                                   f"{exc}") from exc
             plant_task.cancel()
             await asyncio.wait({plant_task}, timeout=1.0)
             return self.stats(history=False)

@@ -61,6 +61,10 @@ def test_plant_and_thruster_faults_at_chosen_times(tmp_path):
                 ("sensor", {"name": "gps", "mode": "silence", "at_s": 5},
                  "unknown instrument 'gps'"),
                 ("sensor", {"name": "dvl", "mode": "sulk", "at_s": 5}, "unknown mode 'sulk'"),
+                # a Digiquartz line has no NaN: the emulator's encoding raised in the plant's
+                # task, which ended unseen, every instrument silent for good (session 26)
+                ("sensor", {"name": "depth", "mode": "nan", "seconds": 0.3},
+                 "a Digiquartz line carries no NaN"),
                 ("fault", {"node": 4, "name": "warp", "at_s": 5}, "unknown fault 'warp'"),
                 ("silence", {"node": 4, "seconds": -1, "at_s": 5}, "seconds must be"),
                 ("bus_off", {"seconds": 0, "at_s": 5}, "seconds must be")):
@@ -133,3 +137,33 @@ def test_a_truth_log_that_cannot_be_written_ends_and_the_vehicle_goes_on(tmp_pat
     finally:
         proc.stop(timeout_s=5.0)
         proc.kill()
+
+
+def test_a_plant_that_stops_ends_sim_bridge_naming_it(tmp_path):
+    """An error inside the plant's task (here an instrument encoder made to raise at the
+    50th step — every real cause found so far is mended, so one is provoked) ends the run
+    with the error named (``PlantStopped``), at once: before (session 26) the task ended
+    unseen and sim-bridge answered its control channel on, its instruments silent for
+    good."""
+    import asyncio
+
+    from sim_bridge.bridge import PlantStopped, SimBridge
+    from uvd.commands.sim_bridge import bridge_config
+    from uvd.runtime.config import load_config
+
+    bridge = SimBridge(bridge_config(load_config(write_local_config(tmp_path))))
+    step = bridge.emulators.step
+    calls = []
+
+    def failing_step(t_ns):
+        calls.append(t_ns)
+        if len(calls) == 50:
+            raise ValueError("an encoder's bug")
+        step(t_ns)
+
+    bridge.emulators.step = failing_step
+    t0 = time.monotonic()
+    with pytest.raises(PlantStopped, match=r"stopped at plant step 49: ValueError: an "
+                                           r"encoder's bug"):
+        asyncio.run(asyncio.wait_for(bridge.run(duration_s=30.0), 60.0))
+    assert time.monotonic() - t0 < 10.0  # not the run's 30 s

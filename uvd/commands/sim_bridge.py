@@ -200,11 +200,15 @@ def _run(args) -> int:
 
         return await bridge.run(duration_s=args.duration, on_ready=ready, stop=stop)
 
+    from sim_bridge.bridge import PlantStopped
     try:
         stats = asyncio.run(run())
     except (UvdError, OSError) as exc:
         emit({"event": "error", "error": f"{type(exc).__name__}: {exc}"})
         return 2
+    except PlantStopped as exc:  # its traceback is in the log
+        emit({"event": "error", "error": str(exc)})
+        return 1
     emit({"event": "exit", "stats": stats})
     return 0
 
