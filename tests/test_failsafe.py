@@ -156,6 +156,29 @@ def test_latched_trigger_cannot_be_reset_while_its_condition_holds():
     assert refused == (("no_such", "unknown trigger"),)
 
 
+def test_a_reset_of_all_refuses_latched_holds_leaves_clearing_ones_and_clears_the_rest():
+    """The operator's reset of every trigger (names None: MAVLink 31011, uvd
+    reset-failsafe): a latched one whose condition holds is refused by name; one that clears
+    by itself and still holds is left to clear, not refused (an INS without rates would
+    otherwise refuse every reset); one whose condition has just gone is cleared now, not
+    ``clear_after_s`` later; a latched one whose condition has gone is reset."""
+    sim = Sim()
+    sim.step(leak=True, feedback_age_s=5.0, ins_age_s=5.0)
+    assert {"leak", "feedback_missing", "ins_stale"} == \
+        active_names(evaluate(sim.reg, sim.th, sim.state, healthy(sim.t))[0])
+    # still wet, the INS still stale; the feedback back
+    h = healthy(sim.t + DT, leak=True, ins_age_s=5.0)
+    st, evs, refused = reset(sim.reg, sim.th, sim.state, h)
+    assert [n for n, _ in refused] == ["leak"] and "condition still true" in refused[0][1]
+    assert [e.trigger for e in evs] == ["feedback_missing"]
+    d, _ = evaluate(sim.reg, sim.th, st, h)
+    assert active_names(d) == {"leak", "ins_stale"}
+    # dry: the leak is reset, the stale INS still left to clear by itself
+    h = healthy(sim.t + 2 * DT, ins_age_s=5.0)
+    st, evs, refused = reset(sim.reg, sim.th, st, h)
+    assert refused == () and [e.trigger for e in evs] == ["leak"]
+
+
 def test_most_severe_action_wins_and_events_name_the_causes():
     sim = Sim()
     d = sim.step(rates_degraded=True)

@@ -85,6 +85,71 @@ def test_a_latched_leak_is_reset_from_the_shell_once_dry_and_the_vehicle_arms_ag
     assert seen["nothing_latched"] == 0  # none latched: nothing to refuse
 
 
+@pytest.mark.parametrize("how", ["silence", "reboot"])
+def test_a_reset_brings_faulted_or_rebooted_amplifiers_back_and_the_vehicle_arms(
+        tmp_path, capsys, how):
+    """A drive goes to FAULT (node 5's CAN silent for 1.3 s: it misses its commands and
+    faults, as a loose connector makes it) — or every drive reboots (sim-bridge's ``reset``:
+    pre-operational, unconfigured, as a power glitch leaves them). The daemon disarms on the
+    latched ``amplifier_fault``. The operator's reset, disarmed, first brings the amplifiers
+    back (started again, a fault reset), then resets the trigger: exit 0, and a station arms
+    the vehicle. Before (session 26) nothing sent a fault reset or started a rebooted drive
+    after the daemon's start: the reset was refused ("condition still true: node 5:
+    drive_fault") for as long as the daemon ran — found by a chaos soak."""
+    port = free_port("udp", "127.0.0.1")
+    changes = {"mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
+                           "params_file": "", "operator_timeout_s": 0.0,
+                           "signing_timestamp_file": str(tmp_path / "signing.ts")}}
+    seen = {}
+    with running_bridge(tmp_path, changes) as (cfg_path, proc):
+        cfg = load_config(cfg_path)
+
+        async def scenario(d):
+            station = Station(port)
+            try:
+                await asyncio.to_thread(station.heartbeat)
+                if how == "silence":
+                    assert (await asyncio.to_thread(proc.call, "silence", node=5,
+                                                    seconds=1.3))["ok"]
+                else:
+                    assert (await asyncio.to_thread(proc.call, "reset"))["ok"]
+                await until(lambda: any(e["type"] == "failsafe" and e["kind"] == "fired"
+                                        and e["trigger"] == "amplifier_fault"
+                                        for e in d.supervisor.failsafe_events()), 10.0,
+                            "amplifier_fault")
+                await until(lambda: d.supervisor.state is State.STANDBY, 5.0, "disarmed")
+                await asyncio.sleep(2.0)  # the silence over: the drive stays in FAULT
+                seen["faults_before"] = d.supervisor.decision.causes
+                t0 = time.monotonic()
+                seen["reset"] = await asyncio.to_thread(
+                    main, ["reset-failsafe", "--config", str(cfg_path)])
+                seen["reset_s"] = time.monotonic() - t0
+                seen["arm"] = (await asyncio.to_thread(station.arm)).result
+                t_end = time.monotonic() + 5.0
+                while d.supervisor.state is not State.ARMED and time.monotonic() < t_end:
+                    await asyncio.sleep(0.05)
+                seen["state"] = d.supervisor.state
+                await asyncio.sleep(1.0)  # tracking again, thrust out
+                seen["recoveries"] = d.recovery.recoveries
+            finally:
+                station.close()
+
+        sink = ListSink()
+        d, cycles = run_scenario(cfg, scenario, timeout_s=150.0, sink=sink)
+    out = capsys.readouterr().out
+    refusals = [r["reason"] for r in sink.records if r.get("type") == "command"
+                and not r["ok"] and str(r.get("source")).startswith("mavlink")]
+    print(out, f"reset answered in {seen['reset_s']:.2f} s; refused: {refusals}")
+    assert "amplifier_fault" in seen["faults_before"], seen
+    assert seen["reset"] == 0 and "failsafe reset: amplifier_fault -> disarm (operator " \
+        "reset)" in out
+    assert seen["arm"] == mav.MAV_RESULT_ACCEPTED and seen["state"] is State.ARMED
+    assert seen["recoveries"] == 1 and seen["reset_s"] < 12.0
+    last = cycles[-5:]  # armed and driven again: every drive enabled, thrust commanded
+    assert all(r["state"] == "ARMED" for r in last)
+    assert any(abs(x) > 0 for r in last for x in r["thrust"])
+
+
 def test_reset_failsafe_refuses_a_silent_link(capsys):
     port = free_port("udp", "::1")  # nobody listens there
     assert main(["reset-failsafe", "--to", f"127.0.0.1:{port}", "--timeout", "0.5"]) == 2

@@ -430,9 +430,13 @@ class AmplifierGroup:
         Never raises for a node that does not answer: its entry in the report says why, and
         it carries ``config_failed`` until the next successful start.
         """
+        return self._start(self.nodes, timeout_s)
+
+    def _start(self, nodes: Sequence[_Node], timeout_s: float) -> StartReport:
+        """:meth:`start` of ``nodes`` only."""
         t0 = time.monotonic()
         report: dict[int, str] = {}
-        for node in self.nodes:
+        for node in nodes:
             try:
                 self._configure(node)
                 node.remote.nmt.send_command(0x01)  # NMT start remote node
@@ -449,7 +453,7 @@ class AmplifierGroup:
                 node.started_ns = now
                 node.missed = 0
         deadline = time.monotonic() + timeout_s
-        waiting = [n for n in self.nodes if report[n.node_id] == "ok"]
+        waiting = [n for n in nodes if report[n.node_id] == "ok"]
         while waiting and time.monotonic() < deadline:
             self._heartbeat_if_due(self.clock())
             waiting = [n for n in waiting if n.hb_state != NMT_OPERATIONAL]
@@ -459,6 +463,20 @@ class AmplifierGroup:
                 f"no heartbeat reporting OPERATIONAL within {timeout_s:g} s "
                 f"(last NMT state {_NMT_NAMES.get(n.hb_state, n.hb_state)})")
         return StartReport(report, time.monotonic() - t0)
+
+    def recover(self, timeout_s: float = 2.0) -> StartReport:
+        """Bring the drives back after faults — the daemon's decision, disarmed, on the
+        operator's failsafe reset (never the driver's own): every drive that rebooted (a
+        boot-up seen since its start), left OPERATIONAL or failed its configuration is
+        configured and started again (:meth:`start` of those nodes: blocking, bounded), then
+        every drive in FAULT gets a fault reset (:meth:`reset_faults`); a drive whose fault
+        persists stays in FAULT. The report names the nodes started again (empty: none)."""
+        with self._lock:
+            again = [n for n in self.nodes if n.start_error or n.bootups > n.bootups_at_start
+                     or n.hb_state != NMT_OPERATIONAL]
+        report = self._start(again, timeout_s) if again else StartReport({}, 0.0)
+        self.reset_faults()
+        return report
 
     def _configure(self, node: _Node) -> None:
         if not self.cfg.configure:

@@ -22,8 +22,8 @@ from uvd.cliargs import int_in, positive_float
 TEXTS_S, QUIET_S = 2.0, 0.3
 
 
-def add_station_options(p: argparse.ArgumentParser) -> None:
-    """``--config``, ``--to``, ``--system``, ``--timeout``."""
+def add_station_options(p: argparse.ArgumentParser, timeout_s: float = 5.0) -> None:
+    """``--config``, ``--to``, ``--system``, ``--timeout`` (default ``timeout_s``)."""
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="the daemon's configuration: its [mavlink] listen address and signing "
                         "key (default: the embedded config/sim.toml)")
@@ -31,8 +31,8 @@ def add_station_options(p: argparse.ArgumentParser) -> None:
                    help="the link's UDP address (default: [mavlink] listen)")
     p.add_argument("--system", type=int_in(1, 255), default=255,
                    help="this station's MAVLink system id (default 255)")
-    p.add_argument("--timeout", type=positive_float, default=5.0,
-                   help="seconds to wait for each answer (default 5)")
+    p.add_argument("--timeout", type=positive_float, default=timeout_s,
+                   help=f"seconds to wait for each answer (default {timeout_s:g})")
 
 
 def _udp_address(text: str) -> str:

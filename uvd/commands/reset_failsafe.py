@@ -9,6 +9,9 @@ vehicle stays disarmed until the daemon restarts. The cycle applies the reset at
 start and records it; each trigger reset is a failsafe event (``reset``, "operator reset")
 told to every station, and a trigger whose condition still holds is refused by name ("leak:
 condition still true: leak detected"). Triggers that clear by themselves are left to do so.
+Disarmed, the daemon first brings the amplifiers back — drives that rebooted started again,
+a fault reset to those in FAULT (uvd.runtime.recovery) — and answers once they are (at most
+about 10 s).
 It speaks to the daemon as ``uvd eta`` does (``--config``, ``--to``, ``--system``).
 
 Exit code 0 when every latched trigger was reset (or none was latched), 1 when one was
@@ -27,7 +30,7 @@ def register(sub) -> None:
     p = sub.add_parser("reset-failsafe", help="reset the latched failsafe triggers of a "
                                               "running daemon (MAVLink)",
                        description=__doc__.split("\n\n")[0])
-    add_station_options(p)
+    add_station_options(p, timeout_s=15.0)  # a reset waits for the amplifiers' recovery
     p.set_defaults(handler=_run)
 
 

@@ -94,8 +94,9 @@ class HoldPose:
 
 @dataclass(frozen=True)
 class ResetFailsafe:
-    """Reset latched failsafe triggers whose condition no longer holds (every active latched
-    one when ``names`` is None: MAVLink's MAV_CMD_USER_2, ``uvd reset-failsafe``)."""
+    """Reset failsafe triggers whose condition no longer holds (``names``; when None, every
+    active one, and a latched one whose condition holds is refused: MAVLink's
+    MAV_CMD_USER_2, ``uvd reset-failsafe``; :func:`uvd.runtime.failsafe.reset`)."""
 
     names: tuple[str, ...] | None = None
     source: str = ""

@@ -6,7 +6,9 @@ the :class:`~uvd.runtime.supervisor.Supervisor`) and the hardware interfaces
 (:mod:`uvd.runtime.interfaces`) — the instruments, the CAN bus with the amplifiers, the leak
 input, the ground-station link's heartbeat. Its :meth:`Daemon.tick` is glue only::
 
-    commands      the operator's commands queued since the last cycle (App.commands)
+    commands      the operator's commands queued since the last cycle (App.commands); a
+                  failsafe reset of a disarmed vehicle held while the amplifiers are
+                  brought back (uvd.runtime.recovery)
     read          each hardware interface adds its part of the cycle's inputs
     update        uvd.runtime.cycle.update — the same update lockstep and replay run
     write         the command to the amplifiers, one telemetry record, every
@@ -34,6 +36,7 @@ from uvd.runtime.cycle import CycleInputs, CycleResult
 from uvd.runtime.hardware import Hardware
 from uvd.runtime.interfaces import InputParts
 from uvd.runtime.lifecycle import State
+from uvd.runtime.recovery import AmplifierRecovery
 from uvd.runtime.reporting import Estimates, cycle_record
 from uvd.runtime.startup import kept_params, prepare, start_record
 from uvd.runtime.supervisor import Supervisor
@@ -83,6 +86,9 @@ class Daemon:
         self.app.hub.publish(start_record(config, self.params_kept, self.supervisor.config,
                                           self.supervisor.data), always=True)
         self.auto_arm = AutoArm(config.loop.rate_hz) if auto_arm else None
+        #: an operator's failsafe reset, disarmed, brings the amplifiers back first
+        self.recovery = AmplifierRecovery(hw.can,
+                                          lambda: self.config.failsafe.feedback_stale_s)
         self.counters = {"cycles": 0, "guard_nonfinite": 0, "guard_clamped": 0}
         self.commands_max_abs = 0.0
         self.warm_up_s = prepare(self.supervisor.config, start_pose(config)[0],
@@ -116,6 +122,9 @@ class Daemon:
     def tick(self, t_ns: int, dt: float) -> None:
         """One period of the fixed-rate loop (see the module docstring)."""
         for p in self.app.commands.drain():
+            if not self.recovery.hold(p, t_ns, self.supervisor.state):
+                p.future.set_result(self._apply(p.command, t_ns))
+        for p in self.recovery.due(t_ns):
             p.future.set_result(self._apply(p.command, t_ns))
         if self.auto_arm is not None:
             sup = self.supervisor
@@ -123,6 +132,7 @@ class Daemon:
             if arm is not None:
                 self.auto_arm.answered(self._apply(arm, t_ns), t_ns, log)
         inp = self.read(t_ns)
+        self.recovery.seen(t_ns, inp.actuators)
         self.write(t_ns, dt, inp, self.supervisor.update(inp, dt))
 
     def read(self, t_ns: int) -> CycleInputs:
@@ -179,6 +189,7 @@ class Daemon:
         """App summary (loop statistics, failsafe events, …) plus the daemon's counters."""
         out = self.app.summary()
         out["daemon"] = {**self.counters, **self.hardware.counters,
+                         "amplifier_recoveries": self.recovery.recoveries,
                          "commands_max_abs_n": self.commands_max_abs,
                          "armed_at_ns": self.armed_at_ns,
                          "arm_refusal": None if self.auto_arm is None else self.auto_arm.refusal}

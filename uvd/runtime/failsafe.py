@@ -659,10 +659,11 @@ def reset(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState,
     Parameters
     ----------
     names : iterable of str, optional
-        Triggers to reset; when None, every active latched one (a trigger that clears by
-        itself is left to do so: resetting one whose condition holds is refused anyway, and
-        an operator's "reset" of a vehicle whose INS gives no rates would otherwise never
-        succeed).
+        Triggers to reset; when None, every active one whose condition no longer holds, and
+        a latched one whose condition holds is refused — one that clears by itself and still
+        holds is left to clear (an operator's "reset" of a vehicle whose INS gives no rates
+        would otherwise never succeed), and one that no longer holds is cleared now, not
+        ``clear_after_s`` later (the operator's reset after a fault has just gone).
 
     Returns
     -------
@@ -674,8 +675,7 @@ def reset(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState,
     """
     by_name = {d.name: d for d in registry}
     wanted = list(names) if names is not None else [
-        n for n, ts in state.triggers.items() if ts.active and n in by_name
-        and by_name[n].latch]
+        n for n, ts in state.triggers.items() if ts.active]
     new = dict(state.triggers)
     events: list[FailsafeEvent] = []
     refused: list[tuple[str, str]] = []
@@ -689,7 +689,8 @@ def reset(registry: Sequence[TriggerDef], th: Thresholds, state: ArbiterState,
             continue
         reason, mem = _safe_condition(d, health, th, ts.memory)
         if reason is not None:
-            refused.append((n, f"condition still true: {reason}"))
+            if names is not None or d.latch:
+                refused.append((n, f"condition still true: {reason}"))
             continue
         new[n] = TriggerState(memory=mem)
         events.append(FailsafeEvent(health.t_ns, "reset", n, d.action, "operator reset"))
