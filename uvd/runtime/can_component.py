@@ -127,18 +127,6 @@ class GcFreeze:
     async def run(self) -> None:
         return None
 
-    async def recover(self) -> str:
-        """The operator's failsafe reset, disarmed: the amplifiers that rebooted, left
-        OPERATIONAL or failed their configuration started again, a fault reset to every drive
-        in FAULT (:meth:`drivers.can.AmplifierGroup.recover`; its SDO exchanges in a thread,
-        bounded). What was done, for the log ("" without amplifiers)."""
-        if self.group is None:
-            return ""
-        report = await asyncio.to_thread(self.group.recover)
-        started = ", ".join(f"node {n}: {why}" for n, why in report.nodes.items())
-        return f"amplifiers started again ({started}), fault reset sent" if started else \
-            "fault reset sent to the amplifiers"
-
     async def stop(self) -> None:
         return None
 
