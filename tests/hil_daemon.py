@@ -65,6 +65,17 @@ def running_bridge(run_dir: Path, changes: dict | None = None, duration_s: float
         proc.kill()
 
 
+def station_link(run_dir: Path) -> tuple[int, dict]:
+    """A free loopback UDP port and the configuration changes that put the daemon's MAVLink
+    link on it, for a station of the test's own (no parameter file, no operator-loss
+    failsafe, the signing time stamp in ``run_dir``)."""
+    from uvd.netports import free_port
+    port = free_port("udp", "127.0.0.1")
+    return port, {"mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
+                              "params_file": "", "operator_timeout_s": 0.0,
+                              "signing_timestamp_file": str(run_dir / "signing.ts")}}
+
+
 async def until(pred, timeout_s: float, what: str, task=None) -> None:
     deadline = time.monotonic() + timeout_s
     while not pred():

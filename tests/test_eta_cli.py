@@ -8,7 +8,7 @@ import asyncio
 
 import pytest
 
-from tests.hil_daemon import run_scenario, running_bridge
+from tests.hil_daemon import run_scenario, running_bridge, station_link
 from uvd.cli import main
 from uvd.netports import free_port
 from uvd.runtime.config import load_config
@@ -17,10 +17,7 @@ pytestmark = pytest.mark.timeout(240)
 
 
 def test_uvd_eta_sets_and_clears_a_thruster_on_a_running_daemon(tmp_path, capsys):
-    port = free_port("udp", "::1")
-    changes = {"mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
-                           "params_file": "", "operator_timeout_s": 0.0,
-                           "signing_timestamp_file": str(tmp_path / "signing.ts")}}
+    port, changes = station_link(tmp_path)
     seen = {}
     with running_bridge(tmp_path, changes) as (cfg_path, _):
         cfg = load_config(cfg_path)

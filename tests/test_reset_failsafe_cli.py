@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from tests.hil_daemon import ListSink, run_scenario, running_bridge, until
+from tests.hil_daemon import ListSink, run_scenario, running_bridge, station_link, until
 from tests.mavlink_gcs import Station, mav
 from uvd.cli import main
 from uvd.netports import free_port
@@ -27,10 +27,7 @@ def test_a_latched_leak_is_reset_from_the_shell_once_dry_and_the_vehicle_arms_ag
     "failsafe reset: leak …") and a ground station arms the vehicle again. Before (session
     26) no station and no command could reset a latched trigger: the vehicle stayed disarmed
     until the daemon restarted."""
-    port = free_port("udp", "127.0.0.1")
-    changes = {"mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
-                           "params_file": "", "operator_timeout_s": 0.0,
-                           "signing_timestamp_file": str(tmp_path / "signing.ts")}}
+    port, changes = station_link(tmp_path)
     seen = {}
     with running_bridge(tmp_path, changes) as (cfg_path, proc):
         cfg = load_config(cfg_path)
@@ -96,10 +93,7 @@ def test_a_reset_brings_faulted_or_rebooted_amplifiers_back_and_the_vehicle_arms
     the vehicle. Before (session 26) nothing sent a fault reset or started a rebooted drive
     after the daemon's start: the reset was refused ("condition still true: node 5:
     drive_fault") for as long as the daemon ran — found by a chaos soak."""
-    port = free_port("udp", "127.0.0.1")
-    changes = {"mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
-                           "params_file": "", "operator_timeout_s": 0.0,
-                           "signing_timestamp_file": str(tmp_path / "signing.ts")}}
+    port, changes = station_link(tmp_path)
     seen = {}
     with running_bridge(tmp_path, changes) as (cfg_path, proc):
         cfg = load_config(cfg_path)
