@@ -1,0 +1,287 @@
+"""``uvd bench chaos``: the daemon soaked in every fault sim-bridge can make, with an operator.
+
+Three real processes, as on the vehicle: ``sim-bridge`` (its control channel makes the
+faults), ``uvd run`` (armed at its start, recording its black box) and this benchmark, which
+is also the ground station (pymavlink over UDP loopback, the daemon's MAVLink link). For
+``--minutes``, every 0.5–3 s one action drawn with ``--seed``: an instrument's fault
+(silence, garbage, NaN, stuck; 0.2–4 s), one drive's CAN silence (0.1–1.5 s: it misses its
+commands and faults), a drive's EMCY, a thruster's health, a bus-off (0.1–0.5 s), a leak
+(0.2–2 s), the operator's arm, disarm, mode, manual control or failsafe reset, a SIGHUP
+reload. Every ``--check-every`` seconds a **recovery check**: sim-bridge's faults cleared
+(its ``reset``: the drives reboot, the instruments are well again), 2 s, the operator's
+failsafe reset (MAVLink 31011), then arm; it passes when the vehicle reports armed within
+10 s.
+
+Figures: recovery checks passed of those run; the actions by kind; station calls that got no
+answer; the daemon's exit code, its cycles and overruns and its memory (RSS) at the first and
+last sample; and from its recording: cycles with thrust where there must be none (a
+zero-thrust or disarm action, or disarmed — hold-depth's vertical thrust is allowed),
+non-finite commands, and ``uvd replay --lockstep``'s mismatches over the whole run (every
+command, reset and recovery included).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import json
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uvd.bench import Bench
+from uvd.cliargs import nonnegative_int, positive_float
+from uvd.runtime.process import stop_daemon
+
+#: MAVLink custom mode numbers the operator picks from (docs/mavlink.md)
+_MODES = (1, 2, 3, 4, 5, 6, 7)
+
+
+def _add(p) -> None:
+    p.add_argument("--minutes", type=positive_float, default=4.0,
+                   help="minutes of faults (default 4)")
+    p.add_argument("--seed", type=nonnegative_int, default=2,
+                   help="seed of the drawn actions (default 2)")
+    p.add_argument("--check-every", type=positive_float, default=25.0, metavar="S",
+                   help="seconds between recovery checks (default 25)")
+
+
+class _Station:
+    """A ground station: HEARTBEAT at 2 Hz from its own thread; each command waits, bounded,
+    for its COMMAND_ACK (None: none came)."""
+
+    def __init__(self, port: int) -> None:
+        os.environ.setdefault("MAVLINK20", "1")
+        from pymavlink import mavutil
+        self.mav = mavutil.mavlink
+        self.conn = mavutil.mavlink_connection(
+            f"udpout:127.0.0.1:{port}", source_system=255,
+            source_component=self.mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")
+        self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._beat, daemon=True)
+        self._thread.start()
+
+    def _beat(self) -> None:
+        while not self._stop.is_set():
+            with self._lock:
+                self.conn.mav.heartbeat_send(self.mav.MAV_TYPE_GCS,
+                                             self.mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            self._stop.wait(0.5)
+
+    def wait(self, kind: str, cond, timeout_s: float):
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            m = self.conn.recv_match(type=kind, blocking=True, timeout=0.1)
+            if m is not None and cond(m):
+                return m
+        return None
+
+    def command(self, cmd: int, *params: float, timeout_s: float = 15.0) -> int | None:
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        with self._lock:
+            self.conn.mav.command_long_send(1, 1, cmd, 0, *p)
+        ack = self.wait("COMMAND_ACK", lambda m: m.command == cmd, timeout_s)
+        return None if ack is None else int(ack.result)
+
+    def manual(self, rng: random.Random) -> None:
+        with self._lock:
+            self.conn.mav.manual_control_send(1, rng.randint(-1000, 1000),
+                                              rng.randint(-1000, 1000), rng.randint(0, 1000),
+                                              rng.randint(-1000, 1000), 0)
+
+    def armed(self, timeout_s: float) -> bool:
+        return self.wait("HEARTBEAT", lambda m: m.get_srcSystem() == 1
+                         and bool(m.base_mode & 128), timeout_s) is not None
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.conn.close()
+
+
+def _rss_kb(pid: int) -> int | None:
+    with contextlib.suppress(OSError, StopIteration):
+        with open(f"/proc/{pid}/status") as fh:
+            return next(int(x.split()[1]) for x in fh if x.startswith("VmRSS"))
+    return None
+
+
+def _act(rng: random.Random, bridge, st: _Station, daemon) -> tuple[str, Any]:
+    """One drawn action: its kind and what answered it."""
+    mav = st.mav
+    kind = rng.choice(["sensor", "sensor", "can_silence", "can_fault", "can_health", "bus_off",
+                       "leak", "arm", "disarm", "mode", "manual", "reload", "reset"])
+    if kind == "sensor":
+        name = rng.choice(["ins", "dvl", "depth"])
+        modes = ["silence", "garbage", "stuck"] + ([] if name == "depth" else ["nan"])
+        return kind, bridge.call("sensor", name=name, mode=rng.choice(modes),
+                                 seconds=round(rng.uniform(0.2, 4.0), 2)).get("ok")
+    if kind == "can_silence":
+        return kind, bridge.call("silence", node=rng.randint(1, 6),
+                                 seconds=round(rng.uniform(0.1, 1.5), 2)).get("ok")
+    if kind == "can_fault":
+        return kind, bridge.call("fault", node=rng.randint(1, 6)).get("ok")
+    if kind == "can_health":
+        return kind, bridge.call("health", node=rng.randint(1, 6),
+                                 value=round(rng.uniform(0.2, 1.0), 2)).get("ok")
+    if kind == "bus_off":
+        return kind, bridge.call("bus_off", seconds=round(rng.uniform(0.1, 0.5), 2)).get("ok")
+    if kind == "leak":
+        bridge.call("leak", wet=True)
+        time.sleep(rng.uniform(0.2, 2.0))
+        return kind, bridge.call("leak", wet=False).get("ok")
+    if kind in ("arm", "disarm"):
+        return kind, st.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if kind == "arm" else 0.0)
+    if kind == "mode":
+        return kind, st.command(mav.MAV_CMD_DO_SET_MODE,
+                                mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, rng.choice(_MODES))
+    if kind == "manual":
+        for _ in range(10):
+            st.manual(rng)
+            time.sleep(0.05)
+        return kind, True
+    if kind == "reload":
+        os.kill(daemon.pid, signal.SIGHUP)
+        return kind, True
+    return kind, st.command(31011, 0)
+
+
+def _recording_figures(run_dir: Path) -> dict[str, Any]:
+    from uvd.runtime.replay.lockstep import replay_lockstep
+    from uvd.telemetry.recording import read_messages
+    files = sorted(glob.glob(str(run_dir / "rec" / "*.mcap")))
+    if len(files) != 1:
+        return {"recording_files": len(files)}
+    n = must_be_zero = nonfinite = 0
+    for _, _, m in read_messages(files[0], ["/uvd/cycle"]):
+        n += 1
+        th = np.asarray(m["thrust"], dtype=float)
+        nonfinite += not bool(np.all(np.isfinite(th)))
+        if (m["action"] in ("zero-thrust", "disarm") or m["state"] != "ARMED"
+                and m["action"] != "hold-depth") and bool(np.any(th != 0.0)):
+            must_be_zero += 1
+    rep = replay_lockstep(files[0])
+    return {"recorded_cycles": n, "cycles_with_thrust_where_none_allowed": must_be_zero,
+            "nonfinite_commands": nonfinite,
+            "replay": {"cycles": rep.cycles, "mismatches": rep.mismatches,
+                       "stopped": rep.stopped}}
+
+
+def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
+            progress=print) -> dict[str, Any]:
+    """Run the soak (the module docstring) and return its figures."""
+    from sim_bridge.bridge import BridgeProcess, hil_scheduling, write_local_config
+    from uvd.netports import free_port
+
+    rng = random.Random(seed)
+    run_dir = Path(tempfile.mkdtemp(prefix="uvd-chaos-"))
+    port = free_port("udp", "127.0.0.1")
+    bridge_args, changes = hil_scheduling()
+    changes.update(
+        recording={"enabled": True, "dir": str(run_dir / "rec")},
+        telemetry={"jsonl": {"enabled": False}, "zenoh": {"enabled": False}},
+        mavlink={"enabled": True, "listen": f"127.0.0.1:{port}", "params_file": "",
+                 "operator_timeout_s": 0.0,
+                 "signing_timestamp_file": str(run_dir / "signing.ts")})
+    cfg_path = write_local_config(run_dir, changes=changes)
+    soak_s = minutes * 60.0
+    actions: dict[str, dict[str, int]] = {}
+    checks: list[dict[str, Any]] = []
+    rss: list[int] = []
+    unanswered = 0
+    bridge = daemon = st = None
+    try:
+        bridge = BridgeProcess(cfg_path, duration_s=soak_s + 180.0, hold=True,
+                               extra=bridge_args).start(timeout_s=120.0)
+        log = (run_dir / "daemon.log").open("w")
+        daemon = subprocess.Popen(
+            [sys.executable, "-m", "uvd", "run", "--config", str(cfg_path), "--arm",
+             "--stop-with-parent", str(os.getpid()), "--duration", str(soak_s + 120.0),
+             "--summary-json", str(run_dir / "summary.json")],
+            stdout=subprocess.DEVNULL, stderr=log)
+        st = _Station(port)
+        if st.wait("HEARTBEAT", lambda m: m.get_srcSystem() == 1, 120.0) is None:
+            raise RuntimeError("no heartbeat from the daemon within 120 s")
+        t0 = time.monotonic()
+        next_check = check_every_s
+        while (el := time.monotonic() - t0) < soak_s:
+            if daemon.poll() is not None:
+                raise RuntimeError(f"the daemon ended ({daemon.returncode}) {el:.0f} s in")
+            if (kb := _rss_kb(daemon.pid)) is not None:
+                rss.append(kb)
+            if el >= next_check:
+                next_check = el + check_every_s
+                bridge.call("reset")
+                time.sleep(2.0)
+                reset = st.command(31011, 0)
+                time.sleep(0.3)
+                arm = st.command(st.mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+                armed = st.armed(10.0)
+                unanswered += (reset is None) + (arm is None)
+                checks.append({"t_s": round(el, 1), "reset": reset, "arm": arm,
+                               "armed": armed})
+                progress(f"  {el:5.0f} s of {soak_s:.0f}: recovery check "
+                         f"{'passed' if armed else 'FAILED'} (reset {reset}, arm {arm}); "
+                         f"{sum(a['n'] for a in actions.values())} actions so far")
+                st.command(st.mav.MAV_CMD_DO_SET_MODE, st.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                           1)
+                continue
+            kind, ans = _act(rng, bridge, st, daemon)
+            a = actions.setdefault(kind, {"n": 0, "unanswered": 0})
+            a["n"] += 1
+            if ans is None:
+                a["unanswered"] += 1
+                unanswered += 1
+            time.sleep(rng.uniform(0.5, 3.0))
+        st.close()
+        st = None
+        code = stop_daemon(daemon, 30.0)
+        log.close()
+    finally:
+        if st is not None:
+            st.close()
+        if daemon is not None and daemon.poll() is None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                stop_daemon(daemon)
+        if bridge is not None:
+            bridge.stop(timeout_s=5.0)
+            bridge.kill()
+    summary = json.loads((run_dir / "summary.json").read_text())
+    figures = {"minutes": minutes, "seed": seed,
+               "recovery_checks": {"passed": sum(c["armed"] for c in checks),
+                                   "run": len(checks)},
+               "actions": actions, "station_calls_unanswered": unanswered,
+               "daemon": {"exit_code": code, "cycles": summary["loop"].get("cycles"),
+                          "overruns": summary["loop"].get("overruns"),
+                          "amplifier_recoveries": summary["daemon"].get(
+                              "amplifier_recoveries"),
+                          "rss_mb_first_last": [round(rss[0] / 1024, 1),
+                                                round(rss[-1] / 1024, 1)] if rss else None},
+               **_recording_figures(run_dir)}
+    ok = figures["recovery_checks"]["passed"] == len(checks) and code == 0 \
+        and figures.get("cycles_with_thrust_where_none_allowed") == 0 \
+        and (figures.get("replay") or {}).get("mismatches") == 0
+    if ok:
+        shutil.rmtree(run_dir, ignore_errors=True)
+    else:  # what to read: the daemon's log, its summary and its black box
+        figures["kept"] = str(run_dir)
+    return figures
+
+
+BENCH = Bench(name="chaos", summary="A soak of the daemon under every fault sim-bridge makes, "
+                                    "with an operator: recovery checks, thrust where none is "
+                                    "allowed, replay mismatches",
+              run=lambda a: measure(a.minutes, a.seed, a.check_every),
+              add_arguments=_add)
