@@ -110,6 +110,23 @@ def _late_at(args) -> str | None:
     return None
 
 
+def _schedule(bridge, at: list) -> str | None:
+    """Give ``bridge`` each ``--at S JSON`` command; the first it refuses, named (None:
+    every one taken)."""
+    for seconds, text in at:
+        try:
+            cmd = json.loads(text)
+            if not (isinstance(cmd, dict) and isinstance(cmd.get("op"), str)):
+                raise ValueError('not a JSON object with an "op" (e.g. {"op": "plant_fault", '
+                                 '"drag_scale": 1.5})')
+            ans = bridge.call(cmd.pop("op"), at_s=seconds, **cmd)
+        except (ValueError, KeyError, AttributeError, TypeError) as exc:
+            ans = {"ok": False, "error": f"{exc}"}
+        if not ans.get("ok"):
+            return f"sim-bridge: --at {seconds} {text}: {ans.get('error')}"
+    return None
+
+
 def _run(args) -> int:
     from sim_bridge.control_channel import JsonLines, serve_commands
 
@@ -143,20 +160,10 @@ def _run(args) -> int:
     except (UvdError, ValueError, OSError) as exc:
         emit({"event": "error", "error": str(exc)})
         return 2
-    for seconds, text in args.at:
-        try:
-            cmd = json.loads(text)
-            if not (isinstance(cmd, dict) and isinstance(cmd.get("op"), str)):
-                raise ValueError('not a JSON object with an "op" (e.g. {"op": "plant_fault", '
-                                 '"drag_scale": 1.5})')
-            ans = bridge.call(cmd.pop("op"), at_s=seconds, **cmd)
-        except (ValueError, KeyError, AttributeError, TypeError) as exc:
-            ans = {"ok": False, "error": f"{exc}"}
-        if not ans.get("ok"):
-            msg = f"sim-bridge: --at {seconds} {text}: {ans.get('error')}"
-            print(msg, file=sys.stderr)
-            emit({"event": "error", "error": msg})
-            return 2
+    if (msg := _schedule(bridge, args.at)) is not None:
+        print(msg, file=sys.stderr)
+        emit({"event": "error", "error": msg})
+        return 2
     import gc
     gc.collect()  # the heavy start-up work is done at normal priority…
     gc.freeze()
