@@ -67,7 +67,15 @@ class Station:
         self.target = (hb.get_srcSystem(), hb.get_srcComponent())
         return hb
 
+    def drain(self) -> None:
+        """Read what waits: while a test does other things nobody reads this socket, and once
+        its buffer is full (the vehicle's telemetry fills the default in ~5 s) the kernel
+        drops what comes next — the answer to the next command too."""
+        while self.conn.recv_match(blocking=False) is not None:
+            pass
+
     def command(self, cmd: int, *params: float, timeout: float = 5.0):
+        self.drain()
         p = list(params) + [0.0] * (7 - len(params))
         self.send("command_long", *self.target, cmd, 0, *p)
         return self.wait("COMMAND_ACK", lambda m: m.command == cmd, timeout)
