@@ -88,8 +88,16 @@ class _Station:
                 return m
         return None
 
+    def drain(self) -> None:
+        """Read what waits: between actions nobody reads, and a full socket buffer (the
+        vehicle's telemetry, ~50 datagrams a second) drops what comes next — an answer too
+        (found as 'unanswered' mode commands after the longest pauses)."""
+        while self.conn.recv_match(blocking=False) is not None:
+            pass
+
     def command(self, cmd: int, *params: float, timeout_s: float = 15.0) -> int | None:
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        self.drain()
         with self._lock:
             self.conn.mav.command_long_send(1, 1, cmd, 0, *p)
         ack = self.wait("COMMAND_ACK", lambda m: m.command == cmd, timeout_s)
@@ -102,6 +110,7 @@ class _Station:
                                               rng.randint(-1000, 1000), 0)
 
     def armed(self, timeout_s: float) -> bool:
+        self.drain()  # a heartbeat from before the arm would answer for it
         return self.wait("HEARTBEAT", lambda m: m.get_srcSystem() == 1
                          and bool(m.base_mode & 128), timeout_s) is not None
 
@@ -244,6 +253,8 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
             if ans is None:
                 a["unanswered"] += 1
                 unanswered += 1
+                progress(f"  {el:5.0f} s of {soak_s:.0f}: {kind}: no answer (t_ns "
+                         f"{time.monotonic_ns()})")
             time.sleep(rng.uniform(0.5, 3.0))
         st.close()
         st = None
@@ -271,6 +282,7 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
                                                 round(rss[-1] / 1024, 1)] if rss else None},
                **_recording_figures(run_dir)}
     ok = figures["recovery_checks"]["passed"] == len(checks) and code == 0 \
+        and unanswered == 0 \
         and figures.get("cycles_with_thrust_where_none_allowed") == 0 \
         and (figures.get("replay") or {}).get("mismatches") == 0
     if ok:
