@@ -54,6 +54,9 @@ def _add(p) -> None:
                    help="seed of the drawn actions (default 2)")
     p.add_argument("--check-every", type=positive_float, default=25.0, metavar="S",
                    help="seconds between recovery checks (default 25)")
+    p.add_argument("--config", default=None, metavar="FILE",
+                   help="base configuration: a file or a shipped one's name, e.g. "
+                        "sim-bluerov2 (default: the embedded config/sim.toml)")
 
 
 class _Station:
@@ -127,8 +130,10 @@ def _rss_kb(pid: int) -> int | None:
     return None
 
 
-def _act(rng: random.Random, bridge, st: _Station, daemon) -> tuple[str, Any]:
-    """One drawn action: its kind and what answered it."""
+def _act(rng: random.Random, bridge, st: _Station, daemon, nodes: list[int]
+         ) -> tuple[str, Any]:
+    """One drawn action (``nodes``: the amplifiers' node ids): its kind and what answered
+    it."""
     mav = st.mav
     kind = rng.choice(["sensor", "sensor", "can_silence", "can_fault", "can_health", "bus_off",
                        "leak", "arm", "disarm", "mode", "manual", "reload", "reset"])
@@ -138,12 +143,12 @@ def _act(rng: random.Random, bridge, st: _Station, daemon) -> tuple[str, Any]:
         return kind, bridge.call("sensor", name=name, mode=rng.choice(modes),
                                  seconds=round(rng.uniform(0.2, 4.0), 2)).get("ok")
     if kind == "can_silence":
-        return kind, bridge.call("silence", node=rng.randint(1, 6),
+        return kind, bridge.call("silence", node=rng.choice(nodes),
                                  seconds=round(rng.uniform(0.1, 1.5), 2)).get("ok")
     if kind == "can_fault":
-        return kind, bridge.call("fault", node=rng.randint(1, 6)).get("ok")
+        return kind, bridge.call("fault", node=rng.choice(nodes)).get("ok")
     if kind == "can_health":
-        return kind, bridge.call("health", node=rng.randint(1, 6),
+        return kind, bridge.call("health", node=rng.choice(nodes),
                                  value=round(rng.uniform(0.2, 1.0), 2)).get("ok")
     if kind == "bus_off":
         return kind, bridge.call("bus_off", seconds=round(rng.uniform(0.1, 0.5), 2)).get("ok")
@@ -189,10 +194,12 @@ def _recording_figures(run_dir: Path) -> dict[str, Any]:
 
 
 def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
-            progress=print) -> dict[str, Any]:
-    """Run the soak (the module docstring) and return its figures."""
+            base: str | None = None, progress=print) -> dict[str, Any]:
+    """Run the soak (the module docstring) on configuration ``base`` and return its
+    figures."""
     from sim_bridge.bridge import BridgeProcess, hil_scheduling, write_local_config
     from uvd.netports import free_port
+    from uvd.runtime.config import load_config
 
     rng = random.Random(seed)
     run_dir = Path(tempfile.mkdtemp(prefix="uvd-chaos-"))
@@ -204,7 +211,8 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
         mavlink={"enabled": True, "listen": f"127.0.0.1:{port}", "params_file": "",
                  "operator_timeout_s": 0.0,
                  "signing_timestamp_file": str(run_dir / "signing.ts")})
-    cfg_path = write_local_config(run_dir, changes=changes)
+    cfg_path = write_local_config(run_dir, base=base, changes=changes)
+    nodes = list(load_config(cfg_path).can.amplifiers.node_ids)
     soak_s = minutes * 60.0
     actions: dict[str, dict[str, int]] = {}
     checks: list[dict[str, Any]] = []
@@ -247,7 +255,7 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
                 st.command(st.mav.MAV_CMD_DO_SET_MODE, st.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                            1)
                 continue
-            kind, ans = _act(rng, bridge, st, daemon)
+            kind, ans = _act(rng, bridge, st, daemon, nodes)
             a = actions.setdefault(kind, {"n": 0, "unanswered": 0})
             a["n"] += 1
             if ans is None:
@@ -270,7 +278,7 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
             bridge.stop(timeout_s=5.0)
             bridge.kill()
     summary = json.loads((run_dir / "summary.json").read_text())
-    figures = {"minutes": minutes, "seed": seed,
+    figures = {"minutes": minutes, "seed": seed, "config": base or "sim",
                "recovery_checks": {"passed": sum(c["armed"] for c in checks),
                                    "run": len(checks)},
                "actions": actions, "station_calls_unanswered": unanswered,
@@ -295,5 +303,5 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
 BENCH = Bench(name="chaos", summary="A soak of the daemon under every fault sim-bridge makes, "
                                     "with an operator: recovery checks, thrust where none is "
                                     "allowed, replay mismatches",
-              run=lambda a: measure(a.minutes, a.seed, a.check_every),
+              run=lambda a: measure(a.minutes, a.seed, a.check_every, a.config),
               add_arguments=_add)
