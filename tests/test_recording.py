@@ -885,3 +885,5 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
     t = [t_ns for _, t_ns, _ in read_messages(f, ["/uvd/cycle"])]
     spell = [a for a in t if sinks[0]["t_ns"] <= a <= sinks[1]["t_ns"]]
     assert len(spell) > 20 and max(b - a for a, b in pairwise(t)) < 0.5e9  # none lost
+    summary = write_report(f, tmp_path / "report")  # a reader of the black box is told too
+    assert summary["sinks_told"] == [m["text"] for m in sinks]

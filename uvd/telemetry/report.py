@@ -50,7 +50,8 @@ def _load(path: Path) -> dict[str, list]:
     ``out["unreadable"]``, the messages that were not JSON (a damaged byte);
     ``out["malformed"]``, the records that are JSON but not what their schema promises in a
     field the report draws (:func:`_problem`)."""
-    out: dict[str, list] = {"cycle": [], "estimate": [], "failsafe": [], "start": []}
+    out: dict[str, list] = {"cycle": [], "estimate": [], "failsafe": [], "start": [],
+                            "sink": []}
     topics = {f"/uvd/{k}": k for k in out}
     unreadable: list[str] = []
     malformed: list[str] = []
@@ -71,7 +72,8 @@ def _load(path: Path) -> dict[str, list]:
 def _problem(kind: str, msg: Any) -> str | None:
     """What makes a record unfit for the report (None: nothing): a cycle record as
     :func:`~uvd.telemetry.records.cycle_record_problem` judges it, with its measured propeller
-    speeds a row of numbers; an estimate's, a failsafe event's or the start record's fields
+    speeds a row of numbers; an estimate's, a failsafe event's, a sink's (``sinks_told``: a
+    recording or a link that failed, as the operator was told) or the start record's fields
     the report reads."""
     if kind == "cycle":
         why = cycle_record_problem(msg)
@@ -90,6 +92,9 @@ def _problem(kind: str, msg: Any) -> str | None:
         return f"t_ns {msg.get('t_ns')!r:.40} is not a 64-bit integer"
     if kind == "failsafe" and not all(isinstance(msg.get(k), str) for k in ("kind", "trigger")):
         return "kind or trigger is not a string"
+    if kind == "sink" and not (isinstance(msg.get("text"), str)
+                               and isinstance(msg.get("ok"), bool)):
+        return "text or ok is not what uvd.sink.v1 holds"
     if kind == "estimate" and msg.get("theta") is not None \
             and len(array_shape(msg["theta"]) or ()) != 1:
         return "theta is not a row of numbers"  # of other lengths: not drawn, as before
@@ -212,6 +217,8 @@ def _draw(plt, path: Path, out: Path, data: dict[str, list], params, say) -> dic
                "duration_s": float(t[-1]) if len(t) else 0.0,
                "failsafe_fired": sum(1 for e in data["failsafe"] if e.get("kind") == "fired"),
                "estimates": len(est), "figures": [f for f, _ in figures]}
+    if data["sink"]:  # a recording or a link that failed during the run, as the operator
+        summary["sinks_told"] = [m["text"] for m in data["sink"]]  # was told of it
     if data["unreadable"]:  # uvd report says so on stderr, --quiet or not
         summary["unreadable_messages"] = len(data["unreadable"])
         summary["first_unreadable"] = data["unreadable"][0]
