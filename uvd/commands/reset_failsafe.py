@@ -1,6 +1,6 @@
-"""``uvd reset-failsafe``: reset the latched failsafe triggers of a running daemon whose
-condition no longer holds, over its MAVLink link — from a shell, as a ground station does with
-COMMAND_LONG ``MAV_CMD_USER_2`` (31011, param1 0).
+"""``uvd reset-failsafe``: reset the failsafe triggers of a running daemon whose condition no
+longer holds — the latched ones above all — over its MAVLink link, from a shell, as a ground
+station does with COMMAND_LONG ``MAV_CMD_USER_2`` (31011, param1 0).
 
 A latched trigger (a leak, a drive's fault, a bus-off, a stuck depth sensor, a non-finite
 command, a cycle that raised, diverged parameters) stays active once fired, and at
@@ -8,7 +8,8 @@ hold-depth or above the arming check refuses arming while it does: without a res
 vehicle stays disarmed until the daemon restarts. The cycle applies the reset at its next
 start and records it; each trigger reset is a failsafe event (``reset``, "operator reset")
 told to every station, and a trigger whose condition still holds is refused by name ("leak:
-condition still true: leak detected"). Triggers that clear by themselves are left to do so.
+condition still true: leak detected"). A trigger that clears by itself is cleared at once if
+its condition is gone, and left to clear if not.
 Disarmed, the daemon first brings the amplifiers back — drives that rebooted started again,
 a fault reset to those in FAULT (uvd.runtime.recovery) — and answers once they are (at most
 about 10 s).

@@ -143,10 +143,11 @@ class _Out:
 #: carries it (docs/mavlink.md)
 MAV_CMD_THRUSTER_ETA = 31010
 
-#: COMMAND_LONG that resets the latched failsafe triggers whose condition no longer holds
-#: (param1 0: all of them) — MAV_CMD_USER_2, as no standard command carries it; without it a
-#: latched trigger (a leak, a drive's fault, a bus-off) keeps the vehicle disarmed until the
-#: daemon restarts (docs/mavlink.md)
+#: COMMAND_LONG that resets the failsafe triggers whose condition no longer holds (param1 0:
+#: all of them; disarmed, the amplifiers are brought back first, uvd.runtime.recovery) —
+#: MAV_CMD_USER_2, as no standard command carries it; without it a latched trigger (a leak, a
+#: drive's fault, a bus-off) keeps the vehicle disarmed until the daemon restarts
+#: (docs/mavlink.md)
 MAV_CMD_RESET_FAILSAFE = 31011
 
 #: the farthest a SET_POSITION_TARGET_LOCAL_NED position may lie from the local origin, per
@@ -533,7 +534,7 @@ class MavlinkLink:
         elif m.command == MAV_CMD_RESET_FAILSAFE:
             if m.param1 != 0.0:
                 self._refuse(m, f"failsafe reset refused: param1 {m.param1:g} must be 0 (every "
-                                "latched trigger)")
+                                "trigger that no longer holds)")
                 return
             c = ResetFailsafe(source=source)
         else:
