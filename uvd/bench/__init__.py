@@ -76,6 +76,21 @@ def run(bench: Bench, args: argparse.Namespace) -> dict[str, Any]:
     return figures
 
 
+def stop_hil(daemon, bridge) -> None:
+    """A hardware-in-the-loop benchmark's end, however it ends: the daemon process stopped
+    (:func:`uvd.runtime.process.stop_daemon`) unless it has, then sim-bridge."""
+    import contextlib
+    import subprocess
+
+    from uvd.runtime.process import stop_daemon
+    if daemon is not None and daemon.poll() is None:
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            stop_daemon(daemon)
+    if bridge is not None:
+        bridge.stop(timeout_s=5.0)
+        bridge.kill()
+
+
 def percentiles(samples_s, scale: float = 1e6) -> dict[str, float]:
     """Median, p90, p99, p99.9 and max of timing samples (seconds), scaled (µs by default)."""
     a = np.asarray(samples_s, dtype=float) * scale

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from uvd.bench import Bench
+from uvd.bench import Bench, stop_hil
 from uvd.cliargs import nonnegative_int, positive_float
 from uvd.runtime.process import stop_daemon
 
@@ -271,12 +271,7 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
     finally:
         if st is not None:
             st.close()
-        if daemon is not None and daemon.poll() is None:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                stop_daemon(daemon)
-        if bridge is not None:
-            bridge.stop(timeout_s=5.0)
-            bridge.kill()
+        stop_hil(daemon, bridge)
     summary = json.loads((run_dir / "summary.json").read_text())
     figures = {"minutes": minutes, "seed": seed, "config": base or "sim",
                "recovery_checks": {"passed": sum(c["armed"] for c in checks),

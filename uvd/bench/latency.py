@@ -21,7 +21,6 @@ figure and is far above a SocketCAN adapter's.
 from __future__ import annotations
 
 import bisect
-import contextlib
 import json
 import os
 import shutil
@@ -34,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from uvd.bench import Bench, percentiles
+from uvd.bench import Bench, percentiles, stop_hil
 from uvd.cliargs import nonnegative_int, positive_float
 from uvd.runtime.process import stop_daemon
 
@@ -117,12 +116,7 @@ def measure(duration_s: float = 30.0, *, rate_hz: float | None = None, sched_fif
         done.set()
         th.join(2.0)
     finally:
-        if daemon is not None and daemon.poll() is None:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                stop_daemon(daemon)
-        if bridge is not None:
-            bridge.stop(timeout_s=5.0)
-            bridge.kill()
+        stop_hil(daemon, bridge)
 
     cycles = []
     for line in (run_dir / "telemetry.jsonl").open(encoding="utf-8"):
