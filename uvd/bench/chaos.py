@@ -193,6 +193,19 @@ def _recording_figures(run_dir: Path) -> dict[str, Any]:
                        "stopped": rep.stopped}}
 
 
+def _recovery_check(bridge, st: _Station) -> dict[str, Any]:
+    """sim-bridge's faults cleared (its drives reboot), 2 s, the failsafe reset, arm: the
+    answers, and whether the vehicle reported armed within 10 s (then back to auto)."""
+    bridge.call("reset")
+    time.sleep(2.0)
+    reset = st.command(31011, 0)
+    time.sleep(0.3)
+    arm = st.command(st.mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+    armed = st.armed(10.0)
+    st.command(st.mav.MAV_CMD_DO_SET_MODE, st.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1)
+    return {"reset": reset, "arm": arm, "armed": armed}
+
+
 def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
             base: str | None = None, progress=print) -> dict[str, Any]:
     """Run the soak (the module docstring) on configuration ``base`` and return its
@@ -240,20 +253,12 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
                 rss.append(kb)
             if el >= next_check:
                 next_check = el + check_every_s
-                bridge.call("reset")
-                time.sleep(2.0)
-                reset = st.command(31011, 0)
-                time.sleep(0.3)
-                arm = st.command(st.mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
-                armed = st.armed(10.0)
-                unanswered += (reset is None) + (arm is None)
-                checks.append({"t_s": round(el, 1), "reset": reset, "arm": arm,
-                               "armed": armed})
+                c = _recovery_check(bridge, st)
+                unanswered += (c["reset"] is None) + (c["arm"] is None)
+                checks.append({"t_s": round(el, 1), **c})
                 progress(f"  {el:5.0f} s of {soak_s:.0f}: recovery check "
-                         f"{'passed' if armed else 'FAILED'} (reset {reset}, arm {arm}); "
-                         f"{sum(a['n'] for a in actions.values())} actions so far")
-                st.command(st.mav.MAV_CMD_DO_SET_MODE, st.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                           1)
+                         f"{'passed' if c['armed'] else 'FAILED'} (reset {c['reset']}, arm "
+                         f"{c['arm']}); {sum(a['n'] for a in actions.values())} actions so far")
                 continue
             kind, ans = _act(rng, bridge, st, daemon, nodes)
             a = actions.setdefault(kind, {"n": 0, "unanswered": 0})
