@@ -60,7 +60,10 @@ class AmplifierRecovery:
                 and getattr(self.can, "group", None) is not None):
             return False
         self.held.append((pending, t_ns))
-        if self._task is None:
+        if self._task is None or (self._task.done() and len(self.held) == 1):
+            # none runs, or the last one ended after the reset it outlasted was applied
+            if self._task is not None and not self._done_ns:
+                self._tell(self._task)
             self._done_ns, self._clear = 0, False
             self.recoveries += 1
             self._task = asyncio.get_running_loop().create_task(self.can.recover(),
