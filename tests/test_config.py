@@ -133,6 +133,9 @@ port = "/dev/ttyUSB2"
      "'garbage' is not <protocol>/<address>"),
     ("[telemetry.zenoh]\nconnect = [\"tcp/127.0.0.1:7447\", \"tcp/10.0.0.1\"]",
      "telemetry.zenoh.connect[1]", "has no port 1-65535"),
+    # a port to send to is 1-65535; one to bind may be 0, the kernel's pick (test below)
+    ("[mavlink]\nconnect = [\"127.0.0.1:0\"]", "mavlink.connect[0]", "and a port 1-65535"),
+    ("[mavlink]\nlisten = \"127.0.0.1:70000\"", "mavlink.listen", "and a port 0-65535"),
     # found by probing (session 24): check-config said OK to a loop too slow for the drives'
     # command timeout, which would fault every drive between two commands
     ("[loop]\nrate_hz = 1", "can.amplifiers.command_timeout_ms",
@@ -352,3 +355,11 @@ def test_aid_resume_goes_on_from_the_last_runs_file(tmp_path, monkeypatch, capsy
     _, errs = errors_of(tmp_path, text)
     assert str(work / "aid.toml") in errs["estimation.save_path"]
     assert "move it away to start afresh" in errs["estimation.save_path"]
+
+
+def test_the_mavlink_link_may_listen_on_a_port_the_kernel_picks(tmp_path):
+    """``[mavlink] listen`` port 0: bound to one the kernel picks (the connect stations answer
+    where its datagrams come from; tests bind so, never racing another process for a port)."""
+    cfg = load_config(write(tmp_path, MINIMAL + '[mavlink]\nenabled = true\nlisten = '
+                                                '"127.0.0.1:0"\n'))
+    assert cfg.mavlink.listen == "127.0.0.1:0"

@@ -476,16 +476,19 @@ class TelemetrySection:
     zenoh: ZenohSection = section(ZenohSection)
 
 
-def check_udp_address(addr: str, key: str) -> list[tuple[str, str]]:
-    """``[(key, why)]`` if ``addr`` is not ADDRESS:PORT (numeric IP, port 1..65535), else []."""
+def check_udp_address(addr: str, key: str, *, any_port: bool = False
+                      ) -> list[tuple[str, str]]:
+    """``[(key, why)]`` if ``addr`` is not ADDRESS:PORT (numeric IP, port 1..65535; 0 too with
+    ``any_port``: a port to bind, which the kernel then picks), else []."""
     host, sep, port = addr.rpartition(":")
+    lowest = 0 if any_port else 1
     try:
-        ok = bool(sep) and 0 < int(port) < 65536
+        ok = bool(sep) and lowest <= int(port) < 65536
         ipaddress.ip_address(host.strip("[]"))
     except ValueError:
         ok = False
     return [] if ok else [(key, f"{addr!r} is not ADDRESS:PORT (a numeric IPv4/IPv6 address "
-                                "and a port 1-65535)")]
+                                f"and a port {lowest}-65535)")]
 
 
 @dataclass(frozen=True)
@@ -496,7 +499,9 @@ class MavlinkSection:
     enabled: bool = setting(False, doc="run the MAVLink link (QGroundControl, MAVProxy)")
     listen: str = setting("127.0.0.1:14551",
                           doc="UDP ADDRESS:PORT the link listens on; ground stations send "
-                              "here and get telemetry back at their own address; empty: none")
+                              "here and get telemetry back at their own address; port 0: one "
+                              "the kernel picks (then only the connect stations, which answer "
+                              "where the datagrams come from, reach it); empty: none")
     connect: tuple[str, ...] = setting(
         (), doc="UDP ADDRESS:PORT the link also sends to (a station that listens, e.g. "
                 "QGroundControl on 127.0.0.1:14550)")
@@ -554,7 +559,7 @@ class MavlinkSection:
             "directory)")
 
     def _check(self, ctx: schema.BuildContext) -> list[tuple[str, str]]:
-        out = check_udp_address(self.listen, "listen") if self.listen else []
+        out = check_udp_address(self.listen, "listen", any_port=True) if self.listen else []
         for i, a in enumerate(self.connect):
             out += check_udp_address(a, f"connect[{i}]")
         return out

@@ -291,8 +291,9 @@ class MavlinkLink:
                 raise OSError(f"[mavlink] serial {self.cfg.serial}: {exc}") from exc
         self._thread = threading.Thread(target=self._run, name="uvd-mavlink", daemon=True)
         self._thread.start()
-        log.info("MAVLink link on udp %s (system %d, signing %s)", self.cfg.listen,
-                 self.cfg.system_id, "on" if self.signing else "off")
+        log.info("MAVLink link on udp %s:%d (system %d, signing %s)",
+                 self.cfg.listen.rpartition(":")[0], self.port, self.cfg.system_id,
+                 "on" if self.signing else "off")  # the port bound: listen's may be 0
 
     @property
     def port(self) -> int:
