@@ -65,15 +65,20 @@ def running_bridge(run_dir: Path, changes: dict | None = None, duration_s: float
         proc.kill()
 
 
-def station_link(run_dir: Path) -> tuple[int, dict]:
-    """A free loopback UDP port and the configuration changes that put the daemon's MAVLink
-    link on it, for a station of the test's own (no parameter file, no operator-loss
-    failsafe, the signing time stamp in ``run_dir``)."""
-    from uvd.netports import free_port
-    port = free_port("udp", "127.0.0.1")
-    return port, {"mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
-                              "params_file": "", "operator_timeout_s": 0.0,
-                              "signing_timestamp_file": str(run_dir / "signing.ts")}}
+def station_link(run_dir: Path) -> dict:
+    """The configuration changes that put the daemon's MAVLink link on a loopback UDP port the
+    kernel picks when it binds (port 0: no other test or process can take it between a pick
+    and the bind — a picked port was once found taken under load), for a station of the
+    test's own (no parameter file, no operator-loss failsafe, the signing time stamp in
+    ``run_dir``). :func:`link_port` tells the port once the daemon runs."""
+    return {"mavlink": {"enabled": True, "listen": "127.0.0.1:0", "params_file": "",
+                        "operator_timeout_s": 0.0,
+                        "signing_timestamp_file": str(run_dir / "signing.ts")}}
+
+
+def link_port(daemon) -> int:
+    """The UDP port a running daemon's MAVLink link is bound to."""
+    return daemon.app.links["mavlink"].port
 
 
 async def until(pred, timeout_s: float, what: str, task=None) -> None:

@@ -8,7 +8,7 @@ import asyncio
 
 import pytest
 
-from tests.hil_daemon import run_scenario, running_bridge, station_link
+from tests.hil_daemon import link_port, run_scenario, running_bridge, station_link
 from uvd.cli import main
 from uvd.netports import free_port
 from uvd.runtime.config import load_config
@@ -17,14 +17,14 @@ pytestmark = pytest.mark.timeout(240)
 
 
 def test_uvd_eta_sets_and_clears_a_thruster_on_a_running_daemon(tmp_path, capsys):
-    port, changes = station_link(tmp_path)
     seen = {}
-    with running_bridge(tmp_path, changes) as (cfg_path, _):
+    with running_bridge(tmp_path, station_link(tmp_path)) as (cfg_path, _):
         cfg = load_config(cfg_path)
 
         async def scenario(d):
             def cli(*argv):
-                return main(["eta", *argv, "--config", str(cfg_path), "--timeout", "10"])
+                return main(["eta", *argv, "--config", str(cfg_path), "--to",
+                             f"127.0.0.1:{link_port(d)}", "--timeout", "10"])
             seen["kill"] = await asyncio.to_thread(cli, "4", "0")
             await asyncio.sleep(0.3)
             seen["eta_killed"] = d.supervisor.data.thruster_eta.tolist()

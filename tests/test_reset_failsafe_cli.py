@@ -10,7 +10,14 @@ import time
 
 import pytest
 
-from tests.hil_daemon import ListSink, run_scenario, running_bridge, station_link, until
+from tests.hil_daemon import (
+    ListSink,
+    link_port,
+    run_scenario,
+    running_bridge,
+    station_link,
+    until,
+)
 from tests.mavlink_gcs import Station, mav
 from uvd.cli import main
 from uvd.netports import free_port
@@ -27,38 +34,39 @@ def test_a_latched_leak_is_reset_from_the_shell_once_dry_and_the_vehicle_arms_ag
     "failsafe reset: leak …") and a ground station arms the vehicle again. Before (session
     26) no station and no command could reset a latched trigger: the vehicle stayed disarmed
     until the daemon restarted."""
-    port, changes = station_link(tmp_path)
     seen = {}
-    with running_bridge(tmp_path, changes) as (cfg_path, proc):
+    with running_bridge(tmp_path, station_link(tmp_path)) as (cfg_path, proc):
         cfg = load_config(cfg_path)
 
-        def reset():
-            return main(["reset-failsafe", "--config", str(cfg_path), "--timeout", "10"])
+        def reset(port):
+            return main(["reset-failsafe", "--config", str(cfg_path), "--to",
+                         f"127.0.0.1:{port}", "--timeout", "10"])
 
         def fired(d, kind):
             return [e for e in d.supervisor.failsafe_events() if e["type"] == "failsafe"
                     and e["kind"] == kind and e["trigger"] == "leak"]
 
         async def scenario(d):
+            port = link_port(d)
             station = Station(port)
             try:
                 await asyncio.to_thread(station.heartbeat)
                 assert (await asyncio.to_thread(proc.call, "leak", wet=True))["ok"]
                 await until(lambda: fired(d, "fired"), 5.0, "leak")
                 await until(lambda: d.supervisor.state is State.STANDBY, 2.0, "disarmed")
-                seen["wet"] = await asyncio.to_thread(reset)
+                seen["wet"] = await asyncio.to_thread(reset, port)
                 seen["arm_wet"] = (await asyncio.to_thread(station.arm)).result
                 assert (await asyncio.to_thread(proc.call, "leak", wet=False))["ok"]
                 await asyncio.sleep(1.0)  # dry for 10 polls: still latched
                 seen["latched_dry"] = "leak" in {a.name for a in d.supervisor.decision.active}
-                seen["dry"] = await asyncio.to_thread(reset)
+                seen["dry"] = await asyncio.to_thread(reset, port)
                 seen["reset_events"] = fired(d, "reset")
                 seen["arm_dry"] = (await asyncio.to_thread(station.arm)).result
                 t_end = time.monotonic() + 5.0
                 while d.supervisor.state is not State.ARMED and time.monotonic() < t_end:
                     await asyncio.sleep(0.05)
                 seen["state"] = d.supervisor.state
-                seen["nothing_latched"] = await asyncio.to_thread(reset)
+                seen["nothing_latched"] = await asyncio.to_thread(reset, port)
             finally:
                 station.close()
 
@@ -93,12 +101,12 @@ def test_a_reset_brings_faulted_or_rebooted_amplifiers_back_and_the_vehicle_arms
     the vehicle. Before (session 26) nothing sent a fault reset or started a rebooted drive
     after the daemon's start: the reset was refused ("condition still true: node 5:
     drive_fault") for as long as the daemon ran — found by a chaos soak."""
-    port, changes = station_link(tmp_path)
     seen = {}
-    with running_bridge(tmp_path, changes) as (cfg_path, proc):
+    with running_bridge(tmp_path, station_link(tmp_path)) as (cfg_path, proc):
         cfg = load_config(cfg_path)
 
         async def scenario(d):
+            port = link_port(d)
             station = Station(port)
             try:
                 await asyncio.to_thread(station.heartbeat)
@@ -116,7 +124,8 @@ def test_a_reset_brings_faulted_or_rebooted_amplifiers_back_and_the_vehicle_arms
                 seen["faults_before"] = d.supervisor.decision.causes
                 t0 = time.monotonic()
                 seen["reset"] = await asyncio.to_thread(
-                    main, ["reset-failsafe", "--config", str(cfg_path)])
+                    main, ["reset-failsafe", "--config", str(cfg_path), "--to",
+                           f"127.0.0.1:{port}"])
                 seen["reset_s"] = time.monotonic() - t0
                 seen["arm"] = (await asyncio.to_thread(station.arm)).result
                 t_end = time.monotonic() + 5.0
