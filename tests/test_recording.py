@@ -836,12 +836,11 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
     import resource
 
     from tests.mavlink_gcs import Station
-    from uvd.netports import free_port
     from uvd.telemetry.sink import TELL_HOLD_S
 
-    port = free_port("udp", "127.0.0.1")
+    # the link on a port the kernel picks, which its log line names
     changes = {"recording": {"enabled": True, "dir": str(tmp_path / "rec")},
-               "mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
+               "mavlink": {"enabled": True, "listen": "127.0.0.1:0",
                            "params_file": str(tmp_path / "params.toml"),
                            "signing_timestamp_file": str(tmp_path / "signing.ts")}}
     log_lines: list[str] = []
@@ -852,6 +851,11 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
                                 cwd=Path(__file__).parents[1])
         reader = threading.Thread(target=lambda: log_lines.extend(proc.stderr), daemon=True)
         reader.start()
+        deadline = time.monotonic() + 60.0
+        while not (bound := [ln for ln in log_lines if "MAVLink link on udp" in ln]):
+            assert proc.poll() is None and time.monotonic() < deadline, "".join(log_lines)
+            time.sleep(0.05)
+        port = int(re.search(r"MAVLink link on udp [\d.]+:(\d+)", bound[0]).group(1))
         station = Station(port)
         try:
             station.heartbeat(timeout=60.0)
