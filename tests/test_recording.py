@@ -891,3 +891,8 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
     assert len(spell) > 20 and max(b - a for a, b in pairwise(t)) < 0.5e9  # none lost
     summary = write_report(f, tmp_path / "report")  # a reader of the black box is told too
     assert summary["sinks_told"] == [m["text"] for m in sinks]
+    from mcap.reader import make_reader  # and any MCAP reader: its channel and schema
+    with open(f, "rb") as fh:
+        got = [(sch.name, ch.message_encoding, json.loads(msg.data)["ok"]) for sch, ch, msg in
+               make_reader(fh).iter_messages(topics=["/uvd/sink"])]
+    assert got == [("uvd.sink.v1", "json", False), ("uvd.sink.v1", "json", True)]

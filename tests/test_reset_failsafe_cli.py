@@ -67,6 +67,12 @@ def test_a_latched_leak_is_reset_from_the_shell_once_dry_and_the_vehicle_arms_ag
                     await asyncio.sleep(0.05)
                 seen["state"] = d.supervisor.state
                 seen["nothing_latched"] = await asyncio.to_thread(reset, port)
+                # a station written from the specification sends the command itself (31011,
+                # param1 0: accepted; anything else refused)
+                seen["station_reset"] = (await asyncio.to_thread(station.command, 31011,
+                                                                 0)).result
+                seen["station_bad"] = (await asyncio.to_thread(station.command, 31011,
+                                                               2)).result
             finally:
                 station.close()
 
@@ -88,6 +94,8 @@ def test_a_latched_leak_is_reset_from_the_shell_once_dry_and_the_vehicle_arms_ag
     assert [e["reason"] for e in seen["reset_events"]] == ["operator reset"]
     assert seen["arm_dry"] == mav.MAV_RESULT_ACCEPTED and seen["state"] is State.ARMED
     assert seen["nothing_latched"] == 0  # none latched: nothing to refuse
+    assert (seen["station_reset"], seen["station_bad"]) == (mav.MAV_RESULT_ACCEPTED,
+                                                            mav.MAV_RESULT_DENIED)
 
 
 @pytest.mark.parametrize("how", ["silence", "reboot"])

@@ -28,10 +28,10 @@ SCHEMAS = Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
 class Watcher:
     """The fault-detection side: its own session, the schema files, nothing of the daemon."""
 
-    def __init__(self, endpoint: str) -> None:
+    def __init__(self, endpoint: str, listen: bool = False) -> None:
         conf = zenoh.Config()
         conf.insert_json5("mode", '"peer"')
-        conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        conf.insert_json5(f"{'listen' if listen else 'connect'}/endpoints", json.dumps([endpoint]))
         conf.insert_json5("scouting/multicast/enabled", "false")
         self.session = zenoh.open(conf)
         self.samples: dict[str, list[dict]] = defaultdict(list)
@@ -171,3 +171,34 @@ def test_a_sink_told_failing_is_an_event_that_fits_the_schema():
     body = _event("sink", rec)
     assert body["kind"] == "sink" and body["text"] == rec["text"]
     jsonschema.validate({"seq": 0, "t_ns": 5, "vehicle": "rov", **body}, schema("uvd.event.v1"))
+
+
+def test_a_second_session_is_told_of_a_recording_that_cannot_open(tmp_path):
+    """The daemon's black box cannot open (its folder would lie under a file): a fault-detection
+    client's own session (the schema files, nothing of the daemon) gets an ``event`` of kind
+    ``sink`` that fits ``uvd.event.v1`` and names the sink and why."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    (tmp_path / "a-file").write_text("not a folder\n")
+    # the client listens and the daemon connects at its start: an event is not kept for a
+    # session that connects later
+    changes = {"telemetry": {"zenoh": {"enabled": True, "listen": [], "connect": [endpoint],
+                                       "key": "rov8"}},
+               "recording": {"enabled": True, "dir": str(tmp_path / "a-file" / "rec")}}
+    w = Watcher(endpoint, listen=True)
+    try:
+        with running_bridge(tmp_path, changes) as (cfg_path, _):
+            async def scenario(d):
+                end = time.monotonic() + 15.0  # the watcher connects on its own schedule
+                while not any(m["kind"] == "sink" for m in w.samples["uvd/rov8/event"]) \
+                        and time.monotonic() < end:
+                    await asyncio.sleep(0.1)
+
+            run_scenario(load_config(cfg_path), scenario)
+    finally:
+        w.callbacks.close(w.session)
+    assert not w.invalid, w.invalid[:5]
+    told = [m for m in w.samples["uvd/rov8/event"] if m["kind"] == "sink"]
+    assert len(told) == 1, told
+    assert told[0]["text"].startswith("telemetry sink mcap did not open: open: ")
+    assert told[0]["record"]["ok"] is False and "a-file" in told[0]["record"]["problem"]
