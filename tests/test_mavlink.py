@@ -22,11 +22,10 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from tests.hil_daemon import ListSink, running_bridge, until
+from tests.hil_daemon import ListSink, link_port, running_bridge, until
 from tests.mavlink_gcs import Station
 from uvd.bench.mavlink_fuzz import fuzz_datagrams
 from uvd.links.mavlink.signing import SigningState, now_timestamp
-from uvd.netports import free_port
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.loop import drop_realtime
@@ -37,8 +36,9 @@ OPERATOR_TIMEOUT_S = 2.0
 
 
 def run_daemon(cfg_path: Path, scenario, timeout_s: float = 120.0):
-    """The daemon until STANDBY, then ``scenario(daemon, sink)`` in a worker thread (the
-    station's blocking calls), then an orderly stop."""
+    """The daemon until STANDBY and its MAVLink link bound, then ``scenario(daemon, sink)`` in
+    a worker thread (the station's blocking calls; the link's port is ``link_port(daemon)``),
+    then an orderly stop."""
     sink = ListSink()
     out = {}
 
@@ -47,6 +47,9 @@ def run_daemon(cfg_path: Path, scenario, timeout_s: float = 120.0):
         task = asyncio.get_running_loop().create_task(d.run())
         try:
             await until(lambda: d.supervisor.state.value == "STANDBY", 60.0, "standby", task)
+            # the link opens in the telemetry hub's pump, which starts after STANDBY: its port
+            # (the kernel's pick, listen port 0) is known once it is bound
+            await until(lambda: link_port(d) != 0, 30.0, "the MAVLink link bound", task)
             out["result"] = await asyncio.to_thread(scenario, d, sink)
         finally:
             d.stop("test done")
@@ -70,12 +73,13 @@ def mode_of(hb) -> tuple[int, int]:
 @pytest.fixture(scope="module")
 def bridge(tmp_path_factory):
     run = tmp_path_factory.mktemp("mavlink")
-    port = free_port("udp", "::1")
     key = hashlib.sha256(b"uvd test key").digest()
     key_file = run / "mavlink.key"
     key_file.write_bytes(key)
     key_file.chmod(0o600)
-    changes = {"mavlink": {"enabled": True, "listen": f"127.0.0.1:{port}",
+    # port 0: the kernel picks the link's port when the daemon binds it (a port picked here
+    # could be taken by another process before that); each scenario reads link_port(d)
+    changes = {"mavlink": {"enabled": True, "listen": "127.0.0.1:0",
                            "params_file": str(run / "params.toml"),
                            "signing_timestamp_file": str(run / "signing.ts"),
                            "operator_timeout_s": OPERATOR_TIMEOUT_S,
@@ -83,13 +87,12 @@ def bridge(tmp_path_factory):
                # a stale source fires at 0.25 s: under a loaded machine the sensors may gap
                "failsafe": {"ins_stale_s": 0.5, "depth_stale_s": 1.0}}
     with running_bridge(run, changes) as (cfg_path, _proc):
-        yield {"run": run, "port": port, "cfg": cfg_path, "key": key, "key_file": key_file}
+        yield {"run": run, "cfg": cfg_path, "key": key, "key_file": key_file}
 
 
 def test_a_station_and_mavproxy_see_arm_switch_tune_and_drive_the_submarine(bridge):
-    port = bridge["port"]
-
     def scenario(d, sink):
+        port = link_port(d)  # this daemon's: MAVProxy below is started on it, the daemon up
         s = Station(port)
         try:
             s.heartbeat()
@@ -253,10 +256,9 @@ def test_signing_refuses_unsigned_wrong_and_forged_and_params_survive_a_restart(
     from uvd.io.toml import dump_toml
     signed_cfg = cfg.with_name("signed.toml")
     signed_cfg.write_text(dump_toml(data))
-    port = bridge["port"]
 
     def set_kp(d, sink):  # unsigned: the daemon keeps the parameter in its params_file
-        s = Station(port)
+        s = Station(link_port(d))
         try:
             s.heartbeat()
             assert s.param_set("CTL_KP_1", 370.0) == 370.0
@@ -265,7 +267,8 @@ def test_signing_refuses_unsigned_wrong_and_forged_and_params_survive_a_restart(
 
     run_daemon(cfg, set_kp)  # this test's own "before the restart" (it runs alone too)
 
-    def scenario(d, sink):
+    def scenario(d, sink):  # the restarted daemon: bound to a port of its own
+        port = link_port(d)
         s = Station(port, signing_key=bridge["key"])
         plain = Station(port)  # unsigned
         wrong = Station(port, signing_key=hashlib.sha256(b"not the key").digest())
