@@ -826,13 +826,25 @@ def _statustexts(station, until_text: str, timeout_s: float) -> list[tuple[int, 
     raise AssertionError(f"no STATUSTEXT {until_text!r} within {timeout_s} s: {texts}")
 
 
+def _logging_bits(station) -> tuple[bool, bool, bool]:
+    """The next SYS_STATUS's MAV_SYS_STATUS_LOGGING bit: (present, enabled, healthy)."""
+    from tests.mavlink_gcs import mav
+    m = station.wait("SYS_STATUS", timeout=5.0)
+    bit = mav.MAV_SYS_STATUS_LOGGING
+    return tuple(bool(x & bit) for x in (m.onboard_control_sensors_present,
+                                         m.onboard_control_sensors_enabled,
+                                         m.onboard_control_sensors_health))
+
+
 def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_again(tmp_path):
     """A real ``uvd run`` over sim-bridge, recording, with a ground station on MAVLink: its
     files may not grow (``prlimit`` RLIMIT_FSIZE 1 byte on the daemon's pid, EFBIG in the
     kernel as a full disk fails) and then may again. The station is told both (STATUSTEXT,
     WARNING then NOTICE), the black box holds both ``/uvd/sink`` records and every cycle of
     the spell, the daemon flies on and ends cleanly. Before (session 26) the operator was told
-    nothing: only the daemon's log said so."""
+    nothing: only the daemon's log said so. A second station that connects after the WARNING
+    learns it from SYS_STATUS: logging present and enabled, not healthy; healthy again after
+    the NOTICE (before session 27 SYS_STATUS had no logging bit)."""
     import resource
 
     from tests.mavlink_gcs import Station
@@ -859,16 +871,24 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
         station = Station(port)
         try:
             station.heartbeat(timeout=60.0)
+            logging_before = _logging_bits(station)
             soft, hard = resource.prlimit(proc.pid, resource.RLIMIT_FSIZE)
             time.sleep(1.0)  # a second of cycles on disk before
             resource.prlimit(proc.pid, resource.RLIMIT_FSIZE, (1, hard))
             t_full = time.monotonic()
             told = _statustexts(station, "telemetry sink mcap cannot write", 10.0)
             failing = told[-1]
-            time.sleep(2.0)  # two seconds of cycles that wait for the disk
+            late = Station(port)  # a station that connects after the telling
+            try:
+                late.heartbeat(timeout=10.0)
+                logging_late = _logging_bits(late)
+            finally:
+                late.close()
+            time.sleep(1.0)  # two seconds of cycles that wait for the disk, with the above
             resource.prlimit(proc.pid, resource.RLIMIT_FSIZE, (soft, hard))
             told = _statustexts(station, "telemetry sink mcap writes again", TELL_HOLD_S + 10)
             again = told[-1]
+            logging_again = _logging_bits(station)  # sent after the NOTICE
             assert proc.poll() is None, "the daemon ended"
         finally:
             station.close()
@@ -879,6 +899,9 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
     assert code == 0, "".join(log_lines)[-3000:]
     assert failing[0] == 4 and "File too large" in failing[1]  # MAV_SEVERITY_WARNING
     assert again[0] == 5 and "records dropped" in again[1]  # MAV_SEVERITY_NOTICE
+    assert logging_before == (True, True, True), logging_before
+    assert logging_late == (True, True, False), logging_late  # present, enabled, unhealthy
+    assert logging_again == (True, True, True), logging_again
     assert "Traceback" not in "".join(log_lines)
     (f,) = (tmp_path / "rec").glob("*.mcap")
     sinks = [m for _, _, m in read_messages(f, ["/uvd/sink"])]

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import subprocess
+import sys
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -135,6 +137,7 @@ def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path)
     rate = (len(state) - 1) / span_s
     assert span_s > 3.0 and 9.0 <= rate <= 11.0, (span_s, rate)
     assert len(health) >= 2.0 * span_s - 2 and len(est) >= 6
+    assert all(m["sinks_failing"] == [] for m in health)  # nothing records: none fails
     assert any(m["kind"] == "lifecycle" and "ARMED" in m["text"] for m in events)
     assert est[-1]["masses"] is not None and len(est[-1]["masses"]) == 6
     assert info["alive"] == ["uvd/rov7/alive"] and info["alive_after"] == []
@@ -202,3 +205,48 @@ def test_a_second_session_is_told_of_a_recording_that_cannot_open(tmp_path):
     assert len(told) == 1, told
     assert told[0]["text"].startswith("telemetry sink mcap did not open: open: ")
     assert told[0]["record"]["ok"] is False and "a-file" in told[0]["record"]["problem"]
+
+
+def test_a_session_that_connects_after_the_event_learns_from_health_the_recording_fails(
+        tmp_path):
+    """An event is not kept for a session that connects later, so ``health`` carries what the
+    last ``sink`` event of each sink said: a client that connects after the black box failed
+    to open (its folder would lie under a file) gets no event but every health sample names
+    ``mcap`` in ``sinks_failing`` (the schema files, nothing of the daemon)."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    (tmp_path / "a-file").write_text("not a folder\n")
+    changes = {"telemetry": {"zenoh": {"enabled": True, "listen": [endpoint], "key": "rov9",
+                                       "health_hz": 5.0}},
+               "recording": {"enabled": True, "dir": str(tmp_path / "a-file" / "rec")}}
+    box: dict = {}
+    with running_bridge(tmp_path, changes) as (cfg_path, _):
+        async def scenario(d):
+            end = time.monotonic() + 10.0  # the failed open is told before errors count it
+            while d.app.hub.stats()["mcap"]["errors"] < 1 and time.monotonic() < end:
+                await asyncio.sleep(0.05)
+            await asyncio.sleep(0.5)  # the event is out, and gone, before the client comes
+            box["w"] = w = await asyncio.to_thread(Watcher, endpoint)
+            end = time.monotonic() + 15.0  # the watcher connects on its own schedule
+            while len(w.samples["uvd/rov9/health"]) < 5 and time.monotonic() < end:
+                await asyncio.sleep(0.1)
+            # and uvd watch, a client process of its own that comes later still
+            box["watch"] = await asyncio.to_thread(
+                subprocess.run, [sys.executable, "-m", "uvd", "watch", "--connect", endpoint,
+                                 "--seconds", "5"], capture_output=True, text=True, timeout=60)
+
+        try:
+            run_scenario(load_config(cfg_path), scenario)
+        finally:
+            if "w" in box:
+                box["w"].callbacks.close(box["w"].session)
+    w = box["w"]
+    assert not w.invalid, w.invalid[:5]
+    health = w.samples["uvd/rov9/health"]
+    assert len(health) >= 5, health
+    assert all(m["sinks_failing"] == ["mcap"] for m in health), [m["sinks_failing"]
+                                                                for m in health]
+    assert not [m for m in w.samples["uvd/rov9/event"] if m["kind"] == "sink"]
+    watch = box["watch"]
+    assert watch.returncode == 0, watch.stderr
+    assert "rov9 telemetry sinks failing: mcap\n" in watch.stdout, watch.stdout

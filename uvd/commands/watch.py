@@ -2,9 +2,10 @@
 
 Watches vehicles over Zenoh (docs/zenoh.md) as any client would — through the documented key
 space and JSON payloads only, nothing of the daemon's classes: one line a second per vehicle
-(pose, mode, action, thrust), every event as it comes, and the vehicles coming and going
-(liveliness). An unreadable sample is told at the first and every 1000th of its key for each
-kind, as uvd-fdc tells them, and all are counted at the end.
+(pose, mode, action, thrust), every event as it comes, the telemetry sinks that fail as
+``health`` says (so a watcher that comes after the event is told too) and the vehicles coming
+and going (liveliness). An unreadable sample is told at the first and every 1000th of its key
+for each kind, as uvd-fdc tells them, and all are counted at the end.
 """
 
 from __future__ import annotations
@@ -67,6 +68,21 @@ def _run(args) -> int:
         except (ValueError, KeyError, TypeError) as exc:
             out(unreadable.drop(str(sample.key_expr), "unreadable event", f" ({exc})"))
 
+    failing: dict[str, list[str]] = {}  # each vehicle's sinks_failing, as last printed
+
+    def on_health(sample) -> None:
+        try:
+            m = json.loads(sample.payload.to_bytes())
+            key = str(sample.key_expr).split("/")[1]
+            now = m.get("sinks_failing", [])
+            if not (isinstance(now, list) and all(isinstance(x, str) for x in now)):
+                raise TypeError("sinks_failing is not a list of names")
+            if now != failing.get(key, []):
+                out(f"{key:>12} telemetry sinks failing: {', '.join(now) or 'none'}")
+            failing[key] = now
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            out(unreadable.drop(str(sample.key_expr), "unreadable health sample", f" ({exc})"))
+
     def on_alive(sample) -> None:
         what = "up" if sample.kind == zenoh.SampleKind.PUT else "gone"
         out(f"{str(sample.key_expr).split('/')[1]:>12} {what}")
@@ -81,6 +97,7 @@ def _run(args) -> int:
         v = args.vehicle
         session.declare_subscriber(f"uvd/{v}/state", callbacks(on_state))
         session.declare_subscriber(f"uvd/{v}/event", callbacks(on_event))
+        session.declare_subscriber(f"uvd/{v}/health", callbacks(on_health))
         session.liveliness().declare_subscriber(f"uvd/{v}/alive", callbacks(on_alive),
                                                 history=True)
         via = reached_through(args.connect, args.zenoh_config)

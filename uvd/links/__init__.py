@@ -110,7 +110,9 @@ def _mavlink(ctx: LinkContext) -> Face | None:
         thresholds={"ins": f.ins_stale_s, "dvl": f.dvl_stale_s, "depth": f.depth_stale_s,
                     "feedback": f.feedback_stale_s},
         max_thrust_n=ctx.vehicle.max_thrust_n, controller=c.control.controller,
-        step1_s=c.control.step1_duration_s, loop_cpus=c.loop.cpu_affinity))
+        step1_s=c.control.step1_duration_s, loop_cpus=c.loop.cpu_affinity,
+        recorders=[name for name, on in (("mcap", c.recording.enabled),
+                                         ("jsonl", c.telemetry.jsonl.enabled)) if on]))
 
 
 def _params_file(ctx: LinkContext) -> Face | None:

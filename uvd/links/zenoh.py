@@ -10,8 +10,8 @@ hub's bounded drop-oldest queue stands between them). Key space (docs/zenoh.md):
                                     (``uvd.zestimate.v1``): θ̂, the six masses and drags, g, b,
                                     λ_min(M̂), frozen flag and reason, steps, age
 ``uvd/<vehicle>/health``            lifecycle, failsafe action and triggers, source ages,
-                                    amplifier faults, telemetry drops (``uvd.health.v1``), at
-                                    ``health_hz``
+                                    amplifier faults, telemetry drops, the sinks last told
+                                    failing (``uvd.health.v1``), at ``health_hz``
 ``uvd/<vehicle>/event``             failsafe transitions, lifecycle, commands, reloads, the
                                     start (``uvd.event.v1``)
 ``uvd/<vehicle>/params``            queryable: the configuration's vehicle and gains and the
@@ -142,6 +142,7 @@ class ZenohSink:
         self.health_period_ns = publication_period_ns(health_hz)
         self.configuration = dict(configuration or {})
         self.dropped = dropped
+        self.failing_sinks: set[str] = set()  # as the "sink" records told (in health)
         self._worker = DaemonWorker("uvd-sink-zenoh")
         self._session = None
         self._pubs: dict[str, Any] = {}
@@ -291,7 +292,8 @@ class ZenohSink:
                     self._next_health = next_publication_ns(t_ns, self.health_period_ns)
                     key = f"{self.prefix}/health"
                     items.append((key, ENCODINGS["health"], self._stamp(
-                        key, t_ns, _health(r, self.dropped() if self.dropped else 0))))
+                        key, t_ns, _health(r, self.dropped() if self.dropped else 0,
+                                           self.failing_sinks))))
             elif kind == "estimate":
                 body = estimate_payload(r)
                 with self._lock:
@@ -299,6 +301,9 @@ class ZenohSink:
                 key = f"{self.prefix}/estimate/{body['estimator']}"
                 items.append((key, ENCODINGS["estimate"], self._stamp(key, t_ns, body)))
             elif kind in ("failsafe", "lifecycle", "command", "reload", "sink", "start"):
+                if kind == "sink":
+                    (self.failing_sinks.discard if r["ok"] else self.failing_sinks.add)(
+                        r["sink"])
                 key = f"{self.prefix}/event"
                 items.append((key, ENCODINGS["event"], self._stamp(key, t_ns, _event(kind, r))))
         if items:
@@ -332,7 +337,7 @@ def state_payload(r: Mapping[str, Any]) -> dict[str, Any]:
     return to_jsonable(out)
 
 
-def _health(r: Mapping[str, Any], dropped: int) -> dict[str, Any]:
+def _health(r: Mapping[str, Any], dropped: int, failing_sinks=()) -> dict[str, Any]:
     ages = r.get("ages") or (None,) * 4
     inputs = r.get("inputs") or {}
     act = inputs.get("actuators") or {}
@@ -342,7 +347,8 @@ def _health(r: Mapping[str, Any], dropped: int) -> dict[str, Any]:
         "triggers": list(r.get("triggers") or ()),
         "ages_s": dict(zip(("ins", "dvl", "depth", "feedback"), ages, strict=True)),
         "amplifier_faults": list(act.get("faults") or ()),
-        "overrun_streak": inputs.get("overrun_streak"), "telemetry_dropped": int(dropped)})
+        "overrun_streak": inputs.get("overrun_streak"), "telemetry_dropped": int(dropped),
+        "sinks_failing": sorted(failing_sinks)})
 
 
 def estimate_payload(r: Mapping[str, Any]) -> dict[str, Any]:

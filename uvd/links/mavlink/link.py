@@ -92,8 +92,9 @@ _SEVERITY = {"emergency": 0, "alert": 1, "critical": 2, "error": 3, "warning": 4
 TEXT_BURST = 10
 _STATE_STATUS = {"BOOT": 1, "STANDBY": 3, "ARMED": 4, "FAILSAFE": 5, "SHUTDOWN": 7}
 #: SYS_STATUS sensor bits: INS (gyro, accelerometer, magnetometer), DVL (as optical flow:
-#: velocity over ground), depth (absolute pressure), amplifiers (motor outputs)
-_INS_BITS, _DVL_BIT, _DEPTH_BIT, _MOTOR_BIT = 0x7, 0x40, 0x8, 0x8000
+#: velocity over ground), depth (absolute pressure), amplifiers (motor outputs), the recording
+#: (MAV_SYS_STATUS_LOGGING)
+_INS_BITS, _DVL_BIT, _DEPTH_BIT, _MOTOR_BIT, _LOGGING_BIT = 0x7, 0x40, 0x8, 0x8000, 0x1000000
 _RHO_G = 1000.0 * 9.80665  # fresh water, for SCALED_PRESSURE from depth (docs/mavlink.md)
 _SIGNED_ONLY = {"COMMAND_LONG", "COMMAND_INT", "SET_MODE", "MANUAL_CONTROL",
                 "SET_POSITION_TARGET_LOCAL_NED", "PARAM_SET", "HEARTBEAT"}
@@ -190,6 +191,11 @@ class MavlinkLink:
         ``[control] controller``; ``step1_s`` its step-1 length (custom mode).
     loop_cpus : sequence of int
         ``[loop] cpu_affinity``: the receiver process keeps off these CPUs when it can.
+    recorders : sequence of str
+        The sinks that record the run (``mcap``, ``jsonl``): SYS_STATUS reports logging
+        present and enabled when there is one, and unhealthy while the operator was last told
+        (a ``"sink"`` record) that one of them cannot write — what a station that connects
+        after the STATUSTEXT learns.
     """
 
     name = "mavlink"
@@ -197,7 +203,7 @@ class MavlinkLink:
     def __init__(self, cfg: MavlinkSection, commands: CommandQueue, config: Callable[[], Any],
                  *, thresholds: Mapping[str, float], max_thrust_n: Sequence[float],
                  controller: str = "pdc", step1_s: float = 0.0,
-                 loop_cpus: Sequence[int] = ()) -> None:
+                 loop_cpus: Sequence[int] = (), recorders: Sequence[str] = ()) -> None:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink
         self.mavlink = mavlink
         self.cfg = cfg
@@ -208,6 +214,8 @@ class MavlinkLink:
         self.controller = controller
         self.step1_s = float(step1_s)
         self.loop_cpus = tuple(loop_cpus)
+        self.recorders = frozenset(recorders)
+        self.failing_sinks: set[str] = set()  # as the "sink" records told
         self._out = _Out()
         self.tx = mavlink.MAVLink(self._out, cfg.system_id, cfg.component_id, use_native=False)
         self.tx.WIRE_PROTOCOL_VERSION = "2.0"
@@ -315,6 +323,7 @@ class MavlinkLink:
             elif kind == "lifecycle":
                 self._text(("notice", f"{r['from']} -> {r['to']}: {r['cause']}"), event=True)
             elif kind == "sink":  # a recording that fails, or works again
+                (self.failing_sinks.discard if r["ok"] else self.failing_sinks.add)(r["sink"])
                 self._text(("notice" if r["ok"] else "warning", str(r["text"])), event=True)
             elif kind == "command" and not r.get("ok"):
                 self._text(("warning", f"{r['command']} refused: {r['reason']}"))
@@ -779,6 +788,10 @@ class MavlinkLink:
                              strict=True):
             if a <= lim:
                 health |= b
+        if self.recorders:
+            present |= _LOGGING_BIT
+            if not self.recorders & self.failing_sinks:
+                health |= _LOGGING_BIT
         drops = self.counters["bad_datagrams"] + self.counters["bad_messages"]
         self._send(self.tx.sys_status_encode(present, present, health, 0, 65535, -1, -1, 0,
                                              min(drops, 65535), 0, 0, 0, 0))
