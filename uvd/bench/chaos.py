@@ -32,7 +32,6 @@ import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -41,6 +40,7 @@ import numpy as np
 
 from uvd.bench import Bench, stop_hil
 from uvd.cliargs import nonnegative_int, positive_float
+from uvd.commands._station import GroundStation
 from uvd.runtime.process import stop_daemon
 
 #: MAVLink custom mode numbers the operator picks from (docs/mavlink.md)
@@ -59,68 +59,24 @@ def _add(p) -> None:
                         "sim-bluerov2 (default: the embedded config/sim.toml)")
 
 
-class _Station:
-    """A ground station: HEARTBEAT at 2 Hz from its own thread; each command waits, bounded,
-    for its COMMAND_ACK (None: none came)."""
+def _ack(st: GroundStation, cmd: int, *params: float) -> int | None:
+    """COMMAND_LONG ``cmd``'s MAV_RESULT, or None: no COMMAND_ACK within 15 s."""
+    ack = st.command(cmd, *params, timeout_s=15.0)
+    return None if ack is None else int(ack.result)
 
-    def __init__(self, port: int) -> None:
-        os.environ.setdefault("MAVLINK20", "1")
-        from pymavlink import mavutil
-        self.mav = mavutil.mavlink
-        self.conn = mavutil.mavlink_connection(
-            f"udpout:127.0.0.1:{port}", source_system=255,
-            source_component=self.mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")
-        self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._beat, daemon=True)
-        self._thread.start()
 
-    def _beat(self) -> None:
-        while not self._stop.is_set():
-            with self._lock:
-                self.conn.mav.heartbeat_send(self.mav.MAV_TYPE_GCS,
-                                             self.mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-            self._stop.wait(0.5)
+def _manual(st: GroundStation, rng: random.Random) -> None:
+    """One MANUAL_CONTROL of random sticks (x, y, r: ±1000; z: 0–1000), buttons none."""
+    st.send("manual_control", st.target[0], rng.randint(-1000, 1000),
+            rng.randint(-1000, 1000), rng.randint(0, 1000), rng.randint(-1000, 1000), 0)
 
-    def wait(self, kind: str, cond, timeout_s: float):
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            m = self.conn.recv_match(type=kind, blocking=True, timeout=0.1)
-            if m is not None and cond(m):
-                return m
-        return None
 
-    def drain(self) -> None:
-        """Read what waits: between actions nobody reads, and a full socket buffer (the
-        vehicle's telemetry, ~50 datagrams a second) drops what comes next — an answer too
-        (found as 'unanswered' mode commands after the longest pauses)."""
-        while self.conn.recv_match(blocking=False) is not None:
-            pass
-
-    def command(self, cmd: int, *params: float, timeout_s: float = 15.0) -> int | None:
-        p = [float(x) for x in params] + [0.0] * (7 - len(params))
-        self.drain()
-        with self._lock:
-            self.conn.mav.command_long_send(1, 1, cmd, 0, *p)
-        ack = self.wait("COMMAND_ACK", lambda m: m.command == cmd, timeout_s)
-        return None if ack is None else int(ack.result)
-
-    def manual(self, rng: random.Random) -> None:
-        with self._lock:
-            self.conn.mav.manual_control_send(1, rng.randint(-1000, 1000),
-                                              rng.randint(-1000, 1000), rng.randint(0, 1000),
-                                              rng.randint(-1000, 1000), 0)
-
-    def armed(self, timeout_s: float) -> bool:
-        self.drain()  # a heartbeat from before the arm would answer for it
-        return self.wait("HEARTBEAT", lambda m: m.get_srcSystem() == 1
-                         and bool(m.base_mode & 128), timeout_s) is not None
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
-        self.conn.close()
+def _armed(st: GroundStation, timeout_s: float) -> bool:
+    """Whether the vehicle's HEARTBEAT says armed within ``timeout_s``."""
+    st.drain()  # a heartbeat from before the arm would answer for it
+    return st.wait("HEARTBEAT", lambda m: m.get_srcSystem() == st.target[0]
+                   and bool(m.base_mode & st.mav.MAV_MODE_FLAG_SAFETY_ARMED),
+                   timeout_s) is not None
 
 
 def _rss_kb(pid: int) -> int | None:
@@ -130,7 +86,7 @@ def _rss_kb(pid: int) -> int | None:
     return None
 
 
-def _act(rng: random.Random, bridge, st: _Station, daemon, nodes: list[int]
+def _act(rng: random.Random, bridge, st: GroundStation, daemon, nodes: list[int]
          ) -> tuple[str, Any]:
     """One drawn action (``nodes``: the amplifiers' node ids): its kind and what answered
     it."""
@@ -157,19 +113,19 @@ def _act(rng: random.Random, bridge, st: _Station, daemon, nodes: list[int]
         time.sleep(rng.uniform(0.2, 2.0))
         return kind, bridge.call("leak", wet=False).get("ok")
     if kind in ("arm", "disarm"):
-        return kind, st.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if kind == "arm" else 0.0)
+        return kind, _ack(st, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if kind == "arm" else 0.0)
     if kind == "mode":
-        return kind, st.command(mav.MAV_CMD_DO_SET_MODE,
-                                mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, rng.choice(_MODES))
+        return kind, _ack(st, mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                          rng.choice(_MODES))
     if kind == "manual":
         for _ in range(10):
-            st.manual(rng)
+            _manual(st, rng)
             time.sleep(0.05)
         return kind, True
     if kind == "reload":
         os.kill(daemon.pid, signal.SIGHUP)
         return kind, True
-    return kind, st.command(31011, 0)
+    return kind, _ack(st, 31011, 0)
 
 
 def _recording_figures(run_dir: Path) -> dict[str, Any]:
@@ -193,16 +149,16 @@ def _recording_figures(run_dir: Path) -> dict[str, Any]:
                        "stopped": rep.stopped}}
 
 
-def _recovery_check(bridge, st: _Station) -> dict[str, Any]:
+def _recovery_check(bridge, st: GroundStation) -> dict[str, Any]:
     """sim-bridge's faults cleared (its drives reboot), 2 s, the failsafe reset, arm: the
     answers, and whether the vehicle reported armed within 10 s (then back to auto)."""
     bridge.call("reset")
     time.sleep(2.0)
-    reset = st.command(31011, 0)
+    reset = _ack(st, 31011, 0)
     time.sleep(0.3)
-    arm = st.command(st.mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
-    armed = st.armed(10.0)
-    st.command(st.mav.MAV_CMD_DO_SET_MODE, st.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1)
+    arm = _ack(st, st.mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+    armed = _armed(st, 10.0)
+    _ack(st, st.mav.MAV_CMD_DO_SET_MODE, st.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1)
     return {"reset": reset, "arm": arm, "armed": armed}
 
 
@@ -241,8 +197,8 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
              "--stop-with-parent", str(os.getpid()), "--duration", str(soak_s + 120.0),
              "--summary-json", str(run_dir / "summary.json")],
             stdout=subprocess.DEVNULL, stderr=log)
-        st = _Station(port)
-        if st.wait("HEARTBEAT", lambda m: m.get_srcSystem() == 1, 120.0) is None:
+        st = GroundStation("127.0.0.1", port)
+        if st.vehicle(120.0) is None:
             raise RuntimeError("no heartbeat from the daemon within 120 s")
         t0 = time.monotonic()
         next_check = check_every_s
