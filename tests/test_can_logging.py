@@ -225,3 +225,59 @@ def predicted_peaks(stats: dict, rig) -> list[float]:
         bank.step(targets[k] * tpp, (t[k + 1] - t[k]) / 1e9)
         np.maximum(peak, np.abs(bank.omega), out=peak)
     return peak.tolist()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(180)
+def test_the_operator_is_told_when_the_can_log_cannot_write(tmp_path):
+    """The daemon over sim-bridge with ``[can.log]`` on a disk that takes nothing (the file is
+    /dev/full: every write fails, ENOSPC): the operator is told as of a sink though the CAN
+    log is none — a ``"sink"`` record ``canlog`` (the STATUSTEXT's and the Zenoh event's
+    text), and a station's SYS_STATUS says logging present, enabled and unhealthy. Before
+    (session 27) only the daemon's log said so. The vehicle flies on."""
+    import asyncio
+
+    import jsonschema
+
+    from tests.hil_daemon import ListSink, link_port, run_scenario, running_bridge, station_link
+    from tests.mavlink_gcs import Station, mav
+    from uvd.runtime.config import load_config
+    from uvd.telemetry.recording import schema
+
+    if not os.access("/dev/full", os.W_OK):
+        pytest.skip("no /dev/full on this machine")
+    full = tmp_path / "bus.log"
+    full.symlink_to("/dev/full")
+    changes = {"can": {"log": {"path": str(full)}}, **station_link(tmp_path)}
+    sink = ListSink()
+    out: dict = {}
+    with running_bridge(tmp_path, changes) as (cfg_path, _):
+        async def scenario(d):
+            end = time.monotonic() + 30.0
+            while not [r for r in sink.records if r.get("type") == "sink"] \
+                    and time.monotonic() < end:
+                await asyncio.sleep(0.05)
+
+            def station() -> tuple[bool, bool, bool]:
+                s = Station(link_port(d))
+                try:
+                    s.heartbeat(timeout=10.0)
+                    m = s.wait("SYS_STATUS", timeout=5.0)
+                finally:
+                    s.close()
+                bit = mav.MAV_SYS_STATUS_LOGGING
+                return tuple(bool(x & bit) for x in (m.onboard_control_sensors_present,
+                                                     m.onboard_control_sensors_enabled,
+                                                     m.onboard_control_sensors_health))
+            out["logging"] = await asyncio.to_thread(station)
+            out["state"] = d.supervisor.state.value
+
+        run_scenario(load_config(cfg_path), scenario, sink=sink, timeout_s=120.0)
+    told = [r for r in sink.records if r.get("type") == "sink"]
+    assert len(told) == 1 and told[0]["sink"] == "canlog" and told[0]["ok"] is False, told
+    assert told[0]["text"].startswith("CAN log cannot write: ") \
+        and "No space left on device" in told[0]["text"], told[0]["text"]
+    assert told[0]["write_errors"] >= 1
+    jsonschema.validate(told[0], schema("uvd.sink.v1"))
+    assert out["logging"] == (True, True, False), out  # present, enabled, unhealthy
+    assert out["state"] == "ARMED"  # the vehicle flies on

@@ -181,6 +181,50 @@ def test_a_sink_failing_by_turns_is_told_at_most_once_a_hold_and_its_last_state_
     assert "writes again after" in flips[-1]["text"] and stats["flaky"]["errors"] >= 20
 
 
+def test_a_watched_recording_is_told_as_a_sink_and_a_broken_watch_never_raises():
+    """A recording the hub does not feed (the daemon's CAN log) watched through its
+    ``trouble()``: failing then writing again is told as a sink's is, under its own label
+    and counts; a watch whose ``trouble()`` and ``counts()`` raise is told as unknown, with no
+    counts, and the hub runs on and closes."""
+    good = ListSink("good")
+    state = {"problem": None}
+
+    def broken():
+        raise RuntimeError("recorder gone")
+
+    async def main():
+        hub = TelemetryHub([good], flush_interval_s=0.005, tell_hold_s=0.1)
+        hub.watch("canlog", lambda: state["problem"],
+                  lambda: {"records_dropped": 7, "write_errors": 7}, label="CAN log")
+        hub.watch("odd", broken, broken)
+        pump = asyncio.create_task(hub.run())
+        await asyncio.sleep(0.05)
+        state["problem"] = "/data/bus.log: OSError: [Errno 28] No space left on device"
+        await asyncio.sleep(0.2)
+        state["problem"] = None
+        await asyncio.sleep(0.2)
+        stats = await hub.aclose(1.0)
+        await asyncio.wait_for(pump, 2.0)
+        return stats
+
+    stats = run(main())
+    told = [r for r in good.records if r.get("type") == "sink"]
+    can_log = [r for r in told if r["sink"] == "canlog"]
+    assert [r["ok"] for r in can_log] == [False, True], can_log
+    assert can_log[0]["text"] == ("CAN log cannot write: /data/bus.log: OSError: [Errno 28] "
+                                  "No space left on device")
+    assert can_log[1]["text"].startswith("CAN log writes again after ") \
+        and "(7 records dropped, 0 bytes given up so far)" in can_log[1]["text"]
+    assert (can_log[0]["records_dropped"], can_log[0]["write_errors"],
+            can_log[0]["bytes_given_up"]) == (7, 7, 0)
+    odd = [r for r in told if r["sink"] == "odd"]
+    assert len(odd) == 1 and odd[0]["ok"] is False, odd
+    assert odd[0]["text"] == ("telemetry sink odd cannot write: its state unknown: "
+                              "RuntimeError: recorder gone")
+    assert (odd[0]["records_dropped"], odd[0]["write_errors"]) == (0, 0)
+    assert stats["good"]["errors"] == 0
+
+
 def test_closing_is_bounded_even_if_a_sink_hangs():
     hang, ok = ListSink("hang", hang_close=True), ListSink("ok")
 

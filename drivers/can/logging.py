@@ -12,7 +12,8 @@ the queue fills, frames are dropped from the *log* (counted in ``dropped``), nev
 the bus. A write that fails (a full disk) loses its frame from the log (counted in
 ``write_errors``); failures are told in spells, as the daemon's record files tell theirs
 (:class:`uvd.spells.FailureSpells`): a spell's first failure and its end (the
-first ten spells), and every :data:`LOG_EVERY` th failure throughout.
+first ten spells), and every :data:`LOG_EVERY` th failure throughout; :meth:`CanRecorder.trouble`
+says why while writes fail (the daemon tells the operator).
 """
 
 from __future__ import annotations
@@ -65,6 +66,7 @@ class CanRecorder:
         self.dropped = 0
         self._spells = FailureSpells(LOG_EVERY)
         self._failing_since = 0.0
+        self._last_error = ""
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             if self.max_bytes > 0:
@@ -103,6 +105,11 @@ class CanRecorder:
         """Frames whose write to the file failed (lost from the log)."""
         return self._spells.total
 
+    def trouble(self) -> str | None:
+        """Why the last write failed while writes fail (None: the last one was written; the
+        daemon tells the operator, :meth:`uvd.telemetry.sink.TelemetryHub.watch`)."""
+        return self._last_error if self._spells.in_a_row else None
+
     @property
     def rollovers(self) -> int:
         """How many times the file was rotated."""
@@ -116,6 +123,7 @@ class CanRecorder:
             try:
                 self._writer.on_message_received(msg)
             except Exception as exc:  # noqa: BLE001 - a log problem must not stop the bus
+                self._last_error = f"{self.path}: {type(exc).__name__}: {exc}"
                 if not self._failing_since:
                     self._failing_since = time.monotonic()
                 if self._spells.failed():

@@ -112,7 +112,8 @@ def _mavlink(ctx: LinkContext) -> Face | None:
         max_thrust_n=ctx.vehicle.max_thrust_n, controller=c.control.controller,
         step1_s=c.control.step1_duration_s, loop_cpus=c.loop.cpu_affinity,
         recorders=[name for name, on in (("mcap", c.recording.enabled),
-                                         ("jsonl", c.telemetry.jsonl.enabled)) if on]))
+                                         ("jsonl", c.telemetry.jsonl.enabled),
+                                         ("canlog", c.can.log.path is not None)) if on]))
 
 
 def _params_file(ctx: LinkContext) -> Face | None:

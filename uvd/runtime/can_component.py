@@ -212,6 +212,21 @@ class CanComponent:
         return f"amplifiers started again ({started}), fault reset sent" if started else \
             "fault reset sent to the amplifiers"
 
+    def log_trouble(self) -> str | None:
+        """Why the CAN log (``[can.log]``) cannot write now; None: it writes, or there is
+        none (yet)."""
+        r = self.recorder
+        return None if r is None else r.trouble()
+
+    def log_counts(self) -> dict[str, int]:
+        """The CAN log's frames lost (its queue full or their write failed) and failed
+        writes, as the operator is told them."""
+        r = self.recorder
+        if r is None:
+            return {"records_dropped": 0, "write_errors": 0, "bytes_given_up": 0}
+        return {"records_dropped": r.dropped + r.write_errors, "write_errors": r.write_errors,
+                "bytes_given_up": 0}
+
     # -- its part of the cycle (a hardware interface, uvd.runtime.interfaces) --
 
     def read(self, t_ns: int, armed: bool, parts) -> None:

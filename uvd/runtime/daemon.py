@@ -73,6 +73,9 @@ class Daemon:
         self.recorder, self.mavlink = self.app.links.get("mcap"), self.app.links.get("mavlink")
         if self.recorder is not None:
             hw.tap(self.recorder)
+        if config.can.log.path is not None:  # told as the sinks are, though no sink
+            self.app.hub.watch("canlog", hw.can.log_trouble, hw.can.log_counts,
+                               label="CAN log")
         if hw.instruments.sync:
             hw.wake_on_ins(self.app.loop.wake)
         self.app.set_amplifier_hooks(zero=hw.can.zero, disable=hw.can.disable)

@@ -10,7 +10,8 @@ sink; a sink that fails is counted, logged (a spell's first failed batch and its
 first ten spells, every 1000th failed batch) and retried with the next batch, never
 propagated. The operator is told when a sink starts failing — it did not open, its writes
 fail, or its own ``trouble()`` names a failing or hung disk — and when it works again: a
-``"sink"`` record to every sink (:meth:`TelemetryHub._tell`).
+``"sink"`` record to every sink (:meth:`TelemetryHub._tell`). So is a recording that is no
+sink of the hub (the CAN log, :meth:`TelemetryHub.watch`).
 
 Records must not be mutated after they are published (the core returns new arrays every cycle,
 so this holds by construction).
@@ -27,7 +28,7 @@ import logging
 import math
 import time
 from collections import deque
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -120,6 +121,26 @@ class SinkStats:
         return dict(self.__dict__)
 
 
+class _Telling:
+    """What the operator was last told of one sink or watched recording."""
+
+    def __init__(self) -> None:
+        self.told: str | None = None  # the problem the operator was last told of (None: ok)
+        self.told_at = -math.inf  # monotonic s
+        self.failing_since = 0.0
+
+
+@dataclass
+class _Watched:
+    """A recording the hub tells the operator about but does not feed (:meth:`watch`)."""
+
+    name: str
+    label: str
+    trouble: Callable[[], str | None]
+    counts: Callable[[], Mapping[str, int]]
+    telling: _Telling
+
+
 class _Lane:
     def __init__(self, sink: TelemetrySink, capacity: int, every_n: int = 1,
                  types: Iterable[str] | None = None) -> None:
@@ -134,9 +155,7 @@ class _Lane:
         self.wake = asyncio.Event()
         self.lock = asyncio.Lock()  # one drain at a time keeps batches in order
         self.failing = FailureSpells(_LOG_EVERY)  # failed batches (a full disk, a lost peer)
-        self.told: str | None = None  # the problem the operator was last told of (None: ok)
-        self.told_at = -math.inf  # monotonic s
-        self.failing_since = 0.0
+        self.telling = _Telling()
 
 
 class TelemetryHub:
@@ -168,6 +187,7 @@ class TelemetryHub:
         self.batch = int(batch)
         self._count = 0
         self._lanes: list[_Lane] = [_Lane(s, self.queue_size, every_n) for s in sinks]
+        self._watched: list[_Watched] = []
         self._closing = False
 
     def add_sink(self, sink: TelemetrySink, every_n: int = 1,
@@ -178,6 +198,16 @@ class TelemetryHub:
         whose ``"type"`` is one of them (e.g. ``("estimate",)``).
         """
         self._lanes.append(_Lane(sink, self.queue_size, every_n, types))
+
+    def watch(self, name: str, trouble: Callable[[], str | None],
+              counts: Callable[[], Mapping[str, int]], label: str | None = None) -> None:
+        """Tell the operator of a recording that is no sink of the hub (the CAN log) as of a
+        sink: ``trouble()`` — called from the event loop every ``flush_interval_s``, cheap,
+        never raising — names why it cannot write (None: it writes); ``counts()`` gives its
+        ``records_dropped``, ``write_errors`` and ``bytes_given_up``; ``label`` starts the
+        text (default "telemetry sink NAME"). Before :meth:`run` starts."""
+        self._watched.append(_Watched(name, label or f"telemetry sink {name}", trouble, counts,
+                                      _Telling()))
 
     def set_every_n(self, name: str, every_n: int) -> None:
         """Change a sink's decimation at run time (reload)."""
@@ -231,39 +261,69 @@ class TelemetryHub:
 
     def _tell(self, lane: _Lane) -> None:
         """Tell the operator when ``lane``'s sink starts failing (it did not open, its writes
-        fail, its disk fails or hangs: the sink's own ``trouble()``) and when it works again:
-        a ``"sink"`` record to every sink — on Zenoh an ``event``, over MAVLink a STATUSTEXT,
-        in the black box ``/uvd/sink``. At most one change every ``tell_hold_s`` a sink;
-        what is told follows what is, so the last change is told when the hold ends."""
+        fail, its disk fails or hangs: the sink's own ``trouble()``) and when it works again
+        (:meth:`_tell_change`)."""
         if lane.open_failed or lane.failing.in_a_row:
             problem = lane.stats.last_error
         else:
             own = getattr(lane.sink, "trouble", None)
             problem = own() if callable(own) else None
-        now = time.monotonic()
-        if problem and not lane.failing_since:
-            lane.failing_since = now
-        if (problem is None) == (lane.told is None) or now - lane.told_at < self.tell_hold_s:
-            return
         name = lane.sink.name
-        st = self.stats()[name]
-        own_stats = st.get("sink") or {}
-        counts = {"records_dropped": int(st["dropped"]) + int(own_stats.get("stalled_dropped",
-                                                                             0)),
-                  "write_errors": int(own_stats.get("write_errors", 0)) + lane.failing.total,
-                  "bytes_given_up": int(own_stats.get("lost_bytes", 0))}
+
+        def counts() -> dict[str, int]:
+            st = self.stats()[name]
+            own_stats = st.get("sink") or {}
+            return {"records_dropped": int(st["dropped"])
+                    + int(own_stats.get("stalled_dropped", 0)),
+                    "write_errors": int(own_stats.get("write_errors", 0)) + lane.failing.total,
+                    "bytes_given_up": int(own_stats.get("lost_bytes", 0))}
+        self._tell_change(lane.telling, name, f"telemetry sink {name}", problem, counts,
+                          "did not open" if lane.open_failed else "cannot write")
+
+    def _tell_watched(self) -> None:
+        for w in self._watched:
+            try:
+                problem = w.trouble()
+            except Exception as exc:  # noqa: BLE001 - a broken watch is told, never raised
+                problem = f"its state unknown: {type(exc).__name__}: {exc}"
+
+            def counts(w: _Watched = w) -> dict[str, int]:
+                try:
+                    return {k: int(v) for k, v in w.counts().items()}
+                except Exception:  # noqa: BLE001 - unknown counts are none, never raised
+                    return {}
+            self._tell_change(w.telling, w.name, w.label, problem, counts, "cannot write")
+
+    def _tell_change(self, t: _Telling, name: str, label: str, problem: str | None,
+                     counts: Callable[[], dict[str, int]], failing_as: str) -> None:
+        """A ``"sink"`` record to every sink when ``problem`` (None: it works) changes what the
+        operator was last told of ``name`` — on Zenoh an ``event``, over MAVLink a
+        STATUSTEXT, in the black box ``/uvd/sink``. At most one change every ``tell_hold_s``
+        a sink; what is told follows what is, so the last change is told when the hold
+        ends."""
+        now = time.monotonic()
+        if problem and not t.failing_since:
+            t.failing_since = now
+        if (problem is None) == (t.told is None) or now - t.told_at < self.tell_hold_s:
+            return
+        got = counts()
+        n = {k: int(got.get(k, 0)) for k in ("records_dropped", "write_errors", "bytes_given_up")}
         if problem:
-            text = f"telemetry sink {name} " + (
-                f"did not open: {problem}" if lane.open_failed else f"cannot write: {problem}")
+            text = f"{label} {failing_as}: {problem}"
         else:
-            text = (f"telemetry sink {name} writes again after "
-                    f"{now - lane.failing_since:.1f} s ({counts['records_dropped']} records "
-                    f"dropped, {counts['bytes_given_up']} bytes given up so far)")
-            lane.failing_since = 0.0
-        lane.told, lane.told_at = problem, now
+            text = (f"{label} writes again after {now - t.failing_since:.1f} s "
+                    f"({n['records_dropped']} records dropped, {n['bytes_given_up']} bytes "
+                    "given up so far)")
+            t.failing_since = 0.0
+        t.told, t.told_at = problem, now
         self.publish({"type": "sink", "t_ns": time.monotonic_ns(), "sink": name,
-                      "ok": problem is None, "problem": problem or "", "text": text,
-                      **counts}, always=True)
+                      "ok": problem is None, "problem": problem or "", "text": text, **n},
+                     always=True)
+
+    async def _watch(self) -> None:
+        while not self._closing:
+            self._tell_watched()
+            await asyncio.sleep(self.flush_interval_s)
 
     async def _drain(self, lane: _Lane) -> None:
         async with lane.lock:
@@ -297,6 +357,8 @@ class TelemetryHub:
         async with asyncio.TaskGroup() as tg:
             for lane in self._lanes:
                 tg.create_task(self._pump(lane), name=f"telemetry:{lane.sink.name}")
+            if self._watched:
+                tg.create_task(self._watch(), name="telemetry:watched")
 
     async def aclose(self, timeout_s: float = 0.5) -> dict[str, dict[str, Any]]:
         """Stop the pumps, write what is queued, flush and close every sink.

@@ -192,7 +192,8 @@ class MavlinkLink:
     loop_cpus : sequence of int
         ``[loop] cpu_affinity``: the receiver process keeps off these CPUs when it can.
     recorders : sequence of str
-        The sinks that record the run (``mcap``, ``jsonl``): SYS_STATUS reports logging
+        What records the run (the sinks ``mcap``, ``jsonl``; the CAN log ``canlog``, told
+        as a sink is: :meth:`~uvd.telemetry.sink.TelemetryHub.watch`): SYS_STATUS reports logging
         present and enabled when there is one, and unhealthy while the operator was last told
         (a ``"sink"`` record) that one of them cannot write — what a station that connects
         after the STATUSTEXT learns.
