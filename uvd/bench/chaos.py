@@ -6,18 +6,22 @@ is also the ground station (pymavlink over UDP loopback, the daemon's MAVLink li
 ``--minutes``, every 0.5–3 s one action drawn with ``--seed``: an instrument's fault
 (silence, garbage, NaN, stuck; 0.2–4 s), one drive's CAN silence (0.1–1.5 s: it misses its
 commands and faults), a drive's EMCY, a thruster's health, a bus-off (0.1–0.5 s), a leak
-(0.2–2 s), the operator's arm, disarm, mode, manual control or failsafe reset, a SIGHUP
-reload. Every ``--check-every`` seconds a **recovery check**: sim-bridge's faults cleared
-(its ``reset``: the drives reboot, the instruments are well again), 2 s, the operator's
-failsafe reset (MAVLink 31011), then arm; it passes when the vehicle reports armed within
-10 s.
+(0.2–2 s), a full disk under the daemon (0.2–3 s: ``prlimit`` RLIMIT_FSIZE 1 byte on its
+pid, every write to a file fails as on a full disk), the operator's arm, disarm, mode, manual
+control or failsafe reset, a SIGHUP reload. Every ``--check-every`` seconds a **recovery
+check**: sim-bridge's faults cleared (its ``reset``: the drives reboot, the instruments are
+well again), 2 s, the operator's failsafe reset (MAVLink 31011), then arm; it passes when the
+vehicle reports armed within 10 s.
 
 Figures: recovery checks passed of those run; the actions by kind; station calls that got no
 answer; the daemon's exit code, its cycles and overruns and its memory (RSS) at the first and
 last sample; and from its recording: cycles with thrust where there must be none (a
 zero-thrust or disarm action, or disarmed — hold-depth's vertical thrust is allowed),
-non-finite commands, and ``uvd replay --lockstep``'s mismatches over the whole run (every
-command, reset and recovery included).
+non-finite commands, ``uvd replay --lockstep``'s mismatches over the whole run (every
+command, reset and recovery included), the recording's failures told to the operator
+(``/uvd/sink``: failing and working again, by sink) and, after the soak and one telling hold,
+whether the last told of each was "writes again" and the station's SYS_STATUS says logging
+healthy.
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ import glob
 import json
 import os
 import random
+import re
+import resource
 import shutil
 import signal
 import subprocess
@@ -92,7 +98,8 @@ def _act(rng: random.Random, bridge, st: GroundStation, daemon, nodes: list[int]
     it."""
     mav = st.mav
     kind = rng.choice(["sensor", "sensor", "can_silence", "can_fault", "can_health", "bus_off",
-                       "leak", "arm", "disarm", "mode", "manual", "reload", "reset"])
+                       "leak", "disk_full", "arm", "disarm", "mode", "manual", "reload",
+                       "reset"])
     if kind == "sensor":
         name = rng.choice(["ins", "dvl", "depth"])
         modes = ["silence", "garbage", "stuck"] + ([] if name == "depth" else ["nan"])
@@ -112,6 +119,14 @@ def _act(rng: random.Random, bridge, st: GroundStation, daemon, nodes: list[int]
         bridge.call("leak", wet=True)
         time.sleep(rng.uniform(0.2, 2.0))
         return kind, bridge.call("leak", wet=False).get("ok")
+    if kind == "disk_full":
+        soft, hard = resource.prlimit(daemon.pid, resource.RLIMIT_FSIZE)
+        resource.prlimit(daemon.pid, resource.RLIMIT_FSIZE, (1, hard))
+        try:
+            time.sleep(rng.uniform(0.2, 3.0))
+        finally:
+            resource.prlimit(daemon.pid, resource.RLIMIT_FSIZE, (soft, hard))
+        return kind, True
     if kind in ("arm", "disarm"):
         return kind, _ack(st, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if kind == "arm" else 0.0)
     if kind == "mode":
@@ -142,11 +157,38 @@ def _recording_figures(run_dir: Path) -> dict[str, Any]:
         if (m["action"] in ("zero-thrust", "disarm") or m["state"] != "ARMED"
                 and m["action"] != "hold-depth") and bool(np.any(th != 0.0)):
             must_be_zero += 1
+    told: dict[str, dict[str, Any]] = {}
+    for _, _, m in read_messages(files[0], ["/uvd/sink"]):
+        t = told.setdefault(m["sink"], {"failing": 0, "writes_again": 0})
+        t["failing" if not m["ok"] else "writes_again"] += 1
+        t["last_told_ok"] = bool(m["ok"])
     rep = replay_lockstep(files[0])
     return {"recorded_cycles": n, "cycles_with_thrust_where_none_allowed": must_be_zero,
-            "nonfinite_commands": nonfinite,
+            "nonfinite_commands": nonfinite, "recording_failures_told": told,
             "replay": {"cycles": rep.cycles, "mismatches": rep.mismatches,
                        "stopped": rep.stopped}}
+
+
+def _logging_healthy(st: GroundStation) -> bool | None:
+    """Whether the vehicle's next SYS_STATUS says its recording (MAV_SYS_STATUS_LOGGING)
+    healthy; None: no SYS_STATUS within 5 s."""
+    st.drain()
+    m = st.wait("SYS_STATUS", None, 5.0)
+    return None if m is None else bool(m.onboard_control_sensors_health
+                                       & st.mav.MAV_SYS_STATUS_LOGGING)
+
+
+def _link_port(log_path: Path, proc: subprocess.Popen, timeout_s: float) -> int:
+    """The UDP port the daemon's MAVLink link bound (``listen`` port 0: the kernel's pick),
+    from its log line "MAVLink link on udp HOST:PORT"."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end and proc.poll() is None:
+        found = re.search(r"MAVLink link on udp \S+:(\d+) ", log_path.read_text(errors="replace"))
+        if found:
+            return int(found.group(1))
+        time.sleep(0.1)
+    raise RuntimeError(f"the daemon's MAVLink link did not bind within {timeout_s:g} s "
+                       f"(exit code {proc.poll()}; its log {log_path})")
 
 
 def _recovery_check(bridge, st: GroundStation) -> dict[str, Any]:
@@ -167,17 +209,16 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
     """Run the soak (the module docstring) on configuration ``base`` and return its
     figures."""
     from sim_bridge.bridge import BridgeProcess, hil_scheduling, write_local_config
-    from uvd.netports import free_port
     from uvd.runtime.config import load_config
+    from uvd.telemetry.sink import TELL_HOLD_S
 
     rng = random.Random(seed)
     run_dir = Path(tempfile.mkdtemp(prefix="uvd-chaos-"))
-    port = free_port("udp", "127.0.0.1")
     bridge_args, changes = hil_scheduling()
     changes.update(
         recording={"enabled": True, "dir": str(run_dir / "rec")},
         telemetry={"jsonl": {"enabled": False}, "zenoh": {"enabled": False}},
-        mavlink={"enabled": True, "listen": f"127.0.0.1:{port}", "params_file": "",
+        mavlink={"enabled": True, "listen": "127.0.0.1:0", "params_file": "",
                  "operator_timeout_s": 0.0,
                  "signing_timestamp_file": str(run_dir / "signing.ts")})
     cfg_path = write_local_config(run_dir, base=base, changes=changes)
@@ -197,7 +238,7 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
              "--stop-with-parent", str(os.getpid()), "--duration", str(soak_s + 120.0),
              "--summary-json", str(run_dir / "summary.json")],
             stdout=subprocess.DEVNULL, stderr=log)
-        st = GroundStation("127.0.0.1", port)
+        st = GroundStation("127.0.0.1", _link_port(run_dir / "daemon.log", daemon, 120.0))
         if st.vehicle(120.0) is None:
             raise RuntimeError("no heartbeat from the daemon within 120 s")
         t0 = time.monotonic()
@@ -225,6 +266,8 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
                 progress(f"  {el:5.0f} s of {soak_s:.0f}: {kind}: no answer (t_ns "
                          f"{time.monotonic_ns()})")
             time.sleep(rng.uniform(0.5, 3.0))
+        time.sleep(TELL_HOLD_S + 2.0)  # a full disk's last change is told after one hold
+        logging_healthy = _logging_healthy(st)
         st.close()
         st = None
         code = stop_daemon(daemon, 30.0)
@@ -238,6 +281,7 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
                "recovery_checks": {"passed": sum(c["armed"] for c in checks),
                                    "run": len(checks)},
                "actions": actions, "station_calls_unanswered": unanswered,
+               "logging_healthy_at_end": logging_healthy,
                "daemon": {"exit_code": code, "cycles": summary["loop"].get("cycles"),
                           "overruns": summary["loop"].get("overruns"),
                           "amplifier_recoveries": summary["daemon"].get(
@@ -248,7 +292,9 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
     ok = figures["recovery_checks"]["passed"] == len(checks) and code == 0 \
         and unanswered == 0 \
         and figures.get("cycles_with_thrust_where_none_allowed") == 0 \
-        and (figures.get("replay") or {}).get("mismatches") == 0
+        and (figures.get("replay") or {}).get("mismatches") == 0 \
+        and logging_healthy is True \
+        and all(t["last_told_ok"] for t in figures.get("recording_failures_told", {}).values())
     if ok:
         shutil.rmtree(run_dir, ignore_errors=True)
     else:  # what to read: the daemon's log, its summary and its black box
