@@ -46,7 +46,7 @@ import numpy as np
 
 from uvd.bench import Bench, stop_hil
 from uvd.cliargs import nonnegative_int, positive_float
-from uvd.commands._station import GroundStation
+from uvd.links.mavlink.station import GroundStation
 from uvd.runtime.process import stop_daemon
 
 #: MAVLink custom mode numbers the operator picks from (docs/mavlink.md)
@@ -216,7 +216,8 @@ def measure(minutes: float = 4.0, seed: int = 2, check_every_s: float = 25.0,
     run_dir = Path(tempfile.mkdtemp(prefix="uvd-chaos-"))
     bridge_args, changes = hil_scheduling()
     changes.update(
-        recording={"enabled": True, "dir": str(run_dir / "rec")},
+        # the disk's real room is not this soak's (a machine low on it would be told so)
+        recording={"enabled": True, "dir": str(run_dir / "rec"), "min_free_mb": 0},
         telemetry={"jsonl": {"enabled": False}, "zenoh": {"enabled": False}},
         mavlink={"enabled": True, "listen": "127.0.0.1:0", "params_file": "",
                  "operator_timeout_s": 0.0,
