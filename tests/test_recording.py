@@ -851,7 +851,8 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
     from uvd.telemetry.sink import TELL_HOLD_S
 
     # the link on a port the kernel picks, which its log line names
-    changes = {"recording": {"enabled": True, "dir": str(tmp_path / "rec")},
+    # (a disk with little room told as such, min_free_mb, is another test's)
+    changes = {"recording": {"enabled": True, "dir": str(tmp_path / "rec"), "min_free_mb": 0},
                "mavlink": {"enabled": True, "listen": "127.0.0.1:0",
                            "params_file": str(tmp_path / "params.toml"),
                            "signing_timestamp_file": str(tmp_path / "signing.ts")}}
@@ -919,3 +920,72 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
         got = [(sch.name, ch.message_encoding, json.loads(msg.data)["ok"]) for sch, ch, msg in
                make_reader(fh).iter_messages(topics=["/uvd/sink"])]
     assert got == [("uvd.sink.v1", "json", False), ("uvd.sink.v1", "json", True)]
+
+
+def test_the_free_room_of_the_recordings_disk_is_measured_and_named_below_the_bound(tmp_path):
+    """``low_space()`` after real writes (the lockstep path: the caller's thread writes):
+    below ``min_free_mb`` it names the disk's free megabytes and the folder (this machine's
+    disk has less than 1e12 MB free); above it (1 kB), and with the bound off, None."""
+    import shutil
+
+    from uvd.links.mcap import McapRecorder
+    recs = {mb: McapRecorder(tmp_path / f"rec-{mb:g}", min_free_mb=mb) for mb in (1e12, 1e-3,
+                                                                                  0.0)}
+    for rec in recs.values():
+        rec.open_now(1)
+        rec.write_now([{"type": "failsafe", "t_ns": 2, "kind": "fired", "trigger": "test",
+                        "action": "warn", "reason": "x" * 1000}])
+        rec.close_now()
+    low = recs[1e12].low_space()
+    free_mb = shutil.disk_usage(tmp_path).free / 1e6
+    assert low is not None and low.startswith(f"{recs[1e12].free_bytes / 1e6:.0f} MB free on "
+                                              f"{tmp_path / 'rec-1e+12'} (below [recording] "
+                                              "min_free_mb 1e+12)"), low
+    assert abs(recs[1e12].free_bytes / 1e6 - free_mb) < 100.0  # what statvfs says
+    assert recs[1e-3].low_space() is None and recs[0.0].low_space() is None
+    assert recs[0.0].free_bytes is None  # not even measured
+
+
+def test_a_disk_with_little_room_is_told_once_and_the_vehicle_flies_on(tmp_path):
+    """A real daemon over sim-bridge recording to a disk with less free than ``[recording]
+    min_free_mb`` (1e9 MB: more than any disk here has): the operator is told once — a
+    ``"sink"`` record ``recording-disk`` ("recording disk low: N MB free on DIR (below
+    [recording] min_free_mb 1e+09)"), which the black box keeps too — while the recording
+    itself stays healthy (SYS_STATUS's logging bit) and the vehicle stays armed. Before
+    (session 27) nothing was told until writes failed."""
+    from tests.hil_daemon import ListSink, link_port, run_scenario, station_link
+    from tests.mavlink_gcs import Station, mav
+
+    changes = {"recording": {"enabled": True, "dir": str(tmp_path / "rec"), "min_free_mb": 1e9},
+               **station_link(tmp_path)}
+    sink = ListSink()
+    out: dict = {}
+    with running_bridge(tmp_path, changes) as (cfg_path, _):
+        async def scenario(d):
+            end = time.monotonic() + 20.0
+            while not [r for r in sink.records if r.get("type") == "sink"] \
+                    and time.monotonic() < end:
+                await asyncio.sleep(0.05)
+
+            def health() -> bool:
+                s = Station(link_port(d))
+                try:
+                    s.heartbeat(timeout=10.0)
+                    m = s.wait("SYS_STATUS", timeout=5.0)
+                finally:
+                    s.close()
+                return bool(m.onboard_control_sensors_health & mav.MAV_SYS_STATUS_LOGGING)
+            out["logging_healthy"] = await asyncio.to_thread(health)
+            out["state"] = d.supervisor.state.value
+
+        run_scenario(load_config(cfg_path), scenario, sink=sink, timeout_s=90.0)
+    told = [r for r in sink.records if r.get("type") == "sink"]
+    assert len(told) == 1 and (told[0]["sink"], told[0]["ok"]) == ("recording-disk", False)
+    text = told[0]["text"]
+    assert re.fullmatch(r"recording disk low: \d+ MB free on \S+rec \(below \[recording\] "
+                        r"min_free_mb 1e\+09\)(; about [\d.]+ h of recording left at \d+ MB/h)?",
+                        text), text
+    jsonschema.validate(told[0], schema("uvd.sink.v1"))
+    assert out == {"logging_healthy": True, "state": "ARMED"}, out
+    (f,) = (tmp_path / "rec").glob("*.mcap")
+    assert [m["text"] for _, _, m in read_messages(f, ["/uvd/sink"])] == [text]

@@ -24,6 +24,8 @@ by SIGKILL or a crash is readable by a streaming reader
 section too. A new file is started past ``rotate_mb`` or ``rotate_s``; the
 start record is repeated at the top of each. A stalled disk bounds the bytes waiting for it
 (``max_pending_mb``): past that, records are dropped and counted, never queued without end.
+The disk's free room is measured as the files are written (:meth:`McapRecorder.low_space`:
+below ``min_free_mb`` the operator is told ahead of a full disk).
 
 A lockstep experiment, which has no event loop, writes the same files from its own thread
 (:meth:`McapRecorder.open_now`, :meth:`~McapRecorder.write_now`,
@@ -37,6 +39,7 @@ import base64
 import collections
 import json
 import math
+import shutil
 import threading
 import time
 from collections.abc import Mapping, Sequence
@@ -51,6 +54,9 @@ from uvd.telemetry.recording import CHANNELS, schema
 __all__ = ["McapRecorder"]
 
 _TOPIC_OF_TYPE = {t: topic for topic, (_, t) in CHANNELS.items() if t is not None}
+
+#: the recording's free disk space is measured at most this often (s), by the worker thread
+FREE_EVERY_S = 5.0
 
 
 def _quaternion(R) -> dict[str, float]:
@@ -134,6 +140,9 @@ class McapRecorder:
         oldest first, ``raw_dropped``): memory stays bounded, the loop never waits.
     clock_wall : callable
         Wall clock for the file names only.
+    min_free_mb : float
+        :meth:`low_space` names the disk when it has less free than this (0: never); the
+        worker thread measures it every :data:`FREE_EVERY_S` after a write.
     """
 
     name = "mcap"
@@ -141,7 +150,7 @@ class McapRecorder:
     def __init__(self, directory: str | Path, *, flush_interval_s: float = 0.25,
                  rotate_mb: float = 512.0, rotate_s: float = 0.0, raw_queue_size: int = 65536,
                  slice_s: float = 2e-4, max_pending_mb: float = 64.0,
-                 clock_wall=time.time) -> None:
+                 clock_wall=time.time, min_free_mb: float = 0.0) -> None:
         self.directory = Path(directory)
         self.flush_interval_s = float(flush_interval_s)
         self.rotate_bytes = int(rotate_mb * 1e6)
@@ -168,6 +177,13 @@ class McapRecorder:
         self._worker = DaemonWorker("uvd-sink-mcap")
         self._sync = False  # open_now: the caller's thread writes (lockstep experiments)
         self._flusher: asyncio.Task | None = None
+        self.min_free = int(min_free_mb * 1e6)
+        #: the disk's free bytes when the worker last measured them (None: not yet, or the
+        #: measure failed), and the bytes written and the monotonic time since the first
+        self.free_bytes: int | None = None
+        self._free_at = -math.inf
+        self._bytes_out = 0
+        self._t_first = 0.0
 
     # -- taps (any thread; cheap; never raise) --
 
@@ -225,6 +241,32 @@ class McapRecorder:
         file whole to its last write and the bytes for the disk; past ``max_pending_mb``
         waiting, :meth:`write` drops records (``stalled_dropped``)."""
         self._file.write(path, data, close)
+        now = time.monotonic()
+        if not self._t_first:
+            self._t_first = now
+        self._bytes_out += len(data)
+        if self.min_free and now - self._free_at >= FREE_EVERY_S:
+            self._free_at = now
+            try:
+                self.free_bytes = shutil.disk_usage(path.parent).free
+            except OSError:
+                self.free_bytes = None  # not known: nothing told of it
+
+    def low_space(self) -> str | None:
+        """The recording's disk, when it has less free than ``min_free_mb`` (None: more, or
+        not measured): its free megabytes and, at the rate written so far, the hours of
+        recording left (the hub tells the operator: ``TelemetryHub.watch``)."""
+        free = self.free_bytes
+        if not self.min_free or free is None or free >= self.min_free:
+            return None
+        text = (f"{free / 1e6:.0f} MB free on {self.directory} (below [recording] min_free_mb "
+                f"{self.min_free / 1e6:g})")
+        span = time.monotonic() - self._t_first if self._t_first else 0.0
+        if span >= 10.0 and self._bytes_out:
+            rate = self._bytes_out / span  # bytes a second
+            text += (f"; about {free / rate / 3600:.1f} h of recording left at "
+                     f"{rate * 3600 / 1e6:.0f} MB/h")
+        return text
 
     def _add(self, topic: str, t_ns: int, obj: Any) -> None:
         data = json.dumps(obj, separators=(",", ":"), default=str, allow_nan=False).encode()

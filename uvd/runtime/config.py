@@ -586,6 +586,11 @@ class RecordingSection:
         65536, min=64, max=10_000_000,
         doc="raw frames that may wait for the writer; when full the oldest is dropped and "
             "counted (a replay of that stretch then reports the missing frames)")
+    min_free_mb: float = setting(
+        500.0, unit="MB", min=0.0, max=1e12,
+        doc="the operator is told (STATUSTEXT, Zenoh event) when the recording's disk has "
+            "less free than this, with the hours of recording left at the rate so far, and "
+            "again when it has more; 0 never (ArduPilot's LOG_FILE_MB_FREE is 500 MB too)")
 
 
 @dataclass(frozen=True)

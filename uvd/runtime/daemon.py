@@ -76,6 +76,10 @@ class Daemon:
         if config.can.log.path is not None:  # told as the sinks are, though no sink
             self.app.hub.watch("canlog", hw.can.log_trouble, hw.can.log_counts,
                                label="CAN log")
+        if self.recorder is not None and config.recording.min_free_mb > 0:
+            self.app.hub.watch("recording-disk", self.recorder.low_space,
+                               label="recording disk", failing_as="low",
+                               ok_as="has room again")
         if hw.instruments.sync:
             hw.wake_on_ins(self.app.loop.wake)
         self.app.set_amplifier_hooks(zero=hw.can.zero, disable=hw.can.disable)

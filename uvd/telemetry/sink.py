@@ -137,7 +137,9 @@ class _Watched:
     name: str
     label: str
     trouble: Callable[[], str | None]
-    counts: Callable[[], Mapping[str, int]]
+    counts: Callable[[], Mapping[str, int]] | None
+    failing_as: str
+    ok_as: str
     telling: _Telling
 
 
@@ -200,14 +202,18 @@ class TelemetryHub:
         self._lanes.append(_Lane(sink, self.queue_size, every_n, types))
 
     def watch(self, name: str, trouble: Callable[[], str | None],
-              counts: Callable[[], Mapping[str, int]], label: str | None = None) -> None:
-        """Tell the operator of a recording that is no sink of the hub (the CAN log) as of a
-        sink: ``trouble()`` — called from the event loop every ``flush_interval_s``, cheap,
-        never raising — names why it cannot write (None: it writes); ``counts()`` gives its
-        ``records_dropped``, ``write_errors`` and ``bytes_given_up``; ``label`` starts the
-        text (default "telemetry sink NAME"). Before :meth:`run` starts."""
+              counts: Callable[[], Mapping[str, int]] | None = None, *,
+              label: str | None = None, failing_as: str = "cannot write",
+              ok_as: str = "writes again") -> None:
+        """Tell the operator of what is no sink of the hub as of a sink (the CAN log, the
+        recording's disk running low): ``trouble()`` — called from the event loop every
+        ``flush_interval_s``, cheap, never blocking — names the problem (None: none);
+        ``counts()`` gives its ``records_dropped``, ``write_errors`` and ``bytes_given_up``
+        (None: it has none). The texts: "LABEL FAILING_AS: problem", "LABEL OK_AS after
+        N s (counts)"; ``label`` by default "telemetry sink NAME". Before :meth:`run`
+        starts."""
         self._watched.append(_Watched(name, label or f"telemetry sink {name}", trouble, counts,
-                                      _Telling()))
+                                      failing_as, ok_as, _Telling()))
 
     def set_every_n(self, name: str, every_n: int) -> None:
         """Change a sink's decimation at run time (reload)."""
@@ -278,7 +284,8 @@ class TelemetryHub:
                     "write_errors": int(own_stats.get("write_errors", 0)) + lane.failing.total,
                     "bytes_given_up": int(own_stats.get("lost_bytes", 0))}
         self._tell_change(lane.telling, name, f"telemetry sink {name}", problem, counts,
-                          "did not open" if lane.open_failed else "cannot write")
+                          "did not open" if lane.open_failed else "cannot write",
+                          "writes again")
 
     def _tell_watched(self) -> None:
         for w in self._watched:
@@ -287,15 +294,19 @@ class TelemetryHub:
             except Exception as exc:  # noqa: BLE001 - a broken watch is told, never raised
                 problem = f"its state unknown: {type(exc).__name__}: {exc}"
 
-            def counts(w: _Watched = w) -> dict[str, int]:
+            def counts(w: _Watched = w) -> dict[str, int] | None:
+                if w.counts is None:
+                    return None
                 try:
                     return {k: int(v) for k, v in w.counts().items()}
                 except Exception:  # noqa: BLE001 - unknown counts are none, never raised
                     return {}
-            self._tell_change(w.telling, w.name, w.label, problem, counts, "cannot write")
+            self._tell_change(w.telling, w.name, w.label, problem, counts, w.failing_as,
+                              w.ok_as)
 
     def _tell_change(self, t: _Telling, name: str, label: str, problem: str | None,
-                     counts: Callable[[], dict[str, int]], failing_as: str) -> None:
+                     counts: Callable[[], dict[str, int] | None], failing_as: str,
+                     ok_as: str) -> None:
         """A ``"sink"`` record to every sink when ``problem`` (None: it works) changes what the
         operator was last told of ``name`` — on Zenoh an ``event``, over MAVLink a
         STATUSTEXT, in the black box ``/uvd/sink``. At most one change every ``tell_hold_s``
@@ -307,13 +318,14 @@ class TelemetryHub:
         if (problem is None) == (t.told is None) or now - t.told_at < self.tell_hold_s:
             return
         got = counts()
-        n = {k: int(got.get(k, 0)) for k in ("records_dropped", "write_errors", "bytes_given_up")}
+        n = {k: int((got or {}).get(k, 0)) for k in ("records_dropped", "write_errors",
+                                                     "bytes_given_up")}
         if problem:
             text = f"{label} {failing_as}: {problem}"
         else:
-            text = (f"{label} writes again after {now - t.failing_since:.1f} s "
-                    f"({n['records_dropped']} records dropped, {n['bytes_given_up']} bytes "
-                    "given up so far)")
+            text = f"{label} {ok_as} after {now - t.failing_since:.1f} s" + (
+                "" if got is None else f" ({n['records_dropped']} records dropped, "
+                                       f"{n['bytes_given_up']} bytes given up so far)")
             t.failing_since = 0.0
         t.told, t.told_at = problem, now
         self.publish({"type": "sink", "t_ns": time.monotonic_ns(), "sink": name,
