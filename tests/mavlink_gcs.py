@@ -80,6 +80,14 @@ class Station:
         self.send("command_long", *self.target, cmd, 0, *p)
         return self.wait("COMMAND_ACK", lambda m: m.command == cmd, timeout)
 
+    def sensor_bits(self, bit: int, timeout: float = 5.0) -> tuple[bool, bool, bool]:
+        """The next SYS_STATUS's ``bit`` (e.g. MAV_SYS_STATUS_LOGGING): present, enabled,
+        healthy."""
+        m = self.wait("SYS_STATUS", timeout=timeout)
+        return tuple(bool(x & bit) for x in (m.onboard_control_sensors_present,
+                                             m.onboard_control_sensors_enabled,
+                                             m.onboard_control_sensors_health))
+
     def arm(self, on: bool = True):
         return self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if on else 0.0)
 

@@ -829,11 +829,18 @@ def _statustexts(station, until_text: str, timeout_s: float) -> list[tuple[int, 
 def _logging_bits(station) -> tuple[bool, bool, bool]:
     """The next SYS_STATUS's MAV_SYS_STATUS_LOGGING bit: (present, enabled, healthy)."""
     from tests.mavlink_gcs import mav
-    m = station.wait("SYS_STATUS", timeout=5.0)
-    bit = mav.MAV_SYS_STATUS_LOGGING
-    return tuple(bool(x & bit) for x in (m.onboard_control_sensors_present,
-                                         m.onboard_control_sensors_enabled,
-                                         m.onboard_control_sensors_health))
+    return station.sensor_bits(mav.MAV_SYS_STATUS_LOGGING)
+
+
+def _late_station_logging_bits(port: int) -> tuple[bool, bool, bool]:
+    """A station that comes now: the first SYS_STATUS's logging bit it gets."""
+    from tests.mavlink_gcs import Station
+    s = Station(port)
+    try:
+        s.heartbeat(timeout=10.0)
+        return _logging_bits(s)
+    finally:
+        s.close()
 
 
 def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_again(tmp_path):
@@ -879,12 +886,7 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
             t_full = time.monotonic()
             told = _statustexts(station, "telemetry sink mcap cannot write", 10.0)
             failing = told[-1]
-            late = Station(port)  # a station that connects after the telling
-            try:
-                late.heartbeat(timeout=10.0)
-                logging_late = _logging_bits(late)
-            finally:
-                late.close()
+            logging_late = _late_station_logging_bits(port)  # comes after the telling
             time.sleep(1.0)  # two seconds of cycles that wait for the disk, with the above
             resource.prlimit(proc.pid, resource.RLIMIT_FSIZE, (soft, hard))
             told = _statustexts(station, "telemetry sink mcap writes again", TELL_HOLD_S + 10)
@@ -954,7 +956,6 @@ def test_a_disk_with_little_room_is_told_once_and_the_vehicle_flies_on(tmp_path)
     itself stays healthy (SYS_STATUS's logging bit) and the vehicle stays armed. Before
     (session 27) nothing was told until writes failed."""
     from tests.hil_daemon import ListSink, link_port, run_scenario, station_link
-    from tests.mavlink_gcs import Station, mav
 
     changes = {"recording": {"enabled": True, "dir": str(tmp_path / "rec"), "min_free_mb": 1e9},
                **station_link(tmp_path)}
@@ -967,15 +968,8 @@ def test_a_disk_with_little_room_is_told_once_and_the_vehicle_flies_on(tmp_path)
                     and time.monotonic() < end:
                 await asyncio.sleep(0.05)
 
-            def health() -> bool:
-                s = Station(link_port(d))
-                try:
-                    s.heartbeat(timeout=10.0)
-                    m = s.wait("SYS_STATUS", timeout=5.0)
-                finally:
-                    s.close()
-                return bool(m.onboard_control_sensors_health & mav.MAV_SYS_STATUS_LOGGING)
-            out["logging_healthy"] = await asyncio.to_thread(health)
+            out["logging_healthy"] = (await asyncio.to_thread(
+                _late_station_logging_bits, link_port(d)))[2]
             out["state"] = d.supervisor.state.value
 
         run_scenario(load_config(cfg_path), scenario, sink=sink, timeout_s=90.0)
