@@ -177,6 +177,56 @@ def test_uvd_watch_tells_a_flood_of_unreadable_samples_once_a_thousand():
             in lines), lines[-5:]
 
 
+@pytest.mark.slow
+def test_uvd_watch_tells_what_health_holds_when_it_changes():
+    """``uvd watch`` prints a vehicle's failsafe triggers, amplifier faults and failing sinks
+    from its ``health`` samples when they change — so a watcher that comes after the events
+    that said so is told what holds — once per change, not once per sample; a health sample
+    whose list is not a list of names is unreadable, told and dropped."""
+    import signal
+
+    import zenoh
+
+    port = free_port()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    key = "uvd/sub4/health"
+
+    def health(triggers, faults, sinks):
+        return json.dumps({"triggers": triggers, "amplifier_faults": faults,
+                           "sinks_failing": sinks}).encode()
+
+    with zenoh.open(conf) as s:
+        pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        proc, lines = _watching_client(["-m", "uvd", "watch", "--connect",
+                                        f"tcp/127.0.0.1:{port}", "--seconds", "60"], pub)
+        try:
+            for _ in range(3):  # what holds when the watcher comes: told once
+                pub.put(health(["ins_stale", "leak"], ["node 4: overcurrent"], ["mcap"]))
+            pub.put(health(["leak"], ["node 4: overcurrent"], ["mcap"]))
+            pub.put(health([], [], []))
+            pub.put(json.dumps({"triggers": "leak"}).encode())
+            _wait_for_line(lines, "unreadable health sample")
+            proc.send_signal(signal.SIGINT)  # Ctrl-C
+            assert proc.wait(timeout=20) == 0
+        finally:
+            proc.kill()
+            proc.wait()
+    lines.wait_end()
+    told = [x.strip() for x in lines if x.strip().startswith("sub4 ")]
+    assert told == ["sub4 failsafe triggers active: ins_stale, leak",
+                    "sub4 amplifier faults: node 4: overcurrent",
+                    "sub4 telemetry sinks failing: mcap",
+                    "sub4 failsafe triggers active: leak",
+                    "sub4 failsafe triggers active: none",
+                    "sub4 amplifier faults: none",
+                    "sub4 telemetry sinks failing: none"], told
+    assert any(x.startswith(f"{key}: unreadable health sample (triggers is not a list of names)")
+               for x in lines), lines[-5:]
+
+
 def _watching_client(argv: list[str], pub) -> tuple[subprocess.Popen, list[str]]:
     """A Zenoh client process (``python`` ``argv``) and its lines as they come, once it says
     it is watching and ``pub`` reaches it (at most 60 s: a busy machine takes its time)."""

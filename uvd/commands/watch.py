@@ -2,9 +2,10 @@
 
 Watches vehicles over Zenoh (docs/zenoh.md) as any client would — through the documented key
 space and JSON payloads only, nothing of the daemon's classes: one line a second per vehicle
-(pose, mode, action, thrust), every event as it comes, the telemetry sinks that fail as
-``health`` says (so a watcher that comes after the event is told too) and the vehicles coming
-and going (liveliness). An unreadable sample is told at the first and every 1000th of its key
+(pose, mode, action, thrust), every event as it comes, the failsafe triggers active, the
+amplifier faults and the telemetry sinks that fail as ``health`` says, when they change (so a
+watcher that comes after the events is told what holds), and the vehicles coming and going
+(liveliness). An unreadable sample is told at the first and every 1000th of its key
 for each kind, as uvd-fdc tells them, and all are counted at the end.
 """
 
@@ -17,6 +18,12 @@ import threading
 import time
 
 from uvd.cliargs import nonnegative_float
+
+#: the lists of a ``health`` sample printed when they change (a watcher that comes late is
+#: told what holds: the events that said so went before it)
+_HEALTH_LISTS = (("triggers", "failsafe triggers active"),
+                 ("amplifier_faults", "amplifier faults"),
+                 ("sinks_failing", "telemetry sinks failing"))
 
 
 def register(sub) -> None:
@@ -68,18 +75,20 @@ def _run(args) -> int:
         except (ValueError, KeyError, TypeError) as exc:
             out(unreadable.drop(str(sample.key_expr), "unreadable event", f" ({exc})"))
 
-    failing: dict[str, list[str]] = {}  # each vehicle's sinks_failing, as last printed
+    #: each vehicle's health lists, as last printed (none before its first sample)
+    told: dict[tuple[str, str], list[str]] = {}
 
     def on_health(sample) -> None:
         try:
             m = json.loads(sample.payload.to_bytes())
             key = str(sample.key_expr).split("/")[1]
-            now = m.get("sinks_failing", [])
-            if not (isinstance(now, list) and all(isinstance(x, str) for x in now)):
-                raise TypeError("sinks_failing is not a list of names")
-            if now != failing.get(key, []):
-                out(f"{key:>12} telemetry sinks failing: {', '.join(now) or 'none'}")
-            failing[key] = now
+            for field, what in _HEALTH_LISTS:
+                now = m.get(field, [])
+                if not (isinstance(now, list) and all(isinstance(x, str) for x in now)):
+                    raise TypeError(f"{field} is not a list of names")
+                if now != told.get((key, field), []):
+                    out(f"{key:>12} {what}: {', '.join(now) or 'none'}")
+                told[(key, field)] = now
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
             out(unreadable.drop(str(sample.key_expr), "unreadable health sample", f" ({exc})"))
 
