@@ -970,6 +970,7 @@ def test_a_disk_with_little_room_is_told_once_and_the_vehicle_flies_on(tmp_path)
 
             out["logging_healthy"] = (await asyncio.to_thread(
                 _late_station_logging_bits, link_port(d)))[2]
+            out["syncs"] = d.app.hub.stats()["mcap"]["sink"]["syncs"]
             out["state"] = d.supervisor.state.value
 
         run_scenario(load_config(cfg_path), scenario, sink=sink, timeout_s=90.0)
@@ -980,6 +981,35 @@ def test_a_disk_with_little_room_is_told_once_and_the_vehicle_flies_on(tmp_path)
                         r"min_free_mb 1e\+09\)(; about [\d.]+ h of recording left at \d+ MB/h)?",
                         text), text
     jsonschema.validate(told[0], schema("uvd.sink.v1"))
+    # the black box forced to the disk every [recording] sync_interval_s (1 s) it ran
+    assert out.pop("syncs") >= 2, out
     assert out == {"logging_healthy": True, "state": "ARMED"}, out
     (f,) = (tmp_path / "rec").glob("*.mcap")
     assert [m["text"] for _, _, m in read_messages(f, ["/uvd/sink"])] == [text]
+
+
+def test_the_data_is_forced_to_the_disk_at_the_sync_interval_and_at_the_end(tmp_path):
+    """``AppendFile`` with ``sync_interval_s`` 0.05: over ~0.5 s of writes every 10 ms the data
+    is forced to the disk (``fdatasync``, on this machine's real file system) once per
+    interval, not per write; with 0, only when the file ends. What a power cut of the
+    machine loses is then bounded by the interval, not by the kernel's writeback (~30 s)."""
+    from uvd.telemetry.appendfile import AppendFile
+
+    timed, plain = AppendFile(1 << 20, sync_interval_s=0.05), AppendFile(1 << 20)
+    t0 = time.monotonic()
+    worst = 0.0
+    for _ in range(50):
+        for f, name in ((timed, "timed.bin"), (plain, "plain.bin")):
+            w0 = time.perf_counter()
+            assert f.write(tmp_path / name, b"x" * 4096)
+            if f is timed:
+                worst = max(worst, time.perf_counter() - w0)
+        time.sleep(0.01)
+    span = time.monotonic() - t0
+    print(f"{timed.syncs} syncs in {span:.2f} s of writes; slowest write with its sync "
+          f"{worst * 1e3:.2f} ms")
+    assert span / 0.05 * 0.5 <= timed.syncs <= span / 0.05 + 1, (timed.syncs, span)
+    assert plain.syncs == 0
+    plain.write(tmp_path / "plain.bin", b"", close=True)
+    assert plain.syncs == 1 and plain.stats()["syncs"] == 1
+    assert (tmp_path / "timed.bin").stat().st_size == 50 * 4096

@@ -79,7 +79,7 @@ def _mcap(ctx: LinkContext) -> Face | None:
     from uvd.links.mcap import McapRecorder
     return Face(McapRecorder(r.dir, flush_interval_s=r.flush_interval_s, rotate_mb=r.rotate_mb,
                              rotate_s=r.rotate_s, raw_queue_size=r.raw_queue_size,
-                             min_free_mb=r.min_free_mb))
+                             min_free_mb=r.min_free_mb, sync_interval_s=r.sync_interval_s))
 
 
 def _jsonl(ctx: LinkContext) -> Face | None:

@@ -143,6 +143,10 @@ class McapRecorder:
     min_free_mb : float
         :meth:`low_space` names the disk when it has less free than this (0: never); the
         worker thread measures it every :data:`FREE_EVERY_S` after a write.
+    sync_interval_s : float
+        The worker forces the file's data to the disk at most this long apart (0: only at a
+        file's end): what a power cut of the machine may lose
+        (:class:`~uvd.telemetry.appendfile.AppendFile`).
     """
 
     name = "mcap"
@@ -150,7 +154,8 @@ class McapRecorder:
     def __init__(self, directory: str | Path, *, flush_interval_s: float = 0.25,
                  rotate_mb: float = 512.0, rotate_s: float = 0.0, raw_queue_size: int = 65536,
                  slice_s: float = 2e-4, max_pending_mb: float = 64.0,
-                 clock_wall=time.time, min_free_mb: float = 0.0) -> None:
+                 clock_wall=time.time, min_free_mb: float = 0.0,
+                 sync_interval_s: float = 0.0) -> None:
         self.directory = Path(directory)
         self.flush_interval_s = float(flush_interval_s)
         self.rotate_bytes = int(rotate_mb * 1e6)
@@ -168,7 +173,7 @@ class McapRecorder:
         self._buf: _Buffer | None = None
         # the worker's file; what waits in it after failed writes counts against the bound
         # twice over, so that write() drops records before whole bytes are given up
-        self._file = AppendFile(2 * self.max_pending)
+        self._file = AppendFile(2 * self.max_pending, sync_interval_s)
         self._channels: dict[str, int] = {}
         self._seq: dict[int, int] = {}
         self._start_rec: Mapping[str, Any] | None = None

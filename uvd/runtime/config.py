@@ -586,6 +586,12 @@ class RecordingSection:
         65536, min=64, max=10_000_000,
         doc="raw frames that may wait for the writer; when full the oldest is dropped and "
             "counted (a replay of that stretch then reports the missing frames)")
+    sync_interval_s: float = setting(
+        1.0, unit="s", min=0.0, max=3600.0,
+        doc="the files' data is forced to the disk (fdatasync, by the writer thread, off the "
+            "loop) at most this long apart: what a power cut of the vehicle's computer may "
+            "lose beside flush_interval_s; 0 leaves it to the operating system (on Linux up "
+            "to ~30 s)")
     min_free_mb: float = setting(
         500.0, unit="MB", min=0.0, max=1e12,
         doc="the operator is told (STATUSTEXT, Zenoh event) when the recording's disk has "
