@@ -720,17 +720,21 @@ def _published(cycle, hub):
 def _recorded(cycle, directory: str, times: dict[str, list]):
     """``cycle`` followed by what the daemon's write phase does for telemetry — build one cycle
     record (6 thrusters) and publish it — every cycle; every other cycle the hub has the MCAP
-    recorder as its sink and the cycle's seven CAN sends (6 RPDOs + SYNC) pass its tap, the
-    others publish to a hub without sinks. The daemon builds and publishes the record whether
-    or not it records, so the difference is what ``[recording] enabled`` adds to a cycle. The
-    time of each call goes to ``times["with"]`` or ``times["without"]``: interleaved, in the
-    same run, under the same load; the recorder's pump runs between cycles as in the daemon."""
+    recorder (the daemon's ``[recording]`` defaults) as its sink and the cycle's seven CAN
+    sends (6 RPDOs + SYNC) pass its tap, the others publish to a hub without sinks. The daemon
+    builds and publishes the record whether or not it records, so the difference is what
+    ``[recording] enabled`` adds to a cycle. The time of each call goes to ``times["with"]``
+    or ``times["without"]``: interleaved, in the same run, under the same load; the
+    recorder's pump runs between cycles as in the daemon."""
     import can
 
     from uvd.links.mcap import McapRecorder
+    from uvd.runtime.config import RecordingSection
     from uvd.telemetry.sink import TelemetryHub
 
-    rec = McapRecorder(directory)
+    r = RecordingSection()  # the daemon's defaults: its data forced to the disk every 1 s
+    rec = McapRecorder(directory, flush_interval_s=r.flush_interval_s,
+                       sync_interval_s=r.sync_interval_s)
     hub, bare = TelemetryHub([rec]), TelemetryHub([])
     frames = [can.Message(arbitration_id=0x200 + n, data=bytes(4), is_extended_id=False)
               for n in range(1, 7)] + [can.Message(arbitration_id=0x80, data=b"",
