@@ -176,6 +176,42 @@ def test_a_write_interrupted_by_ctrl_c_leaves_the_old_file_and_no_temporary(tmp_
     assert path.read_text() == "old\n" and not tmp.exists()
 
 
+def test_a_whole_write_forces_the_data_before_the_rename_and_the_rename_after(
+        tmp_path, monkeypatch):
+    """``write_whole`` against a power cut of the machine (which no test can make): the new
+    file's data is forced to the disk before it is renamed over the old one, and the folder
+    (the rename) after — the order that leaves the old file or the new one, never an empty
+    one. The calls are watched as the real ones run (``os.fsync`` and ``os.replace`` of the
+    module, called through); so is the MAVLink parameters file, written through it."""
+    import os
+    import stat
+
+    import uvd.jsonio as jsonio
+    from uvd.links.mavlink.params import read_params_file, write_params_file
+
+    calls: list[tuple[str, str]] = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        mode = os.fstat(fd).st_mode
+        calls.append(("fsync", "folder" if stat.S_ISDIR(mode) else "file"))
+        return real_fsync(fd)
+
+    def replace(a, b):
+        calls.append(("replace", Path(b).name))
+        return real_replace(a, b)
+
+    monkeypatch.setattr(jsonio.os, "fsync", fsync)
+    monkeypatch.setattr(jsonio.os, "replace", replace)
+    jsonio.write_json(tmp_path / "out.json", {"x": 1})
+    assert calls == [("fsync", "file"), ("replace", "out.json"), ("fsync", "folder")], calls
+    calls.clear()
+    write_params_file(tmp_path / "params.toml", {"control.kp": 310.0})
+    assert calls == [("fsync", "file"), ("replace", "params.toml"), ("fsync", "folder")], calls
+    assert read_params_file(tmp_path / "params.toml") == {"control.kp": 310.0}
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["out.json", "params.toml"]
+
+
 def _files_may_grow_to(limit: int):
     """In the child: RLIMIT_FSIZE ``limit`` bytes (a disk with room for that much), SIGXFSZ
     ignored."""

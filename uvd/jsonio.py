@@ -52,10 +52,15 @@ def write_whole(path: Path, write: Callable[[Path], Any], tmp: Path,
                 what: str | None = None) -> None:
     """``write(tmp)``, then ``tmp`` renamed over ``path``: the file is whole or not there. A
     write that fails (a full disk) or is interrupted (Ctrl-C) leaves no temporary file; an
-    OSError names ``what`` (``path`` by default)."""
+    OSError names ``what`` (``path`` by default). ``tmp``'s data is forced to the disk before
+    the rename and the rename after it, so that a power cut of the machine too leaves the old
+    file or the new one — not an empty one, which some file systems leave of a renamed file
+    whose data was still in memory."""
     try:
         write(tmp)
+        _sync(tmp)
         os.replace(tmp, path)
+        _sync(path.parent)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
         raise OSError(exc.errno, f"cannot write {what or path}: {exc.strerror or exc}") \
@@ -63,6 +68,15 @@ def write_whole(path: Path, write: Callable[[Path], Any], tmp: Path,
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _sync(path: Path) -> None:
+    """A file's data, or a folder's entries, forced to the disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def is_int64(x: Any) -> bool:

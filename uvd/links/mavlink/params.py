@@ -16,12 +16,12 @@ while armed and, while disarmed, kept for the next start (``[mavlink] params_fil
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, get_args, get_origin
 
 from uvd.io.toml import read_toml
+from uvd.jsonio import write_whole
 from uvd.runtime import schema
 from uvd.runtime.config import Config
 
@@ -152,13 +152,14 @@ def _toml(v: Any) -> str:
 
 
 def write_params_file(path: str | Path, values: dict[str, Any]) -> None:
-    """Write ``{dotted key: value}`` atomically (temporary file, then rename)."""
+    """Write ``{dotted key: value}`` whole or not at all, a power cut included
+    (:func:`uvd.jsonio.write_whole`): a file left empty would keep the operator's parameters
+    from the next start and from being kept again."""
     p = Path(path)
     lines = ["# uvd: parameters set over MAVLink, applied at start (docs/mavlink.md)",
              "[values]"] + [f'"{k}" = {_toml(v)}' for k, v in sorted(values.items())]
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    os.replace(tmp, p)
+    write_whole(p, lambda tmp: tmp.write_text("\n".join(lines) + "\n", encoding="utf-8"),
+                p.with_name(p.name + ".tmp"))
 
 
 def render_table() -> str:
