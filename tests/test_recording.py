@@ -988,12 +988,27 @@ def test_a_disk_with_little_room_is_told_once_and_the_vehicle_flies_on(tmp_path)
     assert [m["text"] for _, _, m in read_messages(f, ["/uvd/sink"])] == [text]
 
 
-def test_the_data_is_forced_to_the_disk_at_the_sync_interval_and_at_the_end(tmp_path):
+def test_the_data_is_forced_to_the_disk_at_the_sync_interval_and_at_the_end(tmp_path,
+                                                                           monkeypatch):
     """``AppendFile`` with ``sync_interval_s`` 0.05: over ~0.5 s of writes every 10 ms the data
     is forced to the disk (``fdatasync``, on this machine's real file system) once per
     interval, not per write; with 0, only when the file ends. What a power cut of the
-    machine loses is then bounded by the interval, not by the kernel's writeback (~30 s)."""
+    machine loses is then bounded by the interval, not by the kernel's writeback (~30 s).
+    Each new file's folder is forced once, at its first sync, so that its name survives too
+    (the folder syncs watched as the real ``os.fsync`` runs)."""
+    import stat
+
     from uvd.telemetry.appendfile import AppendFile
+
+    folders: list[int] = []
+    real_fsync = os.fsync
+
+    def fsync(fd):
+        if stat.S_ISDIR(os.fstat(fd).st_mode):
+            folders.append(fd)
+        return real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
 
     timed, plain = AppendFile(1 << 20, sync_interval_s=0.05), AppendFile(1 << 20)
     t0 = time.monotonic()
@@ -1009,7 +1024,7 @@ def test_the_data_is_forced_to_the_disk_at_the_sync_interval_and_at_the_end(tmp_
     print(f"{timed.syncs} syncs in {span:.2f} s of writes; slowest write with its sync "
           f"{worst * 1e3:.2f} ms")
     assert span / 0.05 * 0.5 <= timed.syncs <= span / 0.05 + 1, (timed.syncs, span)
-    assert plain.syncs == 0
+    assert plain.syncs == 0 and len(folders) == 1  # the timed file's, at its first sync
     plain.write(tmp_path / "plain.bin", b"", close=True)
-    assert plain.syncs == 1 and plain.stats()["syncs"] == 1
+    assert plain.syncs == 1 and plain.stats()["syncs"] == 1 and len(folders) == 2
     assert (tmp_path / "timed.bin").stat().st_size == 50 * 4096

@@ -45,8 +45,9 @@ class AppendFile:
     sync_interval_s : float
         After a write, the file's data is forced to the disk (``fdatasync``) when this long
         has passed since the last time (0: only at close, the operating system's writeback
-        otherwise — on Linux up to ~30 s of data that a power cut of the machine loses). A
-        failed sync is a failed write: the file is cut back and the bytes kept.
+        otherwise — on Linux up to ~30 s of data that a power cut of the machine loses); a new
+        file's folder at its first sync, so that its name survives too. A failed sync is a
+        failed write: the file is cut back and the bytes kept.
     """
 
     def __init__(self, max_pending: int, sync_interval_s: float = 0.0) -> None:
@@ -54,6 +55,7 @@ class AppendFile:
         self.sync_interval_s = float(sync_interval_s)
         self.syncs = 0  # forced to the disk, at an interval or at close
         self._synced_at = time.monotonic()
+        self._entry_synced = True
         self.path: Path | None = None
         self.unwritten = b""  # what failed writes left, written first next time
         self.lost_bytes = 0
@@ -84,6 +86,7 @@ class AppendFile:
             if self._fh is None:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 self._fh = open(path, "ab", buffering=0)  # noqa: SIM115 - kept open
+                self._entry_synced = False
             size = os.fstat(self._fh.fileno()).st_size
             view = memoryview(todo)
             while view:
@@ -91,6 +94,9 @@ class AppendFile:
             if close or (self.sync_interval_s
                          and time.monotonic() - self._synced_at >= self.sync_interval_s):
                 _datasync(self._fh.fileno())
+                if not self._entry_synced:  # a new file: its name in the folder too
+                    _sync_folder(path.parent)
+                    self._entry_synced = True
                 self._synced_at = time.monotonic()
                 self.syncs += 1
         except OSError as exc:
@@ -146,3 +152,12 @@ class AppendFile:
 #: the file's data (and the size that finds it) to the disk, not its times: ``fdatasync`` where
 #: the system has it
 _datasync = getattr(os, "fdatasync", os.fsync)
+
+
+def _sync_folder(folder: Path) -> None:
+    """A folder's entries to the disk: a new file's name survives a power cut with its data."""
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
