@@ -58,9 +58,9 @@ def write_whole(path: Path, write: Callable[[Path], Any], tmp: Path,
     whose data was still in memory."""
     try:
         write(tmp)
-        _sync(tmp)
+        sync_to_disk(tmp)
         os.replace(tmp, path)
-        _sync(path.parent)
+        sync_to_disk(path.parent)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
         raise OSError(exc.errno, f"cannot write {what or path}: {exc.strerror or exc}") \
@@ -70,8 +70,9 @@ def write_whole(path: Path, write: Callable[[Path], Any], tmp: Path,
         raise
 
 
-def _sync(path: Path) -> None:
-    """A file's data, or a folder's entries, forced to the disk."""
+def sync_to_disk(path: Path) -> None:
+    """A file's data, or a folder's entries (a new or renamed file's name), forced to the
+    disk: what a power cut of the machine then keeps."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)

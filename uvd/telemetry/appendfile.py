@@ -25,6 +25,7 @@ import os
 import time
 from pathlib import Path
 
+from uvd.jsonio import sync_to_disk
 from uvd.spells import FailureSpells
 
 __all__ = ["AppendFile", "LOG_EVERY"]
@@ -95,7 +96,7 @@ class AppendFile:
                          and time.monotonic() - self._synced_at >= self.sync_interval_s):
                 _datasync(self._fh.fileno())
                 if not self._entry_synced:  # a new file: its name in the folder too
-                    _sync_folder(path.parent)
+                    sync_to_disk(path.parent)
                     self._entry_synced = True
                 self._synced_at = time.monotonic()
                 self.syncs += 1
@@ -152,12 +153,3 @@ class AppendFile:
 #: the file's data (and the size that finds it) to the disk, not its times: ``fdatasync`` where
 #: the system has it
 _datasync = getattr(os, "fdatasync", os.fsync)
-
-
-def _sync_folder(folder: Path) -> None:
-    """A folder's entries to the disk: a new file's name survives a power cut with its data."""
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
