@@ -25,10 +25,7 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     import zenoh
 
     port = free_port()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf = _listening_peer(port)
     faults = []
     callbacks = SessionCallbacks()
     with zenoh.open(conf) as s:
@@ -107,10 +104,7 @@ def test_a_flood_of_malformed_samples_is_counted_each_and_told_once_a_thousand(t
     import zenoh
 
     port = free_port()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf = _listening_peer(port)
     key = "uvd/sub2/estimate/aid6"
     with zenoh.open(conf) as s:
         pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
@@ -146,10 +140,7 @@ def test_uvd_watch_tells_a_flood_of_unreadable_samples_once_a_thousand():
     import zenoh
 
     port = free_port()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf = _listening_peer(port)
     state, event = "uvd/sub3/state", "uvd/sub3/event"
     with zenoh.open(conf) as s:
         pub = s.declare_publisher(state, congestion_control=zenoh.CongestionControl.BLOCK)
@@ -188,10 +179,7 @@ def test_uvd_watch_tells_what_health_holds_when_it_changes():
     import zenoh
 
     port = free_port()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf = _listening_peer(port)
     key = "uvd/sub4/health"
 
     def health(triggers, faults, sinks):
@@ -225,6 +213,17 @@ def test_uvd_watch_tells_what_health_holds_when_it_changes():
                     "sub4 telemetry sinks failing: none"], told
     assert any(x.startswith(f"{key}: unreadable health sample (triggers is not a list of names)")
                for x in lines), lines[-5:]
+
+
+def _listening_peer(port: int):
+    """A Zenoh peer's configuration that listens on loopback ``port``, nothing scouted: the
+    publisher a client under test connects to."""
+    import zenoh
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
 
 
 def _watching_client(argv: list[str], pub) -> tuple[subprocess.Popen, list[str]]:
@@ -280,10 +279,7 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path, busy_m
     from tests.test_fdc_residual import B, _estimate, _simulate
 
     port = free_port()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf = _listening_peer(port)
     samples = _simulate(260.0, t_fault=200.0, eta=[1, 1, 1, 0.5, 1, 1], noise=0.002)
     faults, asked = [], []
 
