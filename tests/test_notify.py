@@ -5,6 +5,7 @@ other tasks and threads live. And the unit file against ``systemd-analyze``."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import re
 import shutil
@@ -215,6 +216,102 @@ def test_daemon_sends_ready_watchdog_stopping_and_a_stalled_loop_stops_watchdog(
     assert receiver.count("WATCHDOG=1") == app.watchdog.pings
     stopping = [i for i, m in enumerate(msgs) if "STOPPING=1" in m]
     assert stopping and all("WATCHDOG" not in m for m in msgs[stopping[0] + 1:])
+
+
+class _SlowSink:
+    """A telemetry sink whose open takes ``open_s`` (a disk or a router that is slow to come)."""
+
+    def __init__(self, open_s: float) -> None:
+        self.name, self.open_s, self.records = "slow", open_s, []
+
+    async def open(self):
+        await asyncio.sleep(self.open_s)
+
+    async def write(self, records):
+        self.records += records
+
+    async def flush(self):
+        pass
+
+    async def aclose(self):
+        pass
+
+
+def _ready_probe(app_of, station):
+    """A notifier that, when the daemon says READY, notes what is open and at once sends a
+    station's HEARTBEAT to the MAVLink port the link has then (0: none yet)."""
+    from pymavlink.dialects.v20 import common as mav
+    enc = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+
+    class Probe(SdNotifier):
+        def __init__(self) -> None:
+            super().__init__(env={})
+            self.seen: list[dict] = []
+
+        def ready(self, status=None):
+            app = app_of()
+            port = app.links["mavlink"].port
+            self.seen.append({"port": port, "opening": app.hub.opening(),
+                              "t": time.monotonic()})
+            if port:
+                station.sendto(enc.heartbeat_encode(mav.MAV_TYPE_GCS,
+                                                    mav.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(enc),
+                               ("127.0.0.1", port))
+            return super().ready(status)
+    return Probe()
+
+
+@pytest.mark.parametrize("slow_open_s", [0.0, 3.0])
+def test_ready_comes_with_the_links_open_and_a_station_at_once_is_answered(slow_open_s):
+    """READY (systemd's, and STANDBY) came a few milliseconds before the MAVLink link was
+    bound: a station that came at once got no answer until the bind. Now the links open first.
+    A sink slower than ``[daemon] start_timeout_s`` does not hold the daemon back: it is up
+    after the start's budget, and the slow sink goes on opening and gets its records."""
+    cfg = load_config(ROOT / "config" / "sim.toml")
+    cfg = replace(cfg, daemon=replace(cfg.daemon, start_timeout_s=1.0),
+                  mavlink=replace(cfg.mavlink, enabled=True, listen="127.0.0.1:0",
+                                  params_file="", connect=()))
+    station = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    station.bind(("127.0.0.1", 0))
+    station.settimeout(0.1)
+    notifier = _ready_probe(lambda: app, station)
+    answered: list[bytes] = []
+    t0 = time.monotonic()
+
+    class Station:
+        name = "station"
+
+        async def start(self):
+            pass
+
+        async def stop(self):
+            pass
+
+        async def run(self):
+            deadline = time.monotonic() + 5.0
+            while not answered and time.monotonic() < deadline:
+                with contextlib.suppress(TimeoutError):
+                    answered.append(await asyncio.to_thread(station.recv, 512))
+            if slow_open_s:
+                await asyncio.sleep(slow_open_s)  # the slow sink opens meanwhile
+            app.request_stop("test done")
+
+    slow = _SlowSink(slow_open_s)
+    app = App(cfg, lambda t, dt: None, components=[Station()], notifier=notifier,
+              sinks=[slow] if slow_open_s else (), realtime=False)
+    try:
+        rc = asyncio.run(asyncio.wait_for(app.run(), 30.0))
+    finally:
+        station.close()
+    assert rc == 0
+    (seen,) = notifier.seen
+    assert seen["port"] > 0, seen
+    assert answered and answered[0][0] in (0xFD, 0xFE), answered  # a MAVLink frame back
+    if slow_open_s:
+        assert seen["opening"] == ["slow"] and 0.9 < seen["t"] - t0 < slow_open_s, seen
+        assert slow.records, "the slow sink got no records once open"
+    else:
+        assert seen["opening"] == [], seen
 
 
 def _analyze(*args, timeout=60):

@@ -17,7 +17,8 @@ Task structure (``asyncio.TaskGroup``)::
 
     App.run()
      └─ TaskGroup
-         ├─ main: start components → BOOT→STANDBY → READY=1 → wait for stop → shutdown
+         ├─ main: start components → open the links → BOOT→STANDBY → READY=1 → wait for stop
+         │                      → shutdown
          ├─ control-loop        FixedRateLoop.run()
          ├─ telemetry           TelemetryHub.run()  (one pump per sink inside)
          ├─ <component>.run()   one per component
@@ -454,6 +455,7 @@ class App:
     async def _main(self, tg: asyncio.TaskGroup) -> None:
         cfg = self.config.daemon
         started: list[Component] = []
+        start_by = time.monotonic() + cfg.start_timeout_s
         try:
             async with asyncio.timeout(cfg.start_timeout_s):
                 for c in self.components:
@@ -466,14 +468,21 @@ class App:
             self.request_stop(f"start failed: {what}", exit_code=1)
             await self._shutdown(None, started)
             return
+        # the links open before the daemon says it is up: a station that comes at once finds
+        # the MAVLink port bound (a link slower than the start's budget opens on, told)
+        tasks = [tg.create_task(self._guard("telemetry", self.hub.run), name="telemetry")]
+        opening = await self.hub.wait_open(start_by - time.monotonic())
+        if opening:
+            log.warning("telemetry: %s not open within [daemon] start_timeout_s %g s; up "
+                        "without them, they go on opening", ", ".join(opening),
+                        cfg.start_timeout_s)
         t = time.monotonic_ns()
         if self.realtime:  # threads the drivers started (python-can, canopen, pyserial)
             self._promote_helpers("booted")
         self.supervisor.boot_complete(t, "components up: " +
                                       (", ".join(c.name for c in started) or "none"))
         self.notifier.ready(self.supervisor.status_text())
-        tasks = [tg.create_task(self._guard(c.name, c.run), name=c.name) for c in started]
-        tasks.append(tg.create_task(self._guard("telemetry", self.hub.run), name="telemetry"))
+        tasks += [tg.create_task(self._guard(c.name, c.run), name=c.name) for c in started]
         loop_task = tg.create_task(self._guard("control loop", self._run_loop),
                                    name="control-loop")
         if self._helper_prio > 0:

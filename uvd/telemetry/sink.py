@@ -191,6 +191,7 @@ class TelemetryHub:
         self._lanes: list[_Lane] = [_Lane(s, self.queue_size, every_n) for s in sinks]
         self._watched: list[_Watched] = []
         self._closing = False
+        self._settled = asyncio.Event()  # every sink opened or failed to (wait_open)
 
     def add_sink(self, sink: TelemetrySink, every_n: int = 1,
                  types: Iterable[str] | None = None) -> None:
@@ -253,7 +254,23 @@ class TelemetryHub:
                     log.warning("telemetry: sink %s did not open (%s: %s); its records are "
                                 "dropped", lane.sink.name, type(exc).__name__, exc)
                     self._tell(lane)
+        if not self.opening():
+            self._settled.set()
         return lane.opened
+
+    def opening(self) -> list[str]:
+        """The sinks still opening: neither open nor failed to."""
+        return [lane.sink.name for lane in self._lanes if not (lane.opened or lane.open_failed)]
+
+    async def wait_open(self, timeout_s: float) -> list[str]:
+        """With :meth:`run` started: wait until every sink has opened or failed to, at most
+        ``timeout_s``; returns :meth:`opening` (a sink that takes longer goes on opening, its
+        records queued). The daemon declares itself ready after it, so a station that comes
+        at once finds the MAVLink port bound."""
+        if self.opening():
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._settled.wait(), max(0.0, timeout_s))
+        return self.opening()
 
     async def _pump(self, lane: _Lane) -> None:
         if not await self._ensure_open(lane):
