@@ -10,7 +10,7 @@ import pytest
 
 from uvd.links.mavlink.link import custom_mode_of
 from uvd.links.mavlink.params import PARAMS, check_value, param_table, write_params_file
-from uvd.links.mavlink.signing import SigningError, load_key
+from uvd.links.mavlink.signing import SigningError, load_key, load_timestamp, save_timestamp
 from uvd.runtime import schema
 from uvd.runtime.config import DEFAULT_CONFIG, load_config
 from uvd.runtime.cycle import CycleConfig
@@ -106,6 +106,30 @@ def test_the_signing_key_file_must_be_private_and_32_bytes(tmp_path):
         load_key(f)
     with pytest.raises(SigningError, match="missing"):
         load_key(tmp_path / "missing")
+
+
+def test_the_signing_timestamp_file_is_whole_or_the_old_one(tmp_path, monkeypatch):
+    """The timestamp is kept as write_whole keeps a file: forced to the disk before it
+    replaces the old one (a file lost to a power cut read 0), and a write that fails leaves
+    the old value and no temporary file, with an error naming the file."""
+    import os
+    f = tmp_path / "signing.ts"
+    synced: list[str] = []
+    real_fsync = os.fsync
+
+    def fsync(fd):  # the names of what was forced to the disk
+        synced.append(os.readlink(f"/proc/self/fd/{fd}"))
+        real_fsync(fd)
+    monkeypatch.setattr(os, "fsync", fsync)
+    save_timestamp(f, 123_456)
+    assert load_timestamp(f) == 123_456
+    assert synced == [str(tmp_path / "signing.ts.tmp"), str(tmp_path)]
+    (tmp_path / "signing.ts.tmp").symlink_to("/dev/full")  # a disk with no room
+    with pytest.raises(OSError, match="cannot write the signing timestamp file .*signing.ts: "
+                                      "No space left on device"):
+        save_timestamp(f, 999)
+    assert load_timestamp(f) == 123_456
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["signing.ts"]
 
 
 def test_custom_mode_reports_the_operator_mode_and_what_the_cycle_applies():

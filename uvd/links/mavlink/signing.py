@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import hashlib
 import hmac
-import os
 import stat
 import time
 from pathlib import Path
 
 from uvd.errors import UvdError
+from uvd.jsonio import write_whole
 
 __all__ = ["SigningError", "SigningState", "load_key", "load_timestamp", "save_timestamp",
            "now_timestamp", "sign_block_parts"]
@@ -85,11 +85,12 @@ def load_timestamp(path: str | Path | None) -> int:
 
 
 def save_timestamp(path: str | Path, ts: int) -> None:
-    """Keep ``ts`` in ``path`` (atomically)."""
+    """Keep ``ts`` in ``path``, whole, through a power cut too (:func:`uvd.jsonio.write_whole`:
+    a file lost reads 0, and a vehicle whose clock starts behind would sign again with
+    timestamps its stations have seen)."""
     p = Path(path)
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(f"{int(ts)}\n", encoding="ascii")
-    os.replace(tmp, p)
+    write_whole(p, lambda tmp: tmp.write_text(f"{int(ts)}\n", encoding="ascii"),
+                p.with_name(p.name + ".tmp"), "the signing timestamp file " + str(p))
 
 
 def sign_block_parts(packet: bytes) -> tuple[int, int, int, int] | None:
