@@ -65,6 +65,31 @@ def running_bridge(run_dir: Path, changes: dict | None = None, duration_s: float
         proc.kill()
 
 
+def daemon_config(bridge_cfg: Path, run_dir: Path, changes: dict | None = None) -> Path:
+    """A daemon configuration for a bridge already running (a module's shared one): the
+    bridge's own (its instruments' ports, its CAN bus) with ``changes`` merged in, table by
+    table, as :func:`running_bridge` merges them; written to ``run_dir/uvd.toml``."""
+    from sim_bridge.bridge import merge_tables
+    from uvd.io.toml import dump_toml, read_toml
+    data = read_toml(bridge_cfg)
+    merge_tables(data, changes or {})
+    path = Path(run_dir) / "uvd.toml"
+    path.write_text(dump_toml(data), encoding="utf-8")
+    return path
+
+
+@contextlib.contextmanager
+def reusing_bridge(shared: tuple[Path, BridgeProcess], run_dir: Path,
+                   changes: dict | None = None):
+    """:func:`running_bridge`'s ``(config path, BridgeProcess)`` for a module's shared bridge
+    (as tests/test_daemon_faults.py shares one): reset and placed as at its start, with a
+    daemon configuration of the caller's own (:func:`daemon_config`)."""
+    cfg_path, proc = shared
+    assert proc.call("reset")["ok"] and proc.call("place", hold=True)["ok"]
+    Path(run_dir).mkdir(parents=True, exist_ok=True)
+    yield daemon_config(cfg_path, run_dir, changes), proc
+
+
 def station_link(run_dir: Path) -> dict:
     """The configuration changes that put the daemon's MAVLink link on a loopback UDP port the
     kernel picks when it binds (port 0: no other test or process can take it between a pick

@@ -173,6 +173,6 @@ def test_a_second_daemon_on_a_can_bus_in_use_does_not_start(tmp_path):
         assert "failsafe fired" not in log and "CAN fault" not in log, log[-2000:]
         assert first.returncode == 0
         r = subprocess.run([sys.executable, "-m", "uvd", "run", "--config", str(twin),
-                            "--duration", "3"], capture_output=True, text=True, timeout=240)
+                            "--duration", "1"], capture_output=True, text=True, timeout=240)
         assert r.returncode == 0, r.stderr[-2000:]
         assert "lifecycle BOOT → STANDBY" in r.stderr, r.stderr[-2000:]

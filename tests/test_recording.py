@@ -27,7 +27,7 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from tests.hil_daemon import run_scenario, running_bridge
+from tests.hil_daemon import reusing_bridge, run_scenario, running_bridge
 from uvd.cli import main
 from uvd.runtime import commands as cmd
 from uvd.runtime.config import load_config
@@ -39,13 +39,20 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory):
+def shared_bridge(tmp_path_factory):
+    """One sim-bridge for the module's daemons, each test's own configuration on it."""
+    with running_bridge(tmp_path_factory.mktemp("bridge")) as b:
+        yield b
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory, shared_bridge):
     """(recording file, config path, daemon) of a short recorded HIL run."""
     run_dir = tmp_path_factory.mktemp("rec")
     changes = {"recording": {"enabled": True, "dir": str(run_dir / "rec"),
                              "flush_interval_s": 0.1},
                "failsafe": {"amplifier_fault": "reallocate"}}
-    with running_bridge(run_dir, changes) as (cfg_path, proc):
+    with reusing_bridge(shared_bridge, run_dir, changes) as (cfg_path, proc):
         cfg = load_config(cfg_path)
 
         async def scenario(d):
@@ -200,6 +207,20 @@ def test_a_recorded_eta_the_replay_does_not_reach_is_a_mismatch(recorded, tmp_pa
     assert rep.first_mismatch["t_ns"] == edited[0]
 
 
+def _keep_report_summaries(monkeypatch) -> list[dict]:
+    """The summaries :func:`write_report` returns from now on (``uvd report`` calls it), so
+    that one drawing of a report serves both the command's and the summary's checks."""
+    import uvd.telemetry.report as report
+    summaries: list[dict] = []
+    real = report.write_report
+
+    def keep(*args, **kwargs):
+        summaries.append(real(*args, **kwargs))
+        return summaries[-1]
+    monkeypatch.setattr(report, "write_report", keep)
+    return summaries
+
+
 def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = None,
              stray_channel: int | None = None) -> None:
     """Copy a recording message by message through MCAP's writer, ``edit``-ing each (None:
@@ -267,7 +288,7 @@ def test_other_gains_replay_and_compare_tracking(recorded, tmp_path):
     assert rec["thrust_rms_n"] != rpl["thrust_rms_n"]
 
 
-def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
+def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys, monkeypatch):
     path, _, _, cycles = recorded
     data = path.read_bytes()
     # a file cut anywhere (a crash) replays with 0 mismatches: every cycle's samples lie in
@@ -344,12 +365,13 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
     assert rep.stopped.startswith("message on /uvd/cycle at ") and \
         rep.stopped.endswith(" the replay covers the 20 cycles recorded before it"), rep.stopped
     n_recorded = sum(1 for _ in read_messages(path, ["/uvd/cycle"]))
-    summary = write_report(garbled, tmp_path / "report-garbled")
-    assert (summary["cycles"], summary["unreadable_messages"]) == (n_recorded - 1, 1)
-    assert summary["first_unreadable"].startswith("message on /uvd/cycle at ")
     capsys.readouterr()
+    summaries = _keep_report_summaries(monkeypatch)
     assert main(["report", str(garbled), "--out", str(tmp_path / "report-garbled"),
                  "--quiet"]) == 0
+    (summary,) = summaries
+    assert (summary["cycles"], summary["unreadable_messages"]) == (n_recorded - 1, 1)
+    assert summary["first_unreadable"].startswith("message on /uvd/cycle at ")
     assert "uvd report: 1 unreadable message(s) skipped (first: message on /uvd/cycle" in \
         capsys.readouterr().err
 
@@ -364,7 +386,7 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys):
     (lambda msg: [msg["t_ns"]], "a JSON list, not an object"),
 ])
 def test_a_malformed_cycle_record_is_skipped_by_the_report_and_ends_the_replay(
-        recorded, tmp_path, capsys, edit, why):
+        recorded, tmp_path, capsys, monkeypatch, edit, why):
     """A cycle record that is valid JSON but not what uvd.cycle.v1 promises: the report
     skips and counts it and draws the rest (it refused the whole file, or printed a
     traceback); the replay, which needs every cycle, covers the 20 before it, bit for bit."""
@@ -378,11 +400,13 @@ def test_a_malformed_cycle_record_is_skipped_by_the_report_and_ends_the_replay(
     assert re.fullmatch(f"a /uvd/cycle record at .* ns is malformed \\({why}\\): the replay "
                         "covers the 20 cycles recorded before it", rep.stopped), rep.stopped
     n_recorded = sum(1 for _ in read_messages(path, ["/uvd/cycle"]))
-    summary = write_report(bad, tmp_path / "report")
+    capsys.readouterr()
+    # one report, drawn by the command, whose summary write_report returned is kept
+    summaries = _keep_report_summaries(monkeypatch)
+    assert main(["report", str(bad), "--out", str(tmp_path / "report"), "--quiet"]) == 0
+    (summary,) = summaries
     assert (summary["cycles"], summary["malformed_records"]) == (n_recorded - 1, 1)
     assert re.fullmatch(f"/uvd/cycle record at [0-9]+ ns: {why}", summary["first_malformed"])
-    capsys.readouterr()
-    assert main(["report", str(bad), "--out", str(tmp_path / "report"), "--quiet"]) == 0
     assert re.search(f"uvd report: 1 malformed record\\(s\\) skipped \\(first: /uvd/cycle "
                      f"record at [0-9]+ ns: {why}\\)", capsys.readouterr().err)
 
@@ -539,11 +563,12 @@ def test_a_damaged_record_costs_only_itself(recorded, tmp_path, damage, why):
     assert summary["unreadable_messages"] == 1 and summary["first_unreadable"] == notes[0]
 
 
-def test_sigkill_of_the_daemon_leaves_a_file_report_reads_to_within_a_second(tmp_path):
+def test_sigkill_of_the_daemon_leaves_a_file_report_reads_to_within_a_second(
+        tmp_path, shared_bridge):
     """``uvd run`` (a real daemon process over sim-bridge, recording) killed with SIGKILL
     mid-run: ``uvd report`` reads its file up to at most one second before the kill."""
     changes = {"recording": {"enabled": True, "dir": str(tmp_path / "rec")}}
-    with running_bridge(tmp_path, changes) as (cfg_path, _):
+    with reusing_bridge(shared_bridge, tmp_path, changes) as (cfg_path, _):
         proc = subprocess.Popen([sys.executable, "-m", "uvd", "run", "--config", str(cfg_path),
                                  "--arm", "--duration", "60"], stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL, cwd=Path(__file__).parents[1])
@@ -843,7 +868,8 @@ def _late_station_logging_bits(port: int) -> tuple[bool, bool, bool]:
         s.close()
 
 
-def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_again(tmp_path):
+def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_again(
+        tmp_path, shared_bridge):
     """A real ``uvd run`` over sim-bridge, recording, with a ground station on MAVLink: its
     files may not grow (``prlimit`` RLIMIT_FSIZE 1 byte on the daemon's pid, EFBIG in the
     kernel as a full disk fails) and then may again. The station is told both (STATUSTEXT,
@@ -864,7 +890,7 @@ def test_the_operator_is_told_when_the_black_box_cannot_write_and_when_it_can_ag
                            "params_file": str(tmp_path / "params.toml"),
                            "signing_timestamp_file": str(tmp_path / "signing.ts")}}
     log_lines: list[str] = []
-    with running_bridge(tmp_path, changes) as (cfg_path, _):
+    with reusing_bridge(shared_bridge, tmp_path, changes) as (cfg_path, _):
         proc = subprocess.Popen([sys.executable, "-m", "uvd", "run", "--config", str(cfg_path),
                                  "--duration", "120"], stdout=subprocess.DEVNULL,
                                 stderr=subprocess.PIPE, text=True,
@@ -948,7 +974,7 @@ def test_the_free_room_of_the_recordings_disk_is_measured_and_named_below_the_bo
     assert recs[0.0].free_bytes is None  # not even measured
 
 
-def test_a_disk_with_little_room_is_told_once_and_the_vehicle_flies_on(tmp_path):
+def test_a_disk_with_little_room_is_told_once_and_the_vehicle_flies_on(tmp_path, shared_bridge):
     """A real daemon over sim-bridge recording to a disk with less free than ``[recording]
     min_free_mb`` (1e9 MB: more than any disk here has): the operator is told once — a
     ``"sink"`` record ``recording-disk`` ("recording disk low: N MB free on DIR (below
@@ -961,7 +987,7 @@ def test_a_disk_with_little_room_is_told_once_and_the_vehicle_flies_on(tmp_path)
                **station_link(tmp_path)}
     sink = ListSink()
     out: dict = {}
-    with running_bridge(tmp_path, changes) as (cfg_path, _):
+    with reusing_bridge(shared_bridge, tmp_path, changes) as (cfg_path, _):
         async def scenario(d):
             end = time.monotonic() + 20.0
             while not [r for r in sink.records if r.get("type") == "sink"] \

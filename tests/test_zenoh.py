@@ -17,7 +17,7 @@ import jsonschema
 import pytest
 import zenoh
 
-from tests.hil_daemon import run_scenario, running_bridge
+from tests.hil_daemon import reusing_bridge, run_scenario, running_bridge
 from uvd.netports import free_port
 from uvd.runtime.config import load_config
 from uvd.zenoh_callbacks import SessionCallbacks
@@ -25,6 +25,13 @@ from uvd.zenoh_callbacks import SessionCallbacks
 pytestmark = pytest.mark.slow
 
 SCHEMAS = Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
+
+
+@pytest.fixture(scope="module")
+def shared_bridge(tmp_path_factory):
+    """One sim-bridge for the module's daemons, each test's own configuration on it."""
+    with running_bridge(tmp_path_factory.mktemp("bridge")) as b:
+        yield b
 
 
 class Watcher:
@@ -81,7 +88,7 @@ class Watcher:
         return ok, err, time.monotonic() - t0
 
 
-def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path):
+def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path, shared_bridge):
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     changes = {"telemetry": {"zenoh": {"enabled": True, "listen": [endpoint], "key": "rov7",
@@ -90,7 +97,7 @@ def test_a_schema_client_sees_state_estimates_health_events_and_params(tmp_path)
     w = Watcher(endpoint)
     info = {}
     try:
-        with running_bridge(tmp_path, changes) as (cfg_path, proc):
+        with reusing_bridge(shared_bridge, tmp_path, changes) as (cfg_path, proc):
             cfg = load_config(cfg_path)
 
             async def scenario(d):
@@ -176,7 +183,7 @@ def test_a_sink_told_failing_is_an_event_that_fits_the_schema():
     jsonschema.validate({"seq": 0, "t_ns": 5, "vehicle": "rov", **body}, schema("uvd.event.v1"))
 
 
-def test_a_second_session_is_told_of_a_recording_that_cannot_open(tmp_path):
+def test_a_second_session_is_told_of_a_recording_that_cannot_open(tmp_path, shared_bridge):
     """The daemon's black box cannot open (its folder would lie under a file): a fault-detection
     client's own session (the schema files, nothing of the daemon) gets an ``event`` of kind
     ``sink`` that fits ``uvd.event.v1`` and names the sink and why."""
@@ -190,7 +197,7 @@ def test_a_second_session_is_told_of_a_recording_that_cannot_open(tmp_path):
                "recording": {"enabled": True, "dir": str(tmp_path / "a-file" / "rec")}}
     w = Watcher(endpoint, listen=True)
     try:
-        with running_bridge(tmp_path, changes) as (cfg_path, _):
+        with reusing_bridge(shared_bridge, tmp_path, changes) as (cfg_path, _):
             async def scenario(d):
                 end = time.monotonic() + 15.0  # the watcher connects on its own schedule
                 while not any(m["kind"] == "sink" for m in w.samples["uvd/rov8/event"]) \
@@ -208,7 +215,7 @@ def test_a_second_session_is_told_of_a_recording_that_cannot_open(tmp_path):
 
 
 def test_a_session_that_connects_after_the_event_learns_from_health_the_recording_fails(
-        tmp_path):
+        tmp_path, shared_bridge):
     """An event is not kept for a session that connects later, so ``health`` carries what the
     last ``sink`` event of each sink said: a client that connects after the black box failed
     to open (its folder would lie under a file) gets no event but every health sample names
@@ -220,7 +227,7 @@ def test_a_session_that_connects_after_the_event_learns_from_health_the_recordin
                                        "health_hz": 5.0}},
                "recording": {"enabled": True, "dir": str(tmp_path / "a-file" / "rec")}}
     box: dict = {}
-    with running_bridge(tmp_path, changes) as (cfg_path, _):
+    with reusing_bridge(shared_bridge, tmp_path, changes) as (cfg_path, _):
         async def scenario(d):
             end = time.monotonic() + 10.0  # the failed open is told before errors count it
             while d.app.hub.stats()["mcap"]["errors"] < 1 and time.monotonic() < end:
@@ -233,7 +240,7 @@ def test_a_session_that_connects_after_the_event_learns_from_health_the_recordin
             # and uvd watch, a client process of its own that comes later still
             box["watch"] = await asyncio.to_thread(
                 subprocess.run, [sys.executable, "-m", "uvd", "watch", "--connect", endpoint,
-                                 "--seconds", "5"], capture_output=True, text=True, timeout=60)
+                                 "--seconds", "2"], capture_output=True, text=True, timeout=60)
 
         try:
             run_scenario(load_config(cfg_path), scenario)
