@@ -32,7 +32,6 @@ import sys
 import time
 import uuid
 
-import can
 import numpy as np
 
 from uvd.bench import Bench, percentiles
@@ -61,6 +60,8 @@ def _realtime(on: bool) -> str:
 
 
 def _encode_decode(samples: int) -> dict:
+    import can  # here, not at the top: the command line registers every bench
+
     from drivers.can import cia402
     from drivers.can.amplifier import AmplifierGroup
     from drivers.can.bus import CanBus

@@ -13,11 +13,11 @@ import time
 
 import numpy as np
 
-from sim_bridge.instruments.models import InstrumentConfig, Instruments
-from sim_bridge.plant import Plant, PlantConfig
 from uvd.bench import Bench, percentiles
 from uvd.cliargs import positive_float
-from uvd.io.vehicle import load_vehicle
+
+# the plant (numba's kernels) is imported when the bench runs: ``uvd``'s command line
+# registers every bench, and a command as light as ``uvd watch`` should not load it
 
 
 def _add(p) -> None:
@@ -35,6 +35,9 @@ def _commands(n_steps: int, n_thr: int, dt: float) -> np.ndarray:
 
 
 def _run(args) -> dict:
+    from sim_bridge.instruments.models import InstrumentConfig, Instruments
+    from sim_bridge.plant import Plant, PlantConfig
+    from uvd.io.vehicle import load_vehicle
     vehicle = load_vehicle(args.vehicle)
     dt = 1.0 / args.rate
     n = int(round(args.seconds * args.rate))

@@ -18,7 +18,6 @@ from pathlib import Path
 
 from drivers import digiquartz, frames, pd0, phins_ascii, phins_stdbin
 from drivers.framing import decode_bytes
-from sim_bridge.instruments.models import InstrumentConfig
 from uvd.cliargs import nonnegative_int
 from uvd.errors import ConfigError
 from uvd.geometry import wrap_angle
@@ -133,6 +132,7 @@ def _noise_line(n: pd0.BottomTrackNoise) -> str:
     per_ping = "" if not n.bt_pings else \
         f", {n.sigma_ping_m_s * 1e3:.1f} mm/s a ping ({n.bt_pings} bottom-track pings an ensemble)"
     every = "" if not math.isfinite(n.interval_s) else f", an ensemble every {n.interval_s:.2f} s"
+    from sim_bridge.instruments.models import InstrumentConfig
     sim = InstrumentConfig()
     return (f"# bottom-track velocity noise (robust σ of the error velocity, {n.ensembles} "
             f"ensembles{every}): {n.sigma_m_s * 1e3:.1f} mm/s an ensemble{per_ping}; "

@@ -41,10 +41,8 @@ from typing import Any
 import numpy as np
 
 from uvd import _jitcache
-from uvd.bench import host_steal_s
 from uvd.cliargs import nonnegative_int, output_file, output_folder, positive_float
 from uvd.jsonio import write_json
-from uvd.lockstep import hil_tracking
 from uvd.runtime.process import stop_daemon
 
 #: lockstep runs (seeds seed … seed + SPREAD_SEEDS − 1) whose spread the HIL run is set against
@@ -198,6 +196,7 @@ def _figures(cfg, duration_s: float, seed: int, run_dir: Path, truth_path: Path,
     """The demo's figures from what the run left behind (summary, telemetry, truth);
     ``spread_logs``: lockstep runs of the same configuration with other seeds."""
     from sim_bridge.bridge import read_truth
+    from uvd.lockstep import hil_tracking
     c = cfg.control
     samples, loads, steal = watch["samples"], watch["loads"], watch["steal"]
     daemon_hwm, bridge_hwm = watch["daemon_hwm"], watch["bridge_hwm"]
@@ -281,6 +280,7 @@ def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str]
            tail, progress) -> dict[str, Any]:
     """Follow the run for ``duration_s`` after arming: the daemon's log lines, both processes'
     memory, the load average and the host's steal, a progress line every 10 s."""
+    from uvd.bench import host_steal_s
     samples: list[tuple[float, float, float]] = []
     loads: list[float] = []  # 1-minute load average, once a second
     steal: list[tuple[float, float]] = []  # (monotonic s, cumulative steal s), ~1 Hz
