@@ -313,3 +313,18 @@ def test_an_experiment_too_short_for_its_figures_says_so(name, capsys):
     assert main(["experiment", name, "--hours", "0.01", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert f"uvd experiment: error: {name}: --hours 0.01 is too short" in err, err
+
+
+def test_the_command_line_loads_no_numeric_kernels_to_build_its_parser():
+    """``uvd watch``, ``uvd eta`` and the like start in about a third of a second: building the
+    parser (every command and bench registers its options) imports neither numba, SciPy nor
+    python-can (with them, 0.58 s; the daemon's cycle and the benches import them when they
+    run). A fresh interpreter, since this one has them all."""
+    import subprocess
+    import sys
+    code = ("import sys; from uvd.cli import build_parser; build_parser(); "
+            "print(' '.join(m for m in ('numba', 'scipy', 'can', 'uvd.estimation.aid', "
+            "'sim_bridge.plant') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "", f"imported to build the parser: {r.stdout.strip()}"
