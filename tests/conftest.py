@@ -45,7 +45,10 @@ def shared_data():
 #: datagram flood, bus rates), or load the machine on purpose (test_fdc's busy processes).
 #: ``make test`` runs the suite on two xdist workers with ``--dist loadgroup``; these go to one
 #: group, so they run one after another on one worker and never beside each other (the other
-#: worker runs the rest). A new module of that kind belongs here.
+#: worker runs the rest). A new module of that kind belongs here. A test of such a module that
+#: runs nothing in real time and bounds nothing in wall-clock time (a command refused before
+#: it starts, a lockstep run) is marked ``untimed`` and runs on either worker: the group is
+#: the suite's longest path.
 REAL_TIME_GROUP = "real-time"
 REAL_TIME_MODULES = frozenset(f"test_{name}" for name in (
     "amplifier_eta", "can_bench", "can_bus", "can_contract", "can_fuzz", "can_logging", "cli",
@@ -66,12 +69,16 @@ REAL_TIME_MODULES = frozenset(f"test_{name}" for name in (
 SERIAL_MODULES = frozenset({"test_mavlink"})
 
 
+def _real_time(item) -> bool:
+    return item.path.stem in REAL_TIME_MODULES and item.get_closest_marker("untimed") is None
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist reads the groups (its own modifyitems)
 def pytest_collection_modifyitems(items):
-    """Put the tests of :data:`REAL_TIME_MODULES` in the xdist group :data:`REAL_TIME_GROUP`,
-    and mark those of :data:`SERIAL_MODULES` ``serial``."""
+    """Put the tests of :data:`REAL_TIME_MODULES` (but those marked ``untimed``) in the xdist
+    group :data:`REAL_TIME_GROUP`, and mark those of :data:`SERIAL_MODULES` ``serial``."""
     for item in items:
-        if item.path.stem in REAL_TIME_MODULES:
+        if _real_time(item):
             item.add_marker(pytest.mark.xdist_group(REAL_TIME_GROUP))
         if item.path.stem in SERIAL_MODULES:
             item.add_marker(pytest.mark.serial)
@@ -84,7 +91,7 @@ def pytest_collection_finish(session):
     if not getattr(session.config.option, "loadgroup", False):  # set on xdist workers only
         return
     lost = [i.nodeid for i in session.items
-            if i.path.stem in REAL_TIME_MODULES and not i.nodeid.endswith(f"@{REAL_TIME_GROUP}")]
+            if _real_time(i) and not i.nodeid.endswith(f"@{REAL_TIME_GROUP}")]
     if lost:
         raise pytest.UsageError(f"--dist loadgroup: xdist did not group {len(lost)} real-time "
                                 f"tests (e.g. {lost[0]}); see tests/conftest.py")

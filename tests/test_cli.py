@@ -22,6 +22,7 @@ def test_help_lists_commands(capsys):
         assert cmd in out
 
 
+@pytest.mark.untimed
 def test_version():
     r = subprocess.run([sys.executable, "-m", "uvd", "--version"], capture_output=True, text=True,
                        timeout=60)
@@ -138,6 +139,7 @@ def _no_file_may_grow() -> None:
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
 
 
+@pytest.mark.untimed
 def test_a_failed_write_is_an_error_that_says_so_not_a_traceback(tmp_path):
     """A command whose output cannot be written (a full disk) ends with exit 1 and one line;
     a --json OUT names its path and leaves no temporary file. Both were tracebacks
@@ -223,6 +225,7 @@ def _files_may_grow_to(limit: int):
     return preexec
 
 
+@pytest.mark.untimed
 def test_check_config_doc_out_that_cannot_be_written_leaves_the_old_docs_whole(tmp_path):
     """--doc-out over existing docs on a disk too full for them: exit 1, one line naming the
     file that could not be written, the old file whole and no temporary file. Before, the

@@ -41,6 +41,7 @@ def test_a_wrong_config_fails_fast_naming_the_key(tmp_path, capsys, old, new, ke
     assert line.startswith(f"{path}: {key}: ") and reason in line
 
 
+@pytest.mark.untimed
 def test_the_real_process_exits_2_before_opening_anything(tmp_path):
     path = bad(tmp_path, "kp = 300.0", "kp = -5.0")
     r = subprocess.run([sys.executable, "-m", "uvd", "run", "--config", str(path), "--arm"],
@@ -50,6 +51,7 @@ def test_the_real_process_exits_2_before_opening_anything(tmp_path):
     assert not Path("/tmp/uvd-sim/ins").exists() or "BOOT" not in r.stderr
 
 
+@pytest.mark.untimed
 def test_sim_bridge_refuses_a_wrong_config_too(tmp_path):
     path = bad(tmp_path, 'interface = "udp_multicast"', 'interface = "no-such-bus"')
     r = subprocess.run([sys.executable, "-m", "uvd", "sim-bridge", "--config", str(path)],
@@ -57,6 +59,7 @@ def test_sim_bridge_refuses_a_wrong_config_too(tmp_path):
     assert r.returncode == 2 and "can.interface" in r.stderr
 
 
+@pytest.mark.untimed
 def test_an_absent_device_stops_the_start_with_exit_1(tmp_path):
     """A port that does not exist is not a configuration error (the adapter may be plugged
     later) but the drivers cannot come up: the start times out, exit 1, naming the port."""
@@ -99,6 +102,7 @@ def _cut_eds(tmp_path: Path) -> Path:
     return cut
 
 
+@pytest.mark.untimed
 def test_sim_bridge_names_an_object_dictionary_that_does_not_read(tmp_path):
     # found by probing (session 21): sim-bridge ended in canopen's ValueError traceback
     # (uvd run and uvd zero-thrust named it already, through drivers' load_od)

@@ -618,6 +618,7 @@ def test_report_writes_valid_pngs_the_html_references(recorded, tmp_path):
     assert main(["report", str(tmp_path / "none.mcap"), "--out", str(out), "--quiet"]) == 2
 
 
+@pytest.mark.untimed
 def test_a_two_step_experiment_records_the_daemons_channels_and_reports(tmp_path):
     """``uvd experiment two-step --record``: the same format (every message fits its schema),
     and ``uvd report`` draws it, the controller's θ̂ included, and cross-validates a parameter
