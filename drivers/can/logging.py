@@ -19,6 +19,7 @@ says why while writes fail (the daemon tells the operator).
 from __future__ import annotations
 
 import logging
+import os
 import queue
 import threading
 import time
@@ -34,6 +35,10 @@ log = logging.getLogger(__name__)
 
 #: after a spell's first failed write, one in this many is logged (a full disk fails them all)
 LOG_EVERY = 100
+#: the file is flushed and forced to the disk at most this often while frames come (s), as the
+#: black box is (``[recording] sync_interval_s``): a power cut then loses at most about this
+#: much of a candump or ASC log (of a BLF log also the container python-can still compresses)
+SYNC_EVERY_S = 1.0
 
 
 class CanRecorder:
@@ -64,6 +69,8 @@ class CanRecorder:
         self.max_bytes = int(max_bytes)
         self.written = 0
         self.dropped = 0
+        self.syncs = 0
+        self.sync_errors = 0
         self._spells = FailureSpells(LOG_EVERY)
         self._failing_since = 0.0
         self._last_error = ""
@@ -116,10 +123,18 @@ class CanRecorder:
         return int(getattr(self._writer, "rollover_count", 0))
 
     def _run(self) -> None:
+        synced_at, dirty = time.monotonic(), False
         while True:
-            msg = self._queue.get()
+            if dirty and time.monotonic() - synced_at >= SYNC_EVERY_S:
+                self._sync()
+                synced_at, dirty = time.monotonic(), False
+            try:
+                msg = self._queue.get(timeout=SYNC_EVERY_S if dirty else None)
+            except queue.Empty:
+                continue
             if msg is None:
                 return
+            dirty = True
             try:
                 self._writer.on_message_received(msg)
             except Exception as exc:  # noqa: BLE001 - a log problem must not stop the bus
@@ -136,6 +151,19 @@ class CanRecorder:
                             "(%d so far)", self.path, time.monotonic() - self._failing_since,
                             self.write_errors)
             self._failing_since = 0.0
+
+    def _sync(self) -> None:
+        """What the writer wrote, flushed and forced to the disk (the writer thread's)."""
+        try:
+            f = getattr(self._writer, "writer", self._writer).file  # a rotating one's current
+            f.flush()
+            os.fsync(f.fileno())
+            self.syncs += 1
+        except (OSError, ValueError, AttributeError) as exc:
+            self.sync_errors += 1
+            if self.sync_errors == 1 or self.sync_errors % LOG_EVERY == 0:
+                log.warning("CAN log: cannot force %s to the disk (%d times): %s", self.path,
+                            self.sync_errors, exc)
 
     def stop(self, timeout: float = 5.0) -> None:
         """Write what is queued, close the file (idempotent)."""
