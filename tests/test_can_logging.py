@@ -95,6 +95,26 @@ def test_a_running_log_is_forced_to_the_disk_every_second(tmp_path, monkeypatch,
     assert str(path) in synced
 
 
+def test_frames_a_full_disk_refuses_at_the_sync_are_told(tmp_path):
+    """A candump log on a full device (/dev/full) with fewer frames than its writer buffers:
+    no write fails — the frames wait in the buffer — but the sync's flush does, and that is
+    the log's trouble, told as a failed write is (before the sync, such a loss showed only at
+    the close)."""
+    path = tmp_path / "bus.log"
+    path.symlink_to("/dev/full")
+    rec = CanRecorder(path)
+    try:
+        for m in frames(5):
+            rec.record(m, is_rx=True)
+        deadline = time.monotonic() + 10.0
+        while rec.trouble() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert rec.write_errors == 0 and rec.sync_errors >= 1
+        assert rec.trouble() == f"{path}: OSError: [Errno 28] No space left on device"
+    finally:
+        rec.stop()  # its close fails too: logged, never raised
+
+
 def test_recorder_config_errors(tmp_path):
     with pytest.raises(ConfigError):
         CanRecorder(tmp_path / "x.csvx")

@@ -71,6 +71,7 @@ class CanRecorder:
         self.dropped = 0
         self.syncs = 0
         self.sync_errors = 0
+        self._sync_trouble: str | None = None
         self._spells = FailureSpells(LOG_EVERY)
         self._failing_since = 0.0
         self._last_error = ""
@@ -113,9 +114,11 @@ class CanRecorder:
         return self._spells.total
 
     def trouble(self) -> str | None:
-        """Why the last write failed while writes fail (None: the last one was written; the
-        daemon tells the operator, :meth:`uvd.telemetry.sink.TelemetryHub.watch`)."""
-        return self._last_error if self._spells.in_a_row else None
+        """Why the last write failed while writes fail, else why the last sync failed while
+        syncs fail — a buffered writer's frames meet a full disk only when flushed (None: the
+        last of each worked; the daemon tells the operator,
+        :meth:`uvd.telemetry.sink.TelemetryHub.watch`)."""
+        return self._last_error if self._spells.in_a_row else self._sync_trouble
 
     @property
     def rollovers(self) -> int:
@@ -159,8 +162,10 @@ class CanRecorder:
             f.flush()
             os.fsync(f.fileno())
             self.syncs += 1
+            self._sync_trouble = None
         except (OSError, ValueError, AttributeError) as exc:
             self.sync_errors += 1
+            self._sync_trouble = f"{self.path}: {type(exc).__name__}: {exc}"
             if self.sync_errors == 1 or self.sync_errors % LOG_EVERY == 0:
                 log.warning("CAN log: cannot force %s to the disk (%d times): %s", self.path,
                             self.sync_errors, exc)
