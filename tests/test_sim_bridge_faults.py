@@ -77,6 +77,7 @@ def test_plant_and_thruster_faults_at_chosen_times(tmp_path):
         proc.kill()
 
 
+@pytest.mark.untimed  # refused before anything runs
 @pytest.mark.parametrize("at, command, words", [
     # quote-free words: the error reaches the test inside a dict's repr (its quotes escaped),
     # and sim-bridge's stderr copy of it may not be read yet (seen under load)
@@ -101,6 +102,7 @@ def test_a_bad_at_command_stops_sim_bridge_at_its_start(tmp_path, at, command, w
         proc.kill()
 
 
+@pytest.mark.untimed  # refused before anything runs
 @pytest.mark.parametrize("options, words", [
     (["--realtime", "200"], "argument --realtime: '200' is not an integer in 1..99"),
     (["--realtime", "0"], "argument --realtime: '0' is not an integer in 1..99"),
