@@ -34,6 +34,21 @@ def shared_recordings(folder: str) -> Path:
 
 
 @pytest.fixture
+def synced_paths(monkeypatch) -> list[str]:
+    """The paths ``os.fsync`` forces to the disk from now on, in order (the calls made: no
+    test can cut the power)."""
+    import os
+    synced: list[str] = []
+    real_fsync = os.fsync
+
+    def fsync(fd):
+        synced.append(os.readlink(f"/proc/self/fd/{fd}"))
+        real_fsync(fd)
+    monkeypatch.setattr(os, "fsync", fsync)
+    return synced
+
+
+@pytest.fixture
 def shared_data():
     """``shared_data("bluerov-exjobb")``: the folder of unlicensed recordings, or a skip that
     names it (:func:`shared_recordings`)."""

@@ -65,19 +65,12 @@ def test_recorder_rotates_by_size_and_loses_nothing(tmp_path):
 
 
 @pytest.mark.parametrize("rotating", [False, True])
-def test_a_running_log_is_forced_to_the_disk_every_second(tmp_path, monkeypatch, rotating):
+def test_a_running_log_is_forced_to_the_disk_every_second(tmp_path, synced_paths, rotating):
     """While frames come, the log is flushed and fsync'ed about every second (as the black box
     is): about a second after 20 frames, a candump log opened anew holds all 20, with the
     recorder still running, and nothing more is forced while no frame comes. Before, they
     waited in the writer's 8 kB buffer until it filled or the log closed, and a power cut lost
     them."""
-    synced: list[str] = []
-    real_fsync = os.fsync
-
-    def fsync(fd):
-        synced.append(os.readlink(f"/proc/self/fd/{fd}"))
-        real_fsync(fd)
-    monkeypatch.setattr(os, "fsync", fsync)
     path = tmp_path / "bus.log"
     with CanRecorder(path, max_bytes=10**6 if rotating else 0) as rec:
         for m in frames(20):
@@ -92,7 +85,7 @@ def test_a_running_log_is_forced_to_the_disk_every_second(tmp_path, monkeypatch,
         assert rec.syncs == syncs_while_idle
     assert len(on_disk) == 20 and rec.sync_errors == 0
     assert 0.5 < waited < 5.0, waited
-    assert str(path) in synced
+    assert str(path) in synced_paths
 
 
 def test_frames_a_full_disk_refuses_at_the_sync_are_told(tmp_path):

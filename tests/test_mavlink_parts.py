@@ -108,22 +108,14 @@ def test_the_signing_key_file_must_be_private_and_32_bytes(tmp_path):
         load_key(tmp_path / "missing")
 
 
-def test_the_signing_timestamp_file_is_whole_or_the_old_one(tmp_path, monkeypatch):
+def test_the_signing_timestamp_file_is_whole_or_the_old_one(tmp_path, synced_paths):
     """The timestamp is kept as write_whole keeps a file: forced to the disk before it
     replaces the old one (a file lost to a power cut read 0), and a write that fails leaves
     the old value and no temporary file, with an error naming the file."""
-    import os
     f = tmp_path / "signing.ts"
-    synced: list[str] = []
-    real_fsync = os.fsync
-
-    def fsync(fd):  # the names of what was forced to the disk
-        synced.append(os.readlink(f"/proc/self/fd/{fd}"))
-        real_fsync(fd)
-    monkeypatch.setattr(os, "fsync", fsync)
     save_timestamp(f, 123_456)
     assert load_timestamp(f) == 123_456
-    assert synced == [str(tmp_path / "signing.ts.tmp"), str(tmp_path)]
+    assert synced_paths == [str(tmp_path / "signing.ts.tmp"), str(tmp_path)]
     (tmp_path / "signing.ts.tmp").symlink_to("/dev/full")  # a disk with no room
     with pytest.raises(OSError, match="cannot write the signing timestamp file .*signing.ts: "
                                       "No space left on device"):
