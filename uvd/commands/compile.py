@@ -12,9 +12,11 @@ do sim-bridge's and uvd-fdc's. This command does that work ahead, for one config
 * two simulated seconds of the configuration in lockstep: sim-bridge's plant and instruments,
   through the daemon's own cycle (:func:`uvd.commands.demo.lockstep_run`).
 
-It fills the cache of the environment it runs in. For the systemd unit (``CacheDirectory=uvd``),
-run it as the service does: ``sudo -u uvd env CACHE_DIRECTORY=/var/cache/uvd uvd compile
---config /etc/uvd/uvd.toml``. ``make test`` runs it beside the suite's first tests.
+It fills the cache of the environment it runs in (:func:`uvd._jitcache.configure`) and says
+where. For the systemd unit, run it with the service's user and ``CacheDirectory=``:
+``sudo systemd-run -P -p User=uvd -p CacheDirectory=uvd /opt/uvd/.venv/bin/uvd compile
+--config /etc/uvd/uvd.toml`` (docs/runtime.md). ``make test`` runs it beside the suite's
+first tests.
 
 Exit code 0 when every part compiled, 1 when one raised (named; the others still run), 2 when
 the configuration is invalid.
