@@ -23,7 +23,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from tests.hil_daemon import run_scenario, running_bridge, until
+from tests.hil_daemon import ListSink, run_scenario, running_bridge, until
 from uvd.runtime.config import load_config
 from uvd.runtime.daemon import Daemon
 from uvd.runtime.failsafe import Action
@@ -470,3 +470,31 @@ def test_a_wall_clock_step_changes_nothing(hil, monkeypatch):
     assert d.app.loop.overruns == 0 or d.app.loop.max_overrun_streak < cfg.loop.overrun_streak
     assert all(math.isfinite(x) for r in armed for x in r["thrust"])
     commands_were_safe(d, cycles, proc)
+
+
+class _SlowToOpen(ListSink):
+    """A link that takes ``open_s`` to open (a Zenoh router slow to answer, a loaded machine)."""
+
+    name = "slow-link"
+
+    def __init__(self, open_s: float) -> None:
+        super().__init__()
+        self.open_s = open_s
+
+    async def open(self) -> None:
+        await asyncio.sleep(self.open_s)
+
+
+def test_a_link_slow_to_open_does_not_cost_the_drives_their_heartbeat(hil):
+    """The daemon waits for its links before it says READY (tests/test_notify.py). It waited
+    with the drives already started: they consume the daemon's heartbeat ([can.amplifiers]
+    node_consumer_ms, 500 ms), which only the control loop sends, so a link that took longer
+    to open than that faulted all six with ``daemon_heartbeat_lost`` and the vehicle never
+    armed (a Zenoh link connecting on a loaded machine, seen in a fresh clone's run). Now the
+    links open first, then the drivers start and the loop at once."""
+    cfg, proc = hil
+    open_s = 3.0 * cfg.can.amplifiers.node_consumer_ms / 1000.0
+    sink = _SlowToOpen(open_s)
+    d, cycles = run_scenario(cfg, lambda d: asyncio.sleep(0.5), sink=sink)
+    assert not [e for e in events(d) if "heartbeat" in e.get("reason", "")], events(d)
+    assert any(r["state"] == "ARMED" for r in cycles)

@@ -454,8 +454,19 @@ class App:
 
     async def _main(self, tg: asyncio.TaskGroup) -> None:
         cfg = self.config.daemon
+        # The links open first, before the daemon says it is up (a station that comes at once
+        # finds the MAVLink port bound), and before the drivers: those touch the vehicle, and
+        # started drives consume a heartbeat only the control loop sends ([can.amplifiers]
+        # node_consumer_ms) — a link waited for after them faulted every drive. A link not
+        # open within start_timeout_s is told and goes on opening; the drivers then have
+        # start_timeout_s of their own.
+        tasks = [tg.create_task(self._guard("telemetry", self.hub.run), name="telemetry")]
+        opening = await self.hub.wait_open(cfg.start_timeout_s)
+        if opening:
+            log.warning("telemetry: %s not open within [daemon] start_timeout_s %g s; up "
+                        "without them, they go on opening", ", ".join(opening),
+                        cfg.start_timeout_s)
         started: list[Component] = []
-        start_by = time.monotonic() + cfg.start_timeout_s
         try:
             async with asyncio.timeout(cfg.start_timeout_s):
                 for c in self.components:
@@ -467,15 +478,9 @@ class App:
                       ", ".join(c.name for c in started) or "no component")
             self.request_stop(f"start failed: {what}", exit_code=1)
             await self._shutdown(None, started)
+            for task in tasks:
+                task.cancel()
             return
-        # the links open before the daemon says it is up: a station that comes at once finds
-        # the MAVLink port bound (a link slower than the start's budget opens on, told)
-        tasks = [tg.create_task(self._guard("telemetry", self.hub.run), name="telemetry")]
-        opening = await self.hub.wait_open(start_by - time.monotonic())
-        if opening:
-            log.warning("telemetry: %s not open within [daemon] start_timeout_s %g s; up "
-                        "without them, they go on opening", ", ".join(opening),
-                        cfg.start_timeout_s)
         t = time.monotonic_ns()
         if self.realtime:  # threads the drivers started (python-can, canopen, pyserial)
             self._promote_helpers("booted")

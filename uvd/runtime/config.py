@@ -604,7 +604,9 @@ class DaemonSection:
     """Start and stop of the daemon (``[daemon]``)."""
 
     start_timeout_s: float = setting(10.0, unit="s", gt=0.0, max=300.0,
-                                     doc="drivers must be up within this time, else exit 1")
+                                     doc="drivers must be up within this time, else exit 1 (the "
+                                         "links are waited for as long before them, then "
+                                         "go on opening)")
     shutdown_zero_cycles: int = setting(3, min=1, max=100,
                                         doc="zero-current commands sent on shutdown")
     shutdown_zero_period_s: float = setting(0.01, unit="s", min=0.0, max=0.5,
