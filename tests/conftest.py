@@ -14,9 +14,19 @@ Real recordings come in two kinds:
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
+
+# Tests press Ctrl-C on the commands they start (SIGINT to `uvd watch`, `uvd demo`…). A shell
+# that runs the suite in the background (`make test &`, `nohup … &` in a script) starts it with
+# SIGINT ignored, every child inherits that, and a Python started so never raises
+# KeyboardInterrupt: the command runs on and the test times out (both `uvd watch` tests of
+# tests/test_fdc.py, 20 s each). The children get the terminal's default back; the suite
+# itself is then interruptible as usual.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 ROOT = Path(__file__).resolve().parents[1]
 #: recordings outside the repository (no licence to copy them in): ../shared/data/
