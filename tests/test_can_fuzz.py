@@ -155,7 +155,10 @@ def _junk_exchange():
         assert c["rx_remote"] > 0 and c["rx_unknown"] > 0 and c["rx_callback_errors"] == 0
         # 150 bus-error frames in 1.5 s: the bus is (rightly) error-passive; still working
         assert fb.faults.get(0) in (None, ("error_passive",))
-        assert set(fb.faults) <= {0}, fb.faults
+        # a drive timed out: how long it went without a command, by its own clock (seen once
+        # in a loaded fresh clone's run, not reproduced beside two busy loops)
+        assert set(fb.faults) <= {0}, (fb.faults, {k: v["last_timeout_ms"] for k, v in
+                                                    rig.call("stats")["nodes"].items()})
         np.testing.assert_array_equal(fb.torque_permille, np.rint(cmd / 0.3))
         syncs = group.counters["syncs_sent"]
         deadline = time.monotonic() + 1.0
