@@ -178,6 +178,20 @@ def test_a_write_interrupted_by_ctrl_c_leaves_the_old_file_and_no_temporary(tmp_
     assert path.read_text() == "old\n" and not tmp.exists()
 
 
+@pytest.mark.untimed
+def test_a_temporary_path_that_is_a_folder_is_the_error_told_and_stays(tmp_path):
+    """``write_whole`` whose temporary path is a folder (left by something else): the write's
+    own error is told, naming the file, not the failed removal of the temporary (which hid
+    it: IsADirectoryError from ``unlink``); the folder and the old file stay as they were."""
+    from uvd.jsonio import write_whole
+    path, tmp = tmp_path / "params.toml", tmp_path / ".params.toml.tmp"
+    path.write_text("old\n")
+    (tmp / "inside").mkdir(parents=True)
+    with pytest.raises(OSError, match=f"cannot write {path}: Is a directory"):
+        write_whole(path, lambda t: t.write_text("new\n"), tmp)
+    assert path.read_text() == "old\n" and (tmp / "inside").is_dir()
+
+
 def test_a_whole_write_forces_the_data_before_the_rename_and_the_rename_after(
         tmp_path, monkeypatch):
     """``write_whole`` against a power cut of the machine (which no test can make): the new

@@ -62,12 +62,22 @@ def write_whole(path: Path, write: Callable[[Path], Any], tmp: Path,
         os.replace(tmp, path)
         sync_to_disk(path.parent)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
+        _discard(tmp)
         raise OSError(exc.errno, f"cannot write {what or path}: {exc.strerror or exc}") \
             from exc
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        _discard(tmp)
         raise
+
+
+def _discard(tmp: Path) -> None:
+    """Remove a temporary file if there is one; a removal that fails (``tmp`` a folder that
+    was there before, a folder without write permission) never hides the error that came
+    first."""
+    try:
+        tmp.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def sync_to_disk(path: Path) -> None:
