@@ -86,12 +86,9 @@ def compile_kernels(cfg, progress=print) -> tuple[list[tuple[str, float]], list[
 
 
 def _run(args) -> int:
-    from uvd.runtime.config import ConfigValidationError, load_config
-
-    try:
-        cfg = load_config(args.config)
-    except ConfigValidationError as exc:
-        print(f"uvd compile: invalid configuration, nothing compiled:\n{exc}", file=sys.stderr)
+    from uvd.commands import checked_config
+    cfg = checked_config(args.config, "compile", "nothing compiled")
+    if cfg is None:
         return 2
     cache = os.environ.get("NUMBA_CACHE_DIR")
     before, t0 = kernel_files(cache), time.perf_counter()

@@ -549,11 +549,8 @@ def _run(args) -> int:
                   f"run's {args.duration:g} s of armed tracking (--duration)", file=sys.stderr)
             return 2
     if args.config is not None:   # the user's file judged before anything starts
-        from uvd.runtime.config import ConfigValidationError, load_config
-        try:
-            load_config(args.config)
-        except ConfigValidationError as exc:
-            print(f"uvd demo: invalid configuration, nothing started:\n{exc}", file=sys.stderr)
+        from uvd.commands import checked_config
+        if checked_config(args.config, "demo", "nothing started") is None:
             return 2
     figures, code = run_demo(args.duration, record=args.record, base=args.config,
                              seed=args.seed, fault=fault, accept=args.accept or "confirm",

@@ -38,19 +38,17 @@ def _run(args) -> int:
     import asyncio
     import logging
 
+    from uvd.commands import checked_config
     from uvd.jsonio import write_json
     from uvd.runtime.app import setup_logging
-    from uvd.runtime.config import ConfigValidationError, load_config
     from uvd.runtime.process import stop_with_parent
 
     if args.stop_with_parent is not None and not stop_with_parent(args.stop_with_parent):
         print(f"uvd run: process {args.stop_with_parent}, which started it, has ended: not "
               "starting", file=sys.stderr)
         return 1
-    try:
-        cfg = load_config(args.config)
-    except ConfigValidationError as exc:
-        print(f"uvd run: invalid configuration, nothing started:\n{exc}", file=sys.stderr)
+    cfg = checked_config(args.config, "run", "nothing started")
+    if cfg is None:
         return 2
     listener = setup_logging(getattr(logging, args.log_level))
     logging.getLogger("canopen").setLevel(max(logging.WARNING, getattr(logging, args.log_level)))

@@ -76,12 +76,10 @@ def zero_amplifiers(config, *, cycles: int = 5, period_s: float = 0.01) -> dict[
 
 def _run(args) -> int:
     from drivers.can import BusOpenError
-    from uvd.runtime.config import ConfigValidationError, load_config
+    from uvd.commands import checked_config
 
-    try:
-        cfg = load_config(args.config)
-    except ConfigValidationError as exc:
-        print(f"uvd zero-thrust: invalid configuration, nothing sent:\n{exc}", file=sys.stderr)
+    cfg = checked_config(args.config, "zero-thrust", "nothing sent")
+    if cfg is None:
         return 2
     try:
         res = zero_amplifiers(cfg, cycles=args.cycles, period_s=args.period)
