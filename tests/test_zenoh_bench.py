@@ -33,9 +33,14 @@ def test_bench_loop_with_a_stalled_subscriber(tmp_path):
     out = tmp_path / "loop.json"
     assert main(["bench", "loop", "--rate", "200", "--zenoh-stall", "1.5", "--warmup", "0",
                  "--no-naive", "--json", str(out)]) == 0
-    z = json.loads(out.read_text())["zenoh_stall"]
-    # 5 blocks of 1.5 s at 200 Hz: reading 3 of them, stalled 2
-    assert z["blocks"] == 5 and z["reading"]["n"] >= 700 and z["stalled"]["n"] >= 500
+    r = json.loads(out.read_text())
+    z = r["zenoh_stall"]
+    # 5 blocks of 1.5 s at 200 Hz: reading 3 of them less the 0.25 s after each stall (800
+    # cycles), stalled 2 and those tails (700). Every deadline is measured in its phase or
+    # counted skipped (a loaded machine skips some: once 693 reading); the loop's rate under
+    # load is the benchmark's to judge, not this test's
+    assert z["blocks"] == 5 and z["reading"]["n"] >= 600 and z["stalled"]["n"] >= 500
+    assert z["reading"]["n"] + z["stalled"]["n"] + r["skipped"] >= 1470
     hub = z["hub"]["zenoh"]
     assert hub["dropped"] == 0 and hub["errors"] == 0 and hub["published"] >= 900
     got = z["subscriber"]["received"]["uvd/bench/state"]
