@@ -34,11 +34,13 @@ demo: $(STAMP)
 # uvd (collection 17 s → 4 s).
 # `uvd compile` fills the kernel cache beside the workers' first tests (45 s when it is empty,
 # under 1 s when not); the real-time group starts with its modules that call no kernel
-# (tests/conftest.py), so its daemons find them compiled. Its summary line comes at the end.
+# (tests/conftest.py), so its daemons find them compiled. Its summary line comes at the end;
+# Ctrl-C stops it too (a background job of a shell ignores SIGINT).
 TEST_WORKERS ?= 2
 test: $(STAMP)
 	export PYTHONDONTWRITEBYTECODE=; \
 	$(PY) -m uvd compile --quiet > $(VENV)/compile.log 2>&1 & compiling=$$!; \
+	trap 'kill $$compiling 2>/dev/null; exit 130' INT TERM; \
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup -m "not serial"; parallel=$$?; \
 	wait $$compiling; compiled=$$?; cat $(VENV)/compile.log; \
 	$(PY) -m pytest -q -m serial; serial=$$?; \
