@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from driver_strategies import DATA
 
 from uvd.cli import main
 from uvd.estimation.runlog import RunLog
@@ -94,6 +95,13 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
                  str(tmp_path / "x.toml")]) == 2
     err = capsys.readouterr().err
     assert "not a readable run log" in err and "not a zip archive" in err
+    assert "--profile" not in err  # nothing names it another system's recording
+    # a real ArduSub telemetry log given without its profile: the error says what to add
+    assert main(["identify", "--log", str(DATA / "ardusub" / "small.tlog"), "--method", "ls",
+                 "--out", str(tmp_path / "x.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "another system's recording (MAVLink telemetry log" in err
+    assert "add --profile NAME (built-in: ardusub-bin, ardusub-tlog," in err
     np.savez(tmp_path / "partial.npz", t=np.arange(3.0))
     assert main(["xval", "--params", str(tmp_path / "none.toml"), "--log",
                  str(tmp_path / "partial.npz")]) == 2

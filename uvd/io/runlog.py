@@ -37,6 +37,24 @@ def save_runlog(run: RunLog, path: str | Path) -> None:
         np.savez_compressed(fh, **arrays)
 
 
+def _profile_hint(path: Path) -> str:
+    """What to do with an existing file or folder named as another system's recording (a ROS
+    bag, MCAP, .tlog, .BIN): read it through a log profile; "" for anything else."""
+    from uvd.errors import LogReadError
+    from uvd.io.logprofile import builtin_profiles
+    from uvd.io.logs import FORMATS, detect_format
+
+    try:
+        fmt = detect_format(path) if path.exists() else "uvd-telemetry"
+    except LogReadError:
+        return ""
+    if fmt == "uvd-telemetry":
+        return ""
+    return (f"; by its name another system's recording ({FORMATS[fmt].description}), read "
+            f"through a log profile: add --profile NAME (built-in: "
+            f"{', '.join(builtin_profiles())}) or --profile FILE.toml (docs/real-vehicles.md)")
+
+
 def load_runlog(path: str | Path) -> RunLog:
     """Read a run written by :func:`save_runlog`, or ``uvd run``'s JSON-lines telemetry
     (:func:`runlog_from_telemetry`); raises :class:`ConfigError` naming what is wrong."""
@@ -47,12 +65,14 @@ def load_runlog(path: str | Path) -> RunLog:
         if head == b"{":
             return runlog_from_telemetry(path)
         raise ConfigError(f"{path}: not a readable run log: not a zip archive (.npz, "
-                          "numpy's savez format) nor uvd run's JSON-lines telemetry")
+                          "numpy's savez format) nor uvd run's JSON-lines telemetry"
+                          f"{_profile_hint(path)}")
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
     except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: not a readable run log (.npz): {exc}") from exc
+        raise ConfigError(f"{path}: not a readable run log (.npz): {exc}"
+                          f"{_profile_hint(path)}") from exc
     missing = {"t", "R", "p", "v", "u"} - set(data)
     if missing:
         raise ConfigError(f"{path}: run log lacks array(s) {sorted(missing)}")
