@@ -3,9 +3,12 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import math
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +24,7 @@ from uvd.runtime.config import (
     parse_config,
     render_config_doc,
 )
-from uvd.runtime.schema import describe, reloadable_changes
+from uvd.runtime.schema import describe, leaf_keys, reloadable_changes
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -363,3 +366,36 @@ def test_the_mavlink_link_may_listen_on_a_port_the_kernel_picks(tmp_path):
     cfg = load_config(write(tmp_path, MINIMAL + '[mavlink]\nenabled = true\nlisten = '
                                                 '"127.0.0.1:0"\n'))
     assert cfg.mavlink.listen == "127.0.0.1:0"
+
+
+#: a value of every wrong kind: negative, huge, not finite, empty, a NUL character (TOML's
+#: \u0000, which the operating system refuses in a path with a ValueError), another type, a
+#: list, a table
+HOSTILE = (-1, 10**30, 1e308, math.nan, "", "\x00", True, [], [math.nan] * 6, {"a": 1}, 0.5,
+           "x" * 300)
+
+
+def test_every_key_takes_any_value_or_refuses_it_by_name():
+    """Each key of the schema set to each :data:`HOSTILE` value in config/sim.toml: the
+    configuration loads or is refused with a ConfigValidationError naming the key (or, for a
+    driver's own dataclass, the table that builds it; a rule across keys may name another key
+    beside it) — never another exception. Before
+    session 30, a NUL character in ``[estimation] initial_params`` raised ValueError."""
+    base = tomllib.loads((ROOT / "config" / "sim.toml").read_text())
+    refused = 0
+    for leaf in leaf_keys(Config):
+        *tables, name = leaf.key.split(".")
+        for value in HOSTILE:
+            data = copy.deepcopy(base)
+            node = data
+            for t in tables:
+                node = node.setdefault(t, {})
+            node[name] = value
+            try:
+                parse_config(data, source="hostile.toml")
+            except ConfigValidationError as exc:
+                refused += 1
+                # the key, its name in a rule across keys ("[loop] rate_hz 0.5"), or its table
+                assert name in str(exc) or f"{'.'.join(tables)}:" in str(exc), \
+                    (leaf.key, value, str(exc))
+    assert refused > len(leaf_keys(Config)) * 6  # most of them are refused

@@ -36,9 +36,9 @@ def read_toml(path: str | Path, what: str = "") -> dict[str, Any]:
     path = Path(path)
     try:
         data = path.read_bytes()
-    except OSError as exc:
+    except (OSError, ValueError) as exc:  # ValueError: a NUL character in the path
         raise TomlFileError(path, f"cannot read{' ' + what if what else ''}: "
-                                  f"{exc.strerror or exc}") from exc
+                                  f"{getattr(exc, 'strerror', None) or exc}") from exc
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:

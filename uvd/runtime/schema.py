@@ -178,6 +178,16 @@ def _toml_type(value: Any) -> str:
     return type(value).__name__
 
 
+def _no_nul(value: str, key: str, errors: list) -> bool:
+    """A string holds no NUL character (TOML's \\u0000): no path, port, address or name can
+    (the operating system refuses it in a path, as a ValueError where an OSError is caught)."""
+    if "\0" in value:
+        errors.append((key, f"{value!r} holds a NUL character (\\u0000), which no path, port "
+                            "or name can"))
+        return False
+    return True
+
+
 def _scalar(value: Any, tp: Any, key: str, errors: list) -> Any:
     """Convert one TOML scalar to ``tp`` or record why not (returns MISSING on error)."""
     if get_origin(tp) is Literal:
@@ -211,12 +221,12 @@ def _scalar(value: Any, tp: Any, key: str, errors: list) -> Any:
             errors.append((key, f"expected a file path (string), got {_toml_type(value)} "
                                 f"{value!r}"))
             return MISSING
-        return Path(value)
+        return Path(value) if _no_nul(value, key, errors) else MISSING
     if tp is str:
         if not isinstance(value, str):
             errors.append((key, f"expected a string, got {_toml_type(value)} {value!r}"))
             return MISSING
-        return value
+        return value if _no_nul(value, key, errors) else MISSING
     raise TypeError(f"unsupported configuration type {tp!r} for {key}")
 
 
