@@ -370,18 +370,22 @@ def test_the_mavlink_link_may_listen_on_a_port_the_kernel_picks(tmp_path):
 
 #: a value of every wrong kind: negative, huge, not finite, empty, a NUL character (TOML's
 #: \u0000, which the operating system refuses in a path with a ValueError), another type, a
-#: list, a table
+#: list, a table, a file name too long for the file system (an OSError where a path is looked at)
 HOSTILE = (-1, 10**30, 1e308, math.nan, "", "\x00", True, [], [math.nan] * 6, {"a": 1}, 0.5,
-           "x" * 300)
+           "x" * 300, "x" * 300 + ".toml")
 
 
-def test_every_key_takes_any_value_or_refuses_it_by_name():
-    """Each key of the schema set to each :data:`HOSTILE` value in config/sim.toml: the
+def test_every_key_takes_any_value_or_refuses_it_by_name(tmp_path):
+    """Each key of the schema set to each :data:`HOSTILE` value in config/sim.toml with AID
+    resuming from its file: the
     configuration loads or is refused with a ConfigValidationError naming the key (or, for a
     driver's own dataclass, the table that builds it; a rule across keys may name another key
     beside it) — never another exception. Before
-    session 30, a NUL character in ``[estimation] initial_params`` raised ValueError."""
+    session 30, a NUL character in ``[estimation] initial_params`` raised ValueError, and a
+    vehicle file name or ``save_path`` too long OSError."""
     base = tomllib.loads((ROOT / "config" / "sim.toml").read_text())
+    base.setdefault("estimation", {}).update(aid=True, resume=True,
+                                             save_path=str(tmp_path / "aid.toml"))
     refused = 0
     for leaf in leaf_keys(Config):
         *tables, name = leaf.key.split(".")

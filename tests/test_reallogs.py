@@ -607,6 +607,15 @@ def test_vehicle_unknown_curve(tmp_path):
     with pytest.raises(ConfigError, match=r"v\.toml: thrusters\[0\]: unknown thrust curve "
                                           r"'t9000'"):
         load_vehicle(bad)
+    # a curve is a name, never a path: not a file of another folder of the package (a vehicle
+    # was read as a curve), nor one too long for the file system (OSError until session 30)
+    for name in ("../jhu-rov", "t" * 300):
+        bad.write_text(src.replace('curve = "t200"', f'curve = "{name}"'))
+        with pytest.raises(ConfigError, match=r"unknown thrust curve .* built-in curves \['t200'"):
+            load_vehicle(bad)
+    for name in ("curves/t200", "x" * 300 + ".toml"):  # nor is a vehicle's name
+        with pytest.raises(ConfigError, match="unknown vehicle|File name too long"):
+            load_vehicle(name)
 
 
 # ---------------------------------------------------------------------------------------------

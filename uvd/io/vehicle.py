@@ -38,11 +38,13 @@ def builtin_vehicles() -> list[str]:
 def vehicle_path(name_or_path: str | Path) -> Path:
     """The file of a built-in vehicle name, or ``name_or_path`` itself if it is a TOML file."""
     p = Path(name_or_path)
-    if p.suffix == ".toml" and p.exists():
-        return p
-    root = _builtin_root() / f"{name_or_path}.toml"
-    if root.is_file():
-        return Path(str(root))
+    try:
+        if p.suffix == ".toml" and p.exists():
+            return p
+    except OSError as exc:  # a name too long for the file system
+        raise ConfigError(f"vehicle file {str(p)!r:.80}: {exc.strerror}") from exc
+    if str(name_or_path) in builtin_vehicles():  # a name, never a path into the package
+        return Path(str(_builtin_root() / f"{name_or_path}.toml"))
     raise ConfigError(f"unknown vehicle {str(name_or_path)!r}: not a file, and not one of the "
                       f"built-in vehicles {builtin_vehicles()}")
 
@@ -72,10 +74,10 @@ def _curve_from_table(table: dict, where: str) -> ThrustCurve:
 
 def load_curve(name: str) -> ThrustCurve:
     """A built-in thrust curve by name (e.g. ``t200``, Blue Robotics' T200)."""
-    f = _builtin_root() / "curves" / f"{name}.toml"
-    if not f.is_file():
+    if name not in builtin_curves():  # a name, never a path (too long, or into another folder)
         raise ConfigError(f"unknown thrust curve {name!r}: not one of the built-in curves "
                           f"{builtin_curves()} nor a [thrust_curves.{name}] table of the vehicle")
+    f = _builtin_root() / "curves" / f"{name}.toml"
     return _curve_from_table(read_toml(f), f"thrust curve {f}")
 
 

@@ -124,7 +124,11 @@ class VehicleSection:
         if p.suffix != ".toml":
             return [("name", f"{self.name!r} is neither a built-in vehicle "
                              f"({', '.join(builtin_vehicles())}) nor a .toml file")]
-        if not (p if p.is_absolute() else ctx.base_dir / p).is_file():
+        try:
+            found = (p if p.is_absolute() else ctx.base_dir / p).is_file()
+        except OSError as exc:  # a name too long for the file system
+            return [("name", f"vehicle file {self.name!r:.80}: {exc.strerror}")]
+        if not found:
             return [("name", f"vehicle file {self.name!r} not found (relative paths are taken "
                              f"from {ctx.base_dir})")]
         return []
@@ -289,8 +293,11 @@ class EstimationSection:
     def resume_path(self) -> Path | None:
         """``save_path`` if ``resume`` and the file is there (resolved against the working
         directory, where the daemon writes it), else None."""
-        if self.resume and self.save_path and Path(self.save_path).is_file():
-            return Path(self.save_path).absolute()
+        try:
+            if self.resume and self.save_path and Path(self.save_path).is_file():
+                return Path(self.save_path).absolute()
+        except OSError:  # a name too long for the file system: never written (_check says)
+            pass
         return None
 
     def start_path(self, base_dir: Path) -> Path | None:
@@ -328,6 +335,10 @@ class EstimationSection:
             return [("resume", "needs save_path: the file a run leaves and the next one "
                                "starts from")]
         errors = []
+        try:
+            Path(self.save_path or ".").exists()
+        except OSError as exc:  # a name too long for the file system
+            errors.append(("save_path", f"{self.save_path!r:.80}: {exc.strerror}"))
         for key, p in (("initial_params", self.initial_params_path(ctx.base_dir)),
                        ("save_path", self.resume_path())):
             if p is not None:
