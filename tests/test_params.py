@@ -77,6 +77,11 @@ def test_validation_names_what_is_wrong():
         P.UVParams.from_theta(np.zeros(240))
     with pytest.raises(ParameterError, match="non-finite"):
         P.UVParams.decoupled([np.nan] + [1.0] * 5, [-1.0] * 6, 0.0, [0, 0, 1])
+    # finite entries whose eigenvalues overflow (a corrupt file): LinAlgError until session 30
+    D = good.D.copy()
+    D[1] = 1e308
+    with pytest.raises(ParameterError, match="cannot be computed .* entries up to 1e[+]308"):
+        P.UVParams(M=good.M, D=D, g=0.0, b=[0, 0, 1]).validate()
 
 
 def test_dissipativity_of_coupled_drag():

@@ -150,11 +150,17 @@ class UVParams:
         asym = float(np.max(np.abs(self.M - self.M.T)))
         if asym > 1e-9 * max(1.0, float(np.max(np.abs(self.M)))):
             raise ParameterError(f"{where}: M is not symmetric (max |M - Mᵀ| = {asym:.3g})")
-        lam = self.mass_min_eigenvalue()
-        if lam <= 0.0:
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):  # what overflows is refused
+                lam = self.mass_min_eigenvalue()
+                worst = self.drag_dissipativity_max()
+        except np.linalg.LinAlgError as exc:  # entries near the largest float overflow
+            big = max(float(np.max(np.abs(self.M))), float(np.max(np.abs(self.D))))
+            raise ParameterError(f"{where}: the eigenvalues of M or of the drag cannot be "
+                                 f"computed ({exc}; entries up to {big:.3g})") from exc
+        if not lam > 0.0:  # nan too
             raise ParameterError(f"{where}: M is not positive definite (min eigenvalue {lam:.4g})")
-        worst = self.drag_dissipativity_max()
-        if worst >= 0.0:
+        if not worst < 0.0:
             raise ParameterError(
                 f"{where}: drag is not dissipative (max over unit v of vᵀ(Σ|v_i|D_i)v = "
                 f"{worst:.4g} >= 0)")
