@@ -16,6 +16,8 @@ from uvd.commands.demo_fault import FaultSpec
     ("thruster:4:0.5", "expected thruster:I:ETA@T"),
     ("thruster:4:1.5@30", "ETA 1.5 is not in"),
     ("thruster:4:0.5@5", "leaves uvd-fdc no baseline"),
+    ("thruster:4:1.2.3@30", "expected thruster:I:ETA@T"),  # was float()'s own message
+    ("thruster:4:0.5@1..5", "expected thruster:I:ETA@T"),
 ])
 def test_a_bad_fault_spec_is_named(text, why):
     with pytest.raises(ValueError, match=why):
@@ -56,6 +58,7 @@ def test_the_fault_options_without_a_fault_are_a_command_line_error(options, cap
 
 def test_a_fault_spec_reads_as_the_issue_writes_it():
     assert FaultSpec.parse("thruster:4:0.5@30") == FaultSpec(4, 0.5, 30.0)
+    assert FaultSpec.parse("thruster:4:.5@30.") == FaultSpec(4, 0.5, 30.0)
 
 
 @pytest.mark.slow

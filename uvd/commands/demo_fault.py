@@ -41,7 +41,8 @@ from uvd.zenoh_callbacks import SessionCallbacks
 
 __all__ = ["FaultSpec", "FaultRun", "config_changes"]
 
-_SPEC = re.compile(r"thruster:(\d+):([0-9.]+)@([0-9.]+)$")
+_NUMBER = r"(\d+(?:\.\d*)?|\.\d+)"  # 0.5, 30, 30., .5 (not 1.2.3: the spec is named instead)
+_SPEC = re.compile(rf"thruster:(\d+):{_NUMBER}@{_NUMBER}$")
 #: after the reallocation, the thruster is repaired and its η cleared this much later (s)
 CLEAR_AFTER_S = 10.0
 
