@@ -633,7 +633,9 @@ def _with(obj: Any, values: dict[str, Any], prefix: str, errors: list, reload_on
             changes[head] = _with(cur, sub, key, errors, reload_only, ctx)
             continue
         if set(sub) != {""}:
-            errors.append((key, "not a table (or a table these keys cannot change)"))
+            why = "set in the configuration file only (a driver's table)" \
+                if dataclasses.is_dataclass(cur) else "not a table"
+            errors += [(f"{key}.{rest}" if rest else key, why) for rest in sub]
             continue
         meta = _meta(f)
         if reload_only and not meta.reload:
@@ -644,7 +646,11 @@ def _with(obj: Any, values: dict[str, Any], prefix: str, errors: list, reload_on
             changes[head] = conv
     if len(errors) != n_err or not changes:
         return obj
-    new = dataclasses.replace(obj, **changes)
+    try:
+        new = dataclasses.replace(obj, **changes)
+    except (ValueError, TypeError) as exc:  # the dataclass's own __post_init__ refused (_build)
+        errors.append((prefix or cls.__name__, str(exc)))
+        return obj
     for f in dataclasses.fields(cls):  # carry non-init fields (e.g. the file name) over
         if not f.init:
             object.__setattr__(new, f.name, getattr(obj, f.name))
