@@ -91,6 +91,9 @@ def test_decode_digiquartz_text_and_units(tmp_path, capsys):
 def test_decode_missing_file_and_no_frames(tmp_path, capsys):
     assert main(["decode", "--format", "pd0", str(tmp_path / "nope.pd0")]) == 2
     assert "no such file" in capsys.readouterr().err
+    # a folder is not a missing file (said so until session 30)
+    assert main(["decode", "--format", "pd0", str(tmp_path)]) == 2
+    assert f"{tmp_path} is not a file (a recorded stream" in capsys.readouterr().err
     empty = tmp_path / "empty.bin"
     empty.write_bytes(b"\x00" * 100)
     assert main(["decode", "--format", "pd0", str(empty)]) == 1

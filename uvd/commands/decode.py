@@ -144,9 +144,15 @@ def _decode(args) -> int:
     if args.file == Path("-"):
         data = sys.stdin.buffer.read()
     else:
-        if not args.file.is_file():
+        if not args.file.exists():
             raise ConfigError(f"decode: no such file {args.file}")
-        data = args.file.read_bytes()
+        if not args.file.is_file():  # a folder, a device: a recorded stream is a file
+            raise ConfigError(f"decode: {args.file} is not a file (a recorded stream; '-' "
+                              "reads standard input)")
+        try:
+            data = args.file.read_bytes()
+        except OSError as exc:
+            raise ConfigError(f"decode: cannot read {args.file}: {exc.strerror}") from exc
     conv = None
     if args.format == "pd0":
         codec, si, raw = pd0.Pd0Codec(), _si_pd0, pd0.raw_fields
