@@ -179,11 +179,216 @@ def open_client(connect: list[str], config_file: str | None = None):
         raise ValueError(f"cannot open the Zenoh session: {zenoh_message(exc)}") from exc
 
 
-# main is long (~215 lines): the Zenoh callbacks are closures over one session's per-vehicle
-# state (detectors, aligners, thruster matrices) under one lock; the decisions themselves
-# live in uvd.fdc.detector and uvd.fdc.align. Making that state a class is the way to
-# shorten it (not yet done).
-def main(argv: list[str] | None = None) -> int:
+class FleetWatch:
+    """What one session watches: per (vehicle, estimator) a :class:`VehicleDetector` and the
+    :class:`~uvd.fdc.align.Aligned` that merges its two streams by time stamp (the verdict must
+    not depend on how the two subscriptions' samples interleave or how late they arrive), per
+    vehicle its thruster matrix. Zenoh's callback threads call :meth:`on_estimate`,
+    :meth:`on_state` and :meth:`on_alive`; the main thread calls :meth:`tick` (it asks new
+    vehicles for their thruster matrix and releases what the aligners hold as time passes).
+    One lock guards the state; detections are printed and put on
+    ``uvd/<vehicle>/fault/<kind>`` outside it."""
+
+    def __init__(self, session, settings: CusumSettings, stats: bool) -> None:
+        self.session, self.settings, self.stats = session, settings, stats
+        self.lock = threading.Lock()
+        self.link = LinkStats()
+        self.detectors: dict[tuple[str, str], VehicleDetector] = {}
+        self.aligned: dict[tuple[str, str], Aligned] = {}
+        self.thrusters: dict[str, object] = {}  # vehicle → its thruster matrix B (None: unknown)
+        self.asked: set[str] = set()  # vehicles asked for B (again when they come back)
+        self.settled: set[str] = set()  # vehicles whose question for B is answered
+        self.early: dict[str, deque] = {}  # vehicle → state samples before its first estimate
+
+    def say(self, text: str) -> None:
+        with self.lock:
+            print(text, flush=True)
+
+    def tell(self, line: str | None) -> None:
+        if line is not None:
+            self.say(line)
+
+    # ------------------------------------------------------------------ Zenoh's threads
+
+    def on_estimate(self, sample) -> None:
+        parts = str(sample.key_expr).split("/")
+        if len(parts) != 4:
+            return
+        vehicle, estimator = parts[1], parts[3]
+        payload = self._json_object(sample)
+        if payload is None:
+            return
+        if self.stats:
+            self.link.take(str(sample.key_expr), payload)
+        if payload.get("source") == "controller":
+            return  # an adaptive controller's θ̂ moves by design (AMBC's step 1 → 2)
+        t_ns = self._stamp(sample, payload)
+        if t_ns is None:
+            return
+        now = time.monotonic()
+        with self.lock:
+            al = self.aligned.get((vehicle, estimator))
+            if al is None:
+                self.detectors[vehicle, estimator] = VehicleDetector(
+                    vehicle, self.settings, B=self.thrusters.setdefault(vehicle, None))
+                al = self.aligned[vehicle, estimator] = Aligned(now)
+                al.paused = vehicle not in self.settled  # the detector starts with its B
+                for t_state, item in self.early.pop(vehicle, ()):
+                    al.push("state", t_state, item, now)
+            found = self._feed(vehicle, estimator,
+                               al.push("estimate", t_ns, (str(sample.key_expr), payload), now))
+        self._report(vehicle, found)
+
+    def on_state(self, sample) -> None:
+        payload = self._json_object(sample)
+        if payload is None:
+            return
+        if self.stats:
+            self.link.take(str(sample.key_expr), payload)
+        t_ns = self._stamp(sample, payload)
+        if t_ns is None:
+            return
+        vehicle, key = str(sample.key_expr).split("/")[1], str(sample.key_expr)
+        now, found = time.monotonic(), []
+        with self.lock:
+            mine = [(e, al) for (v, e), al in self.aligned.items() if v == vehicle]
+            if not mine:  # no estimate yet: kept for the detectors to come
+                self.early.setdefault(vehicle, deque(maxlen=EARLY_STATES)).append(
+                    (t_ns, (key, payload)))
+            for estimator, al in mine:
+                found += self._feed(vehicle, estimator,
+                                    al.push("state", t_ns, (key, payload), now))
+        self._report(vehicle, found)
+
+    def on_alive(self, sample) -> None:
+        import zenoh
+        vehicle = str(sample.key_expr).split("/")[1]
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.say(f"{vehicle}: up")
+            return
+        with self.lock:
+            for key in [k for k in self.detectors if k[0] == vehicle]:
+                del self.detectors[key], self.aligned[key]
+            self.thrusters.pop(vehicle, None)
+            self.asked.discard(vehicle)
+            self.settled.discard(vehicle)
+            self.early.pop(vehicle, None)
+        self.say(f"{vehicle}: gone (its baseline is forgotten)")
+
+    # ------------------------------------------------------------------ the main thread
+
+    def tick(self) -> None:
+        """Ask each new vehicle for its thruster matrix; release what the aligners hold (a
+        stream gone quiet stops holding the other)."""
+        with self.lock:
+            unknown = [v for v, B in self.thrusters.items() if B is None and v not in self.asked]
+        for vehicle in unknown:
+            self.asked.add(vehicle)
+            self._ask_thrusters(vehicle)
+        self._release()
+
+    def closing_lines(self) -> list[str]:
+        """What the client says as it ends: malformed samples dropped, samples late."""
+        lines = []
+        if self.link.dropped:
+            lines.append(f"uvd-fdc: dropped {sum(self.link.dropped.values())} malformed samples "
+                         f"({', '.join(f'{k} {n}' for k, n in sorted(self.link.dropped.items()))})")
+        late, forced = self.lateness()
+        if any(late.values()) or forced:
+            lines.append(f"uvd-fdc: samples late behind the other stream: {late} (late state "
+                         f"samples dropped); released unaligned (too many held): {forced}")
+        return lines
+
+    def lateness(self) -> tuple[dict[str, int], int]:
+        """Samples late per stream and those released unaligned, over every aligner."""
+        late = {s: sum(al.late[s] for al in self.aligned.values()) for s in STREAMS}
+        return late, sum(al.forced for al in self.aligned.values())
+
+    # ------------------------------------------------------------------ inside
+
+    def _feed(self, vehicle: str, estimator: str, released) -> list:
+        """Give the detector of (vehicle, estimator) the samples its aligner released (lock
+        held); a malformed one is counted and dropped."""
+        det, found = self.detectors[vehicle, estimator], []
+        for stream, (key, payload) in released:
+            try:
+                found += det.update(payload) if stream == "estimate" else \
+                    det.update_state(payload)
+            except (KeyError, TypeError, ValueError) as exc:
+                line = self.link.drop(key, f"malformed {stream}", f" ({exc})")
+                if line is not None:
+                    print(line, flush=True)  # the lock is held: not say()
+        return found
+
+    def _release(self, vehicle: str | None = None) -> None:
+        """What the aligners (of ``vehicle``; None: all) release as time passes."""
+        now, found = time.monotonic(), {}
+        with self.lock:
+            for (v, e), al in self.aligned.items():
+                if vehicle is None or v == vehicle:
+                    found.setdefault(v, []).extend(self._feed(v, e, al.pop(now)))
+        for v, f in found.items():
+            self._report(v, f)
+
+    def _report(self, vehicle: str, found) -> None:
+        import zenoh
+        for d in found:
+            rel = "n/a" if d.relative_change is None else f"{d.relative_change:+.1%}"
+            self.say(f"FAULT {vehicle}: {d.kind} ({d.channel} {rel}, "
+                     f"{d.magnitude:+.1f} σ, confidence {d.confidence:.1f})")
+            self.session.put(f"uvd/{vehicle}/fault/{d.kind}", json.dumps(d.as_dict()),
+                             encoding=zenoh.Encoding("application/json;schema=uvd.fault.v1"))
+
+    def _ask_thrusters(self, vehicle: str) -> None:
+        """The vehicle's thruster matrix from its ``params`` queryable."""
+        for reply in self.session.get(f"uvd/{vehicle}/params?what=configuration", timeout=2.0):
+            try:
+                conf = json.loads(reply.ok.payload.to_bytes())["configuration"]
+                B = thruster_matrix(conf["thruster_matrix"])
+            except (AttributeError, KeyError, TypeError, ValueError) as exc:
+                self.say(f"uvd/{vehicle}/params: no usable thruster matrix ({exc!r}); faults "
+                         "are reported with the kind of the estimates' channel")
+                break
+            with self.lock:
+                self.thrusters[vehicle] = B
+                for (v, _), det in self.detectors.items():
+                    if v == vehicle:
+                        det.set_thrusters(B)
+            break
+        self._settle(vehicle)
+
+    def _settle(self, vehicle: str) -> None:
+        """The question of ``vehicle``'s B is answered (B, or none usable, or no reply): its
+        samples flow to the detectors."""
+        with self.lock:
+            self.settled.add(vehicle)
+            for (v, _), al in self.aligned.items():
+                if v == vehicle:
+                    al.paused = False
+        self._release(vehicle)
+
+    def _json_object(self, sample) -> dict | None:
+        try:
+            payload = json.loads(sample.payload.to_bytes())
+        except ValueError as exc:
+            self.tell(self.link.drop(str(sample.key_expr), "not JSON", f" ({exc})"))
+            return None
+        if not isinstance(payload, dict):
+            self.tell(self.link.drop(str(sample.key_expr), "not a JSON object"))
+            return None
+        return payload
+
+    def _stamp(self, sample, payload: dict) -> int | None:
+        """The sample's ``t_ns`` (an integer), else counted and dropped."""
+        t_ns = payload.get("t_ns")
+        if isinstance(t_ns, int) and not isinstance(t_ns, bool):
+            return t_ns
+        self.tell(self.link.drop(str(sample.key_expr), "no integer t_ns", f" ({t_ns!r:.40})"))
+        return None
+
+
+def _arguments(argv: list[str] | None) -> tuple[argparse.Namespace, CusumSettings]:
+    """The command line and the detector's settings it gives; exit 2 naming what is wrong."""
     p = argparse.ArgumentParser(prog="uvd-fdc", description=__doc__.split("\n\n")[0])
     add_connection_arguments(p)
     p.add_argument("--vehicle", type=vehicle_pattern, default="*",
@@ -218,8 +423,11 @@ def main(argv: list[str] | None = None) -> int:
                              ("segment_s", "--segment-s")):
             text = text.replace(f"CusumSettings.{name} ", f"argument {option} ")
         p.error(text)
-    import zenoh
+    return args, settings
 
+
+def main(argv: list[str] | None = None) -> int:
+    args, settings = _arguments(argv)
     from uvd.fdc.residual import warm
     warm()  # the residual's kernels before any sample waits on them
 
@@ -228,175 +436,17 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"uvd-fdc: error: {exc}", file=sys.stderr)
         return 2
-    lock = threading.Lock()
-    link = LinkStats()
-    detectors: dict[tuple[str, str], VehicleDetector] = {}
-    thrusters: dict[str, object] = {}  # vehicle → its thruster matrix B (None: not known)
-    asked: set[str] = set()  # vehicles whose params were asked for B (again when they return)
-    settled: set[str] = set()  # vehicles whose question for B is answered
-    # each detector's two streams merged by time stamp (uvd.fdc.align: the verdict must not
-    # depend on how the two subscriptions' samples interleave or how late they arrive)
-    aligned: dict[tuple[str, str], Aligned] = {}
-    early: dict[str, deque] = {}  # vehicle → state samples before its first estimate
+    watch = FleetWatch(session, settings, stats=bool(args.stats))
     callbacks = SessionCallbacks()
-
-    def say(text: str) -> None:
-        with lock:
-            print(text, flush=True)
-
-    def tell(line: str | None) -> None:
-        if line is not None:
-            say(line)
-
-    def on_estimate(sample) -> None:
-        parts = str(sample.key_expr).split("/")
-        if len(parts) != 4:
-            return
-        vehicle, estimator = parts[1], parts[3]
-        payload = _json_object(sample)
-        if payload is None:
-            return
-        if args.stats:
-            link.take(str(sample.key_expr), payload)
-        if payload.get("source") == "controller":
-            return  # an adaptive controller's θ̂ moves by design (AMBC's step 1 → 2)
-        t_ns = _stamp(sample, payload)
-        if t_ns is None:
-            return
-        now = time.monotonic()
-        with lock:
-            al = aligned.get((vehicle, estimator))
-            if al is None:
-                detectors[vehicle, estimator] = VehicleDetector(
-                    vehicle, settings, B=thrusters.setdefault(vehicle, None))
-                al = aligned[vehicle, estimator] = Aligned(now)
-                al.paused = vehicle not in settled  # the detector starts with its B (or none)
-                for t_state, item in early.pop(vehicle, ()):
-                    al.push("state", t_state, item, now)
-            found = feed(vehicle, estimator,
-                         al.push("estimate", t_ns, (str(sample.key_expr), payload), now))
-        report(vehicle, found)
-
-    def feed(vehicle: str, estimator: str, released) -> list:
-        """Give the detector of (vehicle, estimator) the samples its aligner released (lock
-        held); a malformed one is counted and dropped."""
-        det, found = detectors[vehicle, estimator], []
-        for stream, (key, payload) in released:
-            try:
-                found += det.update(payload) if stream == "estimate" else \
-                    det.update_state(payload)
-            except (KeyError, TypeError, ValueError) as exc:
-                if (line := link.drop(key, f"malformed {stream}", f" ({exc})")) is not None:
-                    print(line, flush=True)  # the lock is held: not say()
-        return found
-
-    def release(vehicle: str | None = None) -> None:
-        """What the aligners (of ``vehicle``; None: all) release as time passes."""
-        now, found = time.monotonic(), {}
-        with lock:
-            for (v, e), al in aligned.items():
-                if vehicle is None or v == vehicle:
-                    found.setdefault(v, []).extend(feed(v, e, al.pop(now)))
-        for v, f in found.items():
-            report(v, f)
-
-    def report(vehicle: str, found) -> None:
-        for d in found:
-            rel = "n/a" if d.relative_change is None else f"{d.relative_change:+.1%}"
-            say(f"FAULT {vehicle}: {d.kind} ({d.channel} {rel}, "
-                f"{d.magnitude:+.1f} σ, confidence {d.confidence:.1f})")
-            session.put(f"uvd/{vehicle}/fault/{d.kind}", json.dumps(d.as_dict()),
-                        encoding=zenoh.Encoding("application/json;schema=uvd.fault.v1"))
-
-    def ask_thrusters(vehicle: str) -> None:
-        """The vehicle's thruster matrix from its ``params`` queryable (main thread)."""
-        for reply in session.get(f"uvd/{vehicle}/params?what=configuration", timeout=2.0):
-            try:
-                conf = json.loads(reply.ok.payload.to_bytes())["configuration"]
-                B = thruster_matrix(conf["thruster_matrix"])
-            except (AttributeError, KeyError, TypeError, ValueError) as exc:
-                say(f"uvd/{vehicle}/params: no usable thruster matrix ({exc!r}); faults are "
-                    "reported with the kind of the estimates' channel")
-                break
-            with lock:
-                thrusters[vehicle] = B
-                for (v, _), det in detectors.items():
-                    if v == vehicle:
-                        det.set_thrusters(B)
-            break
-        settle(vehicle)
-
-    def settle(vehicle: str) -> None:
-        """The question of ``vehicle``'s B is answered (B, or none usable, or no reply): its
-        samples flow to the detectors."""
-        with lock:
-            settled.add(vehicle)
-            for (v, _), al in aligned.items():
-                if v == vehicle:
-                    al.paused = False
-        release(vehicle)
-
-    def on_alive(sample) -> None:
-        vehicle = str(sample.key_expr).split("/")[1]
-        if sample.kind == zenoh.SampleKind.PUT:
-            say(f"{vehicle}: up")
-            return
-        with lock:
-            for key in [k for k in detectors if k[0] == vehicle]:
-                del detectors[key], aligned[key]
-            thrusters.pop(vehicle, None)
-            asked.discard(vehicle)
-            settled.discard(vehicle)
-            early.pop(vehicle, None)
-        say(f"{vehicle}: gone (its baseline is forgotten)")
-
-    def _json_object(sample) -> dict | None:
-        try:
-            payload = json.loads(sample.payload.to_bytes())
-        except ValueError as exc:
-            tell(link.drop(str(sample.key_expr), "not JSON", f" ({exc})"))
-            return None
-        if not isinstance(payload, dict):
-            tell(link.drop(str(sample.key_expr), "not a JSON object"))
-            return None
-        return payload
-
-    def _stamp(sample, payload: dict) -> int | None:
-        """The sample's ``t_ns`` (an integer), else counted and dropped."""
-        t_ns = payload.get("t_ns")
-        if isinstance(t_ns, int) and not isinstance(t_ns, bool):
-            return t_ns
-        tell(link.drop(str(sample.key_expr), "no integer t_ns", f" ({t_ns!r:.40})"))
-        return None
-
-    def on_state(sample) -> None:
-        payload = _json_object(sample)
-        if payload is None:
-            return
-        if args.stats:
-            link.take(str(sample.key_expr), payload)
-        t_ns = _stamp(sample, payload)
-        if t_ns is None:
-            return
-        vehicle, key = str(sample.key_expr).split("/")[1], str(sample.key_expr)
-        now, found = time.monotonic(), []
-        with lock:
-            mine = [(e, al) for (v, e), al in aligned.items() if v == vehicle]
-            if not mine:  # no estimate yet: kept for the detectors to come
-                early.setdefault(vehicle, deque(maxlen=EARLY_STATES)).append(
-                    (t_ns, (key, payload)))
-            for estimator, al in mine:
-                found += feed(vehicle, estimator, al.push("state", t_ns, (key, payload), now))
-        report(vehicle, found)
-
     try:
-        session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*", callbacks(on_estimate))
-        session.declare_subscriber(f"uvd/{args.vehicle}/state", callbacks(on_state))
+        session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*",
+                                   callbacks(watch.on_estimate))
+        session.declare_subscriber(f"uvd/{args.vehicle}/state", callbacks(watch.on_state))
         session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive",
-                                                callbacks(on_alive), history=True)
-        say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* and state (baseline after "
-            f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; "
-            f"h {settings.h:g})")
+                                                callbacks(watch.on_alive), history=True)
+        watch.say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* and state (baseline after "
+                  f"{settings.warmup_s:g} s over {settings.baseline_s:g} s; "
+                  f"h {settings.h:g})")
         # SIGTERM (systemd, a parent) and SIGINT (Ctrl-C; also when started in the background,
         # where a shell would have it ignored) end it cleanly: counts written
         stop = threading.Event()
@@ -407,28 +457,17 @@ def main(argv: list[str] | None = None) -> int:
         while not stop.wait(min(0.2, max(0.0, deadline - time.monotonic()))):
             if time.monotonic() >= deadline:
                 break
-            if (note := reach.due()) is not None:
-                say(note)
-            with lock:
-                unknown = [v for v, B in thrusters.items() if B is None and v not in asked]
-            for vehicle in unknown:
-                asked.add(vehicle)
-                ask_thrusters(vehicle)
-            release()  # a stream gone quiet stops holding the other
+            watch.tell(reach.due())
+            watch.tick()
     finally:
-        callbacks.close(session, warn=say, who="uvd-fdc")  # their threads ended: none at exit
-        if link.dropped:
-            say(f"uvd-fdc: dropped {sum(link.dropped.values())} malformed samples "
-                f"({', '.join(f'{k} {n}' for k, n in sorted(link.dropped.items()))})")
-        late = {s: sum(al.late[s] for al in aligned.values()) for s in STREAMS}
-        forced = sum(al.forced for al in aligned.values())
-        if any(late.values()) or forced:
-            say(f"uvd-fdc: samples late behind the other stream: {late} (late state samples "
-                f"dropped); released unaligned (too many held): {forced}")
+        callbacks.close(session, warn=watch.say, who="uvd-fdc")  # their threads ended
+        for line in watch.closing_lines():
+            watch.say(line)
         if args.stats:
+            late, forced = watch.lateness()
             args.stats.parent.mkdir(parents=True, exist_ok=True)
             with open(args.stats, "w") as f:
-                json.dump({**link.summary(), "late": late, "forced": forced}, f)
+                json.dump({**watch.link.summary(), "late": late, "forced": forced}, f)
     return 0
 
 
