@@ -63,10 +63,12 @@ def run(args: argparse.Namespace) -> dict:
             rows[n] = {r["key"]: {k: v for k, v in r.items()
                                   if k not in RUN_ENVIRONMENT + ("index",)}
                        for r in stored}
-    base = out["by_workers"][str(args.workers[0])]["runs_per_hour"]
-    for n in args.workers[1:]:
-        out[f"throughput_{n}_over_{args.workers[0]}"] = \
-            out["by_workers"][str(n)]["runs_per_hour"] / base
+    # against the fewest workers, whichever ran first (--workers 2 1 measures the same ratio
+    # as 1 2, in the other order: one key in the history for both)
+    least = min(args.workers)
+    base = out["by_workers"][str(least)]["runs_per_hour"]
+    for n in sorted(set(args.workers) - {least}):
+        out[f"throughput_{n}_over_{least}"] = out["by_workers"][str(n)]["runs_per_hour"] / base
     first = rows[args.workers[0]]
     out["rows_bit_identical"] = all(rows[n] == first for n in args.workers[1:])
     return out
