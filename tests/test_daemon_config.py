@@ -71,6 +71,28 @@ def test_an_absent_device_stops_the_start_with_exit_1(tmp_path):
     assert "start failed" in r.stderr and str(tmp_path / "ins") in r.stderr
 
 
+@pytest.mark.untimed
+def test_a_start_that_failed_leaves_the_last_runs_estimate_alone(tmp_path):
+    """``[estimation] save_path`` holds an earlier run's θ̂; a start that fails before any
+    cycle (the INS port absent) must not overwrite it with the first guess it loaded."""
+    from sim_bridge.bridge import write_local_config
+    from uvd.estimation.aid import INITP_6DOF
+    from uvd.io.params import save_params
+    from uvd.model.params import params_from_theta
+    saved = tmp_path / "aid.toml"
+    theta = INITP_6DOF.theta.copy()
+    theta[0] *= 1.5
+    save_params(params_from_theta(theta), saved, title="an earlier run's estimate")
+    before = saved.read_bytes()
+    cfg = write_local_config(tmp_path, changes={
+        "daemon": {"start_timeout_s": 1.0},
+        "estimation": {"aid": True, "save_path": str(saved)}})
+    r = subprocess.run([sys.executable, "-m", "uvd", "run", "--config", str(cfg)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1 and "start failed" in r.stderr, r.stderr
+    assert saved.read_bytes() == before
+
+
 def test_navigation_timeouts_are_the_failsafe_thresholds():
     cfg = load_config(DEFAULT_CONFIG)
     nav = nav_config(cfg)

@@ -56,6 +56,7 @@ class Estimates:
         self.period_ns = int(period_s * 1e9)
         self._next_ns = 0
         self.last_t_ns = 0
+        self.cycled = False  # a cycle ran: there is an estimate of this run to publish
         self._frozen_logged: set[str] = set()
         c = supervisor.config.core
         #: anything to publish: online estimators, or a controller adapting its own θ̂
@@ -65,12 +66,15 @@ class Estimates:
     def attach(self, app) -> None:
         """With online estimators: a shutdown step of ``app`` — after the amplifiers are safe,
         before the sinks close (``[estimation] save_path``'s among them) — that publishes the
-        newest θ̂ however long ago the last periodic record went out."""
+        newest θ̂ however long ago the last periodic record went out. A run whose start
+        failed before any cycle publishes nothing: its θ̂ is the one it loaded, and writing it
+        to ``save_path`` would overwrite an earlier run's estimate kept there."""
         if not self.supervisor.config.core.estimators:
             return
 
         async def final() -> None:
-            self.publish(self.last_t_ns)
+            if self.cycled:
+                self.publish(self.last_t_ns)
         app.add_shutdown_step(ShutdownStep("publish the final estimate", final))
 
     def records(self, t_ns: int) -> list[dict[str, Any]]:
@@ -80,6 +84,7 @@ class Estimates:
         """Publish when due — within half a period of the due time: a cycle a few µs early
         is not skipped."""
         self.last_t_ns = t_ns
+        self.cycled = True
         if self.adapts and t_ns >= self._next_ns - int(dt * 5e8):
             self._next_ns = t_ns + self.period_ns
             self.publish(t_ns)
