@@ -375,6 +375,20 @@ HOSTILE = (-1, 10**30, 1e308, math.nan, "", "\x00", True, [], [math.nan] * 6, {"
            "x" * 300, "x" * 300 + ".toml")
 
 
+def test_a_name_the_system_refuses_is_told_apart_from_an_absent_file(tmp_path):
+    """``refused_name``: the one check before a configured TOML file is looked for."""
+    from uvd.io.toml import refused_name
+    (tmp_path / "here.toml").write_text("")
+    assert refused_name(tmp_path / "here.toml") is None
+    assert refused_name(tmp_path / "absent.toml") is None
+    assert refused_name(tmp_path / "here.toml" / "below.toml") is None  # not a folder
+    assert "too long" in refused_name(tmp_path / ("x" * 300 + ".toml")).lower()
+    cfg = tmp_path / "uvd.toml"
+    cfg.write_text(f'[vehicle]\nname = "{"x" * 300}.toml"\n')
+    with pytest.raises(ConfigValidationError, match=r"vehicle\.name: vehicle file 'x+.*too long"):
+        load_config(cfg)
+
+
 def test_every_key_takes_any_value_or_refuses_it_by_name(tmp_path):
     """Each key of the schema set to each :data:`HOSTILE` value in config/sim.toml with AID
     resuming from its file: the

@@ -7,15 +7,20 @@ configuration of the daemon under test); ``tomllib`` reads TOML but does not wri
 
 from __future__ import annotations
 
+import errno
 import json
 import math
+import os
 import tomllib
 from pathlib import Path
 from typing import Any
 
 from uvd.errors import ConfigError
 
-__all__ = ["TomlFileError", "dump_toml", "read_toml"]
+__all__ = ["TomlFileError", "dump_toml", "read_toml", "refused_name"]
+
+#: lookup errors that only mean "not there" (those pathlib's ``exists`` answers False to)
+_ABSENT = frozenset({errno.ENOENT, errno.ENOTDIR, errno.EBADF, errno.ELOOP})
 
 
 class TomlFileError(ConfigError):
@@ -48,6 +53,18 @@ def read_toml(path: str | Path, what: str = "") -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise TomlFileError(path, f"not valid TOML: {exc}") from exc
+
+
+def refused_name(path: str | Path) -> str | None:
+    """Why the system refuses to look ``path`` up at all (a name too long for the file
+    system, a folder on the way without permission), else None — also when it is merely
+    absent. A TOML file's name from a configuration is checked with it before ``is_file``,
+    which raises for such a name on some Python versions and answers False on others."""
+    try:
+        os.stat(path)
+    except OSError as exc:
+        return None if exc.errno in _ABSENT else exc.strerror or str(exc)
+    return None
 
 
 def _toml_value(v: Any) -> str:

@@ -14,7 +14,7 @@ import numpy as np
 
 from uvd.errors import ConfigError, ParameterError
 from uvd.io.params import params_from_mapping
-from uvd.io.toml import read_toml
+from uvd.io.toml import read_toml, refused_name
 from uvd.model.thrusters import ThrustCurve, ThrusterSpec
 from uvd.model.vehicle import Vehicle
 
@@ -38,11 +38,10 @@ def builtin_vehicles() -> list[str]:
 def vehicle_path(name_or_path: str | Path) -> Path:
     """The file of a built-in vehicle name, or ``name_or_path`` itself if it is a TOML file."""
     p = Path(name_or_path)
-    try:
-        if p.suffix == ".toml" and p.exists():
-            return p
-    except OSError as exc:  # a name too long for the file system
-        raise ConfigError(f"vehicle file {str(p)!r:.80}: {exc.strerror}") from exc
+    if why := refused_name(p):
+        raise ConfigError(f"vehicle file {str(p)!r:.80}: {why}")
+    if p.suffix == ".toml" and p.exists():
+        return p
     if str(name_or_path) in builtin_vehicles():  # a name, never a path into the package
         return Path(str(_builtin_root() / f"{name_or_path}.toml"))
     raise ConfigError(f"unknown vehicle {str(name_or_path)!r}: not a file, and not one of the "

@@ -65,7 +65,7 @@ from drivers.can.config import (
 from drivers.can.config import DepthConfig as CanDepthConfig
 from drivers.digiquartz import DepthConverter
 from uvd.errors import ConfigError
-from uvd.io.toml import TomlFileError, read_toml
+from uvd.io.toml import TomlFileError, read_toml, refused_name
 from uvd.runtime import schema
 from uvd.runtime.failsafe import Thresholds
 from uvd.runtime.fdc_source import FaultsSection
@@ -124,11 +124,10 @@ class VehicleSection:
         if p.suffix != ".toml":
             return [("name", f"{self.name!r} is neither a built-in vehicle "
                              f"({', '.join(builtin_vehicles())}) nor a .toml file")]
-        try:
-            found = (p if p.is_absolute() else ctx.base_dir / p).is_file()
-        except OSError as exc:  # a name too long for the file system
-            return [("name", f"vehicle file {self.name!r:.80}: {exc.strerror}")]
-        if not found:
+        full = p if p.is_absolute() else ctx.base_dir / p
+        if why := refused_name(full):
+            return [("name", f"vehicle file {self.name!r:.80}: {why}")]
+        if not full.is_file():
             return [("name", f"vehicle file {self.name!r} not found (relative paths are taken "
                              f"from {ctx.base_dir})")]
         return []
@@ -293,11 +292,9 @@ class EstimationSection:
     def resume_path(self) -> Path | None:
         """``save_path`` if ``resume`` and the file is there (resolved against the working
         directory, where the daemon writes it), else None."""
-        try:
-            if self.resume and self.save_path and Path(self.save_path).is_file():
-                return Path(self.save_path).absolute()
-        except OSError:  # a name too long for the file system: never written (_check says)
-            pass
+        if self.resume and self.save_path and not refused_name(self.save_path) \
+                and Path(self.save_path).is_file():  # a refused name: _check says why
+            return Path(self.save_path).absolute()
         return None
 
     def start_path(self, base_dir: Path) -> Path | None:
@@ -335,10 +332,8 @@ class EstimationSection:
             return [("resume", "needs save_path: the file a run leaves and the next one "
                                "starts from")]
         errors = []
-        try:
-            Path(self.save_path or ".").exists()
-        except OSError as exc:  # a name too long for the file system
-            errors.append(("save_path", f"{self.save_path!r:.80}: {exc.strerror}"))
+        if why := refused_name(self.save_path or "."):
+            errors.append(("save_path", f"{self.save_path!r:.80}: {why}"))
         for key, p in (("initial_params", self.initial_params_path(ctx.base_dir)),
                        ("save_path", self.resume_path())):
             if p is not None:
