@@ -45,8 +45,10 @@ def _profile_hint(path: Path) -> str:
     from uvd.io.logs import FORMATS, detect_format
 
     try:
-        fmt = detect_format(path) if path.exists() else "uvd-telemetry"
-    except LogReadError:
+        if not path.exists():
+            return ""
+        fmt = detect_format(path)
+    except (LogReadError, OSError):  # a format uvd does not know by name; a name too long
         return ""
     if fmt == "uvd-telemetry":
         return ""
