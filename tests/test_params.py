@@ -80,8 +80,14 @@ def test_validation_names_what_is_wrong():
     # finite entries whose eigenvalues overflow (a corrupt file): LinAlgError until session 30
     D = good.D.copy()
     D[1] = 1e308
-    with pytest.raises(ParameterError, match="cannot be computed .* entries up to 1e[+]308"):
+    with pytest.raises(ParameterError,
+                       match="the drag: the eigenvalues cannot be computed .* up to 1e[+]308"):
         P.UVParams(M=good.M, D=D, g=0.0, b=[0, 0, 1]).validate()
+    with pytest.raises(ParameterError, match="M: the eigenvalues cannot be computed"):
+        P.UVParams(M=np.full((6, 6), 1e308), D=good.D, g=0.0, b=[0, 0, 1]).validate()
+    # M refused first: the drag (whose figure would fail here) is not looked at
+    with pytest.raises(ParameterError, match="M is not positive definite"):
+        P.UVParams(M=-np.eye(6), D=D, g=0.0, b=[0, 0, 1]).validate()
 
 
 def test_dissipativity_of_coupled_drag():

@@ -150,16 +150,10 @@ class UVParams:
         asym = float(np.max(np.abs(self.M - self.M.T)))
         if asym > 1e-9 * max(1.0, float(np.max(np.abs(self.M)))):
             raise ParameterError(f"{where}: M is not symmetric (max |M - Mᵀ| = {asym:.3g})")
-        try:
-            with np.errstate(over="ignore", invalid="ignore"):  # what overflows is refused
-                lam = self.mass_min_eigenvalue()
-                worst = self.drag_dissipativity_max()
-        except np.linalg.LinAlgError as exc:  # entries near the largest float overflow
-            big = max(float(np.max(np.abs(self.M))), float(np.max(np.abs(self.D))))
-            raise ParameterError(f"{where}: the eigenvalues of M or of the drag cannot be "
-                                 f"computed ({exc}; entries up to {big:.3g})") from exc
+        lam = _eigen_figure(self.mass_min_eigenvalue, self.M, f"{where}: M")
         if not lam > 0.0:  # nan too
             raise ParameterError(f"{where}: M is not positive definite (min eigenvalue {lam:.4g})")
+        worst = _eigen_figure(self.drag_dissipativity_max, self.D, f"{where}: the drag")
         if not worst < 0.0:
             raise ParameterError(
                 f"{where}: drag is not dissipative (max over unit v of vᵀ(Σ|v_i|D_i)v = "
@@ -172,6 +166,18 @@ class UVParams:
         for i in range(6):
             D_diag[i, i, i] = self.D[i, i, i]
         return bool(np.all(off_M == 0.0) and np.all(self.D == D_diag))
+
+
+def _eigen_figure(figure, entries: np.ndarray, what: str) -> float:
+    """``figure()`` (an eigenvalue-based figure of ``entries``), or a ParameterError naming
+    ``what`` when entries near the largest float make the eigenvalues overflow (a NaN or inf
+    figure is returned, for the caller to refuse)."""
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):
+            return figure()
+    except np.linalg.LinAlgError as exc:
+        raise ParameterError(f"{what}: the eigenvalues cannot be computed ({exc}; entries up "
+                             f"to {float(np.max(np.abs(entries))):.3g})") from exc
 
 
 def _drag_form(D: np.ndarray, v: np.ndarray) -> float:
