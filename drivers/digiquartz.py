@@ -193,10 +193,13 @@ class DepthConverter:
         if self.water not in ("fresh", "sea"):
             raise ValueError(f"DepthConverter.water must be 'fresh' or 'sea', got "
                              f"{self.water!r}")
-        if not (self.rho_kg_m3 > 0 and self.g_m_s2 > 0 and -90 <= self.latitude_deg <= 90
-                and math.isfinite(self.rho_kg_m3) and math.isfinite(self.g_m_s2)):
-            raise ValueError("DepthConverter: density and gravity must be positive and "
-                             "latitude within ±90°")
+        for name, what in (("rho_kg_m3", "density (kg/m³)"), ("g_m_s2", "gravity (m/s²)")):
+            x = getattr(self, name)
+            if not (math.isfinite(x) and x > 0):
+                raise ValueError(f"DepthConverter.{name} must be a finite {what} > 0, got {x!r}")
+        if not -90 <= self.latitude_deg <= 90:  # NaN too
+            raise ValueError(f"DepthConverter.latitude_deg must be within ±90°, got "
+                             f"{self.latitude_deg!r}")
         if not (math.isfinite(self.atmosphere_pa) and self.atmosphere_pa >= 0.0):
             raise ValueError("DepthConverter.atmosphere_pa must be a finite pressure >= 0 Pa "
                              f"(0 for a gauge sensor), got {self.atmosphere_pa!r}")

@@ -184,12 +184,17 @@ def test_driver_sections_plug_in_and_their_errors_name_keys(tmp_path):
     assert "not a python-can interface" in errs["can.interface"]
     _, errs = errors_of(tmp_path, MINIMAL + "[can.amplifiers]\nnode_ids = [1, 2, 3, 4, 5]\n")
     assert "5 node ids for the 6 thrusters" in errs["can.amplifiers.node_ids"]
-    # the Digiquartz driver's DepthConverter is a plain dataclass section
+    # the Digiquartz driver's DepthConverter is a plain dataclass section: its refusals
+    # ("DepthConverter.water must …") name the key
     _, errs = errors_of(tmp_path, MINIMAL + "[sensors.depth.conversion]\nwater = \"brine\"\n")
-    assert "fresh" in errs["sensors.depth.conversion"]
+    assert errs["sensors.depth.conversion.water"].startswith("must be 'fresh' or 'sea'")
     # a negative tare: every depth off by it (session 19; nan and inf the schema refuses)
     _, errs = errors_of(tmp_path, MINIMAL + "[sensors.depth.conversion]\natmosphere_pa = -5.0\n")
-    assert "atmosphere_pa must be a finite pressure >= 0 Pa" in errs["sensors.depth.conversion"]
+    assert errs["sensors.depth.conversion.atmosphere_pa"].startswith(
+        "must be a finite pressure >= 0 Pa")
+    for key, value in (("rho_kg_m3", "-1.0"), ("g_m_s2", "0.0"), ("latitude_deg", "91.0")):
+        _, errs = errors_of(tmp_path, MINIMAL + f"[sensors.depth.conversion]\n{key} = {value}\n")
+        assert errs[f"sensors.depth.conversion.{key}"].endswith(f"got {value}"), errs
 
 
 def test_vehicle_file_relative_to_the_config(tmp_path):

@@ -312,6 +312,16 @@ def _value(value: Any, tp: Any, meta: Meta, key: str, errors: list, ctx: BuildCo
     return conv
 
 
+def _refusal(prefix: str, cls: type, exc: Exception) -> tuple[str, str]:
+    """The key and reason of a dataclass's own refusal (a driver's ``__post_init__``): a
+    message ``"Cls.field must …"`` names the key ``prefix.field``; any other names the table."""
+    text = str(exc)
+    m = re.match(rf"{cls.__name__}\.(\w+) (.+)", text, re.S)
+    if m and m[1] in {f.name for f in dataclasses.fields(cls)}:
+        return (f"{prefix}.{m[1]}" if prefix else m[1]), m[2]
+    return prefix or cls.__name__, text
+
+
 def _build(cls: type, data: Mapping[str, Any], prefix: str, errors: list,
            ctx: BuildContext) -> Any:
     hints = _hints(cls)
@@ -347,7 +357,7 @@ def _build(cls: type, data: Mapping[str, Any], prefix: str, errors: list,
     try:
         obj = cls(**kwargs)
     except (ValueError, TypeError) as exc:  # the dataclass's own __post_init__ refused
-        errors.append((prefix or cls.__name__, str(exc)))
+        errors.append(_refusal(prefix, cls, exc))
         return MISSING
     check = getattr(obj, "_check", None)
     if callable(check):
@@ -649,7 +659,7 @@ def _with(obj: Any, values: dict[str, Any], prefix: str, errors: list, reload_on
     try:
         new = dataclasses.replace(obj, **changes)
     except (ValueError, TypeError) as exc:  # the dataclass's own __post_init__ refused (_build)
-        errors.append((prefix or cls.__name__, str(exc)))
+        errors.append(_refusal(prefix, cls, exc))
         return obj
     for f in dataclasses.fields(cls):  # carry non-init fields (e.g. the file name) over
         if not f.init:
