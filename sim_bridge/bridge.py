@@ -86,6 +86,10 @@ log = logging.getLogger("sim_bridge")
 TRUTH_COLUMNS = ("t_s", "x", "y", "z", "roll", "pitch", "heading", "u", "v", "w", "p", "q",
                  "r", "f1", "f2", "f3", "f4", "f5", "f6")
 
+#: the commands :meth:`SimBridge.call` carries out itself; the others go to the CAN emulators
+BRIDGE_OPS = ("leak", "ping", "place", "plant_fault", "release", "reset", "sensor", "stats",
+              "truth", "writes")
+
 
 # ----------------------------------------------------------------------------- fault injection
 
@@ -477,8 +481,10 @@ class SimBridge:
                 f"no instrument port {name!r}; have {sorted(self.emulators.ports)}"
         if op in ("ping", "truth", "release", "place", "stats", "leak", "reset"):
             return None
+        from sim_bridge.amplifiers.emulators import OPS, command_problem
+        if op not in OPS:  # named with the bridge's own commands, not only the emulators'
+            return f"unknown op {op!r}; known: {', '.join(sorted({*OPS, *BRIDGE_OPS}))}"
         c = self.config.can  # the rest are the CAN emulators' (CanEmulators.call)
-        from sim_bridge.amplifiers.emulators import command_problem
         return command_problem(op, kw, c.amplifiers.node_ids,
                                c.depth.node_id if c.depth.enabled else None)
 

@@ -82,6 +82,11 @@ def test_plant_and_thruster_faults_at_chosen_times(tmp_path):
     # quote-free words: the error reaches the test inside a dict's repr (its quotes escaped),
     # and sim-bridge's stderr copy of it may not be read yet (seen under load)
     ("20", '{"op": "helth", "node": 4}', "helth: unknown op"),
+    # the known ops named are the bridge's and its CAN emulators' (plant_fault was missing)
+    ("20", '{"op": "plantfault"}', "known: bus_off, depth, fault, health, leak, ping, place, "
+                                   "plant_fault, pressure_valid, release, reset, sensor, "
+                                   "silence, stats, truth, unsilence, writes"),
+    ("20", "drag_scale=1.5", "not JSON (Expecting value: line 1 column 1"),
     ("20", '{"op": "health", "node": 9, "value": 0.5}',
      "node 9 is not one of [1, 2, 3, 4, 5, 6]"),
     ("20", '{"drag_scale": 1.5}', "not a JSON object with an"),  # was the KeyError's bare 'op'

@@ -51,6 +51,11 @@ from uvd.model.thrusters import ThrusterSpec
 log = logging.getLogger(__name__)
 
 
+#: the commands :meth:`CanEmulators.call` carries out
+OPS = ("bus_off", "depth", "fault", "health", "ping", "pressure_valid", "reset", "silence",
+       "stats", "unsilence")
+
+
 def command_problem(op: str, kw: dict, node_ids: Sequence[int],
                     pressure_node: int | None) -> str | None:
     """Why ``op`` with ``kw`` is not a command :meth:`CanEmulators.call` can carry out on
@@ -99,8 +104,7 @@ def command_problem(op: str, kw: dict, node_ids: Sequence[int],
         return number("value")
     if op == "pressure_valid":
         return None if "value" in kw else "value is missing"
-    return (f"unknown op {op!r}; known: bus_off, depth, fault, health, ping, pressure_valid, "
-            "reset, silence, stats, unsilence")
+    return f"unknown op {op!r}; known: {', '.join(OPS)}"
 
 
 class CanEmulators:
@@ -467,6 +471,6 @@ class CanEmulators:
             if op == "reset":
                 self.reset()
                 return {"ok": True}
-            return {"ok": False, "error": f"unknown op {op!r}"}
+            return {"ok": False, "error": f"unknown op {op!r}; known: {', '.join(OPS)}"}
         except (KeyError, ValueError, TypeError) as exc:
             return {"ok": False, "error": f"{op}: {exc}"}

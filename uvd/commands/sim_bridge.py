@@ -115,7 +115,10 @@ def _schedule(bridge, at: list) -> str | None:
     every one taken)."""
     for seconds, text in at:
         try:
-            cmd = json.loads(text)
+            try:
+                cmd = json.loads(text)
+            except ValueError as exc:
+                raise ValueError(f"not JSON ({exc})") from None
             if not (isinstance(cmd, dict) and isinstance(cmd.get("op"), str)):
                 raise ValueError('not a JSON object with an "op" (e.g. {"op": "plant_fault", '
                                  '"drag_scale": 1.5})')
