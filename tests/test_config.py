@@ -380,6 +380,20 @@ HOSTILE = (-1, 10**30, 1e308, math.nan, "", "\x00", True, [], [math.nan] * 6, {"
            "x" * 300, "x" * 300 + ".toml")
 
 
+def test_a_missing_bare_name_lists_the_shipped_configurations(tmp_path, monkeypatch):
+    """``--config sim-bluerov`` (a typo of a shipped name): said to be neither a file nor a
+    shipped configuration, with their names; a missing path is only a missing file."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ConfigValidationError) as exc:
+        load_config("sim-bluerov")
+    assert str(exc.value).endswith("sim-bluerov: cannot read: No such file or directory, nor a "
+                                   "shipped configuration's name (jhu-rov, sim, sim-bluerov2)")
+    with pytest.raises(ConfigValidationError) as exc:
+        load_config(tmp_path / "sub" / "sim-bluerov")
+    assert str(exc.value).endswith("cannot read: No such file or directory")
+    assert load_config("sim-bluerov2").vehicle.name == "bluerov2-heavy"
+
+
 def test_a_name_the_system_refuses_is_told_apart_from_an_absent_file(tmp_path):
     """``refused_name``: the one check before a configured TOML file is looked for."""
     from uvd.io.toml import refused_name

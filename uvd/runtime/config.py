@@ -983,7 +983,10 @@ def load_config(path: str | Path | None = None) -> Config:
     try:
         data = read_toml(path)
     except TomlFileError as exc:
-        raise ConfigValidationError(str(path), [("", exc.reason)]) from exc
+        reason = exc.reason
+        if isinstance(exc.__cause__, FileNotFoundError) and len(Path(path).parts) == 1:
+            reason += f", nor a shipped configuration's name ({', '.join(shipped_configs())})"
+        raise ConfigValidationError(str(path), [("", reason)]) from exc
     return parse_config(data, source=path)
 
 
