@@ -190,7 +190,10 @@ class FleetWatch:
     ``uvd/<vehicle>/fault/<kind>`` outside it."""
 
     def __init__(self, session, settings: CusumSettings, stats: bool) -> None:
+        import zenoh
         self.session, self.settings, self.stats = session, settings, stats
+        self._put = zenoh.SampleKind.PUT
+        self._fault_encoding = zenoh.Encoding("application/json;schema=uvd.fault.v1")
         self.lock = threading.Lock()
         self.link = LinkStats()
         self.detectors: dict[tuple[str, str], VehicleDetector] = {}
@@ -261,9 +264,8 @@ class FleetWatch:
         self._report(vehicle, found)
 
     def on_alive(self, sample) -> None:
-        import zenoh
         vehicle = str(sample.key_expr).split("/")[1]
-        if sample.kind == zenoh.SampleKind.PUT:
+        if sample.kind == self._put:
             self.say(f"{vehicle}: up")
             return
         with self.lock:
@@ -287,13 +289,13 @@ class FleetWatch:
             self._ask_thrusters(vehicle)
         self._release()
 
-    def closing_lines(self) -> list[str]:
-        """What the client says as it ends: malformed samples dropped, samples late."""
+    def closing_lines(self, late: dict[str, int], forced: int) -> list[str]:
+        """What the client says as it ends: malformed samples dropped, samples late (``late``
+        and ``forced`` of :meth:`lateness`)."""
         lines = []
         if self.link.dropped:
             lines.append(f"uvd-fdc: dropped {sum(self.link.dropped.values())} malformed samples "
                          f"({', '.join(f'{k} {n}' for k, n in sorted(self.link.dropped.items()))})")
-        late, forced = self.lateness()
         if any(late.values()) or forced:
             lines.append(f"uvd-fdc: samples late behind the other stream: {late} (late state "
                          f"samples dropped); released unaligned (too many held): {forced}")
@@ -331,13 +333,12 @@ class FleetWatch:
             self._report(v, f)
 
     def _report(self, vehicle: str, found) -> None:
-        import zenoh
         for d in found:
             rel = "n/a" if d.relative_change is None else f"{d.relative_change:+.1%}"
             self.say(f"FAULT {vehicle}: {d.kind} ({d.channel} {rel}, "
                      f"{d.magnitude:+.1f} σ, confidence {d.confidence:.1f})")
             self.session.put(f"uvd/{vehicle}/fault/{d.kind}", json.dumps(d.as_dict()),
-                             encoding=zenoh.Encoding("application/json;schema=uvd.fault.v1"))
+                             encoding=self._fault_encoding)
 
     def _ask_thrusters(self, vehicle: str) -> None:
         """The vehicle's thruster matrix from its ``params`` queryable."""
@@ -461,10 +462,10 @@ def main(argv: list[str] | None = None) -> int:
             watch.tick()
     finally:
         callbacks.close(session, warn=watch.say, who="uvd-fdc")  # their threads ended
-        for line in watch.closing_lines():
+        late, forced = watch.lateness()
+        for line in watch.closing_lines(late, forced):
             watch.say(line)
         if args.stats:
-            late, forced = watch.lateness()
             args.stats.parent.mkdir(parents=True, exist_ok=True)
             with open(args.stats, "w") as f:
                 json.dump({**watch.link.summary(), "late": late, "forced": forced}, f)
