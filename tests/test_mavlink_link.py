@@ -466,6 +466,46 @@ def test_the_receiver_process_forwards_only_good_mavlink_and_counts_the_rest():
         st.sock.close()
 
 
+def test_the_receiver_outlives_a_ctrl_c_and_ends_when_the_daemon_ends_it():
+    """Ctrl-C in the terminal of ``uvd run`` reaches the receiver too: it goes on forwarding
+    (the daemon, stopping in order, ends it) and ends, with its last counts, when the daemon
+    shuts its end."""
+    import os
+    import signal
+
+    from uvd.links.mavlink.receiver import read_forwarded, spawn_receiver, stop_receiver
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    proc, pair = spawn_receiver(sock)
+    st = Peer()
+    try:
+        good = st.enc.heartbeat_encode(6, 8, 0, 0, 0).pack(st.enc)
+        counts, got, deadline = collections.Counter(), [], time.monotonic() + 20.0
+        while not got and time.monotonic() < deadline:  # up: it has installed its handlers
+            st.sock.sendto(good, sock.getsockname())
+            got = read_forwarded(pair, counts)
+            time.sleep(0.05)
+        assert got, "the receiver forwarded nothing in 20 s"
+        os.kill(proc.pid, signal.SIGINT)
+        time.sleep(0.3)
+        assert proc.poll() is None, "the receiver died of SIGINT"
+        got = []
+        while not got and time.monotonic() < deadline:
+            st.sock.sendto(good, sock.getsockname())
+            got = read_forwarded(pair, counts)
+            time.sleep(0.05)
+        assert got == [(good, ("127.0.0.1", st.port))] * len(got) and got
+        stop_receiver(proc, pair, counts, timeout_s=5.0)
+        assert proc.returncode == 0
+        assert counts["datagrams"] >= 2 and counts["bad_datagrams"] == 0, counts
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        pair.close()
+        sock.close()
+        st.sock.close()
+
+
 def test_datagrams_the_kernel_drops_while_the_receiver_waits_are_counted():
     """A receiver kept from the CPU (stopped here; a saturated machine alike) while 400
     datagrams arrive at a small buffer: each one is either judged or counted dropped by the

@@ -24,7 +24,11 @@ The daemon creates and binds the UDP socket (so the port is known at once and te
 out from it) and hands it over by file descriptor. This process runs at ``SCHED_BATCH``
 (:func:`_leave_realtime`: a flood must not preempt the loop, and the link must not starve on
 a busy machine), and ends
-when the daemon shuts its end of the pair (after a last count report) or dies.
+when the daemon shuts its end of the pair (after a last count report) or dies — not on
+SIGINT: Ctrl-C in the terminal of ``uvd run`` reaches every process of its group, and the
+daemon, stopping in order, still has telemetry to send and its receiver to end (before, the
+receiver died at once and the daemon logged an error and started another during its
+shutdown).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import contextlib
 import json
 import os
 import select
+import signal
 import socket
 import subprocess
 import sys
@@ -243,12 +248,13 @@ def kernel_drops(ancillary) -> int | None:
 
 
 def main(argv: list[str]) -> int:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the daemon's to end (module docstring)
     _leave_realtime({int(c) for c in argv[2].split(",") if c} if len(argv) > 2 else set())
     sock = socket.socket(fileno=int(argv[0]))
     pair = socket.socket(fileno=int(argv[1]))
     try:
         serve(sock, pair)
-    except (BrokenPipeError, ConnectionResetError, KeyboardInterrupt):
+    except (BrokenPipeError, ConnectionResetError):
         pass
     return 0
 
