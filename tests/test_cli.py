@@ -131,6 +131,52 @@ def test_a_demo_stopped_by_a_signal_leaves_no_process_behind(tmp_path, sig):
         proc.wait(timeout=10.0)
 
 
+def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_path):
+    """Ctrl-C in the terminal (SIGINT to the demo's whole process group) 3 s after arming:
+    the daemon stops in order — sim-bridge, the vehicle's hardware in a session of its own,
+    runs on until the demo stops it last, so the daemon still finds its amplifiers to disable,
+    and its MAVLink receiver waits to be ended — then the demo prints the figures of the
+    seconds run and ends with 130; no process is left. Before (session 32) it printed only
+    "interrupted", and the daemon's log had "did not finish" (the amplifiers gone with the
+    Ctrl-C) and "receiver process ended; starting another"."""
+    out, rec = tmp_path / "demo.json", tmp_path / "rec"
+    proc = subprocess.Popen([sys.executable, "-m", "uvd", "demo", "--duration", "60",
+                             "--json", str(out), "--record", str(rec)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    kids: list[int] = []
+    try:
+        deadline = time.monotonic() + 240.0
+        for line in proc.stdout:
+            if "armed" in line and "after start" in line or time.monotonic() > deadline:
+                break
+        kids = _children(proc.pid)
+        time.sleep(3.0)
+        os.killpg(proc.pid, signal.SIGINT)
+        text, err = proc.communicate(timeout=60.0)
+        assert proc.returncode == 130, err[-2000:]
+        assert "Interrupted after" in text and "position MAE" in text, text[-2000:]
+        res = json.loads(out.read_text())
+        assert res["interrupted"]["of_s"] == 60.0 and 2.5 < res["interrupted"]["after_s"] < 30
+        assert res["tracking"]["samples"] >= 25 and res["daemon"]["exit_code"] == 0
+        assert set(res["lockstep"]["ratio"]) == {"x", "y", "z", "roll", "pitch", "heading"}
+        log = (rec / "daemon.log").read_text()
+        assert "ARMED → SHUTDOWN (shutdown: SIGINT)" in log, log[-2000:]
+        assert "did not finish" not in log and "receiver process ended" not in log, log[-2000:]
+        assert json.loads((rec / "demo.json").read_text())["interrupted"] == res["interrupted"]
+        t0 = time.monotonic()
+        while any(_alive(k) for k in kids) and time.monotonic() - t0 < 10.0:
+            time.sleep(0.1)
+        assert not [k for k in kids if _alive(k)], "left behind"
+    finally:
+        for k in kids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(k, signal.SIGKILL)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10.0)
+
+
 def _no_file_may_grow() -> None:
     """In the child: RLIMIT_FSIZE 1 byte — a write past it fails in the kernel (EFBIG), as
     on a full disk — with SIGXFSZ ignored (its default would end the process)."""

@@ -5,6 +5,12 @@ Used by the contract tests and the benchmark to put the emulators in another pro
 :meth:`sim_bridge.amplifiers.emulators.CanEmulators.call`. The child is started with
 ``--control``, so it exits when this side closes its standard input (or dies), and it is bounded
 by ``--duration`` anyway; :meth:`EmulatorProcess.stop` kills it if it does not exit in time.
+
+The child is the vehicle's hardware, so it runs in a session of its own: Ctrl-C in the
+terminal (SIGINT to the terminal's whole process group) does not reach it. The command that
+started it stops the daemon first — which still disables the amplifiers and sends its last
+telemetry to them — and it last, as :mod:`uvd.commands.demo` does (before, the emulators ended
+at the Ctrl-C with the daemon, whose shutdown then found no amplifier to disable).
 """
 
 from __future__ import annotations
@@ -54,7 +60,8 @@ class EmulatorProcess:
         """Start the child and wait (bounded) for its ready line."""
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         self.proc = subprocess.Popen(self.argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True, env=env)
+                                     stderr=subprocess.PIPE, text=True, env=env,
+                                     start_new_session=True)
         threading.Thread(target=self._reader, daemon=True, name="emulator-stdout").start()
         threading.Thread(target=self._drain_err, daemon=True, name="emulator-stderr").start()
         msg = self._next(timeout_s, lambda m: m.get("event") in ("ready", "error"))

@@ -279,11 +279,38 @@ def _seed_spread(logs, hil: dict, end_s: float) -> dict[str, Any]:
 def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str], pump,
            tail, progress) -> dict[str, Any]:
     """Follow the run for ``duration_s`` after arming: the daemon's log lines, both processes'
-    memory, the load average and the host's steal, a progress line every 10 s."""
-    from uvd.bench import host_steal_s
+    memory, the load average and the host's steal, a progress line every 10 s. Ctrl-C ends
+    the watch early (``interrupted_s``: seconds since arming): the run is then stopped and
+    reported over the seconds it ran (in a terminal the daemon had the SIGINT too and is
+    stopping in order; sim-bridge, in a session of its own, runs until stopped). SIGTERM and
+    SIGHUP unwind at once, as in every command."""
     samples: list[tuple[float, float, float]] = []
     loads: list[float] = []  # 1-minute load average, once a second
     steal: list[tuple[float, float]] = []  # (monotonic s, cumulative steal s), ~1 Hz
+    try:
+        _follow(daemon, bridge, armed_at, duration_s, events, pump, tail, progress,
+                samples, loads, steal)
+        interrupted_s = None
+    except KeyboardInterrupt as exc:
+        from uvd.cli import Stopped
+        if isinstance(exc, Stopped):  # SIGTERM, SIGHUP (a job runner, systemd): end now
+            raise
+        interrupted_s = time.monotonic() - armed_at
+        progress(f"uvd demo: interrupted {interrupted_s:.0f} s into the run: stopping both "
+                 "processes, then the figures of the seconds run (Ctrl-C again to quit "
+                 "without them)")
+    _, daemon_hwm = _rss_mb(daemon.pid)
+    _, bridge_hwm = _rss_mb(bridge.pid)
+
+    return {"samples": samples, "loads": loads, "steal": steal, "daemon_hwm": daemon_hwm,
+            "bridge_hwm": bridge_hwm, "interrupted_s": interrupted_s}
+
+
+def _follow(daemon, bridge, armed_at: float, duration_s: float, events: list[str], pump,
+            tail, progress, samples: list, loads: list, steal: list) -> None:
+    """:func:`_watch`'s loop: appends a sample a second until ``duration_s`` after arming
+    or the daemon's exit."""
+    from uvd.bench import host_steal_s
     next_report = 10.0
     while True:
         el = time.monotonic() - armed_at
@@ -306,11 +333,6 @@ def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str]
             n_fs = sum("failsafe fired" in e for e in events)
             progress(f"  {el:5.0f} / {duration_s:g} s   daemon RSS {rd:6.1f} MB   sim-bridge "
                      f"RSS {rb:6.1f} MB   failsafe events {n_fs}")
-    _, daemon_hwm = _rss_mb(daemon.pid)
-    _, bridge_hwm = _rss_mb(bridge.pid)
-
-    return {"samples": samples, "loads": loads, "steal": steal, "daemon_hwm": daemon_hwm,
-            "bridge_hwm": bridge_hwm}
 
 
 def _stop(daemon, bridge, pump) -> tuple[int, float, dict]:
@@ -434,12 +456,15 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
                 fault_run.poll(bridge)
 
         watch = _watch(daemon, bridge, armed_at, duration_s, events, watched, tail, progress)
+        interrupted_s = watch["interrupted_s"]
         # -- stop: SIGTERM as systemd would --
         code, stop_s, bridge_stats = _stop(daemon, bridge, pump)
         # -- figures --
-        figures = _figures(cfg, duration_s, seed, run_dir, truth_path, summary_path, lock_log,
-                           watch, code, stop_s, bridge_stats, prio, bridge.ready or {},
-                           armed_at - t_start, spread_logs)
+        figures = _figures(cfg, interrupted_s or duration_s, seed, run_dir, truth_path,
+                           summary_path, lock_log, watch, code, stop_s, bridge_stats, prio,
+                           bridge.ready or {}, armed_at - t_start, spread_logs)
+        if interrupted_s is not None:
+            figures["interrupted"] = {"after_s": interrupted_s, "of_s": duration_s}
         hil = figures["tracking"]
         fs_events = figures["failsafe_events"]
         _report(figures, progress)
@@ -451,6 +476,8 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
                 f["daemon_counts"] = json.loads(summary_path.read_text()).get("fault_samples")
             demo_fault.report(f, progress)
             ok = ok and (f.get("reallocated") is not None or accept == "advisory")
+        if interrupted_s is not None:  # as any uvd command stopped by Ctrl-C
+            return figures, 130
         return figures, 0 if ok else 1
     finally:
         if fault_run is not None:
@@ -481,6 +508,9 @@ def _disp(dof: str, value: float) -> str:
 
 def _report(f: dict, progress) -> None:
     hil = f["tracking"]
+    if "interrupted" in f:
+        progress(f"Interrupted after {f['interrupted']['after_s']:.0f} of "
+                 f"{f['interrupted']['of_s']:g} s: the figures of the seconds run")
     if hil.get("samples") and "lockstep" not in f:  # a fault run: no lockstep twin
         progress(f"Tracking error, true state vs reference ({hil['samples']} cycles, "
                  f"{hil['duration_s']:.0f} s): " + ", ".join(
