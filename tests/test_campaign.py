@@ -307,6 +307,71 @@ def test_a_campaign_killed_mid_run_resumes_without_redoing_a_finished_run(tmp_pa
     assert res.table is not None and res.table.exists()
 
 
+def _descendants(pid: int) -> set[int]:
+    """Every live process below ``pid`` (from /proc)."""
+    parents: dict[int, int] = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:  # "pid (comm) state ppid ...": comm may hold spaces
+                parents[int(d.name)] = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+    found, todo = set(), [pid]
+    while todo:
+        parent = todo.pop()
+        kids = [c for c, pp in parents.items() if pp == parent]
+        found.update(kids)
+        todo += kids
+    return found
+
+
+@DASK[0]
+@DASK[1]
+def test_ctrl_c_ends_a_campaign_with_one_line_its_rows_kept_and_no_worker_left(tmp_path):
+    """Ctrl-C in the terminal (SIGINT to the campaign's whole process group) while both
+    workers compute: the campaign ends with 130 and says "interrupted" in one line, the rows
+    it finished are kept, and no worker outlives it. Before (session 32) each worker died of
+    the SIGINT itself with two tracebacks (CancelledError, KeyboardInterrupt); ignoring it,
+    a worker closed mid-run sometimes logged a failed heartbeat with a third."""
+    spec_file = tmp_path / "c.toml"
+    spec_file.write_text('[campaign]\nname = "ctrl-c"\nkind = "control"\n[axes]\n'
+                         'controller = "pdc"\nduration_h = 0.05\nwindow_min = 0.5\n'
+                         'seed = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11]\n')
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "uvd", "campaign", str(spec_file), "--out",
+                             str(out), "--workers", "2", "--quiet"], cwd=ROOT,
+                            start_new_session=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    rows_dir = out / "rows"
+    below: set[int] = set()
+    try:
+        deadline = time.monotonic() + 240
+        while not list(rows_dir.glob("*.parquet")):
+            assert proc.poll() is None, "the campaign ended before its first row"
+            assert time.monotonic() < deadline, "no row within 240 s"
+            time.sleep(0.05)
+        below = _descendants(proc.pid)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+    assert proc.returncode == 130, err[-3000:]
+    assert err.strip().splitlines()[-1] == "uvd campaign: interrupted", err[-3000:]
+    assert "Traceback" not in err and "ERROR" not in err, err[-3000:]
+    assert len(below) >= 2, f"the campaign's worker processes: {below}"
+    t0 = time.monotonic()
+    while below & set(int(d.name) for d in Path("/proc").iterdir() if d.name.isdigit()) \
+            and time.monotonic() - t0 < 10.0:
+        time.sleep(0.1)
+    left = [p for p in below if Path(f"/proc/{p}").exists()]
+    assert not left, f"left behind: {left}"
+    rows = list(rows_dir.glob("*.parquet"))
+    assert 1 <= len(rows) < 12, f"the Ctrl-C came too late to test anything: {len(rows)} rows"
+    assert len(RowStore(out).done()) == len(rows)
+
+
 def test_fdc_summary_counts_hours_at_risk_and_keeps_false_alarms_apart():
     from uvd.campaign.publish import render
     from uvd.campaign.summary import format_summary, summarize_fdc

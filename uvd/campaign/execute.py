@@ -65,8 +65,48 @@ def _client(workers: int, scheduler: str | None, worker_wait_s: float = WORKER_W
     # loopback only; the dashboard on a free port (None does not switch it off, and 8787 may
     # be another cluster's: distributed then warns and takes another anyway)
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           host=LOOPBACK, dashboard_address=f"{LOOPBACK}:0", silence_logs=40)
+                           host=LOOPBACK, dashboard_address=f"{LOOPBACK}:0", silence_logs=40,
+                           preload=[__name__])  # dask_setup/teardown below, in each worker
     return Client(cluster), cluster
+
+
+def _close(client, cluster) -> None:
+    """Close the client, then the local cluster, with Dask's own logging quiet below
+    CRITICAL meanwhile (in this process, the local cluster's scheduler's). Closed on Ctrl-C
+    with runs under way, its scheduler logged their results it could no longer gather
+    ("Couldn't gather keys … forgotten", an ERROR); the campaign has every row it finished,
+    and says that it was interrupted."""
+    import logging
+    log = logging.getLogger("distributed")
+    level = log.level
+    log.setLevel(logging.CRITICAL)
+    try:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    finally:
+        log.setLevel(level)
+
+
+def dask_setup(worker) -> None:
+    """Run by Dask in each worker process of a local cluster as it starts (``preload``): the
+    worker ignores SIGINT. Ctrl-C in the terminal reaches the whole process group; the
+    campaign, interrupted, closes its cluster, which ends the workers. Before (session 32)
+    each worker died of the Ctrl-C itself and printed two tracebacks (CancelledError, then
+    KeyboardInterrupt) above the campaign's "interrupted"."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def dask_teardown(worker) -> None:
+    """Run by Dask as a local cluster's worker begins to close: from then on it logs nothing
+    below CRITICAL. A worker closed while its thread computes a run (the campaign
+    interrupted) often had a heartbeat under way when it closed its own connections, and
+    logged that as an ERROR with a 30-line traceback ("Failed to communicate with scheduler
+    during heartbeat", measured in 1 of 2 interruptions); a closing worker has nothing left to
+    tell the campaign, which has every row it finished and counts the others as not run."""
+    import logging
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
 def run_campaign(spec: CampaignSpec, directory: str | Path, *, workers: int | None = None,
@@ -115,9 +155,7 @@ def run_campaign(spec: CampaignSpec, directory: str | Path, *, workers: int | No
                 if on_row is not None:
                     on_row(row, ran, len(todo))
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            _close(client, cluster)
     have = store.done()
     table = store.write_table([k for k in keys if k in have]) if have else None
     return CampaignOutcome(total=len(keys), skipped=skipped, ran=ran, failed=failed,
