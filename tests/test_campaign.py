@@ -274,6 +274,27 @@ def test_uvd_bench_campaign_reports_throughput_per_worker_count_and_compares_the
     assert fig["rows_bit_identical"] is True
 
 
+def _campaign_with_a_row(spec_file: Path, out: Path, workers: int) -> subprocess.Popen:
+    """``uvd campaign SPEC --out OUT --workers N --quiet`` in a session of its own, once its
+    first row is stored (its output piped); killed, with its cluster and workers, if that
+    fails."""
+    proc = subprocess.Popen([sys.executable, "-m", "uvd", "campaign", str(spec_file), "--out",
+                             str(out), "--workers", str(workers), "--quiet"], cwd=ROOT,
+                            start_new_session=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not list((out / "rows").glob("*.parquet")):
+            assert proc.poll() is None, "the campaign ended before its first row"
+            assert time.monotonic() < deadline, "no row within 240 s"
+            time.sleep(0.05)
+    except BaseException:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+        raise
+    return proc
+
+
 @DASK[0]
 @DASK[1]
 def test_a_campaign_killed_mid_run_resumes_without_redoing_a_finished_run(tmp_path):
@@ -282,20 +303,10 @@ def test_a_campaign_killed_mid_run_resumes_without_redoing_a_finished_run(tmp_pa
                          'controller = "pdc"\nduration_h = 0.01\nwindow_min = 0.5\n'
                          'seed = [0, 1, 2, 3, 4, 5]\n')
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "uvd", "campaign", str(spec_file), "--out",
-                             str(out), "--workers", "1", "--quiet"], cwd=ROOT,
-                            start_new_session=True, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
     rows_dir = out / "rows"
-    try:
-        deadline = time.monotonic() + 240
-        while not list(rows_dir.glob("*.parquet")):
-            assert proc.poll() is None, "the campaign ended before its first row"
-            assert time.monotonic() < deadline, "no row within 240 s"
-            time.sleep(0.05)
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)  # the campaign, its cluster and its workers
-        proc.wait(timeout=30)
+    proc = _campaign_with_a_row(spec_file, out, workers=1)
+    os.killpg(proc.pid, signal.SIGKILL)  # the campaign, its cluster and its workers
+    proc.communicate(timeout=30)
     before = {p.name: p.stat().st_mtime_ns for p in rows_dir.glob("*.parquet")}
     assert 1 <= len(before) < 6, f"the kill came too late to test anything: {len(before)} rows"
     spec = builtin.resolve(spec_file)
@@ -338,18 +349,9 @@ def test_ctrl_c_ends_a_campaign_with_one_line_its_rows_kept_and_no_worker_left(t
                          'controller = "pdc"\nduration_h = 0.05\nwindow_min = 0.5\n'
                          'seed = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11]\n')
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "uvd", "campaign", str(spec_file), "--out",
-                             str(out), "--workers", "2", "--quiet"], cwd=ROOT,
-                            start_new_session=True, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
     rows_dir = out / "rows"
-    below: set[int] = set()
+    proc = _campaign_with_a_row(spec_file, out, workers=2)
     try:
-        deadline = time.monotonic() + 240
-        while not list(rows_dir.glob("*.parquet")):
-            assert proc.poll() is None, "the campaign ended before its first row"
-            assert time.monotonic() < deadline, "no row within 240 s"
-            time.sleep(0.05)
         below = _descendants(proc.pid)
         os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)

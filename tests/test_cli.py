@@ -95,15 +95,11 @@ def test_signals_unwind_a_command_as_ctrl_c_does():
     assert signal.getsignal(signal.SIGTERM) == before
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
-def test_a_demo_stopped_by_a_signal_leaves_no_process_behind(tmp_path, sig):
-    """``kill PID`` of a running ``uvd demo`` (the signal to the demo alone, not its process
-    group, as a job runner or a user's kill sends it): the daemon it started is stopped as
-    systemd would, sim-bridge too. SIGTERM: the demo unwinds and ends by that signal; SIGKILL
-    (a tool's timeout), which nothing in the demo sees: sim-bridge ends as its input closes,
-    the daemon on the SIGTERM the kernel sends when its parent ends (``--stop-with-parent``).
-    Before (session 25), either left the daemon running for the rest of its 360 s bound."""
-    proc = subprocess.Popen([sys.executable, "-m", "uvd", "demo", "--duration", "60"],
+@contextlib.contextmanager
+def _armed_demo(*args: str):
+    """``uvd demo --duration 60 ARGS`` in a session of its own, once armed (both processes
+    up): ``(process, its children)``; all of them killed after, whatever happened."""
+    proc = subprocess.Popen([sys.executable, "-m", "uvd", "demo", "--duration", "60", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     kids: list[int] = []
@@ -112,23 +108,40 @@ def test_a_demo_stopped_by_a_signal_leaves_no_process_behind(tmp_path, sig):
         for line in proc.stdout:  # "armed ... after start": both processes up
             if "armed" in line and "after start" in line or time.monotonic() > deadline:
                 break
-        kids = _children(proc.pid)
+        kids += _children(proc.pid)
         assert len(kids) >= 2, f"the demo's processes: {kids}"
+        yield proc, kids
+    finally:
+        for k in kids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(k, signal.SIGKILL)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10.0)
+
+
+def _assert_gone(pids: list[int], within_s: float = 10.0) -> None:
+    t0 = time.monotonic()
+    while any(_alive(k) for k in pids) and time.monotonic() - t0 < within_s:
+        time.sleep(0.1)
+    assert not [k for k in pids if _alive(k)], "left behind"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
+def test_a_demo_stopped_by_a_signal_leaves_no_process_behind(tmp_path, sig):
+    """``kill PID`` of a running ``uvd demo`` (the signal to the demo alone, not its process
+    group, as a job runner or a user's kill sends it): the daemon it started is stopped as
+    systemd would, sim-bridge too. SIGTERM: the demo unwinds and ends by that signal; SIGKILL
+    (a tool's timeout), which nothing in the demo sees: sim-bridge ends as its input closes,
+    the daemon on the SIGTERM the kernel sends when its parent ends (``--stop-with-parent``).
+    Before (session 25), either left the daemon running for the rest of its 360 s bound."""
+    with _armed_demo() as (proc, kids):
         os.kill(proc.pid, sig)
         out, err = proc.communicate(timeout=30.0)
         assert proc.returncode == -sig, err[-2000:]
         if sig == signal.SIGTERM:
             assert "uvd demo: stopped by SIGTERM" in err, err[-2000:]
-        t0 = time.monotonic()
-        while any(_alive(k) for k in kids) and time.monotonic() - t0 < 10.0:
-            time.sleep(0.1)
-        assert not [k for k in kids if _alive(k)], "left behind"
-    finally:
-        for k in kids:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(k, signal.SIGKILL)
-        proc.kill()
-        proc.wait(timeout=10.0)
+        _assert_gone(kids)
 
 
 def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_path):
@@ -140,17 +153,7 @@ def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_p
     "interrupted", and the daemon's log had "did not finish" (the amplifiers gone with the
     Ctrl-C) and "receiver process ended; starting another"."""
     out, rec = tmp_path / "demo.json", tmp_path / "rec"
-    proc = subprocess.Popen([sys.executable, "-m", "uvd", "demo", "--duration", "60",
-                             "--json", str(out), "--record", str(rec)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
-    kids: list[int] = []
-    try:
-        deadline = time.monotonic() + 240.0
-        for line in proc.stdout:
-            if "armed" in line and "after start" in line or time.monotonic() > deadline:
-                break
-        kids = _children(proc.pid)
+    with _armed_demo("--json", str(out), "--record", str(rec)) as (proc, kids):
         time.sleep(3.0)
         os.killpg(proc.pid, signal.SIGINT)
         text, err = proc.communicate(timeout=60.0)
@@ -164,17 +167,7 @@ def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_p
         assert "ARMED → SHUTDOWN (shutdown: SIGINT)" in log, log[-2000:]
         assert "did not finish" not in log and "receiver process ended" not in log, log[-2000:]
         assert json.loads((rec / "demo.json").read_text())["interrupted"] == res["interrupted"]
-        t0 = time.monotonic()
-        while any(_alive(k) for k in kids) and time.monotonic() - t0 < 10.0:
-            time.sleep(0.1)
-        assert not [k for k in kids if _alive(k)], "left behind"
-    finally:
-        for k in kids:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(k, signal.SIGKILL)
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=10.0)
+        _assert_gone(kids)
 
 
 def _no_file_may_grow() -> None:
