@@ -630,11 +630,13 @@ def write_local_config(run_dir: str | Path, *, base: str | Path | None = None,
     the MAVLink link's parameters and signing timestamp in ``run_dir``, and
     applies ``changes`` (``{"loop": {"rate_hz": 100.0}, …}``, merged table by table).
     Returns the path of the written ``run_dir/uvd.toml``; a ``base`` that cannot be read as TOML
-    is a :class:`~uvd.io.toml.TomlFileError` naming it.
+    is a :class:`~uvd.io.toml.TomlFileError` naming it. Every path it writes is absolute (a
+    device's port must be; before session 32, ``uvd demo --record rec`` wrote ``rec/ins`` and
+    its own configuration was refused).
     """
     from uvd.io.toml import read_toml
     from uvd.shipped import DEFAULT_CONFIG, config_path
-    run_dir = Path(run_dir)
+    run_dir = Path(run_dir).absolute()
     run_dir.mkdir(parents=True, exist_ok=True)
     base = config_path(base) if base is not None else DEFAULT_CONFIG
     data = read_toml(base)

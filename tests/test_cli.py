@@ -96,12 +96,12 @@ def test_signals_unwind_a_command_as_ctrl_c_does():
 
 
 @contextlib.contextmanager
-def _armed_demo(*args: str):
+def _armed_demo(*args: str, cwd: Path | None = None):
     """``uvd demo --duration 60 ARGS`` in a session of its own, once armed (both processes
     up): ``(process, its children)``; all of them killed after, whatever happened."""
     proc = subprocess.Popen([sys.executable, "-m", "uvd", "demo", "--duration", "60", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, cwd=cwd)
     kids: list[int] = []
     try:
         deadline = time.monotonic() + 240.0
@@ -151,9 +151,11 @@ def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_p
     and its MAVLink receiver waits to be ended — then the demo prints the figures of the
     seconds run and ends with 130; no process is left. Before (session 32) it printed only
     "interrupted", and the daemon's log had "did not finish" (the amplifiers gone with the
-    Ctrl-C) and "receiver process ended; starting another"."""
+    Ctrl-C) and "receiver process ended; starting another". ``--record`` is given relative to
+    the working directory, as a user types it (before session 32: refused, the configuration
+    it wrote had relative device paths)."""
     out, rec = tmp_path / "demo.json", tmp_path / "rec"
-    with _armed_demo("--json", str(out), "--record", str(rec)) as (proc, kids):
+    with _armed_demo("--json", str(out), "--record", "rec", cwd=tmp_path) as (proc, kids):
         time.sleep(3.0)
         os.killpg(proc.pid, signal.SIGINT)
         text, err = proc.communicate(timeout=60.0)

@@ -59,6 +59,18 @@ def test_sim_bridge_refuses_a_wrong_config_too(tmp_path):
     assert r.returncode == 2 and "can.interface" in r.stderr
 
 
+def test_a_local_configuration_in_a_relative_folder_is_a_valid_one(tmp_path, monkeypatch):
+    """``write_local_config("rec")`` (``uvd demo --record rec``) names every file by its
+    absolute path: a device's port must be one. Before (session 32) it wrote ``rec/ins``
+    and the demo's own configuration was refused."""
+    from sim_bridge.bridge import write_local_config
+    monkeypatch.chdir(tmp_path)
+    cfg = load_config(write_local_config("rec"))
+    rec = tmp_path / "rec"
+    assert cfg.sensors.ins.port == str(rec / "ins") and cfg.sensors.leak.path == str(rec / "leak")
+    assert cfg.telemetry.jsonl.path == str(rec / "telemetry.jsonl")
+
+
 @pytest.mark.untimed
 def test_an_absent_device_stops_the_start_with_exit_1(tmp_path):
     """A port that does not exist is not a configuration error (the adapter may be plugged

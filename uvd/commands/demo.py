@@ -360,7 +360,7 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
 
     tmp = None
     if record is not None:
-        run_dir = Path(record)
+        run_dir = Path(record).absolute()  # the configuration names files in it
         run_dir.mkdir(parents=True, exist_ok=True)
     else:
         tmp = tempfile.mkdtemp(prefix="uvd-demo-")
