@@ -58,12 +58,17 @@ def _group() -> str:
     return f"ff11::7576:{a:x}:{b:x}"
 
 
-def test_a_second_daemon_process_commands_what_the_recording_did(recorded, tmp_path):
+def test_a_second_daemon_process_commands_what_the_recording_did(recorded, tmp_path,
+                                                                 monkeypatch):
+    """``--work`` relative to the working directory, as a user types it (before session 32
+    the daemon's configuration named relative ports, it refused them, and the replay said
+    only "no daemon appeared" after its 60 s wait)."""
     path, _ = recorded
     out = tmp_path / "rt.json"
+    monkeypatch.chdir(tmp_path)
     code = main(["replay", str(path), "--realtime", "--can-interface", "udp_multicast",
                  "--channel", _group(), "--can-port", str(free_port("udp", "::1")), "--daemon",
-                 "--work", str(tmp_path / "work"), "--json", str(out), "--quiet"])
+                 "--work", "work", "--json", str(out), "--quiet"])
     res = json.loads(out.read_text())
     pl, c = res["playing"], res["commands"]
     print(pl, {k: v for k, v in c.items() if k != "first_difference"}, res["tracking"])
@@ -129,6 +134,22 @@ def test_files_that_cannot_be_played_and_a_daemon_that_never_comes(recorded, tmp
     res = replay_realtime(path, tmp_path / "w", interface="virtual",
                           channel=f"nobody-{os.getpid()}", wait_s=0.5)
     assert res.playing == {"error": "no daemon appeared on the bus within 0.5 s"}
+
+
+def test_a_daemon_under_test_that_exits_is_said_at_once_with_its_words(recorded, tmp_path):
+    """``--daemon`` started a daemon that refused its configuration (exit 2): the replay says
+    so at once, with the daemon's last lines, instead of waiting ``--wait`` seconds for its
+    first frame and saying "no daemon appeared" (before session 32)."""
+    path, cfg_path = recorded
+    bad = tmp_path / "bad.toml"
+    bad.write_text(cfg_path.read_text().replace("[control]", "[control]\nkpp = 1.0", 1))
+    res = replay_realtime(path, tmp_path / "w", interface="udp_multicast", channel=_group(),
+                          can_port=free_port("udp", "::1"), config=bad, start_daemon=True,
+                          wait_s=120.0)
+    err = res.playing["error"]
+    assert err.startswith("the daemon under test exited with code 2 before its first frame")
+    assert "control.kpp" in err and "unknown key" in err, err
+    assert res.daemon_exit == 2
 
 
 def test_a_damaged_record_ends_what_is_played(recorded, tmp_path):

@@ -216,8 +216,10 @@ class RealtimePlayer:
     def __init__(self, rec: WireRecording, bus, ports: dict[str, Any], *, wait_s: float = 60.0,
                  tail_s: float = 0.5, gate_timeout_s: float = 0.5,
                  clock: Callable[[], int] = time.monotonic_ns,
-                 progress: Callable[[int, int], None] | None = None) -> None:
+                 progress: Callable[[int, int], None] | None = None,
+                 gone: Callable[[], str | None] | None = None) -> None:
         self.rec, self.bus, self.ports = rec, bus, ports
+        self.gone = gone  # why the daemon under test has ended, or None while it runs
         self.wait_s, self.tail_s, self.clock, self.progress = wait_s, tail_s, clock, progress
         self.gate_timeout_s = gate_timeout_s
         self.ungated: list[tuple[int, int, int, int]] = []  # (t, id, gate id, gate k)
@@ -269,6 +271,8 @@ class RealtimePlayer:
         try:
             deadline = self.clock() + int(self.wait_s * 1e9)
             while self.offset_ns is None:
+                if self.gone is not None and (why := self.gone()):
+                    return {"error": why}
                 if self.clock() > deadline:
                     return {"error": f"no daemon appeared on the bus within {self.wait_s:g} s"}
                 time.sleep(0.005)
@@ -438,7 +442,7 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
     from uvd.runtime.replay.lockstep import tracking
 
     rec = load_wire(path)
-    work = Path(work)
+    work = Path(work).absolute()  # the daemon's configuration names its ports in it
     work.mkdir(parents=True, exist_ok=True)
     cfg_path = live_config(rec.config_toml, work, interface=interface, channel=channel,
                            can_port=can_port, base=config)
@@ -465,7 +469,9 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
                 stdout=subprocess.DEVNULL, stderr=log)
         elif ready is not None:
             ready(cfg_path)
-        player = RealtimePlayer(rec, bus, ports, wait_s=wait_s, progress=progress)
+        player = RealtimePlayer(rec, bus, ports, wait_s=wait_s, progress=progress,
+                                gone=None if proc is None else
+                                (lambda: _ended(proc, work / "daemon.log")))
         result.playing = player.run()
         result.commands = compare_commands(rec.commands, player.live_commands(),
                                            len(rec.cycles))
@@ -484,6 +490,20 @@ def replay_realtime(path: str | Path, work: str | Path, *, interface: str, chann
         cyc = [m for _, _, m in read_messages(live[0], ["/uvd/cycle"])][:len(rec.cycles)]
         result.tracking["live"] = tracking(cyc, [c["thrust"] for c in cyc])
     return result
+
+
+def _ended(proc: subprocess.Popen, log: Path) -> str | None:
+    """Why the daemon started under test has ended (its exit code and its log's last lines),
+    or None while it runs: said at once, where the wait for its first frame ran out after
+    ``--wait`` seconds with "no daemon appeared" (session 32: a configuration it refused)."""
+    if proc.poll() is None:
+        return None
+    try:
+        lines = [x for x in log.read_text(errors="replace").splitlines() if x.strip()][-3:]
+    except OSError:
+        lines = []
+    return (f"the daemon under test exited with code {proc.returncode} before its first frame "
+            f"({log}):" + "".join(f"\n  {x}" for x in lines))
 
 
 def default_work_dir(recording: Path) -> Path:
