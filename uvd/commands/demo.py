@@ -460,7 +460,8 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         # -- stop: SIGTERM as systemd would --
         code, stop_s, bridge_stats = _stop(daemon, bridge, pump)
         # -- figures --
-        figures = _figures(cfg, interrupted_s or duration_s, seed, run_dir, truth_path,
+        ran_s = duration_s if interrupted_s is None else interrupted_s
+        figures = _figures(cfg, ran_s, seed, run_dir, truth_path,
                            summary_path, lock_log, watch, code, stop_s, bridge_stats, prio,
                            bridge.ready or {}, armed_at - t_start, spread_logs)
         if interrupted_s is not None:
