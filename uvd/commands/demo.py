@@ -30,6 +30,7 @@ import math
 import os
 import queue
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -283,19 +284,27 @@ def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str]
     the watch early (``interrupted_s``: seconds since arming): the run is then stopped and
     reported over the seconds it ran (in a terminal the daemon had the SIGINT too and is
     stopping in order; sim-bridge, in a session of its own, runs until stopped). SIGTERM and
-    SIGHUP unwind at once, as in every command."""
+    SIGHUP unwind at once, as in every command.
+
+    Meanwhile SIGINT only sets a flag, read within a second: a KeyboardInterrupt raised in
+    the wait for the daemon's next log line can leave that queue's lock broken, and the demo
+    then ended in "RuntimeError: release unlocked lock" (once in a fresh clone's tests). A
+    SIGINT ignored when the demo started (a background job) stays ignored."""
     samples: list[tuple[float, float, float]] = []
     loads: list[float] = []  # 1-minute load average, once a second
     steal: list[tuple[float, float]] = []  # (monotonic s, cumulative steal s), ~1 Hz
+    ctrl_c = threading.Event()
+    own = threading.current_thread() is threading.main_thread() \
+        and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    before = signal.signal(signal.SIGINT, lambda *_: ctrl_c.set()) if own else None
     try:
         _follow(daemon, bridge, armed_at, duration_s, events, pump, tail, progress,
-                samples, loads, steal)
-        interrupted_s = None
-    except KeyboardInterrupt as exc:
-        from uvd.cli import Stopped
-        if isinstance(exc, Stopped):  # SIGTERM, SIGHUP (a job runner, systemd): end now
-            raise
-        interrupted_s = time.monotonic() - armed_at
+                samples, loads, steal, ctrl_c)
+    finally:
+        if own:
+            signal.signal(signal.SIGINT, before)
+    interrupted_s = time.monotonic() - armed_at if ctrl_c.is_set() else None
+    if interrupted_s is not None:
         progress(f"uvd demo: interrupted {interrupted_s:.0f} s into the run: stopping both "
                  "processes, then the figures of the seconds run (Ctrl-C again to quit "
                  "without them)")
@@ -307,9 +316,10 @@ def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str]
 
 
 def _follow(daemon, bridge, armed_at: float, duration_s: float, events: list[str], pump,
-            tail, progress, samples: list, loads: list, steal: list) -> None:
-    """:func:`_watch`'s loop: appends a sample a second until ``duration_s`` after arming
-    or the daemon's exit."""
+            tail, progress, samples: list, loads: list, steal: list,
+            ctrl_c: threading.Event) -> None:
+    """:func:`_watch`'s loop: appends a sample a second until ``duration_s`` after arming,
+    the daemon's exit or ``ctrl_c``."""
     from uvd.bench import host_steal_s
     next_report = 10.0
     while True:
@@ -317,6 +327,8 @@ def _follow(daemon, bridge, armed_at: float, duration_s: float, events: list[str
         if el >= duration_s:
             break
         pump(min(1.0, duration_s - el))
+        if ctrl_c.is_set():  # the daemon had it too: its exit is no news
+            break
         rd, _ = _rss_mb(daemon.pid)
         rb, _ = _rss_mb(bridge.pid)
         samples.append((time.monotonic() - armed_at, rd, rb))
