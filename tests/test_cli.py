@@ -95,6 +95,39 @@ def test_signals_unwind_a_command_as_ctrl_c_does():
     assert signal.getsignal(signal.SIGTERM) == before
 
 
+def _parser_running(handler):
+    import argparse
+    parser = argparse.ArgumentParser(prog="uvd")
+    sub = parser.add_subparsers(dest="command")
+    sub.add_parser("x").set_defaults(handler=handler)
+    return lambda: parser
+
+
+def test_a_lock_broken_by_ctrl_c_is_still_an_interruption(monkeypatch, capsys):
+    """The chain CPython gives when Ctrl-C lands in a Condition's wait at the wrong moment
+    (measured once in ``uvd demo``'s queue of log lines, session 32): KeyboardInterrupt, then
+    while handling it RuntimeError "release unlocked lock". The command ends as interrupted
+    (130, one line); a RuntimeError of its own is still raised."""
+    import uvd.cli
+
+    def broken_by_ctrl_c(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise RuntimeError("release unlocked lock")  # noqa: B904 - as CPython raises it
+
+    def a_bug(args):
+        raise RuntimeError("a bug")
+
+    broken = _parser_running(broken_by_ctrl_c)
+    monkeypatch.setattr(uvd.cli, "build_parser", broken)
+    assert main(["x"]) == 130
+    assert capsys.readouterr().err == "uvd x: interrupted\n"
+    monkeypatch.setattr(uvd.cli, "build_parser", _parser_running(a_bug))
+    with pytest.raises(RuntimeError, match="a bug"):
+        main(["x"])
+
+
 @contextlib.contextmanager
 def _armed_demo(*args: str, cwd: Path | None = None):
     """``uvd demo --duration 60 ARGS`` in a session of its own, once armed (both processes
@@ -161,6 +194,7 @@ def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_p
         text, err = proc.communicate(timeout=60.0)
         assert proc.returncode == 130, err[-2000:]
         assert "Interrupted after" in text and "position MAE" in text, text[-2000:]
+        assert "the daemon exited during the run" not in text, text[-2000:]
         res = json.loads(out.read_text())
         assert res["interrupted"]["of_s"] == 60.0 and 2.5 < res["interrupted"]["after_s"] < 30
         assert res["tracking"]["samples"] >= 25 and res["daemon"]["exit_code"] == 0

@@ -95,19 +95,31 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # a full disk, an unwritable file: said, not a traceback
         print(f"uvd {args.command}: error: {exc}", file=sys.stderr)
         return 1
-    except Stopped as exc:
-        # cleaned up: now end as the signal's default would, so that the parent (a shell,
-        # systemd, timeout) sees the process stopped by it
-        name = signal.Signals(exc.signum).name
-        print(f"uvd {args.command}: stopped by {name}", file=sys.stderr)
-        sys.stdout.flush()
-        sys.stderr.flush()
-        signal.signal(exc.signum, signal.SIG_DFL)
-        os.kill(os.getpid(), exc.signum)
-        return 128 + exc.signum
-    except KeyboardInterrupt:
-        print(f"uvd {args.command}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        return _interrupted(args.command, exc)
+    except RuntimeError as exc:
+        # Ctrl-C (or Stopped) raised in a lock's wait — a queue's get with a timeout, Dask's
+        # as_completed — can leave the lock released once too often (CPython's Condition.wait
+        # re-acquires it in a finally the interrupt cuts short), and its `with` then raises
+        # "release unlocked lock" from the interrupt: the command was interrupted all the same
+        if isinstance(exc.__context__, KeyboardInterrupt):
+            return _interrupted(args.command, exc.__context__)
+        raise
+
+
+def _interrupted(command: str, exc: KeyboardInterrupt) -> int:
+    """The end of a command interrupted by Ctrl-C (130) or stopped by a signal, cleaned up."""
+    if not isinstance(exc, Stopped):
+        print(f"uvd {command}: interrupted", file=sys.stderr)
         return 130
+    # now end as the signal's default would, so that the parent (a shell, systemd, timeout)
+    # sees the process stopped by it
+    print(f"uvd {command}: stopped by {signal.Signals(exc.signum).name}", file=sys.stderr)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    signal.signal(exc.signum, signal.SIG_DFL)
+    os.kill(os.getpid(), exc.signum)
+    return 128 + exc.signum
 
 
 if __name__ == "__main__":
