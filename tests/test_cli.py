@@ -195,9 +195,11 @@ def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_p
         assert proc.returncode == 130, err[-2000:]
         assert "Interrupted after" in text and "position MAE" in text, text[-2000:]
         assert "the daemon exited during the run" not in text, text[-2000:]
+        assert "Ctrl-C, then SIGTERM → daemon exit code 0" in text, text[-2000:]
         res = json.loads(out.read_text())
         assert res["interrupted"]["of_s"] == 60.0 and 2.5 < res["interrupted"]["after_s"] < 30
         assert res["tracking"]["samples"] >= 25 and res["daemon"]["exit_code"] == 0
+        assert res["memory"]["daemon_peak_rss_mb"] > 50, res["memory"]  # not NaN: it ended
         assert set(res["lockstep"]["ratio"]) == {"x", "y", "z", "roll", "pitch", "heading"}
         log = (rec / "daemon.log").read_text()
         assert "ARMED → SHUTDOWN (shutdown: SIGINT)" in log, log[-2000:]

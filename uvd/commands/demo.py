@@ -308,11 +308,15 @@ def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str]
         progress(f"uvd demo: interrupted {interrupted_s:.0f} s into the run: stopping both "
                  "processes, then the figures of the seconds run (Ctrl-C again to quit "
                  "without them)")
-    _, daemon_hwm = _rss_mb(daemon.pid)
-    _, bridge_hwm = _rss_mb(bridge.pid)
-
-    return {"samples": samples, "loads": loads, "steal": steal, "daemon_hwm": daemon_hwm,
-            "bridge_hwm": bridge_hwm, "interrupted_s": interrupted_s}
+    # the kernel's peak; of a process already gone (the daemon ends at a Ctrl-C too) the
+    # largest sample
+    peaks = [_rss_mb(daemon.pid)[1], _rss_mb(bridge.pid)[1]]
+    for i, peak in enumerate(peaks):
+        seen = [x[i + 1] for x in samples if math.isfinite(x[i + 1])]
+        if math.isnan(peak) and seen:
+            peaks[i] = max(seen)
+    return {"samples": samples, "loads": loads, "steal": steal, "daemon_hwm": peaks[0],
+            "bridge_hwm": peaks[1], "interrupted_s": interrupted_s}
 
 
 def _follow(daemon, bridge, armed_at: float, duration_s: float, events: list[str], pump,
@@ -572,7 +576,8 @@ def _report(f: dict, progress) -> None:
              f"{m.get('daemon_rss_growth_mb', math.nan):+.2f} MB ({m.get('growth_note', '')}); "
              f"sim-bridge peak RSS {m.get('bridge_peak_rss_mb', math.nan):.1f} MB")
     d = f["daemon"]
-    progress(f"SIGTERM → daemon exit code {d['exit_code']} in {d['stop_s']:.2f} s")
+    how = "Ctrl-C, then SIGTERM" if "interrupted" in f else "SIGTERM"
+    progress(f"{how} → daemon exit code {d['exit_code']} in {d['stop_s']:.2f} s")
 
 
 def _run(args) -> int:
