@@ -24,7 +24,7 @@ def test_defaults_are_a_valid_configuration():
     assert isinstance(cfg.amplifiers, AmplifierConfig)
     assert cfg == CanConfig()  # the driver's defaults are the configuration's defaults
     assert cfg.bus.interface == "socketcan" and cfg.amplifiers.node_ids == (1, 2, 3, 4, 5, 6)
-    assert cfg.amplifiers.command_timeout_ms == 200 and cfg.bus.send_timeout_s == 0.0
+    assert cfg.amplifiers.command_timeout_ms == 300 and cfg.bus.send_timeout_s == 0.0
     assert cfg.amplifiers.eds.is_file() and cfg.depth.eds.is_file()
     assert cfg.log.path is None
 

@@ -56,7 +56,7 @@ class Driver:
 
 @pytest.fixture
 def drv(rig):
-    d = Driver(rig)
+    d = Driver(rig, command_timeout_ms=200)  # the contract's figures below are at 200 ms
     yield d
     d.close()
 

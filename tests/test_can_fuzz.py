@@ -138,7 +138,7 @@ def _junk_exchange():
         c0 = bus.status().counters
         run_cycles(group, 150, cmd, on_cycle=spray)
         # the exchange as it stands at its last cycle: read before anything waits, since a
-        # drive rightly times out 200 ms after its last command (command_timeout_ms), and
+        # drive rightly times out 300 ms after its last command (command_timeout_ms), and
         # the wait for the junk's counts below (up to 2 s on a loaded machine) sends none
         fb = group.read()
 

@@ -142,8 +142,13 @@ port = "/dev/ttyUSB2"
     # found by probing (session 24): check-config said OK to a loop too slow for the drives'
     # command timeout, which would fault every drive between two commands
     ("[loop]\nrate_hz = 1", "can.amplifiers.command_timeout_ms",
-     "200 ms is shorter than two cycles of [loop] rate_hz 1 (2000 ms): the drives would "
-     "time out between commands"),
+     "300 ms is shorter than three cycles of [loop] rate_hz 1 (3000 ms): the drives would "
+     "time out at the first missed deadline"),
+    # session 32: 200 ms at 10 Hz, shipped until then — one 150 ms stall of the daemon faulted
+    # every drive (tests/test_hil_process.py)
+    ("[loop]\nrate_hz = 10\n[can.amplifiers]\ncommand_timeout_ms = 200",
+     "can.amplifiers.command_timeout_ms",
+     "200 ms is shorter than three cycles of [loop] rate_hz 10 (300 ms)"),
 ])
 def test_single_mistakes(tmp_path, snippet, key, words):
     _, errs = errors_of(tmp_path, snippet + "\n" + MINIMAL)

@@ -15,7 +15,7 @@ Example (TOML)::
     [can.amplifiers]
     node_ids = [1, 2, 3, 4, 5, 6]  # in the vehicle's thruster order
     mode = "cst"                   # cyclic synchronous torque; "pt" = profile torque
-    command_timeout_ms = 200       # the drives zero their output after this long without RPDO
+    command_timeout_ms = 300       # the drives zero their output after this long without RPDO
 
     [can.depth]
     enabled = true                 # a CiA 404 pressure transmitter as a second depth source
@@ -149,7 +149,7 @@ class AmplifierConfig:
     node_heartbeat_ms: int = 100
     heartbeat_timeout_ms: int = 350
     node_consumer_ms: int = 500
-    command_timeout_ms: int = 200
+    command_timeout_ms: int = 300
     max_failed_cycles: int = 5
     thrust_per_permille_n: tuple[float, ...] | None = None
     max_torque_permille: int = 1000

@@ -10,8 +10,8 @@ for SDO answers (so a dead node cannot make it hang) and is bounded by ``--cycle
 ``--period`` plus the bus opening: at most 100 cycles 1 s apart, and an option out of its
 range (or NaN) is refused before anything is sent (exit 2), as a wrong configuration is.
 
-The amplifiers' own command timeout (``command_timeout_ms``, 200 ms) zeroes their output
-whatever happens to the daemon; this command makes the stop explicit and immediate.
+The amplifiers' own command timeout (``command_timeout_ms``, 300 ms by default) zeroes their
+output whatever happens to the daemon; this command makes the stop explicit and immediate.
 
 Exit code 0 when every frame was accepted by the bus, 1 when some were dropped, 2 when the
 configuration is invalid or the bus cannot be opened.

@@ -718,13 +718,17 @@ class Config:
         if self.sensors.depth.source == "can" and not self.can.depth.enabled:
             out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
         amps, period_ms = self.can.amplifiers, 1e3 / self.loop.rate_hz
-        if amps.configure and amps.command_timeout_ms < 2.0 * period_ms:
-            # the drives would zero their output and fault between two commands (or at the
-            # first late one): nothing could be driven
+        if amps.configure and amps.command_timeout_ms < 3.0 * period_ms:
+            # One missed deadline (an overrun, or the machine stalled past a period: the loop
+            # tolerates overrun_streak of them) leaves up to two periods and the stall between
+            # two commands. Under two periods the drives fault between any two commands; under
+            # three, at the first missed deadline — measured before session 32 with the then
+            # shipped 200 ms at 10 Hz: the daemon stopped for 150 ms, one overrun, every drive
+            # timed out, amplifier_fault → disarm.
             out.append(("can.amplifiers.command_timeout_ms",
-                        f"{amps.command_timeout_ms} ms is shorter than two cycles of [loop] "
-                        f"rate_hz {self.loop.rate_hz:g} ({2.0 * period_ms:g} ms): the drives "
-                        "would time out between commands"))
+                        f"{amps.command_timeout_ms} ms is shorter than three cycles of [loop] "
+                        f"rate_hz {self.loop.rate_hz:g} ({3.0 * period_ms:g} ms): the drives "
+                        "would time out at the first missed deadline"))
         try:
             vehicle = self.load_vehicle(ctx.base_dir)
         except (ConfigError, ValueError, OSError) as exc:
@@ -784,11 +788,12 @@ class CanAmplifiersSection:
                                     doc="heartbeat consumer time for the daemon's heartbeat "
                                         "written to each amplifier (0x1016:01); 0 = off; "
                                         "longer than heartbeat_period_ms")
-    command_timeout_ms: int = setting(200, unit="ms", min=10, max=10_000,
+    command_timeout_ms: int = setting(300, unit="ms", min=10, max=10_000,
                                       doc="RPDO deadline written to each amplifier (0x1400:05): "
                                           "without a command for this long it zeroes its "
-                                          "output, sends EMCY 0x8250 and faults; at least two "
-                                          "cycles of [loop] rate_hz")
+                                          "output, sends EMCY 0x8250 and faults; at least "
+                                          "three cycles of [loop] rate_hz (one missed "
+                                          "deadline must not fault the drives)")
     max_failed_cycles: int = setting(5, min=1, max=1000,
                                      doc="consecutive cycles without feedback (per node) or "
                                          "with a failed send (per group) before a fault")
