@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.procs import assert_gone, descendants
 from uvd.campaign import builtin
 from uvd.campaign.execute import run_campaign
 from uvd.campaign.runs import kind_axes
@@ -318,24 +319,6 @@ def test_a_campaign_killed_mid_run_resumes_without_redoing_a_finished_run(tmp_pa
     assert res.table is not None and res.table.exists()
 
 
-def _descendants(pid: int) -> set[int]:
-    """Every live process below ``pid`` (from /proc)."""
-    parents: dict[int, int] = {}
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:  # "pid (comm) state ppid ...": comm may hold spaces
-                parents[int(d.name)] = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-    found, todo = set(), [pid]
-    while todo:
-        parent = todo.pop()
-        kids = [c for c, pp in parents.items() if pp == parent]
-        found.update(kids)
-        todo += kids
-    return found
-
-
 @DASK[0]
 @DASK[1]
 def test_ctrl_c_ends_a_campaign_with_one_line_its_rows_kept_and_no_worker_left(tmp_path):
@@ -352,7 +335,7 @@ def test_ctrl_c_ends_a_campaign_with_one_line_its_rows_kept_and_no_worker_left(t
     rows_dir = out / "rows"
     proc = _campaign_with_a_row(spec_file, out, workers=2)
     try:
-        below = _descendants(proc.pid)
+        below = descendants(proc.pid)
         os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
@@ -363,12 +346,7 @@ def test_ctrl_c_ends_a_campaign_with_one_line_its_rows_kept_and_no_worker_left(t
     assert err.strip().splitlines()[-1] == "uvd campaign: interrupted", err[-3000:]
     assert "Traceback" not in err and "ERROR" not in err, err[-3000:]
     assert len(below) >= 2, f"the campaign's worker processes: {below}"
-    t0 = time.monotonic()
-    while below & set(int(d.name) for d in Path("/proc").iterdir() if d.name.isdigit()) \
-            and time.monotonic() - t0 < 10.0:
-        time.sleep(0.1)
-    left = [p for p in below if Path(f"/proc/{p}").exists()]
-    assert not left, f"left behind: {left}"
+    assert_gone(below)
     rows = list(rows_dir.glob("*.parquet"))
     assert 1 <= len(rows) < 12, f"the Ctrl-C came too late to test anything: {len(rows)} rows"
     assert len(RowStore(out).done()) == len(rows)

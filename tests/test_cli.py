@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.procs import assert_gone, children
 from uvd import __version__
 from uvd.cli import Stopped, main, unwinding_signals
 
@@ -52,29 +53,6 @@ def test_demo_is_hardware_in_the_loop_without_failsafe(tmp_path, capsys):
     assert res["tracking"]["position_mae"]["heading"] < 0.35
     assert set(res["lockstep"]["ratio"]) == {"x", "y", "z", "roll", "pitch", "heading"}
     assert res["memory"]["daemon_peak_rss_mb"] > 0 and "daemon_rss_growth_mb" in res["memory"]
-
-
-def _children(pid: int) -> list[int]:
-    """The live processes whose parent is ``pid`` (from /proc)."""
-    kids = []
-    for d in Path("/proc").iterdir():
-        if not d.name.isdigit():
-            continue
-        try:  # "pid (comm) state ppid ...": comm may hold spaces, so split after its ')'
-            ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
-        except (OSError, IndexError, ValueError):
-            continue
-        if ppid == pid:
-            kids.append(int(d.name))
-    return kids
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
 
 
 def test_signals_unwind_a_command_as_ctrl_c_does():
@@ -141,7 +119,7 @@ def _armed_demo(*args: str, cwd: Path | None = None):
         for line in proc.stdout:  # "armed ... after start": both processes up
             if "armed" in line and "after start" in line or time.monotonic() > deadline:
                 break
-        kids += _children(proc.pid)
+        kids += children(proc.pid)
         assert len(kids) >= 2, f"the demo's processes: {kids}"
         yield proc, kids
     finally:
@@ -151,13 +129,6 @@ def _armed_demo(*args: str, cwd: Path | None = None):
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10.0)
-
-
-def _assert_gone(pids: list[int], within_s: float = 10.0) -> None:
-    t0 = time.monotonic()
-    while any(_alive(k) for k in pids) and time.monotonic() - t0 < within_s:
-        time.sleep(0.1)
-    assert not [k for k in pids if _alive(k)], "left behind"
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
@@ -174,7 +145,7 @@ def test_a_demo_stopped_by_a_signal_leaves_no_process_behind(tmp_path, sig):
         assert proc.returncode == -sig, err[-2000:]
         if sig == signal.SIGTERM:
             assert "uvd demo: stopped by SIGTERM" in err, err[-2000:]
-        _assert_gone(kids)
+        assert_gone(kids)
 
 
 def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_path):
@@ -205,7 +176,7 @@ def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_p
         assert "ARMED → SHUTDOWN (shutdown: SIGINT)" in log, log[-2000:]
         assert "did not finish" not in log and "receiver process ended" not in log, log[-2000:]
         assert json.loads((rec / "demo.json").read_text())["interrupted"] == res["interrupted"]
-        _assert_gone(kids)
+        assert_gone(kids)
 
 
 def _no_file_may_grow() -> None:
