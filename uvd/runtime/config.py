@@ -719,12 +719,13 @@ class Config:
             out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
         amps, period_ms = self.can.amplifiers, 1e3 / self.loop.rate_hz
         if amps.configure and amps.command_timeout_ms < 3.0 * period_ms:
-            # One missed deadline (an overrun, or the machine stalled past a period: the loop
-            # tolerates overrun_streak of them) leaves up to two periods and the stall between
-            # two commands. Under two periods the drives fault between any two commands; under
-            # three, at the first missed deadline — measured before session 32 with the then
-            # shipped 200 ms at 10 Hz: the daemon stopped for 150 ms, one overrun, every drive
-            # timed out, amplifier_fault → disarm.
+            # A missed deadline — an overrun, or the machine stalled for more than a period;
+            # the loop tolerates overrun_streak of them in a row — leaves the drives up to a
+            # period plus the stall without a command: more than two periods. Under two
+            # periods the drives fault between any two commands; under three, at the first
+            # missed deadline — measured before session 32 with the then shipped 200 ms at
+            # 10 Hz: the daemon stopped for 150 ms, one overrun, every drive timed out,
+            # amplifier_fault → disarm.
             out.append(("can.amplifiers.command_timeout_ms",
                         f"{amps.command_timeout_ms} ms is shorter than three cycles of [loop] "
                         f"rate_hz {self.loop.rate_hz:g} ({3.0 * period_ms:g} ms): the drives "
