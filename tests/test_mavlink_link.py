@@ -6,7 +6,11 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
+import os
+import signal
 import socket
+import subprocess
 import time
 
 import numpy as np
@@ -392,8 +396,6 @@ def test_an_amplifier_fault_accommodated_is_told_as_a_warning():
 def test_serial_line_carries_telemetry_and_commands(tmp_path):
     """A pseudo-terminal as the radio: the station writes a HEARTBEAT and an ARM on the master
     side; the link queues the Arm and sends its telemetry down the line."""
-    import os
-
     from uvd.runtime.commands import Arm
     master, slave = os.openpty()
     os.set_blocking(master, False)
@@ -441,13 +443,36 @@ def test_serial_line_carries_telemetry_and_commands(tmp_path):
     asyncio.run(asyncio.wait_for(main(), 30.0))
 
 
-def test_the_receiver_process_forwards_only_good_mavlink_and_counts_the_rest():
-    from uvd.links.mavlink.receiver import read_forwarded, spawn_receiver
+@contextlib.contextmanager
+def _receiver(rcvbuf: int | None = None):
+    """A receiver process on a loopback UDP socket (with a ``rcvbuf`` receive buffer) and a
+    station to send to it: ``(process, the daemon's end of the pair, socket, station)``. After:
+    the pair closed (the receiver ends on it, killed if it has not within 5 s), the sockets
+    closed; a test that passed also asserts the receiver's exit code 0."""
+    from uvd.links.mavlink.receiver import spawn_receiver
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    if rcvbuf is not None:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
     sock.bind(("127.0.0.1", 0))
     proc, pair = spawn_receiver(sock)
     st = Peer()
     try:
+        yield proc, pair, sock, st
+    finally:
+        pair.close()
+        try:
+            code = proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            code = proc.wait(timeout=5.0)
+        sock.close()
+        st.sock.close()
+    assert code == 0
+
+
+def test_the_receiver_process_forwards_only_good_mavlink_and_counts_the_rest():
+    from uvd.links.mavlink.receiver import read_forwarded
+    with _receiver() as (_proc, pair, sock, st):
         good = st.enc.heartbeat_encode(6, 8, 0, 0, 0).pack(st.enc)
         flipped = bytearray(good)
         flipped[-1] ^= 0xFF  # bad CRC
@@ -459,26 +484,14 @@ def test_the_receiver_process_forwards_only_good_mavlink_and_counts_the_rest():
             time.sleep(0.02)
         assert got == [(good, ("127.0.0.1", st.port))]
         assert counts == {"datagrams": 4, "bad_datagrams": 3}
-    finally:
-        pair.close()  # the receiver ends on it
-        assert proc.wait(timeout=5.0) == 0
-        sock.close()
-        st.sock.close()
 
 
 def test_the_receiver_outlives_a_ctrl_c_and_ends_when_the_daemon_ends_it():
     """Ctrl-C in the terminal of ``uvd run`` reaches the receiver too: it goes on forwarding
     (the daemon, stopping in order, ends it) and ends, with its last counts, when the daemon
     shuts its end."""
-    import os
-    import signal
-
-    from uvd.links.mavlink.receiver import read_forwarded, spawn_receiver, stop_receiver
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.bind(("127.0.0.1", 0))
-    proc, pair = spawn_receiver(sock)
-    st = Peer()
-    try:
+    from uvd.links.mavlink.receiver import read_forwarded, stop_receiver
+    with _receiver() as (proc, pair, sock, st):
         good = st.enc.heartbeat_encode(6, 8, 0, 0, 0).pack(st.enc)
         counts, got, deadline = collections.Counter(), [], time.monotonic() + 20.0
         while not got and time.monotonic() < deadline:  # up: it has installed its handlers
@@ -498,28 +511,14 @@ def test_the_receiver_outlives_a_ctrl_c_and_ends_when_the_daemon_ends_it():
         stop_receiver(proc, pair, counts, timeout_s=5.0)
         assert proc.returncode == 0
         assert counts["datagrams"] >= 2 and counts["bad_datagrams"] == 0, counts
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        pair.close()
-        sock.close()
-        st.sock.close()
 
 
 def test_datagrams_the_kernel_drops_while_the_receiver_waits_are_counted():
     """A receiver kept from the CPU (stopped here; a saturated machine alike) while 400
     datagrams arrive at a small buffer: each one is either judged or counted dropped by the
     kernel (``kernel_dropped``, reported with the next datagram) — none lost uncounted."""
-    import os
-    import signal
-
-    from uvd.links.mavlink.receiver import read_forwarded, spawn_receiver
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8192)
-    sock.bind(("127.0.0.1", 0))
-    proc, pair = spawn_receiver(sock)
-    st = Peer()
-    try:
+    from uvd.links.mavlink.receiver import read_forwarded
+    with _receiver(rcvbuf=8192) as (proc, pair, sock, st):
         good = st.enc.heartbeat_encode(6, 8, 0, 0, 0).pack(st.enc)
         st.sock.sendto(good, sock.getsockname())  # the receiver is up and reading
         counts, deadline = collections.Counter(), time.monotonic() + 10.0
@@ -539,11 +538,6 @@ def test_datagrams_the_kernel_drops_while_the_receiver_waits_are_counted():
         assert counts["kernel_dropped"] > 0, counts  # the buffer did overflow
         assert counts["datagrams"] + counts["kernel_dropped"] == 402, counts
         assert counts["bad_datagrams"] == counts["datagrams"] - 2, counts
-    finally:
-        pair.close()
-        assert proc.wait(timeout=5.0) == 0
-        sock.close()
-        st.sock.close()
 
 
 def test_a_receiver_that_dies_is_replaced_and_commands_go_on():
@@ -626,11 +620,6 @@ def test_statustext_is_plain_ascii_as_pymavlink_decodes_it():
 def test_a_receiver_that_cannot_finish_is_killed_and_the_stop_does_not_raise():
     """A receiver that does not run (stopped here; kept from the CPU on a saturated
     machine alike) is killed after the timeout; stop_receiver returns, it never raises."""
-    import collections
-    import os
-    import signal
-    import socket
-
     from uvd.links.mavlink.receiver import spawn_receiver, stop_receiver
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
