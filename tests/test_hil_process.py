@@ -9,6 +9,7 @@ the process exits 0 within 2 s.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -95,42 +96,55 @@ class BusObserver:
         self.bus.shutdown()
 
 
-def test_notify_and_sigterm_with_the_real_processes(tmp_path):
-    bridge_args, changes = hil_scheduling()  # scheduled as in the demo
+@contextlib.contextmanager
+def _daemon_on_bridge(tmp_path, *run_args: str, env: dict | None = None):
+    """sim-bridge (scheduled as in the demo), a third node watching the bus, and ``uvd run
+    --config … --arm RUN_ARGS`` with its stderr in ``tmp_path/daemon.log``: ``(config, daemon,
+    observer)``. All of them ended after, whatever happened."""
+    bridge_args, changes = hil_scheduling()
     cfg_path = write_local_config(tmp_path, changes=changes)
     cfg = load_config(cfg_path)
-    nodes = cfg.can.amplifiers.node_ids
     bridge = BridgeProcess(cfg_path, duration_s=90.0, hold=True,
                            extra=bridge_args).start(timeout_s=90.0)
-    notify = NotifyReceiver(str(tmp_path / "notify.sock"))
-    observer = BusObserver(cfg.can.bus, nodes)
-    env = dict(os.environ, NOTIFY_SOCKET=str(tmp_path / "notify.sock"),
-               WATCHDOG_USEC="400000", PYTHONUNBUFFERED="1")
-    env.pop("WATCHDOG_PID", None)
+    observer = BusObserver(cfg.can.bus, cfg.can.amplifiers.node_ids)
     log = (tmp_path / "daemon.log").open("w")
-    daemon = subprocess.Popen([sys.executable, "-m", "uvd", "run", "--config", str(cfg_path),
-                               "--arm", "--duration", "80"], env=env,
-                              stdout=subprocess.DEVNULL, stderr=log)
+    daemon = None
     try:
-        t_ready = notify.wait("READY=1", 60.0)
-        assert t_ready is not None, (tmp_path / "daemon.log").read_text()[-2000:]
-        t_armed = notify.wait("STATUS=ARMED", 20.0)
-        assert t_armed is not None, (tmp_path / "daemon.log").read_text()[-2000:]
-        time.sleep(1.5)  # tracking RefTraj1
-        t_sig = time.monotonic_ns()
-        daemon.send_signal(signal.SIGTERM)
-        code = daemon.wait(timeout=10.0)
-        t_exit = time.monotonic_ns()
-        time.sleep(0.3)
+        daemon = subprocess.Popen(
+            [sys.executable, "-m", "uvd", "run", "--config", str(cfg_path), "--arm", *run_args],
+            env=env or dict(os.environ, PYTHONUNBUFFERED="1"), stdout=subprocess.DEVNULL,
+            stderr=log)
+        yield cfg, daemon, observer
     finally:
-        if daemon.poll() is None:
+        if daemon is not None and daemon.poll() is None:
             daemon.kill()
             daemon.wait(timeout=5.0)
         log.close()
         observer.close()
-        notify.close()
         bridge.stop(timeout_s=5.0)
         bridge.kill()
+
+
+def test_notify_and_sigterm_with_the_real_processes(tmp_path):
+    notify = NotifyReceiver(str(tmp_path / "notify.sock"))
+    env = dict(os.environ, NOTIFY_SOCKET=str(tmp_path / "notify.sock"),
+               WATCHDOG_USEC="400000", PYTHONUNBUFFERED="1")
+    env.pop("WATCHDOG_PID", None)
+    try:
+        with _daemon_on_bridge(tmp_path, "--duration", "80", env=env) as (cfg, daemon, observer):
+            nodes = cfg.can.amplifiers.node_ids
+            t_ready = notify.wait("READY=1", 60.0)
+            assert t_ready is not None, (tmp_path / "daemon.log").read_text()[-2000:]
+            t_armed = notify.wait("STATUS=ARMED", 20.0)
+            assert t_armed is not None, (tmp_path / "daemon.log").read_text()[-2000:]
+            time.sleep(1.5)  # tracking RefTraj1
+            t_sig = time.monotonic_ns()
+            daemon.send_signal(signal.SIGTERM)
+            code = daemon.wait(timeout=10.0)
+            t_exit = time.monotonic_ns()
+            time.sleep(0.3)
+    finally:
+        notify.close()
 
     # -- exit --
     assert code == 0
@@ -166,22 +180,12 @@ def test_a_missed_deadline_does_not_fault_the_drives(tmp_path):
     ``command_timeout_ms`` (300: three cycles) rides it out: no drive times out, no failsafe,
     still armed, tracking after. Before (session 32) the shipped 200 ms faulted every drive at
     the first stall (measured with ``uvd demo``: amplifier_fault → disarm)."""
-    bridge_args, changes = hil_scheduling()
-    cfg_path = write_local_config(tmp_path, changes=changes)
-    cfg = load_config(cfg_path)
-    assert cfg.loop.rate_hz == 10.0 and cfg.can.amplifiers.command_timeout_ms == 300
-    nodes = cfg.can.amplifiers.node_ids
-    bridge = BridgeProcess(cfg_path, duration_s=90.0, hold=True,
-                           extra=bridge_args).start(timeout_s=90.0)
-    observer = BusObserver(cfg.can.bus, nodes)
     log_path, summary = tmp_path / "daemon.log", tmp_path / "summary.json"
-    log = log_path.open("w")
-    daemon = subprocess.Popen([sys.executable, "-m", "uvd", "run", "--config", str(cfg_path),
-                               "--arm", "--duration", "80", "--summary-json", str(summary)],
-                              stdout=subprocess.DEVNULL, stderr=log,
-                              env=dict(os.environ, PYTHONUNBUFFERED="1"))
     stalls = []
-    try:
+    with _daemon_on_bridge(tmp_path, "--duration", "80", "--summary-json",
+                           str(summary)) as (cfg, daemon, observer):
+        assert cfg.loop.rate_hz == 10.0 and cfg.can.amplifiers.command_timeout_ms == 300
+        nodes = cfg.can.amplifiers.node_ids
         deadline = time.monotonic() + 60.0
         while "→ ARMED" not in log_path.read_text():
             assert daemon.poll() is None and time.monotonic() < deadline, \
@@ -202,14 +206,6 @@ def test_a_missed_deadline_does_not_fault_the_drives(tmp_path):
         t_end = time.monotonic_ns()
         daemon.send_signal(signal.SIGTERM)
         assert daemon.wait(timeout=10.0) == 0
-    finally:
-        if daemon.poll() is None:
-            daemon.kill()
-            daemon.wait(timeout=5.0)
-        log.close()
-        observer.close()
-        bridge.stop(timeout_s=5.0)
-        bridge.kill()
     text = log_path.read_text()
     # each stall left the drives ~250 ms without a command: past the 200 ms shipped before
     t1 = [t for t, node, _ in observer.rpdos if node == nodes[0] and t < t_end]
