@@ -296,6 +296,20 @@ def test_nonfinite_and_out_of_range_commands_never_reach_the_bus(drv, rig):
     assert drv.group.write([1.0, 2.0]).nonfinite == N  # wrong shape: zero, not a crash
 
 
+def test_every_control_command_is_carried_out(rig):
+    from sim_bridge.amplifiers.emulators import OPS
+    given = {"bus_off": {"seconds": 0.05}, "depth": {"value": 1.25}, "fault": {"node": 2},
+             "health": {"node": 2, "value": 1.0}, "pressure_valid": {"value": True},
+             "silence": {"node": 2, "seconds": 0.05}, "unsilence": {"node": 2}}
+    try:
+        answers = {op: rig.call(op, **given.get(op, {})) for op in OPS}
+        assert all(a["ok"] for a in answers.values()), answers
+        bad = rig.call("helth", node=2)
+        assert not bad["ok"] and f"known: {', '.join(OPS)}" in bad["error"], bad
+    finally:
+        assert rig.call("reset")["ok"]
+
+
 def test_shutdown_zeroes_and_disables(drv, rig):
     drv.enable()
     run_cycles(drv.group, 30, np.full(N, 50.0))
