@@ -296,6 +296,27 @@ def test_nonfinite_and_out_of_range_commands_never_reach_the_bus(drv, rig):
     assert drv.group.write([1.0, 2.0]).nonfinite == N  # wrong shape: zero, not a crash
 
 
+def test_the_deadline_the_drives_run_with_is_known_written_or_read(rig):
+    # configure = true: the one written (not the emulators' own 200 ms)
+    written = Driver(rig, command_timeout_ms=250)
+    try:
+        assert written.group.command_timeouts_ms() == dict.fromkeys(rig.node_ids, None)
+        written.enable()
+        assert written.group.command_timeouts_ms() == dict.fromkeys(rig.node_ids, 250)
+        assert {v["command_timeout_ms"] for v in rig.call("stats")["nodes"].values()} == {250}
+    finally:
+        written.close()
+    # configure = false: nothing written; each drive's own (after the power cycle, its EDS
+    # default 200 ms), read by SDO — not the configuration's 300 ms default
+    own = Driver(rig, configure=False)
+    try:
+        own.enable()
+        assert own.group.command_timeouts_ms() == dict.fromkeys(rig.node_ids, 200)
+        assert {v["command_timeout_ms"] for v in rig.call("stats")["nodes"].values()} == {200}
+    finally:
+        own.close()
+
+
 def test_every_control_command_is_carried_out(rig):
     from sim_bridge.amplifiers.emulators import OPS
     given = {"bus_off": {"seconds": 0.05}, "depth": {"value": 1.25}, "fault": {"node": 2},

@@ -156,6 +156,26 @@ def test_single_mistakes(tmp_path, snippet, key, words):
     assert words in errs[key]
 
 
+def test_drives_left_unconfigured_are_warned_of_their_own_deadline(tmp_path):
+    from uvd.runtime.can_component import deadline_warnings
+    # uvd writes no deadline then: check-config has nothing to refuse; the daemon reads the
+    # drives' own at start (tests/test_can_contract.py) and warns of the ones that are wrong
+    snippet = "[loop]\nrate_hz = 10\n[can.amplifiers]\nconfigure = false\ncommand_timeout_ms = 200"
+    cfg = load_config(write(tmp_path, snippet + "\n" + MINIMAL))  # no error
+    assert cfg.can.amplifiers.command_timeout_ms == 200
+    _, errs = errors_of(tmp_path, snippet.replace("false", "true") + "\n" + MINIMAL)
+    assert "200 ms is shorter" in errs["can.amplifiers.command_timeout_ms"]
+    lines = deadline_warnings({1: 200, 2: 200, 3: 300, 4: None, 5: 0, 6: 1000}, 10.0)
+    assert lines == [
+        "amplifier 5 keeps its own RPDO deadline (0x1400:05; [can.amplifiers] configure = "
+        "false): 0 (off): a drive keeps its last command when the daemon stops sending (its "
+        "heartbeat consumer, 0x1016, is then the only guard)",
+        "amplifiers 1, 2 keep their own RPDO deadline (0x1400:05; [can.amplifiers] configure "
+        "= false): 200 ms is shorter than three cycles of [loop] rate_hz 10 (300 ms): the "
+        "drives would time out at the first missed deadline"]
+    assert deadline_warnings({1: 200, 2: None}, 50.0) == []
+
+
 def test_port_forms(tmp_path):
     ok = MINIMAL.replace('"/dev/ttyUSB0"', '"udp://0.0.0.0:8110"').replace(
         '"/dev/ttyUSB1"', '"tcp://10.0.0.5:8112"')

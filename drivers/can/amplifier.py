@@ -273,6 +273,7 @@ class _Node:
     reset_cycles: int = 0
     start_error: str = ""
     started_ns: int = 0
+    command_timeout_ms: int | None = None  # the RPDO deadline it runs with (None: unknown)
     bootups_at_start: int = 0
 
 
@@ -480,6 +481,7 @@ class AmplifierGroup:
 
     def _configure(self, node: _Node) -> None:
         if not self.cfg.configure:
+            node.command_timeout_ms = self._own_deadline(node)
             return
         c = self.cfg
         node.remote.nmt.send_command(0x80)  # enter pre-operational
@@ -491,11 +493,32 @@ class AmplifierGroup:
             sdo.download(0x1016, 1, struct.pack("<I", consumer))
         if node.rpdo_event_timer is not None:
             sdo.download(*node.rpdo_event_timer, struct.pack("<H", c.command_timeout_ms))
+            node.command_timeout_ms = c.command_timeout_ms
         sdo.download(OD_MAX_TORQUE, 0, struct.pack("<H", c.max_torque_permille))
         shown = struct.unpack("<b", sdo.upload(OD_MODE_DISPLAY, 0)[:1])[0]
         if shown != cia402.MODES[c.mode]:
             raise ConfigError(f"[can.amplifiers] mode: node {node.node_id} runs mode {shown}, "
                               f"not {cia402.MODES[c.mode]} ({c.mode})")
+
+    @staticmethod
+    def _own_deadline(node: _Node) -> int | None:
+        """The RPDO deadline a drive left unconfigured (``configure = false``) keeps, read
+        by SDO; ``None`` when it has none in its EDS or does not answer (the read is only
+        for the daemon's warning: it never fails a start that wrote nothing)."""
+        if node.rpdo_event_timer is None:
+            return None
+        try:
+            return struct.unpack("<H", node.remote.sdo.upload(*node.rpdo_event_timer)[:2])[0]
+        except Exception as exc:  # noqa: BLE001 - SDO aborts and timeouts alike
+            log.info("amplifier %d (%s): its RPDO deadline could not be read: %s",
+                     node.node_id, node.name, exc)
+            return None
+
+    def command_timeouts_ms(self) -> dict[int, int | None]:
+        """Per node, the RPDO deadline (0x1400:05, ms; 0 = off) it runs with since its
+        start: the one written (``configure = true``) or its own, read (``None``: unknown,
+        not started or no such object)."""
+        return {n.node_id: n.command_timeout_ms for n in self.nodes}
 
     def enable(self) -> None:
         """Goal: OPERATION ENABLED on every drive (reached over the next cycles)."""

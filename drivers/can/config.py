@@ -136,7 +136,8 @@ class AmplifierConfig:
     velocity_rad_s_per_count : float
         Unit of the velocity actual value (0x606C); 0.001 on the reference amplifier.
     configure : bool
-        Write the objects above to every amplifier by SDO at start.
+        Write the objects above to every amplifier by SDO at start; without, each drive's
+        own RPDO deadline is read (:meth:`AmplifierGroup.command_timeouts_ms`).
     sdo_timeout_s : float
         Time allowed for one SDO response.
     """

@@ -16,7 +16,7 @@ import struct
 import numpy as np
 
 from uvd.errors import TransportError
-from uvd.runtime.config import Config
+from uvd.runtime.config import Config, short_deadline
 from uvd.runtime.cycle import ActuatorStatus
 from uvd.runtime.mailbox import Mailbox
 
@@ -109,6 +109,32 @@ def actuator_status(fb, first_write_ns: int) -> ActuatorStatus:
                           healthy_feedback_t_ns=oldest_ok if oldest_ok > 0 else None)
 
 
+def deadline_warnings(timeouts_ms: dict[int, int | None], rate_hz: float) -> list[str]:
+    """What to warn of the RPDO deadlines drives left unconfigured keep
+    (``[can.amplifiers] configure = false``: uvd wrote none, the drives run with their own;
+    :meth:`drivers.can.AmplifierGroup.command_timeouts_ms`): one line per deadline, naming
+    its nodes — too short for the loop (:func:`uvd.runtime.config.short_deadline`), or off
+    (0: a drive keeps its last command when the daemon stops sending). Unknown ones (None)
+    are not guessed at."""
+    by_value: dict[int, list[int]] = {}
+    for node, ms in timeouts_ms.items():
+        if ms is not None:
+            by_value.setdefault(ms, []).append(node)
+    out = []
+    for ms, nodes in sorted(by_value.items()):
+        many = len(nodes) > 1
+        who = (f"amplifier{'s' if many else ''} {', '.join(map(str, sorted(nodes)))} "
+               f"{'keep their' if many else 'keeps its'} own")
+        why = short_deadline(ms, rate_hz)
+        if ms == 0:
+            why = ("0 (off): a drive keeps its last command when the daemon stops sending "
+                   "(its heartbeat consumer, 0x1016, is then the only guard)")
+        if why:
+            out.append(f"{who} RPDO deadline (0x1400:05; [can.amplifiers] "
+                       f"configure = false): {why}")
+    return out
+
+
 class GcFreeze:
     """Last component to start: collect once, then freeze every object that exists.
 
@@ -187,6 +213,10 @@ class CanComponent:
         self.start_report = self.group.start()
         if not self.start_report.ok:
             log.error("amplifiers not all started: %s", self.start_report.nodes)
+        if not c.amplifiers.configure:
+            for line in deadline_warnings(self.group.command_timeouts_ms(),
+                                          self.cfg.loop.rate_hz):
+                log.warning("%s", line)
         self.group.reset_faults()
         self.group.enable()
         if self.depth is not None and not self.depth.start():

@@ -676,6 +676,24 @@ class SimulationSection:
     instruments: SimInstrumentsSection = section(SimInstrumentsSection)
 
 
+def short_deadline(timeout_ms: int, rate_hz: float) -> str | None:
+    """Why the drives' RPDO deadline (0x1400:05) is too short for the loop's rate, or None.
+
+    A missed deadline — an overrun, or the machine stalled for more than a period; the loop
+    tolerates ``overrun_streak`` of them in a row — leaves the drives up to a period plus the
+    stall without a command: more than two periods. Under two periods the drives fault
+    between any two commands; under three, at the first missed deadline — measured before
+    session 32 with the then shipped 200 ms at 10 Hz: the daemon stopped for 150 ms, one
+    overrun, every drive timed out, amplifier_fault → disarm. 0 (a drive's own "off") is
+    not short: see :func:`uvd.runtime.can_component.deadline_warnings`.
+    """
+    need_ms = 3e3 / rate_hz
+    if timeout_ms == 0 or timeout_ms >= need_ms:
+        return None
+    return (f"{timeout_ms} ms is shorter than three cycles of [loop] rate_hz {rate_hz:g} "
+            f"({need_ms:g} ms): the drives would time out at the first missed deadline")
+
+
 @dataclass(frozen=True)
 class Config:
     """The whole configuration file."""
@@ -717,19 +735,10 @@ class Config:
                                               "[telemetry.zenoh] enabled = true"))
         if self.sensors.depth.source == "can" and not self.can.depth.enabled:
             out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
-        amps, period_ms = self.can.amplifiers, 1e3 / self.loop.rate_hz
-        if amps.configure and amps.command_timeout_ms < 3.0 * period_ms:
-            # A missed deadline — an overrun, or the machine stalled for more than a period;
-            # the loop tolerates overrun_streak of them in a row — leaves the drives up to a
-            # period plus the stall without a command: more than two periods. Under two
-            # periods the drives fault between any two commands; under three, at the first
-            # missed deadline — measured before session 32 with the then shipped 200 ms at
-            # 10 Hz: the daemon stopped for 150 ms, one overrun, every drive timed out,
-            # amplifier_fault → disarm.
-            out.append(("can.amplifiers.command_timeout_ms",
-                        f"{amps.command_timeout_ms} ms is shorter than three cycles of [loop] "
-                        f"rate_hz {self.loop.rate_hz:g} ({3.0 * period_ms:g} ms): the drives "
-                        "would time out at the first missed deadline"))
+        amps = self.can.amplifiers
+        why = short_deadline(amps.command_timeout_ms, self.loop.rate_hz)
+        if amps.configure and why:
+            out.append(("can.amplifiers.command_timeout_ms", why))
         try:
             vehicle = self.load_vehicle(ctx.base_dir)
         except (ConfigError, ValueError, OSError) as exc:
@@ -807,7 +816,10 @@ class CanAmplifiersSection:
     velocity_rad_s_per_count: float = setting(0.001, unit="rad/s", gt=0,
                                               doc="unit of the velocity actual value (0x606C)")
     configure: bool = setting(True, doc="write the objects above to every amplifier by SDO "
-                                        "at start")
+                                        "at start; false leaves the drives as they are "
+                                        "(the daemon reads their own RPDO deadline and "
+                                        "warns when it is off or shorter than three "
+                                        "cycles)")
     sdo_timeout_s: float = setting(0.3, unit="s", min=0.01, max=5,
                                    doc="time allowed for one SDO response")
 
