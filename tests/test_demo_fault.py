@@ -61,6 +61,26 @@ def test_a_fault_spec_reads_as_the_issue_writes_it():
     assert FaultSpec.parse("thruster:4:.5@30.") == FaultSpec(4, 0.5, 30.0)
 
 
+def test_a_ctrl_c_before_the_fault_or_its_detection_is_said_so():
+    # an interrupted run used to say "not detected" of a fault that was never put
+    from uvd.commands.demo_fault import report
+    base = {"thruster": 4, "eta": 0.5, "at_s": 20.0}
+
+    def lines(**f) -> list[str]:
+        out: list[str] = []
+        report({**base, **f}, out.append)
+        return [ln.strip() for ln in out]
+    assert lines(interrupted_after_s=7.26) == [
+        "fault: thruster 4 at eta 0.5, 20 s after arming (sim-bridge)",
+        "not put: Ctrl-C 7.3 s after arming, before the fault's 20 s"]
+    assert lines(interrupted_after_s=23.0)[1] == (
+        "fault → detection (uvd-fdc's sample)  not detected in the 3.0 s before the Ctrl-C")
+    assert lines()[1:3] == ["fault → detection (uvd-fdc's sample)  not detected",
+                            "fault → reallocation                  no reallocation"]
+    assert lines(interrupted_after_s=30.0, fault_to_detection_s=4.2)[1] == (
+        "fault → detection (uvd-fdc's sample)     4.2 s")
+
+
 @pytest.mark.slow
 def test_a_weak_thruster_is_detected_over_zenoh_and_reallocated_in_hil(tmp_path):
     from uvd.commands.demo import run_demo

@@ -491,6 +491,8 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
             fault_run = None
             if summary_path.is_file():  # the daemon's count of samples by outcome
                 f["daemon_counts"] = json.loads(summary_path.read_text()).get("fault_samples")
+            if interrupted_s is not None:
+                f["interrupted_after_s"] = interrupted_s
             demo_fault.report(f, progress)
             ok = ok and (f.get("reallocated") is not None or accept == "advisory")
         if interrupted_s is not None:  # as any uvd command stopped by Ctrl-C

@@ -258,9 +258,14 @@ def report(f: dict[str, Any], progress) -> None:
     """The fault's lines of the demo's report."""
     progress(f"  fault: thruster {f['thruster']} at eta {f['eta']:g}, {f['at_s']:g} s after "
              "arming (sim-bridge)")
-    d = f.get("fault_to_detection_s")
-    progress("    fault → detection (uvd-fdc's sample)  " + (f"{d:6.1f} s" if d is not None
-                                                           else "not detected"))
+    d, stopped = f.get("fault_to_detection_s"), f.get("interrupted_after_s")
+    if d is None and stopped is not None and stopped < f["at_s"]:
+        progress(f"    not put: Ctrl-C {stopped:.1f} s after arming, before the fault's "
+                 f"{f['at_s']:g} s")
+        return
+    progress("    fault → detection (uvd-fdc's sample)  " + (
+        f"{d:6.1f} s" if d is not None else "not detected" if stopped is None else
+        f"not detected in the {stopped - f['at_s']:.1f} s before the Ctrl-C"))
     r = f.get("detection_to_reallocation_s")
     if r is not None:
         progress(f"    detection → reallocation (the cycle)  {r:6.3f} s")
