@@ -67,7 +67,10 @@ def test_command_line(tmp_path, capsys):
         assert len([m for m in received(rx) if 0x200 < m.arbitration_id < 0x280]) == 12
     finally:
         rx.shutdown()
-    assert "amplifiers disabled" in capsys.readouterr().out
+    # what was sent, not a claim of the drives' state: nothing here answers
+    out = capsys.readouterr().out
+    assert "amplifiers disabled" not in out
+    assert "with \"disable voltage\", then NMT pre-operational (sent; no answer" in out, out
     bad = tmp_path / "bad.toml"
     bad.write_text(SENSORS + "[control]\nkp = -1\n")
     assert main(["zero-thrust", "--config", str(bad)]) == 2

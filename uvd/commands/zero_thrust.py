@@ -90,5 +90,6 @@ def _run(args) -> int:
     print(f"uvd zero-thrust: {res['cycles']} zero-current cycles to nodes "
           f"{', '.join(map(str, res['nodes']))} on {b.interface}:{b.channel} "
           f"({res['frames_sent']} frames sent, {res['send_failed_cycles']} cycles with a "
-          f"dropped frame, {res['duration_s'] * 1e3:.0f} ms); amplifiers disabled")
+          f"dropped frame, {res['duration_s'] * 1e3:.0f} ms), each with \"disable voltage\", "
+          "then NMT pre-operational (sent; no answer is waited for)")
     return 0 if res["send_failed_cycles"] == 0 else 1
