@@ -81,6 +81,25 @@ def test_an_absent_device_stops_the_start_with_exit_1(tmp_path):
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 1
     assert "start failed" in r.stderr and str(tmp_path / "ins") in r.stderr
+    # the log's first line says which configuration ran; only the embedded default, whose
+    # instruments are sim-bridge's, adds where they come from
+    first = r.stderr.splitlines()[0]
+    assert first == f"INFO uvd.daemon: configuration {cfg}: vehicle jhu-rov, two-step-ambc " \
+                    "at 10 Hz", first
+    assert "uvd sim-bridge" not in r.stderr
+
+
+def test_the_embedded_default_says_its_instruments_are_sim_bridges(caplog):
+    import logging
+
+    from uvd.commands.run import _say_configuration
+    from uvd.runtime.config import DEFAULT_CONFIG, load_config
+    with caplog.at_level(logging.INFO, logger="uvd.daemon"):
+        _say_configuration(load_config(None), embedded=True)
+    assert [r.getMessage() for r in caplog.records] == [
+        f"configuration {DEFAULT_CONFIG}: vehicle jhu-rov, two-step-ambc at 10 Hz",
+        "the embedded default is the simulated vehicle: its instruments and drives are "
+        "`uvd sim-bridge`'s (start that first; `uvd demo` runs both)"]
 
 
 @pytest.mark.untimed

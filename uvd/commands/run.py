@@ -52,6 +52,7 @@ def _run(args) -> int:
         return 2
     listener = setup_logging(getattr(logging, args.log_level))
     logging.getLogger("canopen").setLevel(max(logging.WARNING, getattr(logging, args.log_level)))
+    _say_configuration(cfg, embedded=args.config is None)
     try:
         from uvd.runtime.daemon import Daemon
         try:
@@ -76,3 +77,16 @@ def _run(args) -> int:
         return code
     finally:
         listener.stop()
+
+
+def _say_configuration(cfg, *, embedded: bool) -> None:
+    """The log's first line: which configuration runs which vehicle; with the embedded
+    default, where its instruments come from (without ``uvd sim-bridge`` the start fails
+    after 5 s on the missing ``/tmp/uvd-sim/ins``, which alone does not say why)."""
+    import logging
+    log = logging.getLogger("uvd.daemon")
+    log.info("configuration %s: vehicle %s, %s at %g Hz", cfg.source, cfg.vehicle.name,
+             cfg.control.controller, cfg.loop.rate_hz)
+    if embedded:
+        log.info("the embedded default is the simulated vehicle: its instruments and drives "
+                 "are `uvd sim-bridge`'s (start that first; `uvd demo` runs both)")
