@@ -57,3 +57,16 @@ def free_port(kind: str = "tcp", host: str = "127.0.0.1") -> int:
         return port
     raise OSError(f"free_port: no free {kind} port on {host} in {_TRIES} tries "
                   f"({ports.start}–{ports.stop - 1})")
+
+
+def port_taken(kind: str, host: str, port: int) -> bool:
+    """Whether a ``kind`` ("tcp" or "udp") socket cannot be bound to ``host``:``port`` now
+    (somebody holds it; a TCP port in TIME_WAIT counts too)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    stype = socket.SOCK_STREAM if kind == "tcp" else socket.SOCK_DGRAM
+    with socket.socket(family, stype) as s:
+        try:
+            s.bind((host, port))
+        except OSError:
+            return True
+    return False

@@ -29,6 +29,7 @@ import json
 import math
 import os
 import queue
+import re
 import shutil
 import signal
 import subprocess
@@ -364,6 +365,54 @@ def _stop(daemon, bridge, pump) -> tuple[int, float, dict]:
     return code, stop_s, bridge_stats
 
 
+_ENDPOINT = re.compile(r"(tcp|udp)/(\[[0-9a-fA-F:.]+\]|[^:/\[\]?#]+):(\d+)")
+
+
+def _listener_moves(cfg) -> tuple[dict[str, Any], list[str]]:
+    """The configuration's listeners (Zenoh, MAVLink) whose port another process holds now —
+    a second demo, a daemon, another program — moved to a free port of the same host, and
+    the lines that say so. Free ones stay where ``uvd watch`` and MAVProxy look by default:
+    before, a second demo ran without both links ("sink … did not open")."""
+    from uvd.netports import free_port, port_taken
+    changes: dict[str, Any] = {}
+    said: list[str] = []
+    z = cfg.telemetry.zenoh
+    if z.enabled:
+        listen = list(z.listen)
+        for i, ep in enumerate(listen):
+            m = _ENDPOINT.fullmatch(ep)
+            if m and int(m[3]) and port_taken(m[1], m[2].strip("[]"), int(m[3])):
+                listen[i] = f"{m[1]}/{m[2]}:{free_port(m[1], m[2].strip('[]'))}"
+                said.append(f"  Zenoh: {ep} is taken (another daemon or demo?): this run "
+                            f"listens on {listen[i]}")
+        if said:
+            changes["telemetry"] = {"zenoh": {"listen": listen}}
+    mav = cfg.mavlink
+    host, _, port = (mav.listen or "").rpartition(":")
+    if mav.enabled and port.isdigit() and int(port) and port_taken("udp", host.strip("[]"),
+                                                                   int(port)):
+        moved = f"{host}:{free_port('udp', host.strip('[]'))}"
+        changes["mavlink"] = {"listen": moved}
+        said.append(f"  MAVLink: udp {mav.listen} is taken (another daemon or demo?): this "
+                    f"run listens on udp {moved}")
+    return changes, said
+
+
+def _local_config(run_dir: Path, base, changes: dict[str, Any]):
+    """The run's configuration (``sim_bridge.bridge.write_local_config``), with its taken
+    listeners moved (:func:`_listener_moves`): its path, the loaded one and what to say."""
+    from sim_bridge.bridge import merge_tables, write_local_config
+    from uvd.runtime.config import load_config
+    cfg_path = write_local_config(run_dir, base=base, changes=changes)
+    cfg = load_config(cfg_path)
+    moves, said = _listener_moves(cfg)
+    if moves:
+        merge_tables(changes, moves)
+        cfg_path = write_local_config(run_dir, base=base, changes=changes)
+        cfg = load_config(cfg_path)
+    return cfg_path, cfg, said
+
+
 # run_demo is long (~110 lines) because it owns two processes (sim-bridge and the daemon)
 # for its whole duration: start, arm, watch and stop share one try/finally that kills both.
 def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path | None = None,
@@ -396,13 +445,14 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
             from uvd.commands import demo_fault
             vehicle = load_config(write_local_config(run_dir, base=base)).load_vehicle()
             changes.update(demo_fault.config_changes(fault, run_dir, vehicle, accept))
-        cfg_path = write_local_config(run_dir, base=base, changes=changes)
-        cfg = load_config(cfg_path)
+        cfg_path, cfg, moved = _local_config(run_dir, base, changes)
         c = cfg.control
         progress(f"uvd demo: {c.controller} ({c.model}, robust adaptation "
                  f"{'on' if c.robust_adaptation else 'off'}) tracking {c.reference} on "
                  f"'{cfg.vehicle.name}' at {cfg.loop.rate_hz:g} Hz for {duration_s:g} s, "
                  "hardware in the loop")
+        for line in moved:
+            progress(line)
         if _jitcache.cache_is_empty():
             progress("  compiling the numeric kernels first (once after an install or upgrade: "
                      "about a minute)")
