@@ -6,15 +6,13 @@ sensor as one component, and the amplifiers' feedback as the cycle's typed
 from __future__ import annotations
 
 import asyncio
-import errno
 import gc
-import hashlib
 import logging
 import socket
-import struct
 
 import numpy as np
 
+from uvd.claims import Taken, claim
 from uvd.errors import TransportError
 from uvd.runtime.config import Config, short_deadline
 from uvd.runtime.cycle import ActuatorStatus
@@ -30,9 +28,8 @@ _FEEDBACK_FAULTS = frozenset({"feedback_lost", "heartbeat_lost"})
 
 
 def claim_bus(bus) -> socket.socket | None:
-    """One daemon a CAN bus (``bus``: the ``[can.bus]`` section): an abstract UNIX socket
-    named for the bus, bound and held while the daemon runs; the kernel frees it when the
-    process ends, however it ends. A second daemon on the bus (``uvd run`` by hand beside the
+    """One daemon a CAN bus (``bus``: the ``[can.bus]`` section), held while the daemon runs
+    (:func:`uvd.claims.claim`). A second daemon on the bus (``uvd run`` by hand beside the
     service) would configure the same amplifiers, restart them over NMT and send its zero
     targets between the first's: its start fails here, before it opens the bus, naming the
     process that holds it. None for ``virtual``, a bus within one process. ``uvd zero-thrust``
@@ -42,35 +39,14 @@ def claim_bus(bus) -> socket.socket | None:
     where = f"{bus.interface} {bus.channel}"
     if bus.interface == "udp_multicast":
         where += f" port {bus.port}"
-    # an abstract name holds 107 bytes: a longer channel (an slcan adapter's by-id path) by
-    # its digest
-    key = where if len(where) <= 90 else hashlib.sha256(where.encode()).hexdigest()
-    name = f"\0uvd-can {key}"
-    claim = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
-        claim.bind(name)
-        claim.listen(4)
-    except OSError as exc:
-        claim.close()
-        if exc.errno != errno.EADDRINUSE:
-            raise TransportError(f"can: cannot claim {where} for this daemon: {exc}") from exc
-        raise TransportError(f"can: another daemon ({_holder(name)}) already drives {where}: two "
+        return claim("can", where)
+    except Taken as exc:
+        raise TransportError(f"can: another daemon ({exc.holder}) already drives {where}: two "
                              "daemons would command the same amplifiers (stop it first, e.g. "
                              "systemctl stop uvd)") from None
-    return claim
-
-
-def _holder(name: str) -> str:
-    """Who holds the claim ``name``: "process N" from its socket's credentials."""
-    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
-        s.settimeout(0.5)
-        try:
-            s.connect(name)
-            pid, _, _ = struct.unpack("3i", s.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
-                                                         struct.calcsize("3i")))
-        except OSError:
-            return "another process"
-    return f"process {pid}"
+    except OSError as exc:
+        raise TransportError(f"can: cannot claim {where} for this daemon: {exc}") from exc
 
 
 def actuator_status(fb, first_write_ns: int) -> ActuatorStatus:
