@@ -530,6 +530,40 @@ class SimBridge:
                   stop: asyncio.Event | None = None) -> dict:
         """Run until ``stop`` is set or ``duration_s`` passed; returns the final stats."""
         self._stop = stop or asyncio.Event()
+        claims = self._claim()
+        try:
+            return await self._run(duration_s, on_ready)
+        finally:
+            for c in claims:
+                c.close()
+
+    def _claim(self) -> list:
+        """Hold this vehicle's bus and instrument links for this process
+        (:func:`uvd.claims.claim`), before anything is opened: a second sim-bridge of the
+        same configuration (one forgotten in another terminal) answered as the same CAN nodes
+        beside the first — every node id twice on the bus — and took its links over."""
+        from uvd.claims import Taken, claim
+        from uvd.errors import TransportError
+        b = self.config.can.bus
+        wanted = [("sim-link", str(Path(p).absolute())) for p in self._links.values()]
+        if b.interface != "virtual":  # a bus within one process: nobody else's
+            where = f"{b.interface} {b.channel}" + (f" port {b.port}"
+                                                    if b.interface == "udp_multicast" else "")
+            wanted.insert(0, ("sim-can", where))
+        held: list = []
+        try:
+            for kind, where in wanted:
+                held.append(claim(kind, where))
+        except Taken as exc:
+            for c in held:
+                c.close()
+            what = ("emulates the drives on" if kind == "sim-can" else "serves the instrument "
+                    "link")
+            raise TransportError(f"another sim-bridge ({exc.holder}) already {what} {where}: "
+                                 "stop it first (two would answer as the same vehicle)") from None
+        return held
+
+    async def _run(self, duration_s: float | None, on_ready) -> dict:
         await asyncio.to_thread(self._open_can)
         if self.truth_path is not None:
             self.truth_path.parent.mkdir(parents=True, exist_ok=True)

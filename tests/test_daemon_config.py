@@ -189,6 +189,34 @@ def test_a_can_start_failure_after_the_bus_opened_ends_without_a_traceback(tmp_p
            "both controlword 0x6040 and target torque 0x6071" in r.stderr
 
 
+def test_a_second_sim_bridge_of_a_vehicle_running_does_not_start(tmp_path):
+    """Found by probing (session 33): a second ``uvd sim-bridge`` of the same configuration
+    (one forgotten in another terminal) started, answered as the same six CAN nodes beside the
+    first's and took its instrument links over. Now it ends at once (exit 2), naming the
+    process that holds the bus — or a link, for a configuration that shares only those — and
+    the first's links are untouched."""
+    import os
+
+    from hil_daemon import running_bridge
+
+    from sim_bridge.bridge import write_local_config
+    from uvd.io.toml import read_toml
+    with running_bridge(tmp_path / "A") as (cfg_a, first):
+        pid, ins = first.ready["pid"], first.ready["ports"]["ins"]
+        # the same bus and links (the same file), then only the links (its own bus)
+        links_only = write_local_config(tmp_path / "C", changes={
+            "sensors": read_toml(cfg_a)["sensors"]})
+        for cfg, what in ((cfg_a, "emulates the drives on udp_multicast "),
+                          (links_only, f"serves the instrument link {ins['link']}")):
+            r = subprocess.run([sys.executable, "-m", "uvd", "sim-bridge", "--config",
+                                str(cfg), "--duration", "5"], capture_output=True, text=True,
+                               timeout=120)
+            assert r.returncode == 2, (r.stdout + r.stderr)[-2000:]
+            assert f"another sim-bridge (process {pid}) already {what}" in r.stdout, r.stdout
+            assert os.readlink(ins["link"]) == ins["device"]
+        assert first.call("ping")["ok"]
+
+
 def test_a_second_daemon_on_a_can_bus_in_use_does_not_start(tmp_path):
     """``uvd run`` by hand beside an armed daemon on the same CAN bus (its instruments its own,
     as networked ones would be) fails its start before it opens the bus, naming the daemon
