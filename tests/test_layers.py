@@ -22,11 +22,10 @@ Layers, top to bottom (a module may import its own layer and any layer below it)
 of uvd.runtime: it takes a configuration of its own (sim_bridge.config); only the top two
 layers may import sim_bridge. The utilities (uvd.errors, uvd.jsonio, uvd.blas, uvd._jitcache,
 uvd.progress, uvd.netports, uvd.geometry, uvd.rtthreads, uvd.shipped, uvd.zenoh_callbacks,
-uvd.zenoh_names, uvd.cliargs, uvd.spells, uvd.claims, the ``uvd`` package) are importable from anywhere in
-uvd and import no other layer. drivers imports nothing of uvd but uvd.errors, uvd.geometry
-and uvd.spells; uvd.fdc
-(uvd-fdc, a process of its own) nothing but itself, uvd.zenoh_callbacks, uvd.zenoh_names and
-uvd.cliargs.
+uvd.zenoh_names, uvd.cliargs, uvd.spells, uvd.claims, the ``uvd`` package) are importable
+from anywhere in uvd and import no other layer. drivers imports nothing of uvd but
+uvd.errors, uvd.geometry and uvd.spells; uvd.fdc (uvd-fdc, a process of its own) nothing
+but itself, uvd.zenoh_callbacks, uvd.zenoh_names and uvd.cliargs.
 """
 
 from __future__ import annotations
