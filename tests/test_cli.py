@@ -148,6 +148,26 @@ def test_a_demo_stopped_by_a_signal_leaves_no_process_behind(tmp_path, sig):
         assert_gone(kids)
 
 
+def test_a_daemon_that_dies_during_the_demo_is_said_so():
+    """Found by probing (session 33): the daemon SIGKILLed during the run, the report ended in
+    "SIGTERM → daemon exit code -9 in 0.00 s" — no SIGTERM of the demo's had ended it — and a
+    memory growth of "+nan MB" (its window was the whole run's, past the daemon's end)."""
+    with _armed_demo() as (proc, kids):
+        daemon = next(k for k in kids
+                      if b"\0run\0" in Path(f"/proc/{k}/cmdline").read_bytes())
+        time.sleep(4.0)
+        os.kill(daemon, signal.SIGKILL)
+        out, err = proc.communicate(timeout=120.0)
+        assert_gone(kids)
+    assert proc.returncode == 1, err[-2000:]
+    assert "uvd demo: the daemon exited during the run:" in out, out[-3000:]
+    last = out.strip().splitlines()[-1]
+    assert last.startswith("The daemon ended by itself ") and last.endswith(
+        " s after arming: exit code -9 (killed by SIGKILL)"), out[-3000:]
+    memory = next(ln for ln in out.splitlines() if ln.startswith("Memory: "))
+    assert "nan" not in memory, memory
+
+
 def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_path):
     """Ctrl-C in the terminal (SIGINT to the demo's whole process group) 3 s after arming:
     the daemon stops in order — sim-bridge, the vehicle's hardware in a session of its own,

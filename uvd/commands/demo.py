@@ -210,7 +210,8 @@ def _figures(cfg, duration_s: float, seed: int, run_dir: Path, truth_path: Path,
     hil = hil_tracking(run_dir / "telemetry.jsonl", read_truth(truth_path)) \
         if truth_path.is_file() and (run_dir / "telemetry.jsonl").is_file() \
         else {"samples": 0}
-    mem = _memory(samples, duration_s)
+    ended_s = watch.get("daemon_ended_s")
+    mem = _memory(samples, duration_s if ended_s is None else ended_s)
     mem["daemon_peak_rss_mb"] = daemon_hwm
     mem["bridge_peak_rss_mb"] = bridge_hwm
     figures: dict[str, Any] = {
@@ -225,7 +226,7 @@ def _figures(cfg, duration_s: float, seed: int, run_dir: Path, truth_path: Path,
         "failsafe_events": fs_events,
         "lifecycle": lifecycle,
         "memory": mem,
-        "daemon": {"exit_code": code, "stop_s": stop_s,
+        "daemon": {"exit_code": code, "stop_s": stop_s, "ended_during_run_s": ended_s,
                    "shutdown": summary.get("shutdown", {}).get("steps"),
                    "counters": summary.get("daemon"),
                    "warm_up_and_start_s": start_s},
@@ -299,8 +300,8 @@ def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str]
         and signal.getsignal(signal.SIGINT) is signal.default_int_handler
     before = signal.signal(signal.SIGINT, lambda *_: ctrl_c.set()) if own else None
     try:
-        _follow(daemon, bridge, armed_at, duration_s, events, pump, tail, progress,
-                samples, loads, steal, ctrl_c)
+        ended_s = _follow(daemon, bridge, armed_at, duration_s, events, pump, tail, progress,
+                          samples, loads, steal, ctrl_c)
     finally:
         if own:
             signal.signal(signal.SIGINT, before)
@@ -317,14 +318,15 @@ def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str]
         if math.isnan(peak) and seen:
             peaks[i] = max(seen)
     return {"samples": samples, "loads": loads, "steal": steal, "daemon_hwm": peaks[0],
-            "bridge_hwm": peaks[1], "interrupted_s": interrupted_s}
+            "bridge_hwm": peaks[1], "interrupted_s": interrupted_s, "daemon_ended_s": ended_s}
 
 
 def _follow(daemon, bridge, armed_at: float, duration_s: float, events: list[str], pump,
             tail, progress, samples: list, loads: list, steal: list,
-            ctrl_c: threading.Event) -> None:
+            ctrl_c: threading.Event) -> float | None:
     """:func:`_watch`'s loop: appends a sample a second until ``duration_s`` after arming,
-    the daemon's exit or ``ctrl_c``."""
+    the daemon's exit or ``ctrl_c``. Returns the seconds after arming at which the daemon was
+    seen to have ended by itself, or None."""
     from uvd.bench import host_steal_s
     next_report = 10.0
     while True:
@@ -344,12 +346,13 @@ def _follow(daemon, bridge, armed_at: float, duration_s: float, events: list[str
             steal.append((time.monotonic(), st))
         if daemon.poll() is not None:
             progress("uvd demo: the daemon exited during the run:\n" + tail.tail())
-            break
+            return el
         if el >= next_report:
             next_report += 10.0
             n_fs = sum("failsafe fired" in e for e in events)
             progress(f"  {el:5.0f} / {duration_s:g} s   daemon RSS {rd:6.1f} MB   sim-bridge "
                      f"RSS {rb:6.1f} MB   failsafe events {n_fs}")
+    return None
 
 
 def _stop(daemon, bridge, pump) -> tuple[int, float, dict]:
@@ -628,6 +631,13 @@ def _report(f: dict, progress) -> None:
              f"{m.get('daemon_rss_growth_mb', math.nan):+.2f} MB ({m.get('growth_note', '')}); "
              f"sim-bridge peak RSS {m.get('bridge_peak_rss_mb', math.nan):.1f} MB")
     d = f["daemon"]
+    if d.get("ended_during_run_s") is not None:  # no SIGTERM of ours ended it
+        code = d["exit_code"]
+        how = f" (killed by {signal.Signals(-code).name})" if code is not None and code < 0 \
+            and -code in signal.valid_signals() else ""
+        progress(f"The daemon ended by itself {d['ended_during_run_s']:.0f} s after arming: "
+                 f"exit code {code}{how}")
+        return
     how = "Ctrl-C, then SIGTERM" if "interrupted" in f else "SIGTERM"
     progress(f"{how} → daemon exit code {d['exit_code']} in {d['stop_s']:.2f} s")
 
