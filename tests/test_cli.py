@@ -148,24 +148,38 @@ def test_a_demo_stopped_by_a_signal_leaves_no_process_behind(tmp_path, sig):
         assert_gone(kids)
 
 
-def test_a_daemon_that_dies_during_the_demo_is_said_so():
-    """Found by probing (session 33): the daemon SIGKILLed during the run, the report ended in
-    "SIGTERM → daemon exit code -9 in 0.00 s" — no SIGTERM of the demo's had ended it — and a
-    memory growth of "+nan MB" (its window was the whole run's, past the daemon's end)."""
+@pytest.mark.parametrize("who", ["daemon", "sim-bridge"])
+def test_a_process_that_dies_during_the_demo_is_said_so(who):
+    """Found by probing (session 33), SIGKILL to one of the demo's processes during the run.
+    The daemon: the report ended in "SIGTERM → daemon exit code -9 in 0.00 s" — no SIGTERM of
+    the demo's had ended it — and a memory growth of "+nan MB" (its window was the whole run's,
+    past the daemon's end). sim-bridge: nothing said; the demo watched on to the end of its
+    60 s, "sim-bridge RSS nan MB" every 10 s. Now either is said at once, the run ends there
+    (exit 1), and the report's last line says which process ended and how."""
     with _armed_demo() as (proc, kids):
-        daemon = next(k for k in kids
-                      if b"\0run\0" in Path(f"/proc/{k}/cmdline").read_bytes())
+        word = b"\0run\0" if who == "daemon" else b"\0sim-bridge\0"
+        victim = next(k for k in kids if word in Path(f"/proc/{k}/cmdline").read_bytes())
         time.sleep(4.0)
-        os.kill(daemon, signal.SIGKILL)
+        os.kill(victim, signal.SIGKILL)
+        t_kill = time.monotonic()
         out, err = proc.communicate(timeout=120.0)
+        took = time.monotonic() - t_kill
         assert_gone(kids)
     assert proc.returncode == 1, err[-2000:]
-    assert "uvd demo: the daemon exited during the run:" in out, out[-3000:]
-    last = out.strip().splitlines()[-1]
-    assert last.startswith("The daemon ended by itself ") and last.endswith(
+    assert took < 30.0, took  # not the rest of the 60 s run
+    name = "The daemon" if who == "daemon" else "sim-bridge, the simulated vehicle,"
+    lines = out.strip().splitlines()
+    assert lines[-1].startswith(f"{name} ended by itself ") and lines[-1].endswith(
         " s after arming: exit code -9 (killed by SIGKILL)"), out[-3000:]
-    memory = next(ln for ln in out.splitlines() if ln.startswith("Memory: "))
-    assert "nan" not in memory, memory
+    if who == "daemon":
+        assert "uvd demo: the daemon exited during the run:" in out, out[-3000:]
+        assert not any(ln.startswith("SIGTERM →") for ln in lines), out[-3000:]
+    else:
+        assert "uvd demo: sim-bridge, the simulated vehicle, exited during the run (exit code " \
+               "-9 (killed by SIGKILL)): stopping the daemon" in out, out[-3000:]
+        assert lines[-2].startswith("SIGTERM → daemon exit code 0 in "), out[-3000:]
+    memory = next(ln for ln in lines if ln.startswith("Memory: "))
+    assert "nan" not in memory.partition("sim-bridge")[0], memory
 
 
 def test_ctrl_c_ends_the_demo_in_order_with_the_figures_of_the_seconds_run(tmp_path):

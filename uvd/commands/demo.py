@@ -210,8 +210,8 @@ def _figures(cfg, duration_s: float, seed: int, run_dir: Path, truth_path: Path,
     hil = hil_tracking(run_dir / "telemetry.jsonl", read_truth(truth_path)) \
         if truth_path.is_file() and (run_dir / "telemetry.jsonl").is_file() \
         else {"samples": 0}
-    ended_s = watch.get("daemon_ended_s")
-    mem = _memory(samples, duration_s if ended_s is None else ended_s)
+    ended = watch.get("ended")
+    mem = _memory(samples, duration_s if ended is None else ended["after_s"])
     mem["daemon_peak_rss_mb"] = daemon_hwm
     mem["bridge_peak_rss_mb"] = bridge_hwm
     figures: dict[str, Any] = {
@@ -226,7 +226,8 @@ def _figures(cfg, duration_s: float, seed: int, run_dir: Path, truth_path: Path,
         "failsafe_events": fs_events,
         "lifecycle": lifecycle,
         "memory": mem,
-        "daemon": {"exit_code": code, "stop_s": stop_s, "ended_during_run_s": ended_s,
+        "ended_during_run": ended,
+        "daemon": {"exit_code": code, "stop_s": stop_s,
                    "shutdown": summary.get("shutdown", {}).get("steps"),
                    "counters": summary.get("daemon"),
                    "warm_up_and_start_s": start_s},
@@ -300,8 +301,8 @@ def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str]
         and signal.getsignal(signal.SIGINT) is signal.default_int_handler
     before = signal.signal(signal.SIGINT, lambda *_: ctrl_c.set()) if own else None
     try:
-        ended_s = _follow(daemon, bridge, armed_at, duration_s, events, pump, tail, progress,
-                          samples, loads, steal, ctrl_c)
+        ended = _follow(daemon, bridge, armed_at, duration_s, events, pump, tail, progress,
+                        samples, loads, steal, ctrl_c)
     finally:
         if own:
             signal.signal(signal.SIGINT, before)
@@ -318,15 +319,15 @@ def _watch(daemon, bridge, armed_at: float, duration_s: float, events: list[str]
         if math.isnan(peak) and seen:
             peaks[i] = max(seen)
     return {"samples": samples, "loads": loads, "steal": steal, "daemon_hwm": peaks[0],
-            "bridge_hwm": peaks[1], "interrupted_s": interrupted_s, "daemon_ended_s": ended_s}
+            "bridge_hwm": peaks[1], "interrupted_s": interrupted_s, "ended": ended}
 
 
 def _follow(daemon, bridge, armed_at: float, duration_s: float, events: list[str], pump,
             tail, progress, samples: list, loads: list, steal: list,
-            ctrl_c: threading.Event) -> float | None:
+            ctrl_c: threading.Event) -> dict[str, Any] | None:
     """:func:`_watch`'s loop: appends a sample a second until ``duration_s`` after arming,
-    the daemon's exit or ``ctrl_c``. Returns the seconds after arming at which the daemon was
-    seen to have ended by itself, or None."""
+    the exit of either process or ``ctrl_c``. Returns which process was seen to have ended
+    by itself, when (seconds after arming) and its exit code; None if neither did."""
     from uvd.bench import host_steal_s
     next_report = 10.0
     while True:
@@ -346,7 +347,14 @@ def _follow(daemon, bridge, armed_at: float, duration_s: float, events: list[str
             steal.append((time.monotonic(), st))
         if daemon.poll() is not None:
             progress("uvd demo: the daemon exited during the run:\n" + tail.tail())
-            return el
+            return {"process": "daemon", "after_s": el, "exit_code": daemon.returncode}
+        if bridge.proc.poll() is not None:  # the vehicle is gone: nothing more to measure
+            code = bridge.proc.returncode
+            progress(f"uvd demo: sim-bridge, the simulated vehicle, exited during the run "
+                     f"({_exit_words(code)}): stopping the daemon"
+                     + (f"; its last words:\n{bridge.stderr_tail()}"
+                        if bridge.stderr_tail().strip() else ""))
+            return {"process": "sim-bridge", "after_s": el, "exit_code": code}
         if el >= next_report:
             next_report += 10.0
             n_fs = sum("failsafe fired" in e for e in events)
@@ -538,7 +546,8 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         hil = figures["tracking"]
         fs_events = figures["failsafe_events"]
         _report(figures, progress)
-        ok = code == 0 and bool(hil.get("samples")) and not fs_events
+        ok = code == 0 and bool(hil.get("samples")) and not fs_events \
+            and figures["ended_during_run"] is None
         if fault_run is not None:
             figures["fault"] = f = fault_run.finish()
             fault_run = None
@@ -630,16 +639,21 @@ def _report(f: dict, progress) -> None:
     progress(f"Memory: daemon peak RSS {m.get('daemon_peak_rss_mb', math.nan):.1f} MB, growth "
              f"{m.get('daemon_rss_growth_mb', math.nan):+.2f} MB ({m.get('growth_note', '')}); "
              f"sim-bridge peak RSS {m.get('bridge_peak_rss_mb', math.nan):.1f} MB")
-    d = f["daemon"]
-    if d.get("ended_during_run_s") is not None:  # no SIGTERM of ours ended it
-        code = d["exit_code"]
-        how = f" (killed by {signal.Signals(-code).name})" if code is not None and code < 0 \
-            and -code in signal.valid_signals() else ""
-        progress(f"The daemon ended by itself {d['ended_during_run_s']:.0f} s after arming: "
-                 f"exit code {code}{how}")
-        return
-    how = "Ctrl-C, then SIGTERM" if "interrupted" in f else "SIGTERM"
-    progress(f"{how} → daemon exit code {d['exit_code']} in {d['stop_s']:.2f} s")
+    d, e = f["daemon"], f.get("ended_during_run")
+    if e is None or e["process"] != "daemon":  # a SIGTERM of the demo's ended it
+        how = "Ctrl-C, then SIGTERM" if "interrupted" in f else "SIGTERM"
+        progress(f"{how} → daemon exit code {d['exit_code']} in {d['stop_s']:.2f} s")
+    if e is not None:
+        who = "The daemon" if e["process"] == "daemon" else "sim-bridge, the simulated vehicle,"
+        progress(f"{who} ended by itself {e['after_s']:.0f} s after arming: "
+                 f"{_exit_words(e['exit_code'])}")
+
+
+def _exit_words(code: int | None) -> str:
+    """A process's exit code said: "exit code 1", "exit code -9 (killed by SIGKILL)"."""
+    if code is not None and code < 0 and -code in signal.valid_signals():
+        return f"exit code {code} (killed by {signal.Signals(-code).name})"
+    return f"exit code {code}"
 
 
 def _run(args) -> int:
