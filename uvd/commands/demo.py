@@ -352,7 +352,7 @@ def _follow(daemon, bridge, armed_at: float, duration_s: float, events: list[str
             code = bridge.proc.returncode
             progress(f"uvd demo: sim-bridge, the simulated vehicle, exited during the run "
                      f"({_exit_words(code)}): stopping the daemon"
-                     + (f"; its last words:\n{bridge.stderr_tail()}"
+                     + (f"; its last words:\n{bridge.stderr_tail().rstrip()}"
                         if bridge.stderr_tail().strip() else ""))
             return {"process": "sim-bridge", "after_s": el, "exit_code": code}
         if el >= next_report:
