@@ -112,6 +112,16 @@ def test_a_client_that_reaches_nothing_says_so_and_goes_on(capsys):
     assert f"uvd watch: {says}" in capsys.readouterr().err
     assert fdc_main(argv) == 0
     assert f"uvd-fdc: {says}" in capsys.readouterr().out
+    # a run that ends first says it as it stops, without "still trying" (session 33: one of
+    # 3 s said "… in 3 s …; still trying" and ended; one of 1 s said nothing)
+    short = ["--connect", f"tcp/127.0.0.1:{port}", "--seconds", "1"]
+    ends = (f"nothing reached through tcp/127.0.0.1:{port} in 1 s (is the daemon running, its "
+            "[telemetry.zenoh] listen that endpoint?)\n")
+    assert main(["watch", *short]) == 0
+    assert capsys.readouterr().err.endswith(f"uvd watch: {ends}")
+    assert fdc_main(short) == 0
+    out = capsys.readouterr().out
+    assert f"uvd-fdc: {ends}" in out and "still trying" not in out, out
     conf = zenoh.Config()
     conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
     conf.insert_json5("scouting/multicast/enabled", "false")

@@ -113,10 +113,13 @@ def _run(args) -> int:
         out(f"watching uvd/{v}/… through {via} (Ctrl-C to stop)")
         deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
         reach = ReachNote(session, via, "uvd watch")  # say so, and go on trying
-        while time.monotonic() < deadline:
+        while True:
             time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
-            if (note := reach.due()) is not None:
+            ending = time.monotonic() >= deadline
+            if (note := reach.due(ending=ending)) is not None:
                 print(note, file=sys.stderr, flush=True)
+            if ending:
+                break
     except KeyboardInterrupt:
         pass
     finally:

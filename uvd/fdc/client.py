@@ -153,19 +153,24 @@ class ReachNote:
 
     def __init__(self, session, via: str, who: str) -> None:
         self.session, self.via, self.who = session, via, who
-        self._due: float | None = time.monotonic() + REACH_S
+        self._t0 = time.monotonic()
+        self._due: float | None = self._t0 + REACH_S
 
-    def due(self) -> str | None:
+    def due(self, ending: bool = False) -> str | None:
         """The note, the first time it is asked for after REACH_S if nothing was reached;
-        None before, after, or when something was."""
-        if self._due is None or time.monotonic() < self._due:
+        None before, after, or when something was. ``ending``: the client's last look (its
+        ``--seconds`` are over): the note then comes whenever it is, without "still trying"
+        (it said so as it stopped, or nothing at all for a run shorter than REACH_S)."""
+        if self._due is None or (not ending and time.monotonic() < self._due):
             return None
         self._due = None
         info = self.session.info
         if list(info.routers_zid()) or list(info.peers_zid()):
             return None
-        return (f"{self.who}: nothing reached through {self.via} in {REACH_S:g} s (is the "
-                "daemon running, its [telemetry.zenoh] listen that endpoint?); still trying")
+        waited = time.monotonic() - self._t0 if ending else REACH_S
+        return (f"{self.who}: nothing reached through {self.via} in {waited:.0f} s (is the "
+                "daemon running, its [telemetry.zenoh] listen that endpoint?)"
+                + ("" if ending else "; still trying"))
 
 
 def open_client(connect: list[str], config_file: str | None = None):
@@ -457,6 +462,7 @@ def main(argv: list[str] | None = None) -> int:
         reach = ReachNote(session, reached_through(args.connect, args.zenoh_config), "uvd-fdc")
         while not stop.wait(min(0.2, max(0.0, deadline - time.monotonic()))):
             if time.monotonic() >= deadline:
+                watch.tell(reach.due(ending=True))
                 break
             watch.tell(reach.due())
             watch.tick()
