@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import tempfile
 from pathlib import Path
 
 
@@ -89,6 +90,13 @@ def _cannot_make_folder(folder: Path) -> str | None:
         return f"{p} is a file, not a folder"
     if not os.access(p, os.W_OK | os.X_OK):
         return f"{p} is not writable"
+    # root passes access() nearly everywhere — /proc, sysfs, a read-only bind mount — and the
+    # command then failed at its first write, exit 1 with the OS's words: so make something
+    try:
+        probe = tempfile.mkdtemp(prefix=".uvd-probe-", dir=p)
+    except OSError as exc:
+        return f"nothing can be made in {p} ({exc.strerror})"
+    os.rmdir(probe)
     return None
 
 
