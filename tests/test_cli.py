@@ -221,6 +221,22 @@ def _no_file_may_grow() -> None:
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
 
 
+def test_a_run_too_long_for_memory_is_an_error_not_a_traceback(capsys):
+    """Found by probing (session 33): `uvd experiment ambc-robust --hours 1e9` and `uvd demo
+    --duration 1e9` ended in numpy's _ArrayMemoryError traceback. Any command: one line, exit
+    1; the demo's duration, whose lockstep twins are computed before the run, has a ceiling
+    (a day) and is refused at the command line."""
+    assert main(["experiment", "ambc-robust", "--hours", "1e9", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("uvd experiment: error: out of memory (Unable to allocate ") \
+        and err.endswith("): a shorter run, or a machine with more memory\n"), err
+    with pytest.raises(SystemExit) as stop:
+        main(["demo", "--duration", "1e9"])
+    assert stop.value.code == 2
+    assert "argument --duration: '1e9' is not a positive number up to 86400" in \
+        capsys.readouterr().err
+
+
 @pytest.mark.untimed
 def test_a_failed_write_is_an_error_that_says_so_not_a_traceback(tmp_path):
     """A command whose output cannot be written (a full disk) ends with exit 1 and one line;

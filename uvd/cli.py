@@ -97,6 +97,10 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt as exc:
         return _interrupted(args.command, exc)
+    except MemoryError as exc:  # `uvd experiment --hours 1e9` asked numpy for 15 PiB
+        print(f"uvd {args.command}: error: out of memory ({exc or 'no detail'}): a shorter "
+              "run, or a machine with more memory", file=sys.stderr)
+        return 1
     except RuntimeError as exc:
         # Ctrl-C (or Stopped) raised in a lock's wait — a queue's get with a timeout, Dask's
         # as_completed — can leave the lock released once too often (CPython's Condition.wait

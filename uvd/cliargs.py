@@ -45,6 +45,14 @@ def positive_float(text: str) -> float:
     return _float(text, lambda x: x > 0.0, "a positive finite number")
 
 
+def positive_float_upto(hi: float):
+    """The type of a finite number in (0, ``hi``] (a duration with a ceiling the command's
+    memory or waiting sets)."""
+    def parse(text: str) -> float:
+        return _float(text, lambda x: 0.0 < x <= hi, f"a positive number up to {hi:g}")
+    return parse
+
+
 def nonnegative_float(text: str) -> float:
     """A finite number ≥ 0 (0 often meaning "none" or "for ever", as each option says)."""
     return _float(text, lambda x: x >= 0.0, "a finite number >= 0")

@@ -43,20 +43,26 @@ from typing import Any
 import numpy as np
 
 from uvd import _jitcache
-from uvd.cliargs import nonnegative_int, output_file, output_folder, positive_float
+from uvd.cliargs import nonnegative_int, output_file, output_folder, positive_float_upto
 from uvd.jsonio import write_json
 from uvd.runtime.process import stop_daemon
 
 #: lockstep runs (seeds seed … seed + SPREAD_SEEDS − 1) whose spread the HIL run is set against
 SPREAD_SEEDS = 5
+#: the longest --duration: its lockstep twins (SPREAD_SEEDS of them, computed before the run,
+#: ~5 s a simulated hour each on a 2-core VM) and their logs in memory grow with it; 1e9 s
+#: asked numpy for 75 GiB and ended in a traceback (session 33)
+MAX_DURATION_S = 86400.0
 
 
 def register(sub) -> None:
     p = sub.add_parser("demo", help="hardware-in-the-loop demo: sim-bridge + uvd run, "
                                     "RefTraj1 with two-step AMBC",
                        description=__doc__.split("\n\n")[0])
-    p.add_argument("--duration", type=positive_float, default=60.0, metavar="S",
-                   help="seconds of armed tracking (default 60)")
+    p.add_argument("--duration", type=positive_float_upto(MAX_DURATION_S), default=60.0,
+                   metavar="S", help=f"seconds of armed tracking (default 60, at most "
+                                     f"{MAX_DURATION_S:g}: a day; the lockstep twin of the "
+                                     "run is computed first)")
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the figures to this file")
     p.add_argument("--record", type=output_folder, metavar="DIR",
                    help="keep the run's files (config, telemetry, truth, CAN log, logs)")
@@ -470,6 +476,9 @@ def run_demo(duration_s: float = 60.0, *, record: Path | None = None, base: Path
         t0 = time.monotonic()
         lock_log, spread_logs = None, ()
         if fault is None:  # a faulty run is not the lockstep run's twin
+            if duration_s > 600.0:  # 5 s a simulated hour and seed on a 2-core VM
+                progress(f"  lockstep simulation of the same configuration first: "
+                         f"{SPREAD_SEEDS} seeds × {duration_s:g} s simulated")
             lock_log = lockstep_run(cfg, duration_s, seed)
             spread_logs = tuple(lockstep_run(cfg, duration_s, seed + k)
                                 for k in range(1, SPREAD_SEEDS))
