@@ -30,6 +30,7 @@ from pathlib import Path
 
 from uvd.bench import Bench
 from uvd.cliargs import positive_float, positive_int
+from uvd.errors import ExperimentError
 
 ROOT = Path(__file__).resolve().parents[2]
 #: the last commit before the campaign work (issue 31): "today's code" of the issue
@@ -58,15 +59,22 @@ def _strip(x):
     return x
 
 
-def _one(src: Path, experiment: str, hours: float, out: Path) -> tuple[float, float]:
-    """One run in its own process: (CPU seconds, wall seconds)."""
+def _one(src: Path, experiment: str, hours: float, out: Path, who: str = ""
+         ) -> tuple[float, float]:
+    """One run in its own process: (CPU seconds, wall seconds). ``who``: the side, named in
+    the error of a run that fails (:class:`~uvd.errors.ExperimentError`)."""
     env = {**os.environ, "PYTHONPATH": str(src)}
     cmd = [sys.executable, "-c", "import sys; from uvd.cli import main; sys.exit(main())",
            "experiment", experiment, "--hours", str(hours), "--json", str(out), "--quiet"]
     c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run(cmd, cwd=src, env=env, check=True, stdout=subprocess.DEVNULL)
+    r = subprocess.run(cmd, cwd=src, env=env, stdout=subprocess.DEVNULL,
+                       stderr=subprocess.PIPE, text=True)
     wall = time.perf_counter() - t0
+    if r.returncode != 0:  # was CalledProcessError's traceback under the child's
+        last = next((ln for ln in reversed(r.stderr.splitlines()) if ln.strip()), "no output")
+        raise ExperimentError(f"{who or src}: uvd experiment {experiment} --hours {hours:g} "
+                              f"ended with exit code {r.returncode}: {last}")
     c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     return (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime), wall
 
@@ -83,11 +91,14 @@ def run(args: argparse.Namespace) -> dict:
             made = True
         try:
             sides = {"old": old.resolve(), "new": ROOT}
+            who = {"old": f"the old side ({args.old_ref if args.old_path is None else old})",
+                   "new": "this checkout"}
             # a warm-up run of each side: numba compiles (or loads) its kernels; the second
             # one's CPU is the side's start-up
             start: dict[str, float] = {}
             for name, src in [*sides.items(), *sides.items()]:
-                start[name] = _one(src, args.experiment, 0.01, tmp / f"warm-{name}.json")[0]
+                start[name] = _one(src, args.experiment, 0.01, tmp / f"warm-{name}.json",
+                                   who[name])[0]
             walls: dict[str, list[float]] = {"old": [], "new": []}
             cpus: dict[str, list[float]] = {"old": [], "new": []}
             order = []
@@ -96,7 +107,7 @@ def run(args: argparse.Namespace) -> dict:
             load0 = os.getloadavg()
             for j, name in enumerate(order):
                 cpu, wall = _one(sides[name], args.experiment, args.hours,
-                                 tmp / f"{name}-{j}.json")
+                                 tmp / f"{name}-{j}.json", who[name])
                 cpus[name].append(cpu)
                 walls[name].append(wall)
             load1 = os.getloadavg()
