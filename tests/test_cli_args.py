@@ -31,6 +31,13 @@ from uvd.fdc.detector import CusumSettings
     (["campaign", "smoke", "--limit", "-1"], "--limit"),
     (["campaign", "smoke", "--limit", "0"], "--limit"),
     (["campaign", "smoke", "--workers", "0"], "--workers"),
+    # session 33: 1000 workers on 2 cores were still starting two minutes later; a day's
+    # ceiling on the demo, whose lockstep twins are computed first (1e9 s: 75 GiB, traceback)
+    (["campaign", "smoke", "--workers", "1000"], "--workers"),
+    (["demo", "--duration", "1e9"], "--duration"),
+    # session 33: under a second no cycle ran and most experiments ended in an IndexError
+    (["experiment", "two-step", "--hours", "1e-9"], "--hours"),
+    (["bench", "lockstep", "--hours", "1e-9"], "--hours"),
     (["decode", "--format", "pd0", "--max-errors", "-5", "x.pd0"], "--max-errors"),
     (["xval", "--params", "p.toml", "--log", "l.bag", "--substeps", "0"], "--substeps"),
     (["bench", "lockstep", "--hours", "-1"], "--hours"),

@@ -45,6 +45,14 @@ def positive_float(text: str) -> float:
     return _float(text, lambda x: x > 0.0, "a positive finite number")
 
 
+def simulated_hours(text: str) -> float:
+    """A simulated duration in hours, at least a second (1/3600 h): shorter ones run no
+    control cycle, and most experiments ended in an IndexError on their empty logs
+    (``uvd experiment two-step --hours 1e-9``, session 33)."""
+    return _float(text, lambda x: x * 3600.0 >= 1.0, "a number of hours of at least a second "
+                                                      "(1/3600 = 0.000278)")
+
+
 def positive_float_upto(hi: float):
     """The type of a finite number in (0, ``hi``] (a duration with a ceiling the command's
     memory or waiting sets)."""
@@ -68,6 +76,24 @@ def float_in(lo: float, hi: float):
 def positive_int(text: str) -> int:
     """An integer ≥ 1 (a count of runs, cycles or repeats)."""
     return _int(text, lambda x: x >= 1, "an integer >= 1")
+
+
+def machine_cores() -> int:
+    """The machine's cores (those this process may run on)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def workers_count(text: str) -> int:
+    """A number of local worker processes for CPU-bound runs: 1 up to the machine's cores
+    (more only share them; `uvd campaign --workers 1000` on 2 cores started 1000 processes
+    and was still starting them two minutes later, session 33)."""
+    cores = machine_cores()
+    return _int(text, lambda x: 1 <= x <= cores,
+                f"an integer in 1..{cores} (this machine's cores; for more, a cluster's "
+                "scheduler)")
 
 
 def nonnegative_int(text: str) -> int:

@@ -15,12 +15,13 @@ import tempfile
 from pathlib import Path
 
 from uvd.bench import Bench
-from uvd.cliargs import positive_float, positive_int
+from uvd.cliargs import int_in, positive_float, positive_int
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--workers", type=positive_int, nargs="+", default=[1, 2],
-                   help="worker counts to compare (default 1 2)")
+    p.add_argument("--workers", type=int_in(1, 64), nargs="+", default=[1, 2],
+                   help="worker counts to compare, 1..64 (default 1 2; more than the "
+                        "machine's cores measures them shared)")
     p.add_argument("--runs", type=positive_int, default=16, help="runs of the default grid (16)")
     p.add_argument("--minutes", type=positive_float, default=6.0,
                    help="simulated minutes per run of the default grid (6)")

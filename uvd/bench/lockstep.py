@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 from uvd.bench import Bench
-from uvd.cliargs import positive_float, positive_int
+from uvd.cliargs import positive_int, simulated_hours
 from uvd.errors import ExperimentError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,7 +42,7 @@ _TIMING_KEYS = {"wall_seconds", "sim_wall_s", "wall_s", "summary"}
 def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--experiment", default="two-step",
                    help="the lockstep experiment timed (default two-step)")
-    p.add_argument("--hours", type=positive_float, default=0.5,
+    p.add_argument("--hours", type=simulated_hours, default=0.5,
                    help="simulated hours per run (default 0.5; the experiment's own: 6)")
     p.add_argument("--repeats", type=positive_int, default=2, help="runs of each side (default 2)")
     p.add_argument("--old-ref", default=DEFAULT_OLD_REF,

@@ -7,7 +7,6 @@ completes, so Ctrl-C, a lost worker or a crash loses at most the runs under way.
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -15,6 +14,7 @@ from pathlib import Path
 
 from uvd.campaign.spec import CampaignError, CampaignSpec
 from uvd.campaign.store import RowStore, code_version, make_row, run_key
+from uvd.cliargs import machine_cores
 
 
 @dataclass
@@ -33,10 +33,7 @@ class CampaignOutcome:
 
 def default_workers() -> int:
     """The machine's cores (those this process may run on)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
+    return machine_cores()
 
 
 #: where a local cluster's scheduler, workers and dashboard listen

@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from uvd.cliargs import output_file, output_folder, positive_int
+from uvd.cliargs import output_file, output_folder, positive_int, workers_count
 
 
 def register(sub) -> None:
@@ -23,9 +23,9 @@ def register(sub) -> None:
     p.add_argument("--out", type=output_folder, metavar="DIR",
                    help="where the rows go (default: campaigns/<name>)")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=positive_int, metavar="N",
-                       help="worker processes of the local Dask cluster (default: the "
-                            "machine's cores)")
+    where.add_argument("--workers", type=workers_count, metavar="N",
+                       help="worker processes of the local Dask cluster, at most the "
+                            "machine's cores (default: all of them)")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help="a running Dask scheduler instead of a local cluster")
     p.add_argument("--report", action="store_true",

@@ -7,7 +7,7 @@ import sys
 import time
 
 from uvd import experiments
-from uvd.cliargs import nonnegative_int, output_file, output_folder, positive_float
+from uvd.cliargs import nonnegative_int, output_file, output_folder, simulated_hours
 from uvd.jsonio import write_json
 from uvd.progress import Progress
 
@@ -26,7 +26,7 @@ def register(sub) -> None:
     p.add_argument("--record", type=output_folder, metavar="DIR",
                    help="write each control run to MCAP in DIR/<run>/ as the daemon records "
                         "(uvd report draws it; docs/recording.md)")
-    p.add_argument("--hours", type=positive_float, help="override the simulated duration (hours)")
+    p.add_argument("--hours", type=simulated_hours, help="override the simulated duration (hours)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of every random generator")
     p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=_run)

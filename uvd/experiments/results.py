@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from uvd import experiments
-from uvd.cliargs import nonnegative_int
+from uvd.cliargs import nonnegative_int, positive_int, workers_count
 from uvd.experiments.reproduce import compare, report_line
 from uvd.jsonio import write_json
 from uvd.progress import Progress
@@ -406,10 +406,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--campaigns", nargs="*", metavar="NAME",
                     help="run only these built-in campaigns (default: every published one, "
                          "uvd.campaign.publish.PUBLISHED; none with --only unless named here)")
-    ap.add_argument("--campaign-limit", type=int, metavar="N",
+    ap.add_argument("--campaign-limit", type=positive_int, metavar="N",
                     help="run at most N more runs of each campaign now (instalments)")
-    ap.add_argument("--workers", type=int, metavar="N",
-                    help="Dask workers of the campaigns (default: the machine's cores)")
+    ap.add_argument("--workers", type=workers_count, metavar="N",
+                    help="Dask workers of the campaigns, at most the machine's cores "
+                         "(default: all of them)")
     args = ap.parse_args(argv)
     progress = Progress("results", quiet=args.quiet)
     _progress = progress.note
