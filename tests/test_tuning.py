@@ -180,6 +180,16 @@ def test_bluerov2_config_gains_are_the_rule_and_uvd_tune_prints_them(capsys, tmp
         assert exit_.value.code == 2
         assert f"argument --damping: '{bad}' is not a positive finite number" in \
             capsys.readouterr().err
+    # finite but beyond the loop (session 33: both were a LinAlgError traceback too)
+    for argv, words in ((["--bandwidth", "1e308"], "--bandwidth 1e+308 rad/s is at or above "
+                         "the loop's Nyquist frequency (π × [loop] rate_hz 10 = 31.4 rad/s)"),
+                        (["--bandwidth", "1", "2", "3", "4", "5", "40"], "--bandwidth 40 rad/s"),
+                        (["--damping", "1e308"], "--damping 1e+308: its derivative gain 2ζωm "
+                         "overflows")):
+        assert main(["tune", *argv]) == 2
+        assert words in capsys.readouterr().err
+    assert main(["tune", "--bandwidth", "31", "--damping", "1e300"]) == 0  # below both: said
+    assert "UNSTABLE" in capsys.readouterr().out
 
 
 def test_adaptation_gains_keep_the_thesis_relative_rates_on_any_vehicle():

@@ -113,6 +113,27 @@ def _one_or_six(v):
     return v[0] if v is not None and len(v) == 1 else v
 
 
+def _beyond_the_loop(cfg, bandwidth, damping) -> str | None:
+    """Why a --bandwidth or --damping cannot be tuned for, or None: a bandwidth at or above the
+    loop's Nyquist frequency, π × rate_hz (no sampled loop follows it), or a pair whose gains
+    overflow (session 33: ``--bandwidth 1e308`` and ``--damping 1e308`` ended in numpy's
+    LinAlgError traceback on the infinite gains)."""
+    import math
+
+    nyquist = math.pi * cfg.loop.rate_hz
+    for w in bandwidth or ():
+        if w >= nyquist:
+            return (f"--bandwidth {w:g} rad/s is at or above the loop's Nyquist frequency "
+                    f"(π × [loop] rate_hz {cfg.loop.rate_hz:g} = {nyquist:.3g} rad/s): no "
+                    "sampled loop follows it")
+    m = max(float(x) for x in cfg.load_vehicle().params.M.diagonal())
+    for w in bandwidth or (nyquist,):
+        for z in damping or ():
+            if not math.isfinite(2.0 * z * w * m):
+                return f"--damping {z:g}: its derivative gain 2ζωm overflows"
+    return None
+
+
 def _toml_list(xs) -> str:
     return "[" + ", ".join(f"{x:.4g}" for x in xs) + "]"
 
@@ -129,6 +150,10 @@ def _run(args) -> int:
         cfg = load_config(args.config)
     except ConfigValidationError as exc:
         print(str(exc), file=sys.stderr)
+        return 2
+    why = _beyond_the_loop(cfg, args.bandwidth, args.damping)
+    if why:
+        print(f"uvd tune: {why}", file=sys.stderr)
         return 2
     f = tune_figures(cfg, _one_or_six(args.bandwidth), _one_or_six(args.damping))
     print(f"{f['vehicle']} at {f['rate_hz']:g} Hz: propeller lag {f['lag_s']:g} s, frame age "
