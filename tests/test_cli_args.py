@@ -38,6 +38,11 @@ from uvd.fdc.detector import CusumSettings
     # session 33: under a second no cycle ran and most experiments ended in an IndexError
     (["experiment", "two-step", "--hours", "1e-9"], "--hours"),
     (["bench", "lockstep", "--hours", "1e-9"], "--hours"),
+    # session 33: an OverflowError traceback (select's time_t), a kernel that ran on for
+    # minutes after its SIGTERM, a day-long ceiling on a sweep of lockstep runs
+    (["eta", "4", "0.5", "--timeout", "1e308"], "--timeout"),
+    (["xval", "--params", "p.toml", "--log", "l.bag", "--substeps", "1000000000"], "--substeps"),
+    (["tune", "--aid-sweep", "1e9"], "--aid-sweep"),
     (["decode", "--format", "pd0", "--max-errors", "-5", "x.pd0"], "--max-errors"),
     (["xval", "--params", "p.toml", "--log", "l.bag", "--substeps", "0"], "--substeps"),
     (["bench", "lockstep", "--hours", "-1"], "--hours"),

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from uvd.cliargs import int_in, positive_float
+from uvd.cliargs import int_in, positive_float_upto
 from uvd.links.mavlink.station import GroundStation
 
 #: how long texts are gathered after the COMMAND_ACK, at most, and how long a quiet spell
@@ -32,8 +32,10 @@ def add_station_options(p: argparse.ArgumentParser, timeout_s: float = 5.0) -> N
                    help="the link's UDP address (default: [mavlink] listen)")
     p.add_argument("--system", type=int_in(1, 255), default=255,
                    help="this station's MAVLink system id (default 255)")
-    p.add_argument("--timeout", type=positive_float, default=timeout_s,
-                   help=f"seconds to wait for each answer (default {timeout_s:g})")
+    # select() takes no wait past the platform's time_t: 1e308 was an OverflowError traceback
+    p.add_argument("--timeout", type=positive_float_upto(3600.0), default=timeout_s,
+                   help=f"seconds to wait for each answer, at most 3600 (default "
+                        f"{timeout_s:g})")
 
 
 def _udp_address(text: str) -> str:

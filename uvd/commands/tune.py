@@ -21,7 +21,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from uvd.cliargs import output_file, positive_float
+from uvd.cliargs import output_file, positive_float, positive_float_upto
 from uvd.runtime.schema import AXES
 
 DEFAULT_ZETA = 0.8
@@ -38,9 +38,10 @@ def register(sub) -> None:
     p.add_argument("--damping", type=positive_float, nargs="+", metavar="Z",
                    default=[DEFAULT_ZETA],
                    help=f"damping ratio ζ, one or six (default {DEFAULT_ZETA})")
-    p.add_argument("--aid-sweep", type=positive_float, metavar="S", default=None,
+    p.add_argument("--aid-sweep", type=positive_float_upto(86400.0), metavar="S", default=None,
                    help="choose AID's [estimation] gain_factors by a logarithmic sweep over an "
-                        "S-second lockstep simulation of this configuration (seed 1; minutes)")
+                        "S-second lockstep simulation of this configuration (seed 1; minutes; "
+                        "S at most a day)")
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the figures as JSON")
     p.set_defaults(handler=_run)
 
