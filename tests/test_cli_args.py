@@ -43,6 +43,8 @@ from uvd.fdc.detector import CusumSettings
     (["eta", "4", "0.5", "--timeout", "1e308"], "--timeout"),
     (["xval", "--params", "p.toml", "--log", "l.bag", "--substeps", "1000000000"], "--substeps"),
     (["tune", "--aid-sweep", "1e9"], "--aid-sweep"),
+    (["replay", "--realtime", "--wait", "1e308", "r.mcap"], "--wait"),  # OverflowError
+    (["replay", "--realtime", "--can-port", "70000", "r.mcap"], "--can-port"),
     (["decode", "--format", "pd0", "--max-errors", "-5", "x.pd0"], "--max-errors"),
     (["xval", "--params", "p.toml", "--log", "l.bag", "--substeps", "0"], "--substeps"),
     (["bench", "lockstep", "--hours", "-1"], "--hours"),

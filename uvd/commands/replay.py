@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from uvd.cliargs import output_file, output_folder, positive_float
+from uvd.cliargs import int_in, output_file, output_folder, positive_float_upto
 
 
 def register(sub) -> None:
@@ -36,14 +36,15 @@ def register(sub) -> None:
     rt.add_argument("--can-interface", choices=("udp_multicast", "virtual", "socketcan"),
                     help="python-can interface of the bus the daemon under test is on")
     rt.add_argument("--channel", help="its channel (multicast group, virtual name, vcan0)")
-    rt.add_argument("--can-port", type=int, help="UDP port of udp_multicast")
+    rt.add_argument("--can-port", type=int_in(1, 65535), help="UDP port of udp_multicast")
     rt.add_argument("--work", type=output_folder, metavar="DIR",
                     help="folder of the pseudo-terminals, the daemon's configuration and its "
                          "recording (default: a new one in the temporary directory)")
     rt.add_argument("--daemon", action="store_true",
                     help="start the daemon under test (uvd run --arm) and stop it at the end")
-    rt.add_argument("--wait", type=positive_float, default=60.0, metavar="S",
-                    help="longest wait for the daemon's first frame (default 60 s)")
+    rt.add_argument("--wait", type=positive_float_upto(86400.0), default=60.0, metavar="S",
+                    help="longest wait for the daemon's first frame (default 60 s, at most a "
+                         "day)")
     p.add_argument("--config", type=Path, metavar="FILE",
                    help="replay with this configuration instead of the recorded one "
                         "(compares tracking, not bits)")
