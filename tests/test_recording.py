@@ -249,6 +249,44 @@ def _rewrite(src: Path, dst: Path, edit, schema_names: dict[str, str] | None = N
         w.finish()
 
 
+def test_a_run_in_several_files_replays_whole_from_its_first(recorded, tmp_path, capsys):
+    """Found by probing (session 33): past ``rotate_mb`` / ``rotate_s`` the recorder starts
+    a new file, and a replay of the first file covered that file alone (49 of a run's 208
+    cycles), saying nothing of the rest; a later file replayed from a fresh state, "MISMATCH:
+    51 of 51". Here the recording is cut as the recorder cuts it (the start record repeated
+    atop each file), beside another run's files in the same folder."""
+    path, _, _, cycles = recorded
+    n = len(list(read_messages(path)))
+    cuts = [0, n // 3, 2 * n // 3, n]
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    names = [runs / f"uvd-20261130T06390{k}-{k:03d}.mcap" for k in range(3)]
+    for k, name in enumerate(names):
+        _rewrite(path, name, lambda i, topic, msg, k=k: msg if topic == "/uvd/start"
+                 or cuts[k] <= i < cuts[k + 1] else None)
+    for k in range(2):  # another run, started later: its own start record
+        _rewrite(path, runs / f"uvd-20261130T07000{k}-{k:03d}.mcap",
+                 lambda i, topic, msg: {**msg, "t_ns": msg["t_ns"] + 1}
+                 if topic == "/uvd/start" else msg)
+    out = tmp_path / "replay.json"
+    assert main(["replay", str(names[0]), "--lockstep", "--json", str(out)]) == 0
+    rep = json.loads(out.read_text())
+    assert rep["files"] == [str(x) for x in names] and rep["stopped"] is None
+    assert rep["cycles"] == rep["commands_compared"] == len(cycles) and rep["mismatches"] == 0
+    assert f"uvd replay {names[0]} (3 files of the run): {len(cycles)} cycles" in \
+        capsys.readouterr().out
+    assert main(["replay", str(names[1]), "--lockstep"]) == 2
+    assert f"{names[1]} is file 001 of its run: a replay starts from the run's first file " \
+           f"(the cycle's state before this one is not recorded), {names[0]}" in \
+           capsys.readouterr().err
+    names[1].unlink()  # a file of the run lost: the replay covers what comes before it
+    assert main(["replay", str(names[0]), "--lockstep", "--json", str(out)]) == 0
+    rep = json.loads(out.read_text())
+    assert rep["files"] == [str(names[0])] and 0 < rep["cycles"] < len(cycles)
+    assert rep["stopped"].startswith(f"file 001 of the run is not in {runs}: the replay ends "
+                                     "before it (1 later file(s) not read)"), rep["stopped"]
+
+
 def test_a_corrupted_frame_shows_as_the_first_mismatch(recorded, tmp_path):
     path, _, _, cycles = recorded
     armed_at = next(r["t_ns"] for r in cycles if r["state"] == "ARMED")

@@ -73,7 +73,8 @@ def _run(args) -> int:
     d["wall_s"] = wall
     if args.json:
         write_json(args.json, d)
-    print(f"uvd replay {args.recording}: {rep.cycles} cycles in {wall:.2f} s "
+    files = f" ({len(rep.files)} files of the run)" if len(rep.files) > 1 else ""
+    print(f"uvd replay {args.recording}{files}: {rep.cycles} cycles in {wall:.2f} s "
           f"({rep.operator_commands} operator commands re-applied, "
           f"{rep.missing_samples} samples not found in the raw frames)")
     if rep.stopped:

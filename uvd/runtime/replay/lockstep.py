@@ -18,9 +18,11 @@ With another configuration (``config``: other gains, another controller) the com
 expected to match; the report then compares tracking (position and velocity error against the
 reference) between the recording and the replay.
 
-Not replayable (said in the report, never silently wrong): a reload that applied keys (the
-replay stops there), a recording without its first file (the cycle's state at its start is
-unknown), a depth sensor on CAN (its samples are not raw serial bytes).
+A run recorded in several files (``rotate_mb`` / ``rotate_s``) is read whole from its first
+(:func:`~uvd.runtime.replay.records.run_files`). Not replayable (said in the report, never
+silently wrong): a reload that applied keys (the replay stops there), a later file of a run
+without its first (the cycle's state at its start is unknown: refused, naming the first), a
+depth sensor on CAN (its samples are not raw serial bytes).
 """
 
 from __future__ import annotations
@@ -41,9 +43,9 @@ from uvd.runtime.commands import SetParams, command_from_record
 from uvd.runtime.config import Config, load_config
 from uvd.runtime.cycle import inputs_from_record
 from uvd.runtime.replay.records import (
-    judged_messages,
     malformed_message,
     require_start,
+    run_messages,
     serial_entry,
 )
 from uvd.runtime.schema import with_values
@@ -68,29 +70,35 @@ class Recording:
     serial: list[tuple[str, int, bytes]]  # (source, receive t_ns, bytes), in arrival order
     #: the first damaged record or message, where what is read ends (None: none)
     damaged: str | None = None
+    #: the run's files read, in order (:func:`~uvd.runtime.replay.records.run_files`)
+    files: list[Path] = field(default_factory=list)
 
 
 def load_recording(path: str | Path) -> Recording:
-    """Read the channels a replay needs from one ``.mcap`` file.
+    """Read the channels a replay needs from a run's ``.mcap`` files: ``path``, its first,
+    and those the recorder started after it (:func:`~uvd.runtime.replay.records.run_files`;
+    before session 33 a replay read the first file alone, and said nothing of the rest).
 
     A damaged record, a message that is not JSON or a record that is not what its schema
     promises in a field the replay reads (:func:`~uvd.runtime.replay.records.record_problem`)
     ends what is read, as a cut does: every cycle before it has its inputs in the bytes
-    before its own record; ``damaged`` names it.
+    before its own record; ``damaged`` names it — as it names a file of the run missing from
+    the folder.
 
     Raises
     ------
     RecordingError
-        Not MCAP, or without a start record or cycles before any damage (the message names
-        the file and what is missing).
+        Not MCAP, not a run's first file, or without a start record or cycles before any
+        damage (the message names the file and what is missing).
     """
     path = Path(path)
     start = None
     cycles, commands, lifecycle, reloads, serial = [], [], [], [], []
     damage: list[str] = []
+    read: list[Path] = []
     topics = ("/uvd/start", "/uvd/cycle", "/uvd/command", "/uvd/lifecycle", "/uvd/reload",
               "/uvd/raw/serial")
-    for topic, t_ns, msg in judged_messages(path, topics, damage):
+    for topic, t_ns, msg in run_messages(path, topics, damage, read):
         if topic == "/uvd/cycle":
             cycles.append(msg)
         elif topic == "/uvd/raw/serial":
@@ -113,7 +121,7 @@ def load_recording(path: str | Path) -> Recording:
     if not cycles:
         raise RecordingError(f"{path}: no cycle records (/uvd/cycle){before}")
     return Recording(path, start, cycles, commands, lifecycle, reloads, serial,
-                     damage[0] if damage else None)
+                     damage[0] if damage else None, read)
 
 
 @dataclass
@@ -121,6 +129,8 @@ class ReplayReport:
     """The outcome of :func:`replay_lockstep` (``as_dict`` for ``--json``)."""
 
     recording: str
+    #: the run's files read (its first, then those the recorder started after it)
+    files: list[str] = field(default_factory=list)
     cycles: int = 0
     commands_compared: int = 0
     mismatches: int = 0
@@ -240,7 +250,8 @@ def _replay(rec: Recording, config, progress) -> ReplayReport:
     if cfg.sensors.depth.source == "can":
         raise ConfigError(f"{rec.path}: the depth sensor is on CAN — its samples are not in the "
                           "raw serial channels, so this recording cannot be replayed")
-    report = ReplayReport(recording=str(rec.path), same_config=same)
+    report = ReplayReport(recording=str(rec.path), files=[str(f) for f in rec.files],
+                          same_config=same)
     vehicle = cfg.load_vehicle()
     sup = Supervisor(make_cycle(cfg, vehicle, estimators=_estimators(cfg, rec)))
     samples = _samples(cfg, rec)

@@ -46,9 +46,9 @@ import numpy as np
 
 from uvd.runtime.process import stop_daemon
 from uvd.runtime.replay.records import (
-    judged_messages,
     malformed_message,
     require_start,
+    run_messages,
     serial_entry,
 )
 from uvd.telemetry.recording import RecordingError, read_messages
@@ -93,7 +93,9 @@ class WireRecording:
 
 
 def load_wire(path: str | Path) -> WireRecording:
-    """Read the raw channels, the start record and the cycles of a recording.
+    """Read the raw channels, the start record and the cycles of a recording: the run
+    ``path`` is the first file of, file after file
+    (:func:`~uvd.runtime.replay.records.run_messages`).
 
     A damaged message, or a record that is not what its schema promises in a field a replay
     reads (:func:`~uvd.runtime.replay.records.record_problem`, as the lockstep replay judges
@@ -113,7 +115,7 @@ def load_wire(path: str | Path) -> WireRecording:
     sent: list[tuple[int, int, bytes]] = []  # (t_ns, id, data) of the daemon's frames
     damage: list[str] = []
     topics = ("/uvd/start", "/uvd/raw/serial", "/uvd/raw/can", "/uvd/cycle", "/uvd/command")
-    for topic, t_ns, m in judged_messages(path, topics, damage):
+    for topic, t_ns, m in run_messages(path, topics, damage, []):
         if topic == "/uvd/cycle":
             cycles.append(m)
         elif topic == "/uvd/command":
