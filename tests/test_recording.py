@@ -283,8 +283,19 @@ def test_a_run_in_several_files_replays_whole_from_its_first(recorded, tmp_path,
     assert main(["replay", str(names[0]), "--lockstep", "--json", str(out)]) == 0
     rep = json.loads(out.read_text())
     assert rep["files"] == [str(names[0])] and 0 < rep["cycles"] < len(cycles)
-    assert rep["stopped"].startswith(f"file 001 of the run is not in {runs}: the replay ends "
-                                     "before it (1 later file(s) not read)"), rep["stopped"]
+    assert rep["stopped"].startswith(f"file 001 of the run is not in {runs}: the run is read "
+                                     "up to it (1 later file(s) not read)"), rep["stopped"]
+    # uvd report draws the run as the replay reads it
+    summary = write_report(names[0], tmp_path / "rep")
+    assert summary["files"] == [str(names[0])] and summary["cycles"] == rep["cycles"]
+    assert summary["missing_file"].startswith("file 001 of the run is not in")
+    names[1] = runs / "uvd-20261130T063901-001.mcap"
+    _rewrite(path, names[1], lambda i, topic, msg: msg if topic == "/uvd/start"
+             or cuts[1] <= i < cuts[2] else None)
+    summary = write_report(names[0], tmp_path / "rep")
+    assert summary["files"] == [str(x) for x in names] and "missing_file" not in summary
+    assert summary["cycles"] == len(cycles)
+    assert write_report(names[2], tmp_path / "rep")["files"] == [str(names[2])]  # alone
 
 
 def test_a_corrupted_frame_shows_as_the_first_mismatch(recorded, tmp_path):

@@ -36,8 +36,12 @@ def _run(args) -> int:
     except (RecordingError, ConfigError) as exc:
         print(f"uvd report: {exc}", file=sys.stderr)
         return 2
+    files = len(summary["files"])
     print(f"uvd report: {args.out / 'index.html'} — {summary['cycles']} cycles "
-          f"({summary['armed_cycles']} armed), {len(summary['figures'])} figures")
+          f"({summary['armed_cycles']} armed), {len(summary['figures'])} figures"
+          + (f", from the run's {files} files" if files > 1 else ""))
+    if summary.get("missing_file"):
+        print(f"uvd report: {summary['missing_file']}", file=sys.stderr)
     if summary.get("unreadable_messages"):
         print(f"uvd report: {summary['unreadable_messages']} unreadable message(s) skipped "
               f"(first: {summary['first_unreadable']})", file=sys.stderr)

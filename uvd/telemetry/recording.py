@@ -13,7 +13,7 @@ import json
 import mmap
 import re
 import struct
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from functools import cache
 from importlib import resources
 from pathlib import Path
@@ -25,7 +25,8 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Header, Message, Schema
 from mcap.stream_reader import breakup_chunk
 
-__all__ = ["CHANNELS", "schema", "read_messages", "RecordingError"]
+__all__ = ["CHANNELS", "schema", "read_messages", "RecordingError", "part_number", "run_files",
+           "start_of"]
 
 #: topic → (schema name, record type on the hub; None for the taps and the derived pose)
 CHANNELS: dict[str, tuple[str, str | None]] = {
@@ -265,3 +266,63 @@ def _resync(mm: mmap.mmap, start: int, channels: dict[int, str]) -> int | None:
                 not isinstance(rec, Message) or rec.channel_id in channels):
             return q
     return None
+
+
+#: the recorder's file names (uvd.links.mcap.McapRecorder): its wall clock at the file's start
+#: and the file's number in the run, 000 for the first
+_PART = re.compile(r"uvd-\d{8}T\d{6}-(\d{3,})\.mcap")
+
+
+def part_number(path: str | Path) -> int | None:
+    """The number the recorder gave this file in its run (0: the first), None for a file
+    not named by it."""
+    m = _PART.fullmatch(Path(path).name)
+    return int(m[1]) if m else None
+
+
+def start_of(path: str | Path) -> Mapping[str, Any] | None:
+    """A file's start record (the first message the recorder writes in each of a run's
+    files), None if it has none that reads."""
+    for _topic, _t, msg in read_messages(path, ("/uvd/start",), unreadable=[]):
+        return msg
+    return None
+
+
+def run_files(path: str | Path) -> tuple[list[Path], str | None]:
+    """The files of the run ``path`` is the first file of, in order, and what ended the list
+    early (None: nothing). Past ``rotate_mb`` / ``rotate_s`` the recorder starts a new file in
+    the same folder, numbered on, with the run's start record repeated at its top: the run
+    is the first file and those that follow it with the same start record. A file not named
+    by the recorder is a run of its own.
+
+    Raises
+    ------
+    RecordingError
+        ``path`` is a later file of its run (a replay starts from the run's first file: the
+        cycle's state before it is not recorded); the message names the first when it is in
+        the folder.
+    """
+    path = Path(path)
+    n = part_number(path)
+    if n is None:
+        return [path], None
+    start = start_of(path)
+    same = {}
+    for p in path.parent.glob("uvd-*.mcap"):
+        k = part_number(p)
+        if k is not None and p != path and start is not None and start_of(p) == start:
+            same.setdefault(k, p)
+    if n > 0:
+        first = same.get(0)
+        raise RecordingError(f"{path} is file {n:03d} of its run: a replay starts from the "
+                             f"run's first file (the cycle's state before this one is not "
+                             f"recorded), "
+                             + (f"{first}" if first else f"numbered 000, not in {path.parent}"))
+    files, k = [path], 1
+    while k in same:
+        files.append(same[k])
+        k += 1
+    later = sorted(x for x in same if x > k)
+    gap = (f"file {k:03d} of the run is not in {path.parent}: the run is read up to it "
+           f"({len(later)} later file(s) not read)") if later else None
+    return files, gap

@@ -31,7 +31,7 @@ import numpy as np
 from uvd.geometry import wrap_angles
 from uvd.io.figures import estimates_figure, mne_figure
 from uvd.jsonio import is_int64
-from uvd.telemetry.recording import RecordingError, read_messages
+from uvd.telemetry.recording import RecordingError, part_number, read_messages, run_files
 from uvd.telemetry.records import (
     array_shape,
     cycle_record_problem,
@@ -46,21 +46,30 @@ _ACTIONS = ("none", "warn", "fallback", "hold-depth", "zero-thrust", "disarm")
 
 
 def _load(path: Path) -> dict[str, list]:
-    """The report's channels of ``path``. Skipped and counted, the rest of the run drawn:
+    """The report's channels of ``path`` — of the whole run when it is a run's first file
+    (:func:`~uvd.telemetry.recording.run_files`: the files the recorder started after it;
+    a later file is drawn alone). Skipped and counted, the rest of the run drawn:
     ``out["unreadable"]``, the messages that were not JSON (a damaged byte);
     ``out["malformed"]``, the records that are JSON but not what their schema promises in a
-    field the report draws (:func:`_problem`)."""
+    field the report draws (:func:`_problem`); ``out["files"]``, the files read, and
+    ``out["missing"]``, a file of the run not in the folder (what comes after it is not
+    drawn)."""
     out: dict[str, list] = {"cycle": [], "estimate": [], "failsafe": [], "start": [],
                             "sink": []}
     topics = {f"/uvd/{k}": k for k in out}
     unreadable: list[str] = []
     malformed: list[str] = []
-    for topic, t_ns, msg in read_messages(path, list(topics), unreadable=unreadable):
-        why = _problem(topics[topic], msg)
-        if why is None:
-            out[topics[topic]].append(msg)
-        else:
-            malformed.append(f"{topic} record at {t_ns} ns: {why}")
+    files, gap = run_files(path) if not part_number(path) else ([path], None)
+    for k, part in enumerate(files):
+        for topic, t_ns, msg in read_messages(part, list(topics), unreadable=unreadable):
+            if k and topic == "/uvd/start":
+                continue  # repeated atop each later file of the run
+            why = _problem(topics[topic], msg)
+            if why is None:
+                out[topics[topic]].append(msg)
+            else:
+                malformed.append(f"{topic} record at {t_ns} ns: {why}")
+    out["files"], out["missing"] = [str(f) for f in files], gap
     out["cycle"] = _one_thruster_count(out["cycle"], malformed)
     out["unreadable"], out["malformed"] = unreadable, malformed
     if not out["cycle"]:
@@ -216,7 +225,10 @@ def _draw(plt, path: Path, out: Path, data: dict[str, list], params, say) -> dic
     summary = {"recording": str(path), "cycles": len(cyc), "armed_cycles": int(armed.sum()),
                "duration_s": float(t[-1]) if len(t) else 0.0,
                "failsafe_fired": sum(1 for e in data["failsafe"] if e.get("kind") == "fired"),
-               "estimates": len(est), "figures": [f for f, _ in figures]}
+               "estimates": len(est), "figures": [f for f, _ in figures],
+               "files": data["files"]}
+    if data["missing"]:
+        summary["missing_file"] = data["missing"]
     if data["sink"]:  # a recording or a link that failed during the run, as the operator
         summary["sinks_told"] = [m["text"] for m in data["sink"]]  # was told of it
     if data["unreadable"]:  # uvd report says so on stderr, --quiet or not
