@@ -4,7 +4,7 @@ file after a crash or a SIGKILL), and a second claimant learns which process hol
 
 The daemon claims its CAN bus (:func:`uvd.runtime.can_component.claim_bus`); sim-bridge
 claims the bus its emulated drives answer on and the links of its instruments
-(:meth:`sim_bridge.bridge.Bridge.run`): a second one would answer as the same nodes and take
+(:meth:`sim_bridge.bridge.SimBridge.run`): a second one would answer as the same nodes and take
 the links over.
 """
 

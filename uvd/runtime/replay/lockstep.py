@@ -19,7 +19,7 @@ expected to match; the report then compares tracking (position and velocity erro
 reference) between the recording and the replay.
 
 A run recorded in several files (``rotate_mb`` / ``rotate_s``) is read whole from its first
-(:func:`~uvd.runtime.replay.records.run_files`). Not replayable (said in the report, never
+(:func:`~uvd.telemetry.recording.run_files`). Not replayable (said in the report, never
 silently wrong): a reload that applied keys (the replay stops there), a later file of a run
 without its first (the cycle's state at its start is unknown: refused, naming the first), a
 depth sensor on CAN (its samples are not raw serial bytes).
@@ -70,13 +70,13 @@ class Recording:
     serial: list[tuple[str, int, bytes]]  # (source, receive t_ns, bytes), in arrival order
     #: the first damaged record or message, where what is read ends (None: none)
     damaged: str | None = None
-    #: the run's files read, in order (:func:`~uvd.runtime.replay.records.run_files`)
+    #: the run's files read, in order (:func:`~uvd.telemetry.recording.run_files`)
     files: list[Path] = field(default_factory=list)
 
 
 def load_recording(path: str | Path) -> Recording:
     """Read the channels a replay needs from a run's ``.mcap`` files: ``path``, its first,
-    and those the recorder started after it (:func:`~uvd.runtime.replay.records.run_files`;
+    and those the recorder started after it (:func:`~uvd.telemetry.recording.run_files`;
     before session 33 a replay read the first file alone, and said nothing of the rest).
 
     A damaged record, a message that is not JSON or a record that is not what its schema

@@ -93,11 +93,11 @@ def require_start(path: str | Path, start: Mapping[str, Any] | None, before: str
                              f"{before} — not a uvd recording, or not the first file of a run")
 
 
-
 def run_messages(path: str | Path, topics: tuple[str, ...], damage: list[str],
                  read: list[Path]) -> Iterator[tuple[str, int, Mapping[str, Any]]]:
-    """:func:`judged_messages` over the run ``path`` begins (:func:`run_files`), file after
-    file, its start record once (the first file's); ``read`` gets each file as it is opened.
+    """:func:`judged_messages` over the run ``path`` begins
+    (:func:`~uvd.telemetry.recording.run_files`), file after file, its start record once (the
+    first file's); ``read`` gets each file as it is opened.
     Damage in a file ends the run there; a file of the run missing from the folder is told
     in ``damage`` as what ends it."""
     files, gap = run_files(path)
