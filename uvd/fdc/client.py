@@ -168,7 +168,8 @@ class ReachNote:
         if list(info.routers_zid()) or list(info.peers_zid()):
             return None
         waited = time.monotonic() - self._t0 if ending else REACH_S
-        return (f"{self.who}: nothing reached through {self.via} in {waited:.0f} s (is the "
+        waited_s = f"{waited:.0f}" if waited >= 1.0 else f"{waited:.1f}"  # a 0.5 s run: "0.5"
+        return (f"{self.who}: nothing reached through {self.via} in {waited_s} s (is the "
                 "daemon running, its [telemetry.zenoh] listen that endpoint?)"
                 + ("" if ending else "; still trying"))
 
