@@ -221,6 +221,28 @@ def _no_file_may_grow() -> None:
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
 
 
+def test_a_demo_recorded_where_a_run_is_already_is_refused(tmp_path, capsys):
+    """Found by probing (session 33): a second `uvd demo --record rec` overwrote the first
+    run's demo.json, telemetry, truth and logs (its MCAP stayed, beside the second's). Now it
+    is refused before anything starts, the first run untouched; an empty or new folder is
+    taken."""
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    (rec / "demo.json").write_text("{}")
+    (rec / "uvd-20261130T053813-000.mcap").write_bytes(b"x")
+    assert main(["demo", "--duration", "1", "--record", str(rec)]) == 2
+    assert capsys.readouterr().err == (
+        f"uvd demo: --record {rec}: it holds a run already (demo.json, "
+        "uvd-20261130T053813-000.mcap); give another folder, or remove that one: nothing "
+        "started\n")
+    assert sorted(p.name for p in rec.iterdir()) == ["demo.json", "uvd-20261130T053813-000.mcap"]
+    from uvd.commands.demo import _a_run_in
+    assert _a_run_in(tmp_path / "new") is None and _a_run_in(tmp_path / "empty") is None
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "notes.txt").write_text("mine")
+    assert _a_run_in(tmp_path / "other") is None
+
+
 def test_a_run_too_long_for_memory_is_an_error_not_a_traceback(capsys):
     """Found by probing (session 33): `uvd experiment ambc-robust --hours 1e9` and `uvd demo
     --duration 1e9` ended in numpy's _ArrayMemoryError traceback. Any command: one line, exit

@@ -65,7 +65,8 @@ def register(sub) -> None:
                                      "run is computed first)")
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the figures to this file")
     p.add_argument("--record", type=output_folder, metavar="DIR",
-                   help="keep the run's files (config, telemetry, truth, CAN log, logs)")
+                   help="keep the run's files (config, telemetry, truth, CAN log, logs) in "
+                        "DIR, which must not hold another run's")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="base configuration (default: the embedded config/sim.toml)")
     p.add_argument("--seed", type=nonnegative_int, default=0,
@@ -665,6 +666,20 @@ def _exit_words(code: int | None) -> str:
     return f"exit code {code}"
 
 
+#: what a recorded demo leaves in its folder (the black box's files are uvd-*.mcap)
+RUN_FILES = ("demo.json", "uvd.toml", "telemetry.jsonl", "truth.bin", "can.log", "daemon.log")
+
+
+def _a_run_in(folder: Path) -> str | None:
+    """The files of an earlier recorded run in ``folder`` (a few, named), or None."""
+    p = Path(folder)
+    if not p.is_dir():
+        return None
+    found = [n for n in RUN_FILES if (p / n).exists()] + sorted(
+        x.name for x in p.glob("uvd-*.mcap"))
+    return ", ".join(found[:3]) + (", …" if len(found) > 3 else "") if found else None
+
+
 def _run(args) -> int:
     fault = None
     if not args.fault and (args.accept or args.false_alarm):
@@ -685,6 +700,11 @@ def _run(args) -> int:
         from uvd.commands import checked_config
         if checked_config(args.config, "demo", "nothing started") is None:
             return 2
+    held = _a_run_in(args.record) if args.record else None
+    if held:  # a second run there overwrote the first's figures, telemetry and truth
+        print(f"uvd demo: --record {args.record}: it holds a run already ({held}); give "
+              "another folder, or remove that one: nothing started", file=sys.stderr)
+        return 2
     figures, code = run_demo(args.duration, record=args.record, base=args.config,
                              seed=args.seed, fault=fault, accept=args.accept or "confirm",
                              false_alarm=args.false_alarm)
