@@ -149,6 +149,10 @@ port = "/dev/ttyUSB2"
     ("[loop]\nrate_hz = 10\n[can.amplifiers]\ncommand_timeout_ms = 200",
      "can.amplifiers.command_timeout_ms",
      "200 ms is shorter than three cycles of [loop] rate_hz 10 (300 ms)"),
+    # session 33: AID steps once a cycle, and its observer's Euler step diverges at a·dt ≥ 2
+    ("[estimation]\naid = true\ngains = [30, 5000, 20000, 2000, 2000]", "estimation.gains",
+     "the observer gain a = 30 at a step of 0.1 s makes a·dt = 3 ≥ 2: AID's velocity estimate "
+     "((4.10), (4.23)) diverges; a must stay under 2/dt = 20 ([loop] rate_hz 10)"),
 ])
 def test_single_mistakes(tmp_path, snippet, key, words):
     _, errs = errors_of(tmp_path, snippet + "\n" + MINIMAL)

@@ -115,6 +115,19 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
     assert "lacks array(s)" in capsys.readouterr().err
 
 
+def test_an_observer_gain_the_run_cannot_carry_is_refused(run_file, tmp_path, capsys):
+    """Session 33: `--gains 1e308,…` froze AID at its first step and wrote the file, with
+    numpy's overflow warning and "RMS error inf %"; a·dt ≥ 2 diverges whatever the run."""
+    out = tmp_path / "x.toml"
+    assert main(["identify", "--log", str(run_file), "--method", "aid", "--gains",
+                 "20,5000,20000,2000,2000", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--gains: the observer gain a = 20 at a step of 0.1 s makes a·dt = 2 ≥ 2" in err, err
+    assert "a must stay under 2/dt = 20 (the run's sample period)" in err and not out.exists()
+    from uvd.estimation.aid import observer_problem
+    assert observer_problem(19.9, 0.1) is None and observer_problem(10.0, 0.02) is None
+
+
 def test_runlog_from_uvd_run_telemetry(run_file, tmp_path, capsys):
     """The daemon's JSON-lines cycle records as a run: nominal grid, longest stretch."""
     run = load_runlog(run_file)

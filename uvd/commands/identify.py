@@ -67,8 +67,12 @@ def identify_aid(run, theta0, gains, progress=None):
     velocity-estimate error ∆v = v̂ − v of every sample, (n, 6). ``progress(done, total)``
     every 1000 samples."""
     from uvd.control.types import VehicleState
-    from uvd.estimation.aid import AID6Params, aid6_init, aid6_step
+    from uvd.errors import ConfigError
+    from uvd.estimation.aid import AID6Params, aid6_init, aid6_step, observer_problem
 
+    why = observer_problem(gains.a, run.dt)
+    if why is not None:
+        raise ConfigError(f"--gains: {why} (the run's sample period)")
     prm = AID6Params(gains=gains, input_interp=run.input_interp)
     st = aid6_init(theta0)
     H = run.H
@@ -275,6 +279,10 @@ def _run_logs(args) -> int:
     if args.method == "aid":
         gains = (parse_gains(args.gains, 3) if args.gains else
                  scaled_aid_gains(np.diag(first.M), rotational=True))
+        from uvd.estimation.aid import observer_problem
+        why = observer_problem(gains.a, max(r.dt for r in runs))
+        if why is not None:
+            raise ConfigError(f"--gains: {why} (the profile's grid)")
     else:
         gains = None
     window = 1.0 if args.window is None else args.window

@@ -474,6 +474,18 @@ class AID6Gains:
         _check_gains(self, ("a", "gamma1", "gamma2", "gamma3", "gamma4"), 6, N_THETA_UV)
 
 
+def observer_problem(a: float, dt: float) -> str | None:
+    """Why the velocity observer of (4.23) / (4.10) diverges at gain ``a`` and step ``dt``
+    (s), or None. Its Euler step leaves the estimate's error (1 − a·dt) times itself plus the
+    model's part, which grows unless a·dt < 2 (a > 0 is :class:`AID6Gains`' own check):
+    ``uvd identify --gains 1e308,…`` froze at its first step, "RMS error inf %"."""
+    if a * dt < 2.0:
+        return None
+    return (f"the observer gain a = {a:g} at a step of {dt:g} s makes a·dt = {a * dt:g} ≥ 2: "
+            f"AID's velocity estimate ((4.10), (4.23)) diverges; a must stay under 2/dt = "
+            f"{2.0 / dt:g}")
+
+
 def _check_gains(g, names, n: int, p: int) -> None:
     """Every gain of ``names``, each of the ``n`` per-DOF scales and each of the ``p``
     per-entry scales (if given) finite and > 0."""

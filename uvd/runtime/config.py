@@ -735,6 +735,12 @@ class Config:
                                               "[telemetry.zenoh] enabled = true"))
         if self.sensors.depth.source == "can" and not self.can.depth.enabled:
             out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
+        if self.estimation.aid:  # AID steps once a cycle: its observer's step is the period
+            from uvd.estimation.aid import observer_problem
+            why = observer_problem(self.estimation.gains[0], 1.0 / self.loop.rate_hz)
+            if why:
+                out.append(("estimation.gains", f"{why} ([loop] rate_hz "
+                                                 f"{self.loop.rate_hz:g})"))
         amps = self.can.amplifiers
         why = short_deadline(amps.command_timeout_ms, self.loop.rate_hz)
         if amps.configure and why:
