@@ -245,7 +245,8 @@ class EstimationSection:
     gains: tuple[float, float, float, float, float] = setting(
         (10.0, 5000.0, 20000.0, 2000.0, 2000.0),
         doc="AID gains [a, γ₁, γ₂, γ₃, γ₄] of Theorem 4.3.1, each > 0: a (1/s) pulls v̂ "
-            "toward v (4.23); γ₁, γ₂, γ₃, γ₄ scale the adaptation rates of M̂, D̂ᵢ, ĝ, b̂ "
+            "toward v (4.23), under 2 × [loop] rate_hz (its Euler step diverges at a·dt ≥ 2); "
+            "γ₁, γ₂, γ₃, γ₄ scale the adaptation rates of M̂, D̂ᵢ, ĝ, b̂ "
             "(4.24)-(4.27) (larger = faster); default §4.6's, chosen for the JHU ROV: with "
             "scale_to_vehicle each DOF's γ's are multiplied by its mass over the JHU ROV's")
     scale_to_vehicle: bool = setting(
