@@ -180,6 +180,28 @@ def test_drives_left_unconfigured_are_warned_of_their_own_deadline(tmp_path):
     assert deadline_warnings({1: 200, 2: None}, 50.0) == []
 
 
+def test_two_of_the_daemons_listeners_on_one_udp_port_are_refused(tmp_path):
+    # found by probing (session 33): an INS on MAVLink's port passed check-config, and the
+    # start failed 5 s later on "Address already in use"
+    ins = MINIMAL.replace('"/dev/ttyUSB0"', '"udp://127.0.0.1:14551"')
+    _, errs = errors_of(tmp_path, ins + '[mavlink]\nenabled = true\nlisten = "127.0.0.1:14551"\n')
+    assert errs["mavlink.listen"] == ("udp 127.0.0.1:14551 is sensors.ins.port's too: the "
+                                      "daemon's second listener there would fail to bind at "
+                                      "start"), errs
+    wild = MINIMAL.replace('"/dev/ttyUSB0"', '"udp://0.0.0.0:8110"').replace(
+        '"/dev/ttyUSB1"', '"udp://127.0.0.1:8110"')
+    _, errs = errors_of(tmp_path, wild)
+    assert "is sensors.ins.port's too" in errs["sensors.dvl.port"], errs
+    zen = MINIMAL.replace('"/dev/ttyUSB0"', '"udp://127.0.0.1:7447"')
+    _, errs = errors_of(tmp_path, zen + '[telemetry.zenoh]\nenabled = true\n'
+                        'listen = ["udp/127.0.0.1:7447"]\n')
+    assert "is sensors.ins.port's too" in errs["telemetry.zenoh.listen[0]"], errs
+    ok = MINIMAL.replace('"/dev/ttyUSB0"', '"udp://127.0.0.1:8110"').replace(
+        '"/dev/ttyUSB1"', '"udp://127.0.0.1:8111"')
+    load_config(write(tmp_path, ok + '[mavlink]\nenabled = true\nlisten = "127.0.0.1:14551"\n'
+                      '[telemetry.zenoh]\nenabled = true\nlisten = ["tcp/127.0.0.1:8110"]\n'))
+
+
 def test_port_forms(tmp_path):
     ok = MINIMAL.replace('"/dev/ttyUSB0"', '"udp://0.0.0.0:8110"').replace(
         '"/dev/ttyUSB1"', '"tcp://10.0.0.5:8112"')

@@ -677,6 +677,38 @@ class SimulationSection:
     instruments: SimInstrumentsSection = section(SimInstrumentsSection)
 
 
+_ANY_HOST = {"0.0.0.0", "::", "[::]"}
+
+
+def shared_udp_ports(cfg: Config) -> list[tuple[str, str]]:
+    """``[(key, why)]`` for each UDP address the daemon binds that another of its own
+    listeners binds already — a PHINS/DVL/depth ``udp://`` port, ``[mavlink] listen``,
+    ``[telemetry.zenoh] listen`` ``udp/…`` — the same port on the same host or on the
+    wildcard one. The second to bind failed at start ("start failed … Address already in
+    use", found by probing in session 33: an INS on udp://127.0.0.1:14551, MAVLink's)."""
+    binds: list[tuple[str, str, int]] = []
+    for name in ("ins", "dvl", "depth"):
+        m = _URL.match(getattr(cfg.sensors, name).port or "")
+        if m and m.group(1) == "udp":
+            binds.append((f"sensors.{name}.port", m.group("host"), int(m.group("port"))))
+    if cfg.mavlink.enabled and cfg.mavlink.listen:
+        host, _, port = cfg.mavlink.listen.rpartition(":")
+        binds.append(("mavlink.listen", host, int(port)))
+    if cfg.telemetry.zenoh.enabled:
+        for i, ep in enumerate(cfg.telemetry.zenoh.listen):
+            m = re.fullmatch(r"udp/(.+):(\d+)", ep)
+            if m:
+                binds.append((f"telemetry.zenoh.listen[{i}]", m[1], int(m[2])))
+    out = []
+    for k, (key, host, port) in enumerate(binds):
+        for other, h, p in binds[:k]:
+            if port and p == port and (h == host or {h, host} & _ANY_HOST):
+                out.append((key, f"udp {host}:{port} is {other}'s too: the daemon's second "
+                                 "listener there would fail to bind at start"))
+                break
+    return out
+
+
 def short_deadline(timeout_ms: int, rate_hz: float) -> str | None:
     """Why the drives' RPDO deadline (0x1400:05) is too short for the loop's rate, or None.
 
@@ -736,6 +768,7 @@ class Config:
                                               "[telemetry.zenoh] enabled = true"))
         if self.sensors.depth.source == "can" and not self.can.depth.enabled:
             out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
+        out += shared_udp_ports(self)
         if self.estimation.aid:  # AID steps once a cycle: its observer's step is the period
             from uvd.estimation.aid import observer_problem
             why = observer_problem(self.estimation.gains[0], 1.0 / self.loop.rate_hz)
