@@ -180,6 +180,21 @@ def test_drives_left_unconfigured_are_warned_of_their_own_deadline(tmp_path):
     assert deadline_warnings({1: 200, 2: None}, 50.0) == []
 
 
+def test_two_instruments_on_one_serial_device_are_refused(tmp_path):
+    # found by probing (session 33): an INS and a DVL on one device passed check-config
+    _, errs = errors_of(tmp_path, MINIMAL.replace('"/dev/ttyUSB1"', '"/dev/ttyUSB0"'))
+    assert errs["sensors.dvl.port"] == ("'/dev/ttyUSB0' is sensors.ins.port's device too: two "
+                                        "readers on one device would each get part of its "
+                                        "bytes"), errs
+    dev = tmp_path / "ttyUSB0"
+    dev.write_text("")
+    (tmp_path / "by-id").symlink_to(dev)  # as /dev/serial/by-id/… names /dev/ttyUSB0
+    linked = MINIMAL.replace('"/dev/ttyUSB0"', f'"{dev}"').replace(
+        '"/dev/ttyUSB2"', f'"{tmp_path / "by-id"}"')
+    _, errs = errors_of(tmp_path, linked)
+    assert "is sensors.ins.port's device too" in errs["sensors.depth.port"], errs
+
+
 def test_two_of_the_daemons_listeners_on_one_udp_port_are_refused(tmp_path):
     # found by probing (session 33): an INS on MAVLink's port passed check-config, and the
     # start failed 5 s later on "Address already in use"

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import ipaddress
 import math
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -680,12 +681,14 @@ class SimulationSection:
 _ANY_HOST = {"0.0.0.0", "::", "[::]"}
 
 
-def shared_udp_ports(cfg: Config) -> list[tuple[str, str]]:
-    """``[(key, why)]`` for each UDP address the daemon binds that another of its own
+def shared_ports(cfg: Config) -> list[tuple[str, str]]:
+    """``[(key, why)]`` for each serial device two instruments name
+    (:func:`_shared_devices`) and each UDP address the daemon binds that another of its own
     listeners binds already — a PHINS/DVL/depth ``udp://`` port, ``[mavlink] listen``,
     ``[telemetry.zenoh] listen`` ``udp/…`` — the same port on the same host or on the
     wildcard one. The second to bind failed at start ("start failed … Address already in
-    use", found by probing in session 33: an INS on udp://127.0.0.1:14551, MAVLink's)."""
+    use", found by probing in session 33: an INS on udp://127.0.0.1:14551, MAVLink's); an
+    INS and a DVL on one device passed check-config."""
     binds: list[tuple[str, str, int]] = []
     for name in ("ins", "dvl", "depth"):
         m = _URL.match(getattr(cfg.sensors, name).port or "")
@@ -699,13 +702,35 @@ def shared_udp_ports(cfg: Config) -> list[tuple[str, str]]:
             m = re.fullmatch(r"udp/(.+):(\d+)", ep)
             if m:
                 binds.append((f"telemetry.zenoh.listen[{i}]", m[1], int(m[2])))
-    out = []
+    out = _shared_devices(cfg)
     for k, (key, host, port) in enumerate(binds):
         for other, h, p in binds[:k]:
             if port and p == port and (h == host or {h, host} & _ANY_HOST):
                 out.append((key, f"udp {host}:{port} is {other}'s too: the daemon's second "
                                  "listener there would fail to bind at start"))
                 break
+    return out
+
+
+def _shared_devices(cfg: Config) -> list[tuple[str, str]]:
+    """``[(key, why)]`` for an instrument's serial device that another instrument's port
+    names too (the same path, or the same device through a link: /dev/serial/by-id/… and
+    /dev/ttyUSB0): two readers on one device each get part of its bytes."""
+    seen: dict[str, str] = {}
+    out = []
+    for name in ("ins", "dvl", "depth"):
+        port = getattr(cfg.sensors, name).port
+        if not port or not port.startswith("/") or (
+                name == "depth" and cfg.sensors.depth.source != "serial"):
+            continue
+        key = f"sensors.{name}.port"
+        real = os.path.realpath(port)
+        other = seen.get(port) or seen.get(real)
+        if other:
+            out.append((key, f"{port!r} is {other}'s device too: two readers on one device "
+                             "would each get part of its bytes"))
+        seen.setdefault(port, key)
+        seen.setdefault(real, key)
     return out
 
 
@@ -768,7 +793,7 @@ class Config:
                                               "[telemetry.zenoh] enabled = true"))
         if self.sensors.depth.source == "can" and not self.can.depth.enabled:
             out.append(("sensors.depth.source", "\"can\" needs [can.depth] enabled = true"))
-        out += shared_udp_ports(self)
+        out += shared_ports(self)
         if self.estimation.aid:  # AID steps once a cycle: its observer's step is the period
             from uvd.estimation.aid import observer_problem
             why = observer_problem(self.estimation.gains[0], 1.0 / self.loop.rate_hz)
