@@ -44,6 +44,10 @@ from uvd.fdc.detector import CusumSettings
     (["xval", "--params", "p.toml", "--log", "l.bag", "--substeps", "1000000000"], "--substeps"),
     (["tune", "--aid-sweep", "1e9"], "--aid-sweep"),
     (["replay", "--realtime", "--wait", "1e308", "r.mcap"], "--wait"),  # OverflowError
+    # named DepthConverter's fields rather than the options (session 33)
+    (["decode", "--format", "digiquartz", "--unit", "99", "x.dq"], "--unit"),
+    (["decode", "--format", "digiquartz", "--latitude", "1e9", "x.dq"], "--latitude"),
+    (["decode", "--format", "digiquartz", "--atmosphere-pa", "-5", "x.dq"], "--atmosphere-pa"),
     (["replay", "--realtime", "--can-port", "70000", "r.mcap"], "--can-port"),
     (["decode", "--format", "pd0", "--max-errors", "-5", "x.pd0"], "--max-errors"),
     (["xval", "--params", "p.toml", "--log", "l.bag", "--substeps", "0"], "--substeps"),

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from drivers import digiquartz, frames, pd0, phins_ascii, phins_stdbin
 from drivers.framing import decode_bytes
-from uvd.cliargs import nonnegative_int
+from uvd.cliargs import float_in, int_in, nonnegative_float, nonnegative_int
 from uvd.errors import ConfigError
 from uvd.geometry import wrap_angle
 from uvd.jsonio import to_jsonable
@@ -39,11 +39,13 @@ def register(sub) -> None:
     p.add_argument("--max-errors", type=nonnegative_int, default=50,
                    help="damaged stretches listed in the summary (default 50)")
     g = p.add_argument_group("digiquartz")
-    g.add_argument("--unit", type=int, default=1, help="UN setting: 1 psi … 8 mH2O")
+    # judged at their options (the converter's own words named DepthConverter's fields)
+    g.add_argument("--unit", type=int_in(1, 8), default=1, help="UN setting: 1 psi … 8 mH2O")
     g.add_argument("--water", choices=["fresh", "sea"], default="fresh")
-    g.add_argument("--latitude", type=float, default=39.33, help="for sea water (deg)")
-    g.add_argument("--atmosphere-pa", type=float, default=101325.0,
-                   help="atmospheric tare (Pa)")
+    g.add_argument("--latitude", type=float_in(-90.0, 90.0), default=39.33,
+                   help="for sea water (deg, -90..90)")
+    g.add_argument("--atmosphere-pa", type=nonnegative_float, default=101325.0,
+                   help="atmospheric tare (Pa; 0 for a gauge sensor)")
     p.set_defaults(handler=_run)
 
 
