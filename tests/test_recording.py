@@ -25,6 +25,7 @@ from itertools import pairwise
 from pathlib import Path
 
 import jsonschema
+import numpy as np
 import pytest
 
 from tests.hil_daemon import reusing_bridge, run_scenario, running_bridge
@@ -32,7 +33,7 @@ from uvd.cli import main
 from uvd.runtime import commands as cmd
 from uvd.runtime.config import load_config
 from uvd.runtime.replay.lockstep import replay_lockstep
-from uvd.telemetry.recording import CHANNELS, RecordingError, read_messages, schema
+from uvd.telemetry.recording import CHANNELS, RecordingError, load_run, read_messages, schema
 from uvd.telemetry.report import write_report
 
 pytestmark = pytest.mark.slow
@@ -279,7 +280,12 @@ def test_a_run_in_several_files_replays_whole_from_its_first(recorded, tmp_path,
     assert f"{names[1]} is file 001 of its run: a replay starts from the run's first file " \
            f"(the cycle's state before this one is not recorded), {names[0]}" in \
            capsys.readouterr().err
+    # uvd identify and uvd xval read the same run (they asked for another system's profile)
+    whole, alone = load_run(path), load_run(names[0])
+    assert len(alone) == len(whole) > 20 and np.array_equal(alone.u, whole.u)
+    assert 0 < len(load_run(names[2])) < len(whole)  # a later file alone, as the report
     names[1].unlink()  # a file of the run lost: the replay covers what comes before it
+    assert "file 001 of the run is not in" in load_run(names[0]).stretch_note()
     assert main(["replay", str(names[0]), "--lockstep", "--json", str(out)]) == 0
     rep = json.loads(out.read_text())
     assert rep["files"] == [str(names[0])] and 0 < rep["cycles"] < len(cycles)

@@ -158,9 +158,9 @@ def _run(args) -> int:
     from uvd.estimation.aid import INITP_6DOF, aid6_params
     from uvd.estimation.ls import DiffFilter, ls_identify
     from uvd.io.params import params_from_toml, save_params
-    from uvd.io.runlog import load_runlog
     from uvd.jsonio import write_json
     from uvd.progress import Progress
+    from uvd.telemetry.recording import load_run
 
     if args.linear_damping and (not args.profile or args.method == "aid"):
         raise ConfigError("--linear-damping: only with --profile (the rotational model of "
@@ -174,7 +174,7 @@ def _run(args) -> int:
     args.log = args.log[0]
     if args.window is None:
         args.window = 2.1
-    run = load_runlog(args.log)
+    run = load_run(args.log)
     if run.stretch_note():
         print(f"{args.log}: {run.stretch_note()}")
     summary: dict = {"log": str(args.log), "method": args.method, "samples": len(run.t),

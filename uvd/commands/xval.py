@@ -57,8 +57,8 @@ def _run(args) -> int:
     from uvd.estimation.xval import STATES_6DOF, cross_validate, format_mae_table
     from uvd.io.figures import write_xval_figures
     from uvd.io.params import params_from_toml
-    from uvd.io.runlog import load_runlog
     from uvd.jsonio import write_json
+    from uvd.telemetry.recording import load_run
 
     if args.profile:
         return _run_logs(args)
@@ -67,7 +67,7 @@ def _run(args) -> int:
     args.log = args.log[0]
     params = params_from_toml(args.params)
     _warn_if_not_physical(args.params, params.M, "M")
-    run = load_runlog(args.log)
+    run = load_run(args.log)
     if run.stretch_note():
         print(f"{args.log}: {run.stretch_note()}")
     res = cross_validate(params, run, substeps=args.substeps)

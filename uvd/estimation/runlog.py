@@ -126,8 +126,8 @@ class RunLog:
                       v_true=None if self.v_true is None else self.v_true[sl])
 
     def stretch_note(self) -> str:
-        """What :func:`uvd.io.runlog.runlog_from_telemetry` kept, when it had to cut the run
-        ("" otherwise)."""
+        """What :func:`uvd.io.runlog.runlog_from_telemetry` kept, when it had to cut the run,
+        and a recorded run's file missing from its folder ("" otherwise)."""
         segs = self.extra.get("segments") or []
         bad = self.extra.get("bad_lines", 0)
         parts = []
@@ -137,6 +137,8 @@ class RunLog:
                          f"{sum(n for _, n in segs)} samples")
         if bad:
             parts.append(f"{bad} unreadable line(s) skipped")
+        if self.extra.get("missing_file"):  # a black-box run's (uvd.telemetry.recording)
+            parts.append(self.extra["missing_file"])
         return "; ".join(parts)
 
     @classmethod

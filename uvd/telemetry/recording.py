@@ -282,9 +282,12 @@ def part_number(path: str | Path) -> int | None:
 
 def start_of(path: str | Path) -> Mapping[str, Any] | None:
     """A file's start record (the first message the recorder writes in each of a run's
-    files), None if it has none that reads."""
-    for _topic, _t, msg in read_messages(path, ("/uvd/start",), unreadable=[]):
-        return msg
+    files), None if it has none that reads (or is not MCAP at all)."""
+    try:
+        for _topic, _t, msg in read_messages(path, ("/uvd/start",), unreadable=[]):
+            return msg
+    except (RecordingError, OSError):
+        return None
     return None
 
 
@@ -326,3 +329,29 @@ def run_files(path: str | Path) -> tuple[list[Path], str | None]:
     gap = (f"file {k:03d} of the run is not in {path.parent}: the run is read up to it "
            f"({len(later)} later file(s) not read)") if later else None
     return files, gap
+
+
+def load_run(path: str | Path):
+    """A :class:`uvd.io.runlog.RunLog` of a run in any form uvd leaves: a black-box recording
+    (an ``.mcap`` holding a start record — its ``/uvd/cycle`` records, of the run's files
+    whole from its first, :func:`run_files`, or of a later file alone) or what
+    :func:`uvd.io.runlog.load_runlog` reads (``.npz``, the telemetry's JSON lines). Before
+    session 33 ``uvd identify`` and ``uvd xval`` refused the daemon's own recording as
+    "another system's" and asked for a log profile."""
+    from uvd.io.runlog import load_runlog, runlog_from_records
+    path = Path(path)
+    if path.suffix != ".mcap" or not path.is_file() or start_of(path) is None:
+        return load_runlog(path)
+    # a later file of a run alone, as uvd report draws it (its data need no state before it)
+    files, gap = run_files(path) if not part_number(path) else ([path], None)
+
+    def cycles():
+        for part in files:
+            for _topic, _t, msg in read_messages(part, ("/uvd/cycle",), unreadable=[]):
+                yield msg
+    where = f"{path} ({len(files)} files of the run)" if len(files) > 1 else path
+    run = runlog_from_records(cycles(), name=path.stem, source=f"recording {where}",
+                              where=where)
+    if gap is not None:
+        run.extra["missing_file"] = gap
+    return run
