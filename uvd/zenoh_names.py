@@ -37,6 +37,17 @@ def vehicle_key_problem(key: str) -> str | None:
     return None
 
 
+def endpoint_address(text: str) -> tuple[str, str, int] | None:
+    """``(protocol, host, port)`` of an endpoint whose protocol has a port and that carries
+    no metadata or configuration (``udp/127.0.0.1:7447`` → ``("udp", "127.0.0.1", 7447)``;
+    an IPv6 host keeps its brackets), else None."""
+    m = _ENDPOINT.fullmatch(text) if isinstance(text, str) else None
+    if m is None or m.group("proto") not in _PORTED or m.group(3) or m.group(4):
+        return None
+    host, sep, port = m.group("addr").rpartition(":")
+    return (m.group("proto"), host, int(port)) if sep and host and port.isdigit() else None
+
+
 def endpoint_problem(text: str) -> str | None:
     """Why ``text`` is not a Zenoh endpoint (``tcp/127.0.0.1:7447``), or None."""
     m = _ENDPOINT.fullmatch(text) if isinstance(text, str) else None

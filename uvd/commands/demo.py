@@ -29,7 +29,6 @@ import json
 import math
 import os
 import queue
-import re
 import shutil
 import signal
 import subprocess
@@ -383,24 +382,22 @@ def _stop(daemon, bridge, pump) -> tuple[int, float, dict]:
     return code, stop_s, bridge_stats
 
 
-_ENDPOINT = re.compile(r"(tcp|udp)/(\[[0-9a-fA-F:.]+\]|[^:/\[\]?#]+):(\d+)")
-
-
 def _listener_moves(cfg) -> tuple[dict[str, Any], list[str]]:
     """The configuration's listeners (Zenoh, MAVLink) whose port another process holds now —
     a second demo, a daemon, another program — moved to a free port of the same host, and
     the lines that say so. Free ones stay where ``uvd watch`` and MAVProxy look by default:
     before, a second demo ran without both links ("sink … did not open")."""
     from uvd.netports import free_port, port_taken
+    from uvd.zenoh_names import endpoint_address
     changes: dict[str, Any] = {}
     said: list[str] = []
     z = cfg.telemetry.zenoh
     if z.enabled:
         listen = list(z.listen)
         for i, ep in enumerate(listen):
-            m = _ENDPOINT.fullmatch(ep)
-            if m and int(m[3]) and port_taken(m[1], m[2].strip("[]"), int(m[3])):
-                listen[i] = f"{m[1]}/{m[2]}:{free_port(m[1], m[2].strip('[]'))}"
+            a = endpoint_address(ep)
+            if a and a[0] in ("tcp", "udp") and port_taken(a[0], a[1].strip("[]"), a[2]):
+                listen[i] = f"{a[0]}/{a[1]}:{free_port(a[0], a[1].strip('[]'))}"
                 said.append(f"  Zenoh: {ep} is taken (another daemon or demo?): this run "
                             f"listens on {listen[i]}")
         if said:

@@ -698,10 +698,11 @@ def shared_ports(cfg: Config) -> list[tuple[str, str]]:
         host, _, port = cfg.mavlink.listen.rpartition(":")
         binds.append(("mavlink.listen", host, int(port)))
     if cfg.telemetry.zenoh.enabled:
+        from uvd.zenoh_names import endpoint_address
         for i, ep in enumerate(cfg.telemetry.zenoh.listen):
-            m = re.fullmatch(r"udp/(.+):(\d+)", ep)
-            if m:
-                binds.append((f"telemetry.zenoh.listen[{i}]", m[1], int(m[2])))
+            a = endpoint_address(ep)
+            if a is not None and a[0] == "udp":
+                binds.append((f"telemetry.zenoh.listen[{i}]", a[1], a[2]))
     out = _shared_devices(cfg)
     for k, (key, host, port) in enumerate(binds):
         for other, h, p in binds[:k]:
