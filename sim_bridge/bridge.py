@@ -542,14 +542,12 @@ class SimBridge:
         (:func:`uvd.claims.claim`), before anything is opened: a second sim-bridge of the
         same configuration (one forgotten in another terminal) answered as the same CAN nodes
         beside the first — every node id twice on the bus — and took its links over."""
-        from uvd.claims import Taken, claim
+        from uvd.claims import Taken, bus_name, claim
         from uvd.errors import TransportError
         b = self.config.can.bus
         wanted = [("sim-link", str(Path(p).absolute())) for p in self._links.values()]
         if b.interface != "virtual":  # a bus within one process: nobody else's
-            where = f"{b.interface} {b.channel}" + (f" port {b.port}"
-                                                    if b.interface == "udp_multicast" else "")
-            wanted.insert(0, ("sim-can", where))
+            wanted.insert(0, ("sim-can", bus_name(b)))
         held: list = []
         try:
             for kind, where in wanted:

@@ -25,6 +25,13 @@ class Taken(OSError):
         self.what, self.holder = what, holder
 
 
+def bus_name(bus) -> str:
+    """A CAN bus (``[can.bus]``, drivers' CanBusConfig) as it is claimed and named:
+    ``"<interface> <channel>"``, with ``" port N"`` for udp_multicast."""
+    where = f"{bus.interface} {bus.channel}"
+    return where + f" port {bus.port}" if bus.interface == "udp_multicast" else where
+
+
 def claim(kind: str, where: str) -> socket.socket:
     """Hold ``where`` (a bus, a path) for this process under ``kind``; the returned socket is
     the claim (closing it, or the process ending, gives it up).

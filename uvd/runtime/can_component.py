@@ -12,7 +12,7 @@ import socket
 
 import numpy as np
 
-from uvd.claims import Taken, claim
+from uvd.claims import Taken, bus_name, claim
 from uvd.errors import TransportError
 from uvd.runtime.config import Config, short_deadline
 from uvd.runtime.cycle import ActuatorStatus
@@ -36,9 +36,7 @@ def claim_bus(bus) -> socket.socket | None:
     claims nothing: it is how a vehicle is stopped, whoever runs."""
     if bus.interface == "virtual":
         return None
-    where = f"{bus.interface} {bus.channel}"
-    if bus.interface == "udp_multicast":
-        where += f" port {bus.port}"
+    where = bus_name(bus)
     try:
         return claim("can", where)
     except Taken as exc:
