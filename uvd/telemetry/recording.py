@@ -26,7 +26,7 @@ from mcap.records import Channel, Chunk, Header, Message, Schema
 from mcap.stream_reader import breakup_chunk
 
 __all__ = ["CHANNELS", "schema", "read_messages", "RecordingError", "part_number", "run_files",
-           "start_of"]
+           "start_of", "drawn_files", "read_run", "load_run"]
 
 #: topic → (schema name, record type on the hub; None for the taps and the derived pose)
 CHANNELS: dict[str, tuple[str, str | None]] = {
@@ -331,10 +331,27 @@ def run_files(path: str | Path) -> tuple[list[Path], str | None]:
     return files, gap
 
 
+def drawn_files(path: str | Path) -> tuple[list[Path], str | None]:
+    """What ``uvd report``, ``uvd identify`` and ``uvd xval`` read of a recording: the run
+    whole from its first file (:func:`run_files`), a later file alone (its data need no
+    state recorded before it); and the missing file that ended the run early, or None."""
+    return run_files(path) if not part_number(path) else ([Path(path)], None)
+
+
+def read_run(files: Sequence[Path], topics: Sequence[str], *,
+             unreadable: list[str] | None = None) -> Iterator[tuple[str, int, dict[str, Any]]]:
+    """:func:`read_messages` of ``files`` one after another, the start record repeated atop
+    each later file of a run left out."""
+    for k, part in enumerate(files):
+        for topic, t_ns, msg in read_messages(part, topics, unreadable=unreadable):
+            if not (k and topic == "/uvd/start"):
+                yield topic, t_ns, msg
+
+
 def load_run(path: str | Path):
     """A :class:`uvd.io.runlog.RunLog` of a run in any form uvd leaves: a black-box recording
-    (an ``.mcap`` holding a start record — its ``/uvd/cycle`` records, of the run's files
-    whole from its first, :func:`run_files`, or of a later file alone) or what
+    (an ``.mcap`` holding a start record — its ``/uvd/cycle`` records of
+    :func:`drawn_files`) or what
     :func:`uvd.io.runlog.load_runlog` reads (``.npz``, the telemetry's JSON lines). Before
     session 33 ``uvd identify`` and ``uvd xval`` refused the daemon's own recording as
     "another system's" and asked for a log profile."""
@@ -342,15 +359,10 @@ def load_run(path: str | Path):
     path = Path(path)
     if path.suffix != ".mcap" or not path.is_file() or start_of(path) is None:
         return load_runlog(path)
-    # a later file of a run alone, as uvd report draws it (its data need no state before it)
-    files, gap = run_files(path) if not part_number(path) else ([path], None)
-
-    def cycles():
-        for part in files:
-            for _topic, _t, msg in read_messages(part, ("/uvd/cycle",), unreadable=[]):
-                yield msg
+    files, gap = drawn_files(path)
+    cycles = (msg for _topic, _t, msg in read_run(files, ("/uvd/cycle",), unreadable=[]))
     where = f"{path} ({len(files)} files of the run)" if len(files) > 1 else path
-    run = runlog_from_records(cycles(), name=path.stem, source=f"recording {where}",
+    run = runlog_from_records(cycles, name=path.stem, source=f"recording {where}",
                               where=where)
     if gap is not None:
         run.extra["missing_file"] = gap

@@ -31,7 +31,7 @@ import numpy as np
 from uvd.geometry import wrap_angles
 from uvd.io.figures import estimates_figure, mne_figure
 from uvd.jsonio import is_int64
-from uvd.telemetry.recording import RecordingError, part_number, read_messages, run_files
+from uvd.telemetry.recording import RecordingError, drawn_files, read_run
 from uvd.telemetry.records import (
     array_shape,
     cycle_record_problem,
@@ -47,7 +47,7 @@ _ACTIONS = ("none", "warn", "fallback", "hold-depth", "zero-thrust", "disarm")
 
 def _load(path: Path) -> dict[str, list]:
     """The report's channels of ``path`` — of the whole run when it is a run's first file
-    (:func:`~uvd.telemetry.recording.run_files`: the files the recorder started after it;
+    (:func:`~uvd.telemetry.recording.drawn_files`: the files the recorder started after it;
     a later file is drawn alone). Skipped and counted, the rest of the run drawn:
     ``out["unreadable"]``, the messages that were not JSON (a damaged byte);
     ``out["malformed"]``, the records that are JSON but not what their schema promises in a
@@ -59,16 +59,13 @@ def _load(path: Path) -> dict[str, list]:
     topics = {f"/uvd/{k}": k for k in out}
     unreadable: list[str] = []
     malformed: list[str] = []
-    files, gap = run_files(path) if not part_number(path) else ([path], None)
-    for k, part in enumerate(files):
-        for topic, t_ns, msg in read_messages(part, list(topics), unreadable=unreadable):
-            if k and topic == "/uvd/start":
-                continue  # repeated atop each later file of the run
-            why = _problem(topics[topic], msg)
-            if why is None:
-                out[topics[topic]].append(msg)
-            else:
-                malformed.append(f"{topic} record at {t_ns} ns: {why}")
+    files, gap = drawn_files(path)
+    for topic, t_ns, msg in read_run(files, list(topics), unreadable=unreadable):
+        why = _problem(topics[topic], msg)
+        if why is None:
+            out[topics[topic]].append(msg)
+        else:
+            malformed.append(f"{topic} record at {t_ns} ns: {why}")
     out["files"], out["missing"] = [str(f) for f in files], gap
     out["cycle"] = _one_thruster_count(out["cycle"], malformed)
     out["unreadable"], out["malformed"] = unreadable, malformed
