@@ -85,8 +85,14 @@ def test_a_ctrl_c_before_the_fault_or_its_detection_is_said_so():
 def test_a_weak_thruster_is_detected_over_zenoh_and_reallocated_in_hil(tmp_path):
     from uvd.commands.demo import run_demo
 
+    said: list[str] = []
     figures, _ = run_demo(60.0, record=tmp_path, fault=FaultSpec(4, 0.5, 20.0),
-                          false_alarm=True)
+                          false_alarm=True, progress=said.append)
+    # the operator is told where the run's MAVLink listens (a free port, not 14551)
+    from uvd.runtime.config import load_config
+    listen = load_config(tmp_path / "uvd.toml").mavlink.listen
+    assert any(f"MAVLink on udp {listen} (uvd eta 4 clear --to {listen})" in ln
+               for ln in said), said
     f = figures["fault"]
     print({k: v for k, v in f.items() if k.endswith("_s")})
     assert f["detected"] is not None, (tmp_path / "fdc.log").read_text()

@@ -154,7 +154,8 @@ class FaultRun:
                                                stdin=subprocess.DEVNULL))
         self.progress(f"  thruster {self.spec.thruster} to eta {self.spec.eta:g} in {at:.1f} s "
                       f"(sim-bridge); uvd-fdc ({' '.join(self.spec.fdc_args())}) and uvd watch "
-                      f"on {self.endpoint}")
+                      f"on {self.endpoint}; MAVLink on udp {self.mavlink} (uvd eta "
+                      f"{self.spec.thruster} clear --to {self.mavlink})")
 
     def _on_fault(self, sample) -> None:
         with self._lock:
