@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import shutil
 import subprocess
@@ -127,6 +128,24 @@ def test_unknown_interface_is_a_clear_error():
     assert "no_such_iface" in str(exc.value) and exc.value.__cause__ is not None
     assert isinstance(exc.value, BusError) and isinstance(exc.value, TransportError)
     assert isinstance(exc.value, OSError)
+
+
+def test_a_socketcan_bus_that_cannot_open_says_what_to_do():
+    # a kernel without SocketCAN (this machine's: EAFNOSUPPORT) or without the interface
+    # (ENODEV): python-can's bare "[Errno 97] Address family not supported by protocol"
+    # left the operator to guess
+    with pytest.raises(b.BusOpenError) as exc:
+        b.open_bus(CanBusConfig(interface="socketcan", channel="uvdnone9"))
+    code = exc.value.__cause__.errno
+    assert code in (errno.EAFNOSUPPORT, errno.ENODEV), exc.value
+    said = str(exc.value)
+    assert ("modprobe can_raw" in said if code == errno.EAFNOSUPPORT
+            else "no network interface uvdnone9 (ip -details link show" in said), said
+    # another interface's errors are python-can's own words
+    assert b._socketcan_hint(CanBusConfig(interface="pcan", channel="x"),
+                             OSError(errno.ENODEV, "x")) == ""
+    assert "ip link set can1 up" in b._socketcan_hint(
+        CanBusConfig(interface="socketcan", channel="can1"), OSError(errno.ENETDOWN, "down"))
 
 
 def test_udp_multicast_is_opened_with_hop_limit_zero_and_drops_its_echo():

@@ -284,7 +284,7 @@ def open_bus(cfg: CanBusConfig) -> can.BusABC:
         bus = can.Bus(interface=cfg.interface, channel=cfg.channel, **kwargs)
     except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
         raise BusOpenError(f"cannot open CAN interface {cfg.interface!r} channel "
-                           f"{cfg.channel!r}: {exc}") from exc
+                           f"{cfg.channel!r}: {exc}{_socketcan_hint(cfg, exc)}") from exc
     if cfg.interface == "udp_multicast":
         _enlarge_receive_buffer(bus)
     if cfg.interface == "udp_multicast" and cfg.loopback_only:
@@ -294,6 +294,26 @@ def open_bus(cfg: CanBusConfig) -> can.BusABC:
             raise BusOpenError(f"udp_multicast on {cfg.channel!r}: hop limit is {hops}, not 0; "
                                "refusing a bus whose datagrams could leave this machine")
     return bus
+
+
+#: what the operator of a Linux machine does about SocketCAN's errors when opening
+_SOCKETCAN_HINTS = {
+    errno.EAFNOSUPPORT: "this kernel has no SocketCAN (load it: modprobe can_raw; a container "
+                        "shares its host's kernel, and needs it loaded there)",
+    errno.ENODEV: "no network interface {ch} (ip -details link show; a USB adapter "
+                  "unplugged? a virtual bus for a test: ip link add dev {ch} type vcan)",
+    errno.ENETDOWN: "interface {ch} is down (ip link set {ch} up type can bitrate "
+                    "<the bus's>; [can] bitrate is not set by uvd for socketcan)",
+    errno.EPERM: "not permitted (CAP_NET_RAW is needed to open a raw CAN socket)",
+}
+
+
+def _socketcan_hint(cfg: CanBusConfig, exc: BaseException) -> str:
+    """``": <what to do>"`` for a SocketCAN error the operator can act on, else ``""``."""
+    hint = _SOCKETCAN_HINTS.get(getattr(exc, "errno", None))
+    if cfg.interface != "socketcan" or hint is None:
+        return ""
+    return " — " + hint.format(ch=cfg.channel)
 
 
 def udp_hop_limit(bus: can.BusABC) -> int | None:
