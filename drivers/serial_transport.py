@@ -12,6 +12,7 @@ See :class:`drivers.transport.FrameReader` for the consumer API.
 from __future__ import annotations
 
 import asyncio
+import errno
 
 import serial
 import serial_asyncio_fast
@@ -28,7 +29,15 @@ def _reason(exc: BaseException, port: str) -> str:
     ctx = exc.__context__
     if isinstance(ctx, OSError) and ctx.strerror:
         text = text.replace(str(ctx), f"[Errno {ctx.errno}] {ctx.strerror}")
-    return text.replace(f"could not open port {port}: ", "").replace(f"port {port}", "the port")
+    text = text.replace(f"could not open port {port}: ", "").replace(f"port {port}", "the port")
+    code = getattr(exc, "errno", None)
+    if code in (errno.EAGAIN, errno.EBUSY):
+        text += (" — another process holds it (fuser -v on the port names it: a second uvd, "
+                 "a terminal program, ModemManager probing a USB adapter?)")
+    elif code == errno.EACCES:
+        text += (" — this user may not open it (ls -l on the port shows its group: add the "
+                 "daemon's user to it, often dialout, or give the port one with a udev rule)")
+    return text
 
 
 class SerialFrameReader(FrameReader):

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import asyncio
+import errno
 import os
 import socket
 import tty
 
 import numpy as np
 import pytest
+import serial
 
 from drivers import digiquartz, pd0, phins_stdbin
 from drivers.counters import Counters
@@ -83,8 +85,26 @@ def test_serial_port_is_opened_exclusively():
         os.close(master)
         os.close(slave)
     assert "lock" in err.lower() and "Errno 11" in err
+    assert "another process holds it (fuser -v on the port names it" in err  # what to do
     # what, where and why, each said once (pyserial repeats the port around the OS error)
     assert raised.startswith(f"dvl2: cannot open {path}: ") and raised.count(path) == 1
+
+
+def test_a_port_this_user_may_not_open_says_how_to_be_let_in():
+    # root opens any device, so the refusal is raised here as pyserial raises it (the
+    # operating system's error chained beneath its own, which names the port again)
+    from drivers.serial_transport import _reason
+    try:
+        try:
+            raise PermissionError(errno.EACCES, "Permission denied", "/dev/ttyUSB0")
+        except OSError as os_error:
+            raise serial.SerialException(
+                os_error.errno, f"could not open port /dev/ttyUSB0: {os_error}") from None
+    except serial.SerialException as exc:
+        said = _reason(exc, "/dev/ttyUSB0")
+    assert said.startswith("[Errno 13] Permission denied — this user may not open it (ls -l "
+                           "on the port shows its group: add the daemon's user to it, often "
+                           "dialout"), said
 
 
 def test_missing_port_reports_and_get_times_out():
