@@ -299,12 +299,14 @@ def open_bus(cfg: CanBusConfig) -> can.BusABC:
 #: what the operator of a Linux machine does about SocketCAN's errors when opening
 _SOCKETCAN_HINTS = {
     errno.EAFNOSUPPORT: "this kernel has no SocketCAN (load it: modprobe can_raw; a container "
-                        "shares its host's kernel, and needs it loaded there)",
+                        "shares its host's kernel, and needs it loaded there), or a sandbox "
+                        "refuses AF_CAN (systemd's RestrictAddressFamilies= must list it)",
     errno.ENODEV: "no network interface {ch} (ip -details link show; a USB adapter "
                   "unplugged? a virtual bus for a test: ip link add dev {ch} type vcan)",
     errno.ENETDOWN: "interface {ch} is down (ip link set {ch} up type can bitrate "
                     "<the bus's>; [can] bitrate is not set by uvd for socketcan)",
-    errno.EPERM: "not permitted (CAP_NET_RAW is needed to open a raw CAN socket)",
+    errno.EPERM: "not permitted (a sandbox's system-call filter? systemd's SystemCallFilter=; "
+                 "a CAN_RAW socket itself needs no privilege)",
 }
 
 
