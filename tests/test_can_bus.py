@@ -144,8 +144,8 @@ def test_a_socketcan_bus_that_cannot_open_says_what_to_do():
     # another interface's errors are python-can's own words
     assert b._socketcan_hint(CanBusConfig(interface="pcan", channel="x"),
                              OSError(errno.ENODEV, "x")) == ""
-    assert "ip link set can1 up" in b._socketcan_hint(
-        CanBusConfig(interface="socketcan", channel="can1"), OSError(errno.ENETDOWN, "down"))
+    assert "systemd's SystemCallFilter=" in b._socketcan_hint(
+        CanBusConfig(interface="socketcan", channel="can1"), OSError(errno.EPERM, "no"))
 
 
 def test_udp_multicast_is_opened_with_hop_limit_zero_and_drops_its_echo():

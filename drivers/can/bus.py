@@ -303,15 +303,14 @@ _SOCKETCAN_HINTS = {
                         "refuses AF_CAN (systemd's RestrictAddressFamilies= must list it)",
     errno.ENODEV: "no network interface {ch} (ip -details link show; a USB adapter "
                   "unplugged? a virtual bus for a test: ip link add dev {ch} type vcan)",
-    errno.ENETDOWN: "interface {ch} is down (ip link set {ch} up type can bitrate "
-                    "<the bus's>; [can] bitrate is not set by uvd for socketcan)",
     errno.EPERM: "not permitted (a sandbox's system-call filter? systemd's SystemCallFilter=; "
                  "a CAN_RAW socket itself needs no privilege)",
 }
 
 
 def _socketcan_hint(cfg: CanBusConfig, exc: BaseException) -> str:
-    """``": <what to do>"`` for a SocketCAN error the operator can act on, else ``""``."""
+    """``" — <what to do>"`` for a SocketCAN error the operator can act on at opening (a
+    down interface opens, and fails at its first send), else ``""``."""
     hint = _SOCKETCAN_HINTS.get(getattr(exc, "errno", None))
     if cfg.interface != "socketcan" or hint is None:
         return ""
