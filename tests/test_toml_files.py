@@ -103,3 +103,50 @@ def test_the_commands_say_it_in_one_line_and_exit_2(tmp_path):
     assert r.returncode == 2 and "folder.toml: cannot read the campaign file: Is a directory" \
         in r.stderr, r.stderr
     assert not (tmp_path / "c").exists() and not (tmp_path / "rec").exists()  # nothing started
+
+
+def test_a_file_of_another_kind_is_named_for_what_it_is(tmp_path):
+    # uvd's four kinds of TOML file handed to the wrong option used to fail on each of their
+    # keys: a vehicle file to check-config "8 errors" of unknown keys, identify's own output
+    # to --vehicle "unknown key(s) ['identified', 'refused']", a configuration to
+    # xval --params "no [parameters] table"
+    from uvd.io.vehicle import vehicle_path
+    from uvd.shipped import config_path
+    configuration = config_path("sim-bluerov2")
+    vehicle = vehicle_path("jhu-rov")
+    profile = vehicle.parents[1] / "logprofiles" / "ardusub-bin.toml"
+    identified = tmp_path / "identified.toml"
+    identified.write_text(vehicle.read_text().split("[thruster_defaults]")[0]
+                          + "\n[identified]\nmethod = 'ls'\n\n[refused]\n")
+    said = {"configuration": "this is a daemon configuration (uvd run --config, uvd "
+                             "check-config), of vehicle 'bluerov2-heavy', not a",
+            "vehicle": "this is a vehicle file (thrusters and the first guess: --vehicle, a "
+                       "configuration's [vehicle] name), not a",
+            "profile": "this is a log profile (--profile), not a",
+            "parameters": "this is a parameter file (uvd identify --out; xval --params, "
+                          "identify --init, [estimation] initial_params), not a"}
+    campaign = profile.parents[1] / "campaign" / "builtin" / "smoke.toml"
+    said["campaign"] = "this is a campaign file (uvd campaign FILE), not a"
+    files = {"configuration": configuration, "vehicle": vehicle, "profile": profile,
+             "parameters": identified, "campaign": campaign}
+    readers = {"configuration": (load_config, ConfigValidationError, "daemon configuration"),
+               "vehicle": (load_vehicle, ConfigError, "vehicle file"),
+               "profile": (load_profile, ConfigError, "log profile"),
+               "parameters": (params_from_toml, ParameterError, "parameter file"),
+               "campaign": (lambda p: load(p, kind_axes()), CampaignError, "campaign file")}
+    for wanted, (reader, error, name) in readers.items():
+        for kind, path in files.items():
+            if kind == wanted or (wanted == "parameters" and kind == "vehicle"):
+                reader(path)  # its own kind reads; a vehicle file's [parameters] are one
+                continue
+            with pytest.raises(error) as err:
+                reader(path)
+            assert f"{path}: {said[kind]} {name}" in str(err.value), (wanted, str(err.value))
+    # a file of the kind wanted, with a wrong key, is still told its key
+    typo = tmp_path / "typo.toml"
+    typo.write_text("colour = 1\n" + vehicle.read_text())
+    with pytest.raises(ConfigError, match=r"unknown key\(s\) \['colour'\]"):
+        load_vehicle(typo)
+    r = _uvd("check-config", str(vehicle), cwd=tmp_path)
+    assert r.returncode != 0 and r.stderr.count("\n") <= 3 and said["vehicle"] in r.stderr, \
+        r.stderr

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from uvd.errors import UvdError
-from uvd.io.toml import TomlFileError, read_toml
+from uvd.io.toml import TomlFileError, other_kind, read_toml
 
 SAMPLINGS = ("grid", "random")
 DRAWS = ("uniform", "integers")
@@ -182,6 +182,9 @@ def _draw(parsed, rng: np.random.Generator):
 def parse(data: dict, kinds: dict[str, dict[str, Axis]], source: str = "") -> CampaignSpec:
     """Validate a campaign's tables (``tomllib`` output) into a :class:`CampaignSpec`."""
     unknown = set(data) - {"campaign", "axes"}
+    kind = other_kind(data, "campaign") if unknown else None
+    if kind:
+        raise CampaignError(f"{source or '<campaign>'}: this is {kind}, not a campaign file")
     if unknown:
         raise CampaignError(f"{_where(source, sorted(unknown)[0])}: unknown table; known: "
                             "[campaign], [axes]")

@@ -43,7 +43,7 @@ from importlib import resources
 from pathlib import Path
 
 from uvd.errors import ConfigError
-from uvd.io.toml import TomlFileError, read_toml
+from uvd.io.toml import TomlFileError, other_kind, read_toml
 
 SIGNALS = ("angular_rate", "attitude", "depth", "linear_velocity", "thrusters")
 UNITS = {"angular_rate": ("rad/s", "deg/s"), "attitude": ("rad", "deg"),
@@ -194,6 +194,9 @@ def _signal(name: str, t: dict, where: str) -> SignalSpec:
 def profile_from_mapping(doc: dict, *, where: str) -> LogProfile:
     """Validate a parsed profile; errors name ``where`` and the key."""
     bad = set(doc) - _TOP_KEYS
+    kind = other_kind(doc, "profile")
+    if kind:
+        raise ConfigError(f"{where}: this is {kind}, not a log profile")
     if bad:
         raise ConfigError(f"{where}: unknown key(s) {sorted(bad)}")
     sig = doc.get("signals")

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from uvd.errors import ParameterError
-from uvd.io.toml import TomlFileError, read_toml
+from uvd.io.toml import TomlFileError, other_kind, read_toml
 from uvd.jsonio import write_whole
 from uvd.model.params import UVParams
 
@@ -119,7 +119,9 @@ def params_from_toml(path: str | Path) -> UVParams:
     except TomlFileError as exc:
         raise ParameterError(str(exc)) from exc
     if "parameters" not in doc:
-        raise ParameterError(f"{path}: no [parameters] table")
+        kind = other_kind(doc, "parameters")
+        raise ParameterError(f"{path}: " + (f"this is {kind}, not a parameter file" if kind
+                                            else "no [parameters] table"))
     return params_from_mapping(doc["parameters"], where=f"{path}: [parameters]")
 
 

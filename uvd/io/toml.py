@@ -17,7 +17,7 @@ from typing import Any
 
 from uvd.errors import ConfigError
 
-__all__ = ["TomlFileError", "dump_toml", "read_toml", "refused_name"]
+__all__ = ["TomlFileError", "dump_toml", "other_kind", "read_toml", "refused_name"]
 
 #: lookup errors that only mean "not there" (those pathlib's ``exists`` answers False to)
 _ABSENT = frozenset({errno.ENOENT, errno.ENOTDIR, errno.EBADF, errno.ELOOP})
@@ -53,6 +53,37 @@ def read_toml(path: str | Path, what: str = "") -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise TomlFileError(path, f"not valid TOML: {exc}") from exc
+
+
+#: the kinds of TOML file a user hands uvd, each told by a top-level key only it has, and what
+#: each is for (a vehicle file holds [parameters] too: a file of [parameters] alone is either)
+_KINDS = (
+    ("configuration", ("loop", "sensors", "can", "control", "failsafe", "daemon"),
+     "a daemon configuration (uvd run --config, uvd check-config)"),
+    ("vehicle", ("thrusters", "thruster_defaults", "thrust_curves"),
+     "a vehicle file (thrusters and the first guess: --vehicle, a configuration's [vehicle] "
+     "name)"),
+    ("profile", ("signals",), "a log profile (--profile)"),
+    ("campaign", ("campaign", "axes"), "a campaign file (uvd campaign FILE)"),
+    ("parameters", ("identified", "refused", "linear_damping"),
+     "a parameter file (uvd identify --out; xval --params, identify --init, [estimation] "
+     "initial_params)"),
+)
+
+
+def other_kind(doc: dict[str, Any], wanted: str) -> str | None:
+    """What the TOML file ``doc`` is when it is plainly another kind of uvd's files than
+    ``wanted`` ("configuration", "vehicle", "profile", "campaign" or "parameters"), e.g. "a
+    vehicle file (…)"; None when it is that kind or none of them. For a loader's first error:
+    a file handed to the wrong option otherwise fails on every one of its keys."""
+    for kind, keys, said in _KINDS:
+        if any(k in doc for k in keys):
+            if kind == wanted:
+                return None
+            name = doc.get("vehicle", {}).get("name") if kind == "configuration" \
+                and isinstance(doc.get("vehicle"), dict) else None
+            return said + (f", of vehicle {name!r}" if isinstance(name, str) else "")
+    return None
 
 
 def refused_name(path: str | Path) -> str | None:

@@ -14,7 +14,7 @@ import numpy as np
 
 from uvd.errors import ConfigError, ParameterError
 from uvd.io.params import params_from_mapping
-from uvd.io.toml import read_toml, refused_name
+from uvd.io.toml import other_kind, read_toml, refused_name
 from uvd.model.thrusters import ThrustCurve, ThrusterSpec
 from uvd.model.vehicle import Vehicle
 
@@ -93,7 +93,9 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
     doc = read_toml(path, "the vehicle")
     unknown = set(doc) - _TOP_KEYS
     if unknown:
-        raise ConfigError(f"{path}: unknown key(s) {sorted(unknown)}")
+        kind = other_kind(doc, "vehicle")
+        raise ConfigError(f"{path}: " + (f"this is {kind}, not a vehicle file" if kind
+                                         else f"unknown key(s) {sorted(unknown)}"))
     if "parameters" not in doc:
         raise ConfigError(f"{path}: missing [parameters]")
     params = params_from_mapping(doc["parameters"], where=f"{path}: [parameters]")

@@ -44,6 +44,7 @@ instead be declared here by a section of settings that converts into it
 
 from __future__ import annotations
 
+import dataclasses
 import ipaddress
 import math
 import os
@@ -66,7 +67,7 @@ from drivers.can.config import (
 from drivers.can.config import DepthConfig as CanDepthConfig
 from drivers.digiquartz import DepthConverter
 from uvd.errors import ConfigError
-from uvd.io.toml import TomlFileError, read_toml, refused_name
+from uvd.io.toml import TomlFileError, other_kind, read_toml, refused_name
 from uvd.runtime import schema
 from uvd.runtime.failsafe import Thresholds
 from uvd.runtime.fdc_source import FaultsSection
@@ -1046,6 +1047,10 @@ def parse_config(data: dict[str, Any], *, source: str | Path | None = None) -> C
     """Validate an already parsed TOML mapping; raises :class:`ConfigValidationError`."""
     where = str(source) if source is not None else "<config>"
     ctx = schema.BuildContext(Path(source) if source is not None else None)
+    kind = other_kind(data, "configuration")
+    if kind and not set(data) & {f.name for f in dataclasses.fields(Config)} - {"vehicle"}:
+        raise ConfigValidationError(where, [("", f"this is {kind}, not a daemon "
+                                                 "configuration")])
     cfg, errors = schema.build(Config, data, ctx=ctx)
     if errors or cfg is None:
         raise ConfigValidationError(where, errors)
