@@ -302,6 +302,18 @@ def test_a_run_in_several_files_replays_whole_from_its_first(recorded, tmp_path,
     assert summary["files"] == [str(x) for x in names] and "missing_file" not in summary
     assert summary["cycles"] == len(cycles)
     assert write_report(names[2], tmp_path / "rep")["files"] == [str(names[2])]  # alone
+    # the run's folder given for the recording (uvd demo --record DIR): the files to give,
+    # not "cannot open: [Errno 21] Is a directory" (report, replay) nor "not a readable run
+    # log (.npz)" (identify, xval)
+    firsts = ", ".join(str(runs / f"uvd-20261130T0{t}-000.mcap") for t in ("63900", "70000"))
+    for args in (["report", str(runs), "--out", str(tmp_path / "rep")],
+                 ["replay", str(runs), "--lockstep"],
+                 ["identify", "--log", str(runs), "--method", "ls", "--out",
+                  str(tmp_path / "p.toml")]):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert f"{runs}: a folder, not a recording: give a run's first file in it, {firsts}" \
+            in err and "Traceback" not in err, (args, err)
 
 
 def test_a_corrupted_frame_shows_as_the_first_mismatch(recorded, tmp_path):

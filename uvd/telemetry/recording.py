@@ -90,6 +90,8 @@ def read_messages(path: str | Path, topics: Sequence[str] | None = None, *,
 
     try:
         fh = path.open("rb")
+    except IsADirectoryError as exc:  # a run's folder (uvd demo --record DIR)
+        raise RecordingError(f"{path}: {_which_file(path)}") from exc
     except OSError as exc:
         raise RecordingError(f"{path}: cannot open: {exc}") from exc
     with fh:
@@ -280,6 +282,14 @@ def part_number(path: str | Path) -> int | None:
     return int(m[1]) if m else None
 
 
+def _which_file(folder: Path) -> str:
+    """What to say of a folder given where a recording is wanted: which of its files to give
+    (a run's first files, as the recorder names them)."""
+    firsts = sorted(str(f) for f in folder.glob("*.mcap") if part_number(f) == 0)
+    return ("a folder, not a recording: give a run's first file in it, "
+            + (", ".join(firsts[:3]) if firsts else "uvd-<time>-000.mcap (it holds none)"))
+
+
 def start_of(path: str | Path) -> Mapping[str, Any] | None:
     """A file's start record (the first message the recorder writes in each of a run's
     files), None if it has none that reads (or is not MCAP at all)."""
@@ -355,8 +365,11 @@ def load_run(path: str | Path):
     :func:`uvd.io.runlog.load_runlog` reads (``.npz``, the telemetry's JSON lines). Before
     session 33 ``uvd identify`` and ``uvd xval`` refused the daemon's own recording as
     "another system's" and asked for a log profile."""
+    from uvd.errors import ConfigError
     from uvd.io.runlog import load_runlog, runlog_from_records
     path = Path(path)
+    if path.is_dir() and any(part_number(f) == 0 for f in path.glob("*.mcap")):
+        raise ConfigError(f"{path}: {_which_file(path)}")  # not a ROS 2 bag's folder
     if path.suffix != ".mcap" or not path.is_file() or start_of(path) is None:
         return load_runlog(path)
     files, gap = drawn_files(path)
