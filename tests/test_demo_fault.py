@@ -123,3 +123,9 @@ def test_a_weak_thruster_is_detected_over_zenoh_and_reallocated_in_hil(tmp_path)
     print(rep.as_dict())
     assert rep.stopped is None and rep.cycles == rep.commands_compared > 0
     assert rep.mismatches == 0 and rep.operator_commands >= 2
+    # and uvd report draws it: AID's θ̂ and the controller's side by side, one figure each
+    # (the two in one array ended the report in numpy's "inhomogeneous shape" ValueError)
+    from uvd.telemetry.report import write_report
+    summary = write_report(mcap, tmp_path / "report")
+    assert {"estimates-aid6.png", "estimates-two-step-ambc.png"} <= set(summary["figures"]), \
+        summary["figures"]

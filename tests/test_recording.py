@@ -380,6 +380,23 @@ def test_cut_foreign_and_incomplete_files(recorded, tmp_path, capsys, monkeypatc
         rep = replay_lockstep(cut)
         assert (rep.cycles, rep.mismatches, rep.missing_samples) == (n_cut, 0, 0), \
             (percent, rep.first_mismatch)
+    # another system's MCAP (a ROS 2 bag's, CDR messages): the report says whose topics
+    # they are and what reads them, not only "no cycle records"
+    from mcap.writer import Writer
+    ros2 = tmp_path / "ros2.mcap"
+    with ros2.open("wb") as fh:
+        w = Writer(fh)
+        w.start()
+        sid = w.register_schema("sensor_msgs/msg/Imu", "ros2msg", b"")
+        for topic in ("/rovio/imu/data", "/rovio/thrusters", "/sensor_fusion/states"):
+            w.add_message(w.register_channel(topic, "cdr", sid), log_time=1, publish_time=1,
+                          data=b"\x00\x01\x00\x00")
+        w.finish()
+    with pytest.raises(RecordingError, match=re.escape(
+            "no cycle records (/uvd/cycle): nothing to report; its topics are another system's "
+            "(/rovio/imu/data, /rovio/thrusters, …): uvd identify --profile reads such a "
+            "recording")):
+        write_report(ros2, tmp_path / "ros2-report")
     foreign = tmp_path / "foreign.mcap"
     foreign.write_text("not a recording\n")
     with pytest.raises(RecordingError, match="foreign.mcap: not an MCAP file"):

@@ -26,7 +26,7 @@ from mcap.records import Channel, Chunk, Header, Message, Schema
 from mcap.stream_reader import breakup_chunk
 
 __all__ = ["CHANNELS", "schema", "read_messages", "RecordingError", "part_number", "run_files",
-           "start_of", "drawn_files", "read_run", "load_run"]
+           "start_of", "drawn_files", "read_run", "load_run", "foreign_note"]
 
 #: topic → (schema name, record type on the hub; None for the taps and the derived pose)
 CHANNELS: dict[str, tuple[str, str | None]] = {
@@ -288,6 +288,24 @@ def _which_file(folder: Path) -> str:
     firsts = sorted(str(f) for f in folder.glob("*.mcap") if part_number(f) == 0)
     return ("a folder, not a recording: give a run's first file in it, "
             + (", ".join(firsts[:3]) if firsts else "uvd-<time>-000.mcap (it holds none)"))
+
+
+def foreign_note(path: str | Path) -> str:
+    """``"; …"`` saying that ``path`` is another system's MCAP (its summary lists channels,
+    none of them uvd's), with two of its topics and what reads such a file; ``""`` for
+    anything else (uvd's own, a file without a summary: cut by a crash, or not MCAP)."""
+    from mcap.reader import make_reader
+    try:
+        with Path(path).open("rb") as fh:
+            summary = make_reader(fh).get_summary()
+    except Exception:  # noqa: BLE001 - not MCAP, cut, damaged: nothing to say of it
+        return ""
+    topics = sorted({c.topic for c in summary.channels.values()}) if summary else []
+    if not topics or set(topics) & set(CHANNELS):
+        return ""
+    return (f"; its topics are another system's ({', '.join(topics[:2])}"
+            f"{', …' if len(topics) > 2 else ''}): uvd identify --profile reads such a "
+            "recording (docs/real-vehicles.md)")
 
 
 def start_of(path: str | Path) -> Mapping[str, Any] | None:

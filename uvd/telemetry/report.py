@@ -9,7 +9,9 @@ Figures, each from the recording's own channels (docs/recording.md):
   (f = k ω|ω| of the measured speed, App. A.1), as Fig. 5.2 shows them around reversals;
 * ``estimates.png`` — the estimates over time (the six masses and drags, g, b): the online
   AID's θ̂ of a daemon run, or the adaptive controller's 16 decoupled parameters of a
-  lockstep experiment (``uvd experiment … --record``);
+  lockstep experiment (``uvd experiment … --record``); a run with both (AMBC and
+  ``[estimation] aid``, as ``uvd demo --fault``) has one figure for each,
+  ``estimates-<estimator>.png``;
 * ``failsafe.png`` — the failsafe action over time with every trigger that fired;
 * ``lateness.png`` — the distribution of the loop's measured period around its nominal one;
 * ``xval-*.png`` — with a parameter set, its cross-validation on the run (Figs. 4.5–4.7).
@@ -22,6 +24,7 @@ from __future__ import annotations
 import collections
 import html
 import math
+import re
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -31,7 +34,7 @@ import numpy as np
 from uvd.geometry import wrap_angles
 from uvd.io.figures import estimates_figure, mne_figure
 from uvd.jsonio import is_int64
-from uvd.telemetry.recording import RecordingError, drawn_files, read_run
+from uvd.telemetry.recording import RecordingError, drawn_files, foreign_note, read_run
 from uvd.telemetry.records import (
     array_shape,
     cycle_record_problem,
@@ -71,7 +74,8 @@ def _load(path: Path) -> dict[str, list]:
     out["unreadable"], out["malformed"] = unreadable, malformed
     if not out["cycle"]:
         why = f" ({len(malformed)} malformed, first: {malformed[0]})" if malformed else ""
-        raise RecordingError(f"{path}: no cycle records (/uvd/cycle){why}: nothing to report")
+        raise RecordingError(f"{path}: no cycle records (/uvd/cycle){why}: nothing to "
+                             f"report{foreign_note(path)}")
     return out
 
 
@@ -207,11 +211,19 @@ def _draw(plt, path: Path, out: Path, data: dict[str, list], params, say) -> dic
     _thrust_figure(plt, save, cyc, t, data["start"])
     est = [e for e in data["estimate"] if e.get("theta") is not None
            and len(e["theta"]) in (16, 241)]
-    if est:
-        te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in est])
-        save(estimates_figure(plt, te, [e["theta"] for e in est]), "estimates.png",
-             "Estimates over the run: the online AID's θ̂ (Theorem 4.3.1, cf. Figs. 4.x) or "
-             "the adaptive controller's (the 16 decoupled parameters of §5.3.1, cf. Fig. 5.1).")
+    by_estimator: dict[str, list] = {}
+    for e in est:  # AID's 241 and the controller's 16 side by side: one figure each
+        by_estimator.setdefault(f"{e.get('estimator') or e.get('source')}", []).append(e)
+    for name, group in by_estimator.items():
+        te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in group])
+        whose = ("the online AID's θ̂ (Theorem 4.3.1, cf. Figs. 4.x)"
+                 if group[0].get("source") == "estimator" else
+                 "the adaptive controller's θ̂ (the 16 decoupled parameters of §5.3.1, cf. "
+                 "Fig. 5.1)" if len(group[0]["theta"]) == 16 else "the adaptive controller's θ̂")
+        save(estimates_figure(plt, te, [e["theta"] for e in group]),
+             "estimates.png" if len(by_estimator) == 1
+             else f"estimates-{re.sub(r'[^A-Za-z0-9_.-]', '_', name)}.png",
+             f"Estimates over the run, {name}: {whose}.")
     _failsafe_figure(plt, save, cyc, t, t0, data["failsafe"])
     _period_figure(plt, save, cyc)
 
