@@ -77,13 +77,23 @@ def send_command(host: str, port: int, command: int, params: Sequence[float],
     with GroundStation(host, port, system, key) as st:
         def answer(m, what):
             if m is None:
-                raise TimeoutError(f"no {what} from {host}:{port} within {timeout_s:g} s")
+                bad = st.conn.mav.signing.badsig_count if key is not None else 0
+                raise TimeoutError(f"no {what} from {host}:{port} within {timeout_s:g} s" + (
+                    f" that this station's key verifies: {bad} message(s) came signed with "
+                    "another key (the --config's [mavlink] signing_key_file is not the "
+                    "daemon's)" if bad else ""))
             return m
 
         answer(st.vehicle(timeout_s), "vehicle heartbeat")
         ack = answer(st.command(command, *params, timeout_s=timeout_s), "COMMAND_ACK")
         result = st.mav.enums["MAV_RESULT"][ack.result].name.removeprefix("MAV_RESULT_").lower()
-        return result, _texts(st, about, min(timeout_s, TEXTS_S))
+        # the link's own refusal of the command ("COMMAND_LONG refused: unsigned"), said too
+        texts = _texts(st, lambda t: about(t) or t.startswith("COMMAND_LONG refused"),
+                       min(timeout_s, TEXTS_S))
+        if key is None and any(t == "COMMAND_LONG refused: unsigned" for t in texts):
+            texts.append("the daemon's link is signed: give the --config that holds its "
+                         "[mavlink] signing_key_file")
+        return result, texts
 
 
 def _texts(st: GroundStation, about: Callable[[str], bool], within_s: float) -> list[str]:

@@ -59,6 +59,6 @@ def _run(args) -> int:
     except (UvdError, ValueError, OSError) as exc:
         print(f"uvd eta: {exc}", file=sys.stderr)
         return 2
-    text = texts[0] if texts else ""
+    text = "; ".join(texts)
     print(f"thruster {args.thruster} eta {eta:g}: {result}" + (f" — {text}" if text else ""))
     return 0 if result == "accepted" else 1
