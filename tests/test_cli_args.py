@@ -118,7 +118,8 @@ def test_a_client_that_reaches_nothing_says_so_and_goes_on(capsys):
     """A peer ``uvd watch`` or uvd-fdc whose endpoint nobody listens on (a wrong port, no
     daemon yet) printed its "watching …" line and then nothing, for as long as it ran. After
     3 s each says that it reached nothing and keeps trying; with a Zenoh session listening
-    there, neither does."""
+    there, neither does — unless the vehicle it watches is not up there (a misspelt
+    ``--vehicle``, which waited in silence too): then it names those that are."""
     import zenoh
 
     from uvd.fdc.client import main as fdc_main
@@ -143,11 +144,16 @@ def test_a_client_that_reaches_nothing_says_so_and_goes_on(capsys):
     conf = zenoh.Config()
     conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
     conf.insert_json5("scouting/multicast/enabled", "false")
-    with zenoh.open(conf):
-        assert main(["watch", *argv]) == 0
-        assert fdc_main(argv) == 0
+    with zenoh.open(conf) as there:
+        token = there.liveliness().declare_token("uvd/sub9/alive")  # a vehicle up there
+        assert main(["watch", *argv, "--vehicle", "sub8"]) == 0  # misspelt: it is told
+        assert fdc_main([*argv, "--vehicle", "sub9"]) == 0
+        token.undeclare()
     got = capsys.readouterr()
     assert "nothing reached" not in got.err + got.out
+    assert f"uvd watch: no vehicle 'sub8' through tcp/127.0.0.1:{port} in 3 s; up there: sub9 " \
+           "(--vehicle NAME, or * for every vehicle); still trying" in got.err, got.err
+    assert "no vehicle" not in got.out, got.out
 
 
 def test_eta_refuses_thruster_0_and_an_ipv6_address_it_cannot_reach(capsys):

@@ -112,7 +112,7 @@ def _run(args) -> int:
         via = reached_through(args.connect, args.zenoh_config)
         out(f"watching uvd/{v}/… through {via} (Ctrl-C to stop)")
         deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
-        reach = ReachNote(session, via, "uvd watch")  # say so, and go on trying
+        reach = ReachNote(session, via, "uvd watch", v)  # say so, and go on trying
         while True:
             time.sleep(min(0.2, max(0.0, deadline - time.monotonic())))
             ending = time.monotonic() >= deadline

@@ -149,10 +149,12 @@ def reached_through(connect: list[str], config_file: str | None = None) -> str:
 class ReachNote:
     """The note a client prints once, :data:`REACH_S` after it opened, when its session has
     reached no router or peer (a wrong endpoint, no daemon yet: a peer's session opens anyway
-    and waits in silence). The client goes on trying either way."""
+    and waits in silence), or, watching one ``vehicle``, when no liveliness token of that
+    name is up where it reached (a misspelt name: the vehicles that are up are named). The
+    client goes on trying either way."""
 
-    def __init__(self, session, via: str, who: str) -> None:
-        self.session, self.via, self.who = session, via, who
+    def __init__(self, session, via: str, who: str, vehicle: str = "*") -> None:
+        self.session, self.via, self.who, self.vehicle = session, via, who, vehicle
         self._t0 = time.monotonic()
         self._due: float | None = self._t0 + REACH_S
 
@@ -165,13 +167,29 @@ class ReachNote:
             return None
         self._due = None
         info = self.session.info
-        if list(info.routers_zid()) or list(info.peers_zid()):
-            return None
         waited = time.monotonic() - self._t0 if ending else REACH_S
         waited_s = f"{waited:.0f}" if waited >= 1.0 else f"{waited:.1f}"  # a 0.5 s run: "0.5"
+        trying = "" if ending else "; still trying"
+        if list(info.routers_zid()) or list(info.peers_zid()):
+            up = self._vehicles_up()
+            if "*" in self.vehicle or up is None or self.vehicle in up:
+                return None
+            return (f"{self.who}: no vehicle {self.vehicle!r} through {self.via} in "
+                    f"{waited_s} s; " + (f"up there: {', '.join(up)} (--vehicle NAME, or * "
+                                         "for every vehicle)" if up else
+                                         "no uvd vehicle is up there") + trying)
         return (f"{self.who}: nothing reached through {self.via} in {waited_s} s (is the "
-                "daemon running, its [telemetry.zenoh] listen that endpoint?)"
-                + ("" if ending else "; still trying"))
+                "daemon running, its [telemetry.zenoh] listen that endpoint?)" + trying)
+
+    def _vehicles_up(self) -> list[str] | None:
+        """The vehicles whose liveliness token ``uvd/<vehicle>/alive`` answers (within a
+        second), None when the query fails."""
+        try:
+            replies = self.session.liveliness().get("uvd/*/alive", timeout=1.0)
+            return sorted({str(r.ok.key_expr).split("/")[1] for r in replies
+                           if r.ok is not None})
+        except Exception:  # noqa: BLE001 - a note is not worth failing the client over
+            return None
 
 
 def open_client(connect: list[str], config_file: str | None = None):
@@ -460,7 +478,8 @@ def main(argv: list[str] | None = None) -> int:
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: stop.set())
         deadline = time.monotonic() + args.seconds if args.seconds > 0 else math.inf
-        reach = ReachNote(session, reached_through(args.connect, args.zenoh_config), "uvd-fdc")
+        reach = ReachNote(session, reached_through(args.connect, args.zenoh_config), "uvd-fdc",
+                          args.vehicle)
         while not stop.wait(min(0.2, max(0.0, deadline - time.monotonic()))):
             if time.monotonic() >= deadline:
                 watch.tell(reach.due(ending=True))
