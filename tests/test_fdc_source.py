@@ -61,7 +61,7 @@ def test_confirm_acts_on_a_weak_thruster_its_own_residual_sees():
     assert abs(eta_hat - 0.5) <= 0.1, res.reason
     assert sim.supervisor.data.thruster_eta.tolist() == [1, 1, 1, 0.5, 1, 1]
     assert sim.supervisor.data.fdc.counts() == {"acted": 1, "contradicted": 0,
-                                                "unconfirmed": 0, "advisory": 0}
+                                                "unconfirmed": 0, "advisory": 0, "awaiting": 0}
 
 
 @pytest.mark.parametrize("claim, why", [(0.5, "not within 0.2"),
@@ -88,12 +88,83 @@ def test_advisory_never_acts_and_auto_acts_without_evidence():
     assert sim.supervisor.data.thruster_eta.tolist() == [1, 1, 1, 0.5, 1, 1]
 
 
-def test_confirm_without_evidence_is_unconfirmed():
-    """Right after start the residual has no segment since the claimed change time."""
+def _fdc_events(sim) -> list[dict]:
+    return [e for e in sim.supervisor.failsafe_events() if e.get("trigger") == "fdc"]
+
+
+@pytest.mark.parametrize("health, outcome", [(0.5, "confirmed"), (1.0, "contradicted")])
+def test_a_sample_that_comes_at_once_awaits_the_residual_then_is_decided(health, outcome):
+    """uvd-fdc naming a weak thruster moments after the change (the BlueROV2's in 1.7 s in
+    ``uvd demo --config sim-bluerov2 --fault thruster:7:0.3@20``) left the daemon no residual
+    segment since it: the sample was refused "unconfirmed … 0 segments" and the default
+    ``confirm`` never acted. It now awaits the residual, decided again at each segment."""
     sim = _sim(_cfg("confirm"))
+    _run(sim, 20.0)
+    sim.plant.thrusters.health[3] = health
+    _run(sim, 0.5)
+    res = sim.command(_report(sim, since_s=20.0))
+    print(res.reason)
+    assert res.ok and "awaiting the daemon's residual (the daemon's residual gives eta" in \
+        res.reason and "decided at each segment, within 30 s" in res.reason, res.reason
+    assert sim.supervisor.data.thruster_eta is None
+    assert sim.supervisor.data.fdc.counts()["awaiting"] == 1
+    _run(sim, 10.0)
+    (e,) = _fdc_events(sim)
+    print(e)
+    st = sim.supervisor.data
+    assert st.fdc.awaiting == () and f"; {outcome}: the daemon's residual gives eta" in e["reason"]
+    if outcome == "confirmed":
+        assert e["kind"] == "accommodated" and e["action"] == "warn"
+        assert e["reason"].endswith("→ thruster 4 eta 0.5 (uvd-fdc); given up: none")
+        assert st.thruster_eta.tolist() == [1, 1, 1, 0.5, 1, 1] and st.fdc.acted == 1
+        segments = int(e["reason"].split(" segments)")[0].rsplit("(", 1)[1])
+        assert 3 <= segments <= 5, e["reason"]  # decided at the first segments that can
+    else:
+        assert e["kind"] == "refused" and "not acted on" in e["reason"]
+        assert st.thruster_eta is None and st.fdc.contradicted == 1
+
+
+def test_a_newer_sample_of_a_thruster_replaces_the_one_that_awaits():
+    sim = _sim(_cfg("confirm"))
+    _run(sim, 20.0)
+    sim.plant.thrusters.health[3] = 0.5
+    _run(sim, 0.5)
+    assert "awaiting" in sim.command(_report(sim, eta=0.3, since_s=20.0)).reason
+    assert "awaiting" in sim.command(_report(sim, thruster=2, since_s=20.0)).reason
+    (a4,) = [a for a in sim.supervisor.data.fdc.awaiting if a.thruster == 4]
     _run(sim, 1.0)
-    res = sim.command(_report(sim, since_s=sim.t_ns * 1e-9))
-    assert not res.ok and "unconfirmed" in res.reason and sim.supervisor.data.fdc.unconfirmed == 1
+    assert "awaiting" in sim.command(_report(sim, eta=0.5, since_s=20.0)).reason
+    waiting = sim.supervisor.data.fdc.awaiting
+    assert [a.thruster for a in waiting] == [2, 4] and waiting[1] != a4  # the newer one
+    _run(sim, 30.0)  # thruster 4 confirmed at η 0.5, the healthy 2 contradicted
+    assert sorted((e["kind"], e["reason"].split(";")[0]) for e in _fdc_events(sim)) == [
+        ("accommodated", "uvd-fdc: thruster 4 eta 0.50 (confidence 2)"),
+        ("refused", "uvd-fdc: thruster 2 eta 0.50 (confidence 2)")]
+    assert sim.supervisor.data.thruster_eta.tolist() == [1, 1, 1, 0.5, 1, 1]
+
+
+def test_a_sample_the_residual_cannot_tell_is_unconfirmed_when_its_wait_ends():
+    """A tolerance finer than the residual's spread over the wait (±0.03 of a healthy
+    thruster, against ±0.005 asked): the residual cannot tell η. With ``confirm_wait_s`` 0
+    that is said at once; else at the end of the wait."""
+    for wait in (0.0, 5.0):
+        cfg = _cfg("confirm")
+        cfg = replace(cfg, faults=FaultsSection(replace(cfg.faults.fdc, confirm_wait_s=wait,
+                                                        tolerance=0.01)))
+        sim = _sim(cfg)
+        _run(sim, 1.0)
+        res = sim.command(_report(sim, since_s=sim.t_ns * 1e-9, thruster=3))
+        if wait == 0.0:
+            assert not res.ok and "unconfirmed" in res.reason, res.reason
+            assert sim.supervisor.data.fdc.unconfirmed == 1
+            continue
+        assert res.ok and "awaiting" in res.reason
+        _run(sim, 4.0)
+        assert _fdc_events(sim) == []
+        _run(sim, 1.5)
+        (e,) = _fdc_events(sim)
+        assert e["kind"] == "refused" and "unconfirmed" in e["reason"], e
+        assert sim.supervisor.data.fdc.counts()["unconfirmed"] == 1
 
 
 @pytest.mark.parametrize("c, why", [
@@ -116,14 +187,16 @@ def test_a_sample_without_the_source_enabled_is_refused():
     assert not res.ok and res.reason == "[faults.fdc] is not enabled"
 
 
-def test_the_decision_is_deterministic_through_the_cycle():
+@pytest.mark.parametrize("detect_at", [30.0, 10.5])  # decided at once; awaiting, then later
+def test_the_decision_is_deterministic_through_the_cycle(detect_at):
     """Same run twice, the sample at the same cycle: the same η and bit-identical thrust
     (what ``uvd replay --lockstep`` relies on)."""
     runs = []
     for _ in range(2):
-        sim, res, after = _faulty_run("confirm", 0.5, fault_at=10.0, detect_at=30.0)
-        runs.append((res.reason, np.array(after)))
-    assert runs[0][0] == runs[1][0]
+        sim, res, after = _faulty_run("confirm", 0.5, fault_at=10.0, detect_at=detect_at)
+        after += _run(sim, 6.0)
+        runs.append((res.reason, np.array(after), sim.supervisor.data.thruster_eta.tolist()))
+    assert runs[0][0] == runs[1][0] and runs[0][2] == runs[1][2] == [1, 1, 1, 0.5, 1, 1]
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
 
 

@@ -133,7 +133,8 @@ def test_a_sample_built_from_the_documented_schema_is_decided_by_accept(tmp_path
     """The fdc client's sample, written against uvd.fault.v1 only, goes through the router to
     the daemon's Zenoh face; the FaultReport it becomes is then decided by the cycle of a JHU
     ROV in each ``accept`` mode: advisory tells and leaves η, auto sets thruster 4's η 0.5,
-    confirm (the default) refuses it while the daemon's own residual has no evidence yet."""
+    confirm (the default) keeps it, awaiting the daemon's own residual, which has no evidence
+    yet."""
     from tests.test_fdc_source import _cfg, _run, _sim
     router, endpoint, cfg = fleet(tmp_path, {"faults": {"fdc": {"enabled": True}}})
     from uvd.links.zenoh import zenoh_sink
@@ -155,7 +156,7 @@ def test_a_sample_built_from_the_documented_schema_is_decided_by_accept(tmp_path
     assert report == cmd.FaultReport("thruster", "thruster4", -0.5, 5_000_000_000, 3.0,
                                      1_000_000_000)
     for accept, ok, eta in [("advisory", True, None), ("auto", True, [1, 1, 1, 0.5, 1, 1]),
-                            ("confirm", False, None)]:
+                            ("confirm", True, None)]:
         sim = _sim(_cfg(accept))
         _run(sim, 0.5)
         res = sim.command(report)
@@ -163,7 +164,7 @@ def test_a_sample_built_from_the_documented_schema_is_decided_by_accept(tmp_path
         assert res.ok is ok, (accept, res.reason)
         assert (None if data.thruster_eta is None else data.thruster_eta.tolist()) == eta
         assert {"advisory": "advisory, not acted on", "auto": "accepted (auto)",
-                "confirm": "unconfirmed"}[accept] in res.reason
+                "confirm": "awaiting the daemon's residual"}[accept] in res.reason
 
 
 def test_the_fdc_client_reads_hold_reason_from_the_estimates(tmp_path):

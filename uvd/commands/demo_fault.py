@@ -118,6 +118,7 @@ class FaultRun:
         self.reallocated: dict[str, Any] | None = None
         self.cleared: dict[str, Any] | None = None
         self.refused: list[str] = []
+        self.awaited: list[str] = []  # samples the daemon kept to decide at a later segment
         self._lock = threading.Lock()
         self._session = None
         self._callbacks = SessionCallbacks()
@@ -171,12 +172,20 @@ class FaultRun:
         except ValueError:
             return
         r = m.get("record") or {}
-        if m.get("kind") != "command":
+        if m.get("kind") == "failsafe" and r.get("trigger") == "fdc":
+            # a sample that awaited the daemon's residual, decided at a later segment
+            acted, awaited = r.get("kind") == "accommodated", False
+        elif m.get("kind") == "command":
+            acted = bool(r.get("ok")) and "→" in str(r.get("reason"))  # through SetThrusterEta
+            awaited = bool(r.get("ok")) and "awaiting the daemon's residual" in str(
+                r.get("reason"))
+        else:
             return
-        acted = bool(r.get("ok")) and "→" in str(r.get("reason"))  # through SetThrusterEta
         with self._lock:
-            if r.get("command") == "FaultReport":
-                if acted and self.reallocated is None:
+            if r.get("command") == "FaultReport" or m.get("kind") == "failsafe":
+                if awaited:
+                    self.awaited.append(m["text"])
+                elif acted and self.reallocated is None:
                     self.reallocated = {"t_ns": int(r["t_ns"]), "text": m["text"]}
                     self._clear_at = time.monotonic() + CLEAR_AFTER_S
                 elif not acted:
@@ -224,7 +233,7 @@ class FaultRun:
         out: dict[str, Any] = {"thruster": s.thruster, "eta": s.eta, "at_s": s.at_s,
                                "fdc_args": s.fdc_args(), "detected": self.detected,
                                "reallocated": self.reallocated, "cleared": self.cleared,
-                               "refused": self.refused}
+                               "refused": self.refused, "awaited": self.awaited}
         f = self.fault_ns
         if f is not None and self.detected is not None:
             out["fault_to_detection_s"] = (self.detected["arrived_ns"] - f) * 1e-9
@@ -236,7 +245,7 @@ class FaultRun:
         watch = self.run_dir / "watch.log"
         out["watch_events"] = [ln for ln in watch.read_text().splitlines()
                                if "event: FaultReport" in ln or "event: SetThrusterEta" in ln
-                               ] if watch.is_file() else []
+                               or ": fdc → " in ln] if watch.is_file() else []
         return out
 
 
@@ -269,12 +278,14 @@ def report(f: dict[str, Any], progress) -> None:
         f"not detected in the {stopped - f['at_s']:.1f} s before the Ctrl-C"))
     r = f.get("detection_to_reallocation_s")
     if r is not None:
-        progress(f"    detection → reallocation (the cycle)  {r:6.3f} s")
+        progress(f"    detection → reallocation (the daemon) {r:6.3f} s")
     t = f.get("fault_to_reallocation_s")
     progress("    fault → reallocation                  " + (f"{t:6.1f} s" if t is not None
                                                            else "no reallocation"))
     if f.get("daemon_counts"):
         progress(f"    the daemon's fault samples: {f['daemon_counts']}")
+    for text in f.get("awaited") or ():
+        progress(f"    awaited the daemon's residual: {text}")
     for text in f.get("refused") or ():
         progress(f"    not acted on: {text}")
     for line in f.get("watch_events") or ():

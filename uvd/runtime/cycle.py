@@ -503,7 +503,7 @@ def apply(config: CycleConfig, state: CycleState, c: Any, t_ns: int
         return _set_eta(config, state, c)
     if isinstance(c, cmd.FaultReport):
         from uvd.runtime.fdc_source import decide
-        v = decide(config.fdc, state.fdc, c, config.core.allocator.n_thrusters)
+        v = decide(config.fdc, state.fdc, c, config.core.allocator.n_thrusters, t_ns)
         state = state._replace(fdc=v.state)
         if v.thruster is None:
             return CommandResult(v.ok, v.text), state, ()
@@ -585,6 +585,39 @@ def amplifier_source(config: CycleConfig, state: CycleState, a: ActuatorStatus |
                           a.healthy_feedback_t_ns, effects)
 
 
+def _fdc_update(config: CycleConfig, fdc: Any, t_ns: int, sensed: Any, nav: Any,
+                thrust: np.ndarray, eta: np.ndarray | None
+                ) -> tuple[Any, np.ndarray | None, Effects]:
+    """uvd-fdc's source in the update (:mod:`uvd.runtime.fdc_source`): this cycle's sample for
+    the daemon's evidence, then the samples that await it decided again — a confirmed one
+    sets η from the next cycle on and is told as an ``accommodated`` event of trigger
+    ``fdc`` ("… confirmed: … → thruster 7 eta 0.28 (uvd-fdc); given up: none"), a refused
+    one as a ``refused`` event. Returns the source's state, the η on and the events."""
+    from uvd.runtime.fdc_source import fdc_awaited, fdc_init, fdc_observe
+    rule = config.fdc
+    before = fdc if fdc is not None else fdc_init(rule)
+    fdc = fdc_observe(rule, before, t_ns, sensed.nav_ok, nav.v, nav.H[:3, :3], sensed.speeds,
+                      thrust)
+    if not fdc.awaiting:
+        return fdc, eta, ()
+    old, new = before.evidence.seg_t, fdc.evidence.seg_t
+    closed = len(new) > 0 and (len(old) == 0 or new[-1, 1] != old[-1, 1])
+    fdc, verdicts = fdc_awaited(rule, fdc, t_ns * 1e-9, closed)
+    events = []
+    for v in verdicts:
+        if v.thruster is None:
+            events.append(FailsafeEvent(t_ns, "refused", "fdc", Action.NONE, v.text))
+            continue
+        eta = np.ones(rule.evidence.B.shape[1]) if eta is None else eta.copy()
+        eta[v.thruster - 1] = v.eta
+        lost = ", ".join(config.core.accommodation_for(eta)[0].given_up) or "none"
+        events.append(FailsafeEvent(t_ns, "accommodated", "fdc", Action.WARN,
+                                    f"{v.text} → thruster {v.thruster} eta {v.eta:.3g} "
+                                    f"({v.source}); given up: {lost}"))
+        eta = None if (eta == 1.0).all() else eta
+    return fdc, eta, tuple(events)
+
+
 # -- the update --
 
 _CORE = None  # uvd.core once the first update imported it (module comment above)
@@ -653,15 +686,14 @@ def update(config: CycleConfig, state: CycleState, inp: CycleInputs, dt: float
                          eta)
     out, st = core.act(cfg, sensed, ci, st, dt)
     lapsed = manual_mode and state.manual is not None and manual is None
-    fdc = state.fdc
+    fdc, eta_next = state.fdc, eta
     if config.fdc is not None:  # the daemon's own evidence (fdc_source)
-        from uvd.runtime.fdc_source import fdc_init, fdc_observe
-        fdc = fdc_observe(config.fdc, fdc if fdc is not None else fdc_init(config.fdc),
-                          inp.t_ns, sensed.nav_ok, nav.v, nav.H[:3, :3], sensed.speeds,
-                          out.thrust_n)
+        fdc, eta_next, decided = _fdc_update(config, fdc, inp.t_ns, sensed, nav, out.thrust_n,
+                                             eta)
+        effects = (*effects, *decided)
     new = CycleState(st, arbiter, lifecycle, d, h, state.operator_mode,
                      None if lapsed else state.manual,  # a silent joystick stops the vehicle
-                     until, state.manual_timeout_ns, None, eta, armed, armed_at,
+                     until, state.manual_timeout_ns, None, eta_next, armed, armed_at,
                      ("command",) if out.status == "non-finite" else (), fdc)
     return CycleResult(out, h, d, lifecycle.state, state.operator_mode, effects,
                        armed_at, eta), new

@@ -27,9 +27,16 @@ allocation, the STATUSTEXT, the Zenoh event).
     ``MIN_SEGMENTS`` segments, and η̂ᵢ is nearer the sample's η than a healthy 1
     (|η̂ᵢ − η| < |η̂ᵢ − 1|: the fault explains the residual better than no fault). It is
     **contradicted** when the fit is that precise but either fails (the thruster pushes as
-    commanded; or a small claimed loss the residual does not see), and **unconfirmed** when the
-    fit is not precise enough (the thruster barely commanded since the change). Contradicted and
-    unconfirmed samples are refused — logged, counted, told to the operator — and not acted on.
+    commanded; or a small claimed loss the residual does not see). A fit not yet that precise
+    (uvd-fdc named the change moments ago: fewer segments than that since it; or the thruster
+    barely commanded) **awaits** the residual: the sample is kept in the cycle's state and
+    decided again at each segment that closes, up to ``confirm_wait_s`` after it came —
+    confirmed then, it sets η as at once (told as an ``accommodated`` failsafe event of trigger
+    ``fdc``); contradicted then, or still not precise when the wait ends (**unconfirmed**), it
+    is refused (a ``refused`` event). Contradicted and unconfirmed samples are refused —
+    logged, counted, told to the operator — and not acted on. Before session 34 a sample was
+    decided when it came: uvd-fdc naming a weak thruster of the BlueROV2 1.7 s after the fault
+    left the daemon no segment since, and the default ``confirm`` never acted on it.
 
 Samples of another kind (buoyancy, entanglement, …) never change η: they are told, whatever
 ``accept`` says. The evidence is the configured vehicle model's: a model far from the vehicle
@@ -54,8 +61,8 @@ if TYPE_CHECKING:
 # the evidence's numerics (uvd.estimation, uvd.model) are imported by the functions that run
 # them: the configuration imports this module for its sections
 
-__all__ = ["FdcSourceSection", "FaultsSection", "FdcRule", "FdcState", "Verdict",
-           "fdc_init", "fdc_observe", "decide", "MIN_SEGMENTS"]
+__all__ = ["FdcSourceSection", "FaultsSection", "FdcRule", "FdcState", "Awaiting", "Verdict",
+           "fdc_init", "fdc_observe", "decide", "fdc_awaited", "MIN_SEGMENTS"]
 
 #: the fewest residual segments a confirmation is made from
 MIN_SEGMENTS = 3
@@ -83,6 +90,11 @@ class FdcSourceSection:
                               doc="confirm: how far back the daemon's residual segments reach")
     segment_s: float = setting(1.0, unit="s", gt=0.0, max=60.0,
                                doc="confirm: length of one residual segment")
+    confirm_wait_s: float = setting(
+        30.0, unit="s", min=0.0, max=3600.0,
+        doc="confirm: how long a sample whose η the residual cannot yet tell (too few or too "
+            "imprecise segments since the change) waits for more, decided again at each "
+            "segment; then unconfirmed (0: decided when it comes)")
 
 
 @dataclass(frozen=True)
@@ -101,6 +113,7 @@ class FdcRule:
     tolerance: float
     evidence: EvidenceConfig
     k_thrust: np.ndarray
+    wait_s: float = 0.0
 
     @classmethod
     def of(cls, s: FdcSourceSection, vehicle) -> FdcRule | None:
@@ -110,12 +123,27 @@ class FdcRule:
         from uvd.estimation.thrust_evidence import EvidenceConfig
         ev = EvidenceConfig.from_params(vehicle.params, vehicle.B, segment_s=s.segment_s,
                                         window_s=s.window_s)
-        return cls(s.accept, s.tolerance, ev, np.asarray(vehicle.k_thrust, dtype=float))
+        return cls(s.accept, s.tolerance, ev, np.asarray(vehicle.k_thrust, dtype=float),
+                   s.confirm_wait_s)
+
+
+class Awaiting(NamedTuple):
+    """A thruster sample that awaits the residual (module docstring): the thruster (1-based)
+    and η it claims, the change time it gives (s; None: not given), until when it waits (s),
+    the claim's words and whose it is."""
+
+    thruster: int
+    eta: float
+    since_s: float | None
+    until_s: float
+    claim: str
+    source: str
 
 
 class FdcState(NamedTuple):
     """The source's part of the cycle's state: the evidence, the last thrust commanded (what
-    the thrusters are told until the next cycle) and the samples counted by outcome."""
+    the thrusters are told until the next cycle), the samples counted by outcome and those
+    that await the residual (at most one a thruster: a newer sample replaces it)."""
 
     evidence: Evidence
     f_last: np.ndarray
@@ -123,10 +151,12 @@ class FdcState(NamedTuple):
     contradicted: int = 0
     unconfirmed: int = 0
     advisory: int = 0
+    awaiting: tuple[Awaiting, ...] = ()
 
     def counts(self) -> dict[str, int]:
         return {"acted": self.acted, "contradicted": self.contradicted,
-                "unconfirmed": self.unconfirmed, "advisory": self.advisory}
+                "unconfirmed": self.unconfirmed, "advisory": self.advisory,
+                "awaiting": len(self.awaiting)}
 
 
 def fdc_init(rule: FdcRule) -> FdcState:
@@ -152,14 +182,15 @@ def fdc_observe(rule: FdcRule, st: FdcState, t_ns: int, nav_ok: bool, v, R, spee
 
 class Verdict(NamedTuple):
     """What the cycle does with a sample: set η (``thruster``, ``eta``) or not (None), the
-    text for the operator, whether the sample was accepted (a refused one is ``ok`` False) and
-    the new state."""
+    text for the operator, whether the sample was accepted (a refused one is ``ok`` False),
+    the new state and whose the sample was."""
 
     thruster: int | None
     eta: float | None
     text: str
     ok: bool
     state: FdcState | None
+    source: str = "uvd-fdc"
 
 
 def _parse(c: Any, n: int) -> tuple[int, float] | str:
@@ -176,9 +207,9 @@ def _parse(c: Any, n: int) -> tuple[int, float] | str:
     return i, min(1.0, max(0.0, 1.0 + float(rc)))
 
 
-def decide(rule: FdcRule | None, st: FdcState | None, c: Any, n: int) -> Verdict:
+def decide(rule: FdcRule | None, st: FdcState | None, c: Any, n: int, t_ns: int) -> Verdict:
     """The cycle's decision on the :class:`~uvd.runtime.commands.FaultReport` ``c`` for a
-    vehicle of ``n`` thrusters (module docstring)."""
+    vehicle of ``n`` thrusters, at the cycle of time ``t_ns`` (module docstring)."""
     if rule is None:
         return Verdict(None, None, "[faults.fdc] is not enabled", False, st)
     st = st if st is not None else fdc_init(rule)  # no cycle since the rule came in
@@ -195,19 +226,58 @@ def decide(rule: FdcRule | None, st: FdcState | None, c: Any, n: int) -> Verdict
     if rule.accept == "auto":
         return Verdict(i, eta, f"{claim}; accepted (auto)", True,
                        st._replace(acted=st.acted + 1))
-    from uvd.estimation.thrust_evidence import thruster_fit
     since = None if c.since_t_ns is None else int(c.since_t_ns) * 1e-9
-    fit = thruster_fit(rule.evidence, st.evidence, i, since)
+    waiting = Awaiting(i, eta, since, t_ns * 1e-9 + rule.wait_s, claim, c.source)
+    # a newer sample of the thruster replaces one that awaits, decided now or awaiting itself
+    st = st._replace(awaiting=tuple(a for a in st.awaiting if a.thruster != i))
+    v, seen = _judge(rule, st, waiting, final=not rule.wait_s > 0.0)
+    if v is not None:
+        return v
+    return Verdict(None, None, f"{claim}; awaiting the daemon's residual ({seen}, not yet "
+                               f"precise to {rule.tolerance / 2:g}): decided at each segment, "
+                               f"within {rule.wait_s:g} s", True,
+                   st._replace(awaiting=(*st.awaiting, waiting)))
+
+
+def _judge(rule: FdcRule, st: FdcState, a: Awaiting, final: bool
+           ) -> tuple[Verdict | None, str]:
+    """The verdict on ``a`` by the evidence in ``st`` — confirmed or contradicted when the fit
+    is precise enough; else unconfirmed when ``final``, None (it waits on) when not — and what
+    the residual gives, in words."""
+    from uvd.estimation.thrust_evidence import thruster_fit
+    fit = thruster_fit(rule.evidence, st.evidence, a.thruster, a.since_s)
     seen = (f"the daemon's residual gives eta {fit.eta:.2f} ± {fit.se:.2f} over "
             f"{fit.seconds:.0f} s ({fit.segments} segments)")
     tol = rule.tolerance
     if fit.segments < MIN_SEGMENTS or not fit.se <= tol / 2:  # NaN: never commanded
-        return Verdict(None, None, f"{claim}; unconfirmed: {seen}, not precise to "
+        if not final:
+            return None, seen
+        return Verdict(None, None, f"{a.claim}; unconfirmed: {seen}, not precise to "
                                    f"{tol / 2:g}; not acted on", False,
-                       st._replace(unconfirmed=st.unconfirmed + 1))
-    if abs(fit.eta - eta) > tol or abs(fit.eta - eta) >= abs(fit.eta - 1.0):
-        why = f"not within {tol:g}" if abs(fit.eta - eta) > tol else "nearer a healthy 1"
-        return Verdict(None, None, f"{claim}; contradicted: {seen}, {why}; not acted on",
-                       False, st._replace(contradicted=st.contradicted + 1))
-    return Verdict(i, eta, f"{claim}; confirmed: {seen}", True,
-                   st._replace(acted=st.acted + 1))
+                       st._replace(unconfirmed=st.unconfirmed + 1)), seen
+    if abs(fit.eta - a.eta) > tol or abs(fit.eta - a.eta) >= abs(fit.eta - 1.0):
+        why = f"not within {tol:g}" if abs(fit.eta - a.eta) > tol else "nearer a healthy 1"
+        return Verdict(None, None, f"{a.claim}; contradicted: {seen}, {why}; not acted on",
+                       False, st._replace(contradicted=st.contradicted + 1)), seen
+    return Verdict(a.thruster, a.eta, f"{a.claim}; confirmed: {seen}", True,
+                   st._replace(acted=st.acted + 1), a.source), seen
+
+
+def fdc_awaited(rule: FdcRule, st: FdcState, t_s: float, segment_closed: bool
+                ) -> tuple[FdcState, tuple[Verdict, ...]]:
+    """The samples that await the residual, decided again (module docstring): at a segment
+    that closed this cycle, and at the end of each one's wait (``t_s``: this cycle's time).
+    Returns the state without the decided ones and their verdicts, in the order they came."""
+    if not st.awaiting:
+        return st, ()
+    kept: list[Awaiting] = []
+    verdicts: list[Verdict] = []
+    for a in st.awaiting:
+        final = t_s >= a.until_s
+        v = _judge(rule, st, a, final)[0] if segment_closed or final else None
+        if v is None:
+            kept.append(a)
+        else:
+            verdicts.append(v)
+            st = v.state
+    return st._replace(awaiting=tuple(kept)), tuple(verdicts)

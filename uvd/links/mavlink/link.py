@@ -317,8 +317,10 @@ class MavlinkLink:
             elif kind == "estimate" and r.get("source", "estimator") == "estimator":
                 self._estimate = r
             elif kind == "failsafe":
-                # "accommodated": the amplifier source of η (thruster, η, source, given up)
-                sev = "warning" if r["kind"] in ("fired", "action", "accommodated") else "info"
+                # "accommodated": the amplifier's or uvd-fdc's source of η (thruster, η,
+                # source, given up); "refused": a uvd-fdc sample its wait did not confirm
+                sev = "warning" if r["kind"] in ("fired", "action", "accommodated",
+                                                 "refused") else "info"
                 self._text((sev, f"failsafe {r['kind']}: {r['trigger']} -> "
                                  f"{r['action']} ({r['reason']})"), event=True)
             elif kind == "lifecycle":
