@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import errno
+from pathlib import Path
 
 import serial
 import serial_asyncio_fast
@@ -21,10 +22,15 @@ from drivers.framing import FrameCodec
 from drivers.transport import FrameReader, _Protocol
 from uvd.errors import TransportError
 
+#: where udev names each USB serial adapter plugged in by its vendor, model and serial number
+BY_ID = Path("/dev/serial/by-id")
 
-def _reason(exc: BaseException, port: str) -> str:
+
+def _reason(exc: BaseException, port: str, by_id: Path = BY_ID) -> str:
     """Why ``port`` did not open, saying the port once (the reader's message names it):
-    pyserial repeats it around the operating system's error, which it chains as context."""
+    pyserial repeats it around the operating system's error, which it chains as context; and
+    what to do where the operator can (a device not there: the adapters that are, in
+    ``by_id``; one another process holds; one this user may not open)."""
     text = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
     ctx = exc.__context__
     if isinstance(ctx, OSError) and ctx.strerror:
@@ -34,6 +40,14 @@ def _reason(exc: BaseException, port: str) -> str:
     if code in (errno.EAGAIN, errno.EBUSY):
         text += (" — another process holds it (fuser -v on the port names it: a second uvd, "
                  "a terminal program, ModemManager probing a USB adapter?)")
+    elif code == errno.ENOENT and port.startswith("/dev/"):
+        try:
+            present = sorted(str(p) for p in by_id.iterdir())
+        except OSError:
+            present = []
+        text += (f" — unplugged, or another name? {by_id} holds " + (
+            ", ".join(present[:6]) + (", …" if len(present) > 6 else "") if present
+            else "none: no USB serial adapter is plugged in"))
     elif code == errno.EACCES:
         text += (" — this user may not open it (ls -l on the port shows its group: add the "
                  "daemon's user to it, often dialout, or give the port one with a udev rule)")

@@ -107,6 +107,26 @@ def test_a_port_this_user_may_not_open_says_how_to_be_let_in():
                            "dialout"), said
 
 
+def test_a_device_not_there_names_the_adapters_that_are(tmp_path):
+    # a by-id name of an adapter unplugged (or renamed by another firmware): the adapters
+    # udev names are listed, or that there is none
+    from drivers.serial_transport import _reason
+    port = "/dev/serial/by-id/usb-FTDI_PHINS-if00-port0"
+    try:
+        serial.Serial(port)
+    except serial.SerialException as exc:
+        err = exc
+    by_id = tmp_path / "by-id"
+    by_id.mkdir()
+    assert _reason(err, port, by_id).endswith(
+        f"No such file or directory — unplugged, or another name? {by_id} holds none: no USB "
+        "serial adapter is plugged in")
+    (by_id / "usb-FTDI_FT232R_A12-if00-port0").touch()
+    assert _reason(err, port, by_id).endswith(
+        f"{by_id} holds {by_id}/usb-FTDI_FT232R_A12-if00-port0")
+    assert "unplugged" not in _reason(err, "/tmp/uvd-sim/ins", by_id)  # a pty's placeholder
+
+
 def test_missing_port_reports_and_get_times_out():
     async def go():
         r = SerialFrameReader("/nonexistent/uvd-tty", pd0.Pd0Codec(), name="dvl",
