@@ -26,7 +26,7 @@ from uvd.errors import TransportError
 BY_ID = Path("/dev/serial/by-id")
 
 
-def _reason(exc: BaseException, port: str, by_id: Path = BY_ID) -> str:
+def why_not_open(exc: BaseException, port: str, by_id: Path = BY_ID) -> str:
     """Why ``port`` did not open, saying the port once (the reader's message names it):
     pyserial repeats it around the operating system's error, which it chains as context; and
     what to do where the operator can (a device not there: the adapters that are, in
@@ -89,4 +89,4 @@ class SerialFrameReader(FrameReader):
             transport.serial.reset_input_buffer()
             return transport
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise TransportError(_reason(exc, self.port)) from exc
+            raise TransportError(why_not_open(exc, self.port)) from exc

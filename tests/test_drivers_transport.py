@@ -93,7 +93,7 @@ def test_serial_port_is_opened_exclusively():
 def test_a_port_this_user_may_not_open_says_how_to_be_let_in():
     # root opens any device, so the refusal is raised here as pyserial raises it (the
     # operating system's error chained beneath its own, which names the port again)
-    from drivers.serial_transport import _reason
+    from drivers.serial_transport import why_not_open
     try:
         try:
             raise PermissionError(errno.EACCES, "Permission denied", "/dev/ttyUSB0")
@@ -101,7 +101,7 @@ def test_a_port_this_user_may_not_open_says_how_to_be_let_in():
             raise serial.SerialException(
                 os_error.errno, f"could not open port /dev/ttyUSB0: {os_error}") from None
     except serial.SerialException as exc:
-        said = _reason(exc, "/dev/ttyUSB0")
+        said = why_not_open(exc, "/dev/ttyUSB0")
     assert said.startswith("[Errno 13] Permission denied — this user may not open it (ls -l "
                            "on the port shows its group: add the daemon's user to it, often "
                            "dialout"), said
@@ -110,7 +110,7 @@ def test_a_port_this_user_may_not_open_says_how_to_be_let_in():
 def test_a_device_not_there_names_the_adapters_that_are(tmp_path):
     # a by-id name of an adapter unplugged (or renamed by another firmware): the adapters
     # udev names are listed, or that there is none
-    from drivers.serial_transport import _reason
+    from drivers.serial_transport import why_not_open
     port = "/dev/serial/by-id/usb-FTDI_PHINS-if00-port0"
     try:
         serial.Serial(port)
@@ -118,13 +118,13 @@ def test_a_device_not_there_names_the_adapters_that_are(tmp_path):
         err = exc
     by_id = tmp_path / "by-id"
     by_id.mkdir()
-    assert _reason(err, port, by_id).endswith(
+    assert why_not_open(err, port, by_id).endswith(
         f"No such file or directory — unplugged, or another name? {by_id} holds none: no USB "
         "serial adapter is plugged in")
     (by_id / "usb-FTDI_FT232R_A12-if00-port0").touch()
-    assert _reason(err, port, by_id).endswith(
+    assert why_not_open(err, port, by_id).endswith(
         f"{by_id} holds {by_id}/usb-FTDI_FT232R_A12-if00-port0")
-    assert "unplugged" not in _reason(err, "/tmp/uvd-sim/ins", by_id)  # a pty's placeholder
+    assert "unplugged" not in why_not_open(err, "/tmp/uvd-sim/ins", by_id)  # a pty's placeholder
 
 
 def test_missing_port_reports_and_get_times_out():

@@ -443,6 +443,82 @@ def test_serial_line_carries_telemetry_and_commands(tmp_path):
     asyncio.run(asyncio.wait_for(main(), 30.0))
 
 
+def test_a_radio_missing_or_lost_is_told_and_opened_again_beside_the_udp_link(tmp_path,
+                                                                            caplog):
+    """A telemetry radio not there at start took the whole link off, UDP too ("MAVLink link
+    off: [mavlink] serial …"); one lost while running (its USB adapter unplugged) logged a
+    warning at every wake of the link's thread. Now: the UDP link opens, the line is told once
+    and tried again; a pseudo-terminal linked at its path later is opened and carries the
+    telemetry; its loss (the master closed) is told once and the line is opened again when a
+    new one is linked there."""
+    import logging
+    path = tmp_path / "radio"
+    link = MavlinkLink(
+        MavlinkSection(enabled=True, listen="127.0.0.1:0", params_file="", serial=str(path),
+                       serial_baud=57600),
+        CommandQueue(), lambda: load_config(DEFAULT_CONFIG),
+        thresholds={"ins": 0.25, "dvl": 1.0, "depth": 0.5, "feedback": 0.5},
+        max_thrust_n=[20.0] * 6)
+    dec = mavlink.MAVLink(None, 255, 190)
+    dec.robust_parsing = True
+
+    def radio() -> int:
+        master, slave = os.openpty()
+        os.set_blocking(master, False)
+        path.unlink(missing_ok=True)
+        path.symlink_to(os.ttyname(slave))
+        os.close(slave)  # the link opens it by its name
+        return master
+
+    def heartbeat_down(master: int) -> bool:
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            try:
+                msgs = dec.parse_buffer(os.read(master, 4096)) or []
+            except (BlockingIOError, OSError):
+                time.sleep(0.05)
+                continue
+            if any(m.get_type() == "HEARTBEAT" for m in msgs):
+                return True
+        return False
+
+    def scenario():
+        st = Peer()
+        st.sock.sendto(st.enc.heartbeat_encode(6, 8, 0, 0, 0).pack(st.enc),
+                       ("127.0.0.1", link.port))
+        assert st.wait("HEARTBEAT") is not None  # the UDP link is up without its radio
+        assert link.serial_error.startswith("[Errno 2] No such file or directory")
+        master = radio()
+        assert heartbeat_down(master), "no HEARTBEAT down the line once it is there"
+        assert link.serial_error is None
+        os.close(master)  # the radio lost
+        deadline = time.monotonic() + 5.0
+        while link.counters["serial_lost"] == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert link.counters["serial_lost"] == 1
+        master = radio()
+        assert heartbeat_down(master), "no HEARTBEAT down the line once it is back"
+        os.close(master)
+        st.sock.close()
+
+    async def main():
+        await link.open()
+        try:
+            await link.write([cycle_record()])
+            await asyncio.to_thread(scenario)
+        finally:
+            await link.aclose()
+
+    with caplog.at_level(logging.INFO, logger="uvd.mavlink"):
+        asyncio.run(asyncio.wait_for(main(), 60.0))
+    said = [r.getMessage() for r in caplog.records if "serial" in r.getMessage()]
+    assert len(said) <= 6, said  # told, not at every wake
+    assert f"MAVLink serial {path} not open: [Errno 2] No such file or directory; the UDP " \
+           "link goes on, the line is tried again every 5 s at most" in said, said
+    assert f"MAVLink serial {path} open" in said
+    assert any(s.startswith(f"MAVLink serial {path} lost (") for s in said), said
+
+
 @contextlib.contextmanager
 def _receiver(rcvbuf: int | None = None):
     """A receiver process on a loopback UDP socket (with a ``rcvbuf`` receive buffer) and a
@@ -487,9 +563,10 @@ def test_the_receiver_process_forwards_only_good_mavlink_and_counts_the_rest():
 
 
 def test_the_receiver_outlives_a_ctrl_c_and_ends_when_the_daemon_ends_it():
-    """Ctrl-C in the terminal of ``uvd run`` reaches the receiver too: it goes on forwarding
-    (the daemon, stopping in order, ends it) and ends, with its last counts, when the daemon
-    shuts its end."""
+    """Ctrl-C in the terminal of ``uvd run`` reaches the receiver too, and so do SIGTERM and
+    SIGHUP sent to the group (``timeout``, ``kill -- -PGID``): it goes on forwarding (the
+    daemon, stopping in order, ends it) and ends, with its last counts, when the daemon shuts
+    its end."""
     from uvd.links.mavlink.receiver import read_forwarded, stop_receiver
     with _receiver() as (proc, pair, sock, st):
         good = st.enc.heartbeat_encode(6, 8, 0, 0, 0).pack(st.enc)
@@ -499,9 +576,10 @@ def test_the_receiver_outlives_a_ctrl_c_and_ends_when_the_daemon_ends_it():
             got = read_forwarded(pair, counts)
             time.sleep(0.05)
         assert got, "the receiver forwarded nothing in 20 s"
-        os.kill(proc.pid, signal.SIGINT)
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # a group's signals
+            os.kill(proc.pid, sig)
         time.sleep(0.3)
-        assert proc.poll() is None, "the receiver died of SIGINT"
+        assert proc.poll() is None, f"the receiver died: {proc.returncode}"
         got = []
         while not got and time.monotonic() < deadline:
             st.sock.sendto(good, sock.getsockname())

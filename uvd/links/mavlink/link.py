@@ -13,7 +13,10 @@ holds this process's interpreter lock against the loop. One daemon thread owns t
 sending side and the pymavlink codecs; it
 
 * reads what the receiver forwards and, when ``serial`` is set, a serial line (a telemetry
-  radio; a radio's few kB/s are read here);
+  radio; a radio's few kB/s are read here). A radio that is not there at start, or is lost
+  (its USB adapter unplugged), is told once and opened again every few seconds; the UDP link
+  goes on meanwhile (before session 34 a radio missing at start took the whole link off, and
+  one lost while running logged a warning at every wake, 50 a second);
 * sends HEARTBEAT and SYS_STATUS at ``heartbeat_hz``; ATTITUDE, LOCAL_POSITION_NED,
   SCALED_PRESSURE, VFR_HUD, SERVO_OUTPUT_RAW and ACTUATOR_OUTPUT_STATUS at ``state_hz``;
   NAMED_VALUE_FLOAT of the online estimates at ``estimate_hz`` — to every station heard within
@@ -34,6 +37,7 @@ the newest operator HEARTBEAT (the operator-loss failsafe, :mod:`uvd.runtime.tri
 from __future__ import annotations
 
 import collections
+import contextlib
 import logging
 import math
 import select
@@ -122,6 +126,8 @@ def custom_mode_of(rec: Mapping[str, Any], controller: str, step1_s: float) -> i
 
 #: the station at the end of the serial line (a radio): always a destination when configured
 SERIAL = ("serial",)
+#: the first and the longest wait before a serial line that did not open is tried again (s)
+SERIAL_RETRY_S = (0.5, 5.0)
 
 
 def _addr(text: str) -> tuple[str, int]:
@@ -251,6 +257,10 @@ class MavlinkLink:
         self._tokens, self._tokens_t = TEXT_BURST, time.monotonic()
         self._sock: socket.socket | None = None
         self._serial = None
+        #: when the serial line is tried again (monotonic s), the wait after it, and why it
+        #: is not open (None: open, or not configured)
+        self._serial_next, self._serial_wait = 0.0, SERIAL_RETRY_S[0]
+        self.serial_error: str | None = None
         self.rx_serial = mavlink.MAVLink(None, cfg.system_id, cfg.component_id,
                                          use_native=False)
         self.rx_serial.robust_parsing = True
@@ -289,15 +299,7 @@ class MavlinkLink:
             log.error("MAVLink link off: its receiver process: %s", exc)
             raise
         if self.cfg.serial:
-            import serial
-            try:
-                self._serial = serial.Serial(self.cfg.serial, self.cfg.serial_baud, timeout=0,
-                                             write_timeout=0)
-            except (serial.SerialException, OSError) as exc:
-                self._end_receiver()
-                sock.close()
-                log.error("MAVLink link off: [mavlink] serial %s: %s", self.cfg.serial, exc)
-                raise OSError(f"[mavlink] serial {self.cfg.serial}: {exc}") from exc
+            self._open_serial(time.monotonic())
         self._thread = threading.Thread(target=self._run, name="uvd-mavlink", daemon=True)
         self._thread.start()
         log.info("MAVLink link on udp %s:%d (system %d, signing %s)",
@@ -371,6 +373,8 @@ class MavlinkLink:
                     next_spawn = now + 1.0
                     self._receiver, self._pair = spawn_receiver(self._sock, self.loop_cpus)
                     self.counters["receiver_restarts"] += 1
+                if self.cfg.serial and self._serial is None and now >= self._serial_next:
+                    self._open_serial(now)
                 ins = [f for f in (self._pair, self._serial) if f is not None]
                 readable, _, _ = select.select(ins, [], [], 0.02)
                 if self._pair is not None and self._pair in readable:
@@ -398,6 +402,46 @@ class MavlinkLink:
                 self.counters["errors"] += 1
                 log.warning("MAVLink link: %s: %s", type(exc).__name__, exc)
 
+    # ------------------------------------------------------------------ the serial line
+
+    def _open_serial(self, now: float) -> None:
+        """Open ``[mavlink] serial``; when it does not open, say why (once for each new
+        reason) and when it is tried again (the wait doubling up to the longest)."""
+        import serial
+
+        from drivers.serial_transport import why_not_open
+        port = self.cfg.serial
+        try:
+            self._serial = serial.Serial(port, self.cfg.serial_baud, timeout=0,
+                                         write_timeout=0)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            why = why_not_open(exc, port)
+            if why != self.serial_error:
+                log.warning("MAVLink serial %s not open: %s; the UDP link goes on, the line "
+                            "is tried again every %g s at most", port, why, SERIAL_RETRY_S[1])
+            self.serial_error = why
+            self.counters["serial_open_failed"] += 1
+            self._serial_next = now + self._serial_wait
+            self._serial_wait = min(2.0 * self._serial_wait, SERIAL_RETRY_S[1])
+            return
+        if self.serial_error is not None:
+            log.info("MAVLink serial %s open", port)
+        self.serial_error, self._serial_wait = None, SERIAL_RETRY_S[0]
+
+    def _lose_serial(self, exc: BaseException) -> None:
+        """The line failed under a read (a USB adapter unplugged): closed, told once, tried
+        again from the next wake on."""
+        with contextlib.suppress(Exception):
+            self._serial.close()
+        self._serial = None
+        self.rx_serial.buf = bytearray()  # a packet cut by the loss is not continued
+        self.rx_serial.buf_index = 0
+        self.counters["serial_lost"] += 1
+        self.serial_error = f"lost: {exc}"
+        log.warning("MAVLink serial %s lost (%s); the UDP link goes on, the line is tried "
+                    "again", self.cfg.serial, exc)
+        self._serial_next = time.monotonic() + self._serial_wait
+
     def _save_timestamp(self) -> None:
         if self.signing is None or not self.cfg.signing_timestamp_file:
             return
@@ -423,7 +467,11 @@ class MavlinkLink:
 
     def _receive_serial(self) -> None:
         """A byte stream: one parser keeps its state across reads (at most 4 KiB a wake)."""
-        data = self._serial.read(4096)
+        try:
+            data = self._serial.read(4096)
+        except OSError as exc:  # pyserial's SerialException too: "readiness to read but no data"
+            self._lose_serial(exc)
+            return
         self.counters["serial_bytes"] += len(data)
         try:
             msgs = self.rx_serial.parse_buffer(data) or []

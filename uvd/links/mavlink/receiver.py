@@ -28,7 +28,8 @@ when the daemon shuts its end of the pair (after a last count report) or dies â€
 SIGINT: Ctrl-C in the terminal of ``uvd run`` reaches every process of its group, and the
 daemon, stopping in order, still has telemetry to send and its receiver to end (before, the
 receiver died at once and the daemon logged an error and started another during its
-shutdown).
+shutdown). Nor on SIGTERM or SIGHUP, which reach the group the same way (``timeout``,
+``kill -- -PGID``, a closed terminal; before session 34 the same error at each such stop).
 """
 
 from __future__ import annotations
@@ -248,7 +249,8 @@ def kernel_drops(ancillary) -> int | None:
 
 
 def main(argv: list[str]) -> int:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the daemon's to end (module docstring)
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # the daemon's to end it
+        signal.signal(sig, signal.SIG_IGN)  # (module docstring)
     _leave_realtime({int(c) for c in argv[2].split(",") if c} if len(argv) > 2 else set())
     sock = socket.socket(fileno=int(argv[0]))
     pair = socket.socket(fileno=int(argv[1]))
