@@ -42,9 +42,24 @@ DOF_NAMES = ("x", "y", "z", "roll", "pitch", "heading")
 VEL_NAMES = ("u", "v", "w", "p", "q", "r")
 
 
+#: the plant's rate of a lockstep run when none is given: sim-bridge's (its fastest
+#: instrument's)
+PLANT_RATE_HZ = 100.0
+
+
+def plant_rate_for(control_rate_hz: float) -> float:
+    """The plant rate of a lockstep run at ``control_rate_hz``: the least integer multiple of
+    it that is at least :data:`PLANT_RATE_HZ` — that rate itself for a control rate that
+    divides it (10, 20, 25, 50, 100 Hz), 120 Hz for 30 Hz, the control rate above it. (Before
+    session 34 a fixed 100 Hz: ``uvd demo`` of a configuration at 30 Hz or 1 kHz — within
+    ``[loop] rate_hz``'s bounds — ended in a ValueError traceback.)"""
+    return control_rate_hz * max(1, math.ceil(PLANT_RATE_HZ / control_rate_hz - 1e-9))
+
+
 @dataclass(frozen=True)
 class LockstepConfig:
-    plant_rate_hz: float = 100.0
+    #: None: :func:`plant_rate_for` the control rate
+    plant_rate_hz: float | None = None
     control_rate_hz: float = 10.0
     plant: PlantConfig = field(default_factory=PlantConfig)
     instruments: InstrumentConfig = field(default_factory=InstrumentConfig)
@@ -61,6 +76,8 @@ class LockstepConfig:
     ins_trigger: bool = False
 
     def __post_init__(self) -> None:
+        if self.plant_rate_hz is None:
+            object.__setattr__(self, "plant_rate_hz", plant_rate_for(self.control_rate_hz))
         ratio = self.plant_rate_hz / self.control_rate_hz
         if abs(ratio - round(ratio)) > 1e-9 or ratio < 1:
             raise ValueError("plant_rate_hz must be an integer multiple of control_rate_hz "
