@@ -57,6 +57,22 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
             deadline = time.monotonic() + 10.0
             while not faults and time.monotonic() < deadline:
                 time.sleep(0.1)
+            # the operator's η (the fault accommodated, or repaired and cleared): a new
+            # baseline of the vehicle as it is now, against which a later fault is found
+            s.put("uvd/sub1/event", json.dumps({
+                "kind": "command", "text": "SetThrusterEta from mavlink 255/190: ok — "
+                "thruster 4 eta 1 (mavlink 255/190); given up: none",
+                "record": {"type": "command", "t_ns": 300_000_000_000,
+                           "command": "SetThrusterEta", "ok": True, "source": "mavlink"}}))
+            _wait_for_line(lines, "sub1: thruster effectiveness changed (SetThrusterEta from")
+            for k in range(300, 600):  # the drags stay 1.5×; the masses 1.1× from 500 s
+                scale = {"drags": 1.5, **({"masses": 1.1} if k >= 500 else {})}
+                pub.put(json.dumps({**_payload(float(k), rng, scale=scale), "seq": k,
+                                    "wall_time": time.time()}))
+                time.sleep(0.01)
+            deadline = time.monotonic() + 10.0
+            while len(faults) < 2 and time.monotonic() < deadline:
+                time.sleep(0.1)
             pub.put(b"not json")  # counted and dropped, never a crash
             pub.put(b"[1, 2]")  # JSON, not an object: the same
             _wait_for_line(lines, "not a JSON object")
@@ -69,9 +85,10 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     lines.wait_end()
     out = "".join(lines)
     print(out)
-    assert len(faults) == 1, faults
+    assert len(faults) == 2, faults
     key, d = faults[0]
     assert key == "uvd/sub1/fault/entanglement" and d["channel"].startswith("drag")
+    assert faults[1][0] == "uvd/sub1/fault/flooding" and 500e9 <= faults[1][1]["t_ns"] <= 503e9
     schema = json.loads((Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
                          / "uvd.fault.v1.json").read_text())
     jsonschema.Draft202012Validator(schema).validate(d)
@@ -79,9 +96,9 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     assert "FAULT sub1: entanglement" in out and "not JSON" in out and "sub1: gone" in out
     stats = json.loads((tmp_path / "stats.json").read_text())  # --stats: what arrived
     key = "uvd/sub1/estimate/aid6"
-    assert stats["received"] == {key: 299} and stats["lost"] == {key: 1}
+    assert stats["received"] == {key: 599} and stats["lost"] == {key: 1}
     assert stats["dropped"] == {key: 2} and f"dropped 2 malformed samples ({key} 2)" in out
-    assert stats["latency_ms"]["n"] == 299 and 0 < stats["latency_ms"]["p50"] < 1000
+    assert stats["latency_ms"]["n"] == 599 and 0 < stats["latency_ms"]["p50"] < 1000
 
 
 @pytest.fixture

@@ -9,7 +9,12 @@ thruster matrix let it name a weak thruster), prints each detection and publishe
 relative change, confidence, the residual's explanation). Vehicles are followed by
 their liveliness token ``uvd/<vehicle>/alive``: one that goes away is forgotten, and one that
 comes back starts a new baseline (it may have been repaired, or restarted with other
-parameters). Nothing of the daemon is imported: only the wire contract.
+parameters). So does one whose thruster effectiveness η changed (its ``uvd/<vehicle>/event``:
+the operator's ``SetThrusterEta``, a fault sample acted on, the amplifier's own fault
+accommodated): the vehicle is another from then on — a fault accommodated, or a thruster
+repaired and cleared — and a later fault is found against it (before session 34 a vehicle
+that had alarmed once was held faulty until its daemon restarted: no second fault was ever
+reported). Nothing of the daemon is imported: only the wire contract.
 """
 
 from __future__ import annotations
@@ -287,6 +292,20 @@ class FleetWatch:
                                     al.push("state", t_ns, (key, payload), now))
         self._report(vehicle, found)
 
+    def on_event(self, sample) -> None:
+        """An event of the vehicle's (``uvd.event.v1``) that changed its thruster
+        effectiveness: its detectors start a new baseline (the module docstring)."""
+        payload = self._json_object(sample)
+        if payload is None or not eta_changed(payload):
+            return
+        vehicle = str(sample.key_expr).split("/")[1]
+        with self.lock:
+            for key in [k for k in self.detectors if k[0] == vehicle]:
+                del self.detectors[key], self.aligned[key]
+            self.early.pop(vehicle, None)
+        self.say(f"{vehicle}: thruster effectiveness changed ({payload.get('text')}): a new "
+                 "baseline")
+
     def on_alive(self, sample) -> None:
         vehicle = str(sample.key_expr).split("/")[1]
         if sample.kind == self._put:
@@ -412,6 +431,22 @@ class FleetWatch:
         return None
 
 
+def eta_changed(event: dict) -> bool:
+    """Whether a vehicle's event (``uvd.event.v1``: kind, text, record) changed a thruster's
+    effectiveness η: the operator's ``SetThrusterEta`` done, a ``FaultReport`` acted on (its
+    reason goes on "→ thruster …") or a failsafe ``accommodated`` event (the amplifier's
+    fault, or a fault sample confirmed after it waited)."""
+    r = event.get("record")
+    if not isinstance(r, dict):
+        return False
+    if event.get("kind") == "failsafe":
+        return r.get("kind") == "accommodated"
+    if event.get("kind") != "command" or r.get("ok") is not True:
+        return False
+    return r.get("command") == "SetThrusterEta" or (
+        r.get("command") == "FaultReport" and "→ thruster" in str(r.get("reason")))
+
+
 def _arguments(argv: list[str] | None) -> tuple[argparse.Namespace, CusumSettings]:
     """The command line and the detector's settings it gives; exit 2 naming what is wrong."""
     p = argparse.ArgumentParser(prog="uvd-fdc", description=__doc__.split("\n\n")[0])
@@ -467,6 +502,7 @@ def main(argv: list[str] | None = None) -> int:
         session.declare_subscriber(f"uvd/{args.vehicle}/estimate/*",
                                    callbacks(watch.on_estimate))
         session.declare_subscriber(f"uvd/{args.vehicle}/state", callbacks(watch.on_state))
+        session.declare_subscriber(f"uvd/{args.vehicle}/event", callbacks(watch.on_event))
         session.liveliness().declare_subscriber(f"uvd/{args.vehicle}/alive",
                                                 callbacks(watch.on_alive), history=True)
         watch.say(f"uvd-fdc: watching uvd/{args.vehicle}/estimate/* and state (baseline after "
