@@ -55,7 +55,15 @@ def _run(args) -> int:
     spec = builtin.resolve(args.spec)
     out = args.out if args.out is not None else Path("campaigns") / spec.name
     if not args.report:
-        with Progress(spec.name, unit="runs", quiet=args.quiet, every_s=30.0) as p:
+        from uvd.claims import Taken, claim
+        try:  # held to the end: a second campaign into the folder ran every run again beside
+            held = claim("campaign", str(Path(out).resolve()))  # it (session 34)
+        except Taken as exc:
+            print(f"uvd campaign: {out} is being filled by another campaign ({exc.holder}): "
+                  "wait for it (its rows are kept, a later run skips them) or give another "
+                  "--out", file=sys.stderr)
+            return 2
+        with held, Progress(spec.name, unit="runs", quiet=args.quiet, every_s=30.0) as p:
             def on_row(row: dict, done: int, todo: int) -> None:
                 if row["error"] is not None:
                     p.note(f"  run {row['index']} failed: {row['error'][:300]}")
