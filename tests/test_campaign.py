@@ -4,6 +4,7 @@ campaign killed mid-run and started again)."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
@@ -321,12 +322,16 @@ def test_a_campaign_killed_mid_run_resumes_without_redoing_a_finished_run(tmp_pa
 
 @DASK[0]
 @DASK[1]
-def test_ctrl_c_ends_a_campaign_with_one_line_its_rows_kept_and_no_worker_left(tmp_path):
+@pytest.mark.parametrize("presses", [1, 2])
+def test_ctrl_c_ends_a_campaign_with_one_line_its_rows_kept_and_no_worker_left(tmp_path,
+                                                                              presses):
     """Ctrl-C in the terminal (SIGINT to the campaign's whole process group) while both
     workers compute: the campaign ends with 130 and says "interrupted" in one line, the rows
     it finished are kept, and no worker outlives it. Before (session 32) each worker died of
     the SIGINT itself with two tracebacks (CancelledError, KeyboardInterrupt); ignoring it,
-    a worker closed mid-run sometimes logged a failed heartbeat with a third."""
+    a worker closed mid-run sometimes logged a failed heartbeat with a third. Pressed twice,
+    0.3 s apart, the second broke off the cluster's close and the campaign ended 10.5 s after
+    the first instead of 1.9 s (session 34)."""
     spec_file = tmp_path / "c.toml"
     spec_file.write_text('[campaign]\nname = "ctrl-c"\nkind = "control"\n[axes]\n'
                          'controller = "pdc"\nduration_h = 0.05\nwindow_min = 0.5\n'
@@ -336,13 +341,20 @@ def test_ctrl_c_ends_a_campaign_with_one_line_its_rows_kept_and_no_worker_left(t
     proc = _campaign_with_a_row(spec_file, out, workers=2)
     try:
         below = descendants(proc.pid)
+        t0 = time.monotonic()
         os.killpg(proc.pid, signal.SIGINT)
+        if presses == 2:
+            time.sleep(0.3)
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)
+        ended_s = time.monotonic() - t0
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(timeout=30)
     assert proc.returncode == 130, err[-3000:]
+    assert ended_s < 8.0, f"ended {ended_s:.1f} s after the first Ctrl-C"
     assert err.strip().splitlines()[-1] == "uvd campaign: interrupted", err[-3000:]
     assert "Traceback" not in err and "ERROR" not in err, err[-3000:]
     assert len(below) >= 2, f"the campaign's worker processes: {below}"
@@ -551,3 +563,18 @@ def test_a_row_that_cannot_be_written_is_named_and_leaves_no_temporary_file(tmp_
     row = tmp_path / "rows" / "k1.parquet"
     assert r.stdout.startswith(f"[Errno 27] cannot write the row {row}: "), r.stderr[-2000:]
     assert list((tmp_path / "rows").iterdir()) == []
+
+
+def test_a_second_campaign_into_a_folder_being_filled_is_refused(tmp_path, capsys):
+    """Two campaigns into one folder (a second terminal, a timer) each ran every run, beside
+    the other on the same cores (60 and 58 of control-model-error's 60, session 34): the
+    second now says who fills the folder and stops before it runs anything."""
+    from uvd.claims import claim
+    from uvd.cli import main
+    out = tmp_path / "c"
+    with claim("campaign", str(out.resolve())):  # as the first campaign holds it
+        assert main(["campaign", "smoke", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"uvd campaign: {out} is being filled by another campaign (process {os.getpid()})" \
+        in err, err
+    assert not (out / "rows").exists() or not any((out / "rows").iterdir())

@@ -74,15 +74,23 @@ def _close(client, cluster) -> None:
     ("Couldn't gather keys … forgotten", an ERROR); the campaign has every row it finished,
     and says that it was interrupted."""
     import logging
+    import signal
+    import threading
     log = logging.getLogger("distributed")
     level = log.level
     log.setLevel(logging.CRITICAL)
+    # a second Ctrl-C (an impatient operator) broke off the close it lands in, and the
+    # campaign then ended 10.5 s after the first instead of 1.9 s: the close, bounded, ends
+    main = threading.current_thread() is threading.main_thread()
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:
         client.close()
         if cluster is not None:
             cluster.close()
     finally:
         log.setLevel(level)
+        if main:
+            signal.signal(signal.SIGINT, handler)
 
 
 def dask_setup(worker) -> None:
