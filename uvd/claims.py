@@ -5,7 +5,8 @@ file after a crash or a SIGKILL), and a second claimant learns which process hol
 The daemon claims its CAN bus (:func:`uvd.runtime.can_component.claim_bus`); sim-bridge
 claims the bus its emulated drives answer on and the links of its instruments
 (:meth:`sim_bridge.bridge.SimBridge.run`): a second one would answer as the same nodes and take
-the links over.
+the links over. ``uvd campaign`` claims the folder it fills (:mod:`uvd.commands.campaign`): a
+second campaign into it would run every run again beside the first.
 """
 
 from __future__ import annotations
