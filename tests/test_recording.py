@@ -1139,3 +1139,28 @@ def test_the_data_is_forced_to_the_disk_at_the_sync_interval_and_at_the_end(tmp_
     plain.write(tmp_path / "plain.bin", b"", close=True)
     assert plain.syncs == 1 and plain.stats()["syncs"] == 1 and len(folders) == 2
     assert (tmp_path / "timed.bin").stat().st_size == 50 * 4096
+
+
+def test_estimates_of_several_estimators_are_drawn_one_figure_each():
+    """AID's 241 parameters beside an adaptive controller's 16 (``uvd demo --fault``'s run:
+    AMBC and ``[estimation] aid``) ended the report in numpy's "inhomogeneous shape"; records
+    that name no estimator are told apart by their length."""
+    from uvd.estimation.aid import INITP_6DOF
+    from uvd.io.figures import _pyplot
+    from uvd.telemetry.report import _estimates_figures
+    plt = _pyplot()
+    theta = list(map(float, INITP_6DOF.theta))
+    est = [{"t_ns": k, "theta": theta} for k in range(3)] + \
+        [{"t_ns": k, "theta": [1.0] * 16} for k in range(3)]
+    named = [{**e, "estimator": "aid6", "source": "estimator"} for e in est[:3]] + \
+        [{**e, "estimator": "two-step-ambc", "source": "controller"} for e in est[3:]]
+    for records, files in ((est, ["estimates-estimate-241.png", "estimates-estimate-16.png"]),
+                           (named, ["estimates-aid6.png", "estimates-two-step-ambc.png"]),
+                           (named[:3], ["estimates.png"])):
+        saved: list[str] = []
+
+        def save(fig, name: str, caption: str, saved=saved) -> None:
+            plt.close(fig)
+            saved.append(name)
+        _estimates_figures(plt, save, records, 0)
+        assert saved == files

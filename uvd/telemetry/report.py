@@ -211,19 +211,7 @@ def _draw(plt, path: Path, out: Path, data: dict[str, list], params, say) -> dic
     _thrust_figure(plt, save, cyc, t, data["start"])
     est = [e for e in data["estimate"] if e.get("theta") is not None
            and len(e["theta"]) in (16, 241)]
-    by_estimator: dict[str, list] = {}
-    for e in est:  # AID's 241 and the controller's 16 side by side: one figure each
-        by_estimator.setdefault(f"{e.get('estimator') or e.get('source')}", []).append(e)
-    for name, group in by_estimator.items():
-        te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in group])
-        whose = ("the online AID's θ̂ (Theorem 4.3.1, cf. Figs. 4.x)"
-                 if group[0].get("source") == "estimator" else
-                 "the adaptive controller's θ̂ (the 16 decoupled parameters of §5.3.1, cf. "
-                 "Fig. 5.1)" if len(group[0]["theta"]) == 16 else "the adaptive controller's θ̂")
-        save(estimates_figure(plt, te, [e["theta"] for e in group]),
-             "estimates.png" if len(by_estimator) == 1
-             else f"estimates-{re.sub(r'[^A-Za-z0-9_.-]', '_', name)}.png",
-             f"Estimates over the run, {name}: {whose}.")
+    _estimates_figures(plt, save, est, t0)
     _failsafe_figure(plt, save, cyc, t, t0, data["failsafe"])
     _period_figure(plt, save, cyc)
 
@@ -288,6 +276,28 @@ def _tracking_figures(plt, save, cyc: list, t: np.ndarray, armed: np.ndarray) ->
     fig = mne_figure(plt, np.arange(len(mp)) * win / 60.0, win / 60.0, mp, mv)
     save(fig, "mne.png", f"Position and velocity MNE (§5.3.1) in {win / 60.0:.3g}-minute "
                          "windows, the layout of Fig. 5.4.")
+
+
+def _estimates_figures(plt, save, est: list, t0: int) -> None:
+    """The estimates over time, one figure an estimator (``estimates.png`` when there is one):
+    AID's 241 parameters and an adaptive controller's 16 in one array ended the report in
+    numpy's "inhomogeneous shape" ValueError (``uvd demo --fault``'s run, session 34)."""
+    groups: dict[tuple[str, int], list] = {}
+    for e in est:
+        name = str(e.get("estimator") or e.get("source") or "estimate")
+        groups.setdefault((name, len(e["theta"])), []).append(e)
+    names = [name for name, _ in groups]
+    for (name, n), group in groups.items():
+        te = np.array([(int(e["t_ns"]) - t0) * 1e-9 for e in group])
+        whose = ("the online AID's θ̂ (Theorem 4.3.1, cf. Figs. 4.x)"
+                 if group[0].get("source") == "estimator" else
+                 "the adaptive controller's θ̂ (the 16 decoupled parameters of §5.3.1, cf. "
+                 "Fig. 5.1)" if n == 16 else "the adaptive controller's θ̂")
+        label = name if names.count(name) == 1 else f"{name}-{n}"
+        save(estimates_figure(plt, te, [e["theta"] for e in group]),
+             "estimates.png" if len(groups) == 1
+             else f"estimates-{re.sub(r'[^A-Za-z0-9_.-]', '_', label)}.png",
+             f"Estimates over the run, {label}: {whose}.")
 
 
 def _thrust_figure(plt, save, cyc: list, t: np.ndarray, start: Any) -> None:
