@@ -431,6 +431,12 @@ def test_serial_line_carries_telemetry_and_commands(tmp_path):
                 return
         raise AssertionError("no HEARTBEAT down the serial line")
 
+    _with_link(link, scenario, 30.0, close=(master, slave))
+
+
+def _with_link(link, scenario, timeout_s: float, close=()) -> None:
+    """Open ``link``, give it a cycle record, run ``scenario`` in a thread (a station's
+    side), close the link and then the file descriptors ``close``."""
     async def main():
         await link.open()
         try:
@@ -438,9 +444,9 @@ def test_serial_line_carries_telemetry_and_commands(tmp_path):
             await asyncio.to_thread(scenario)
         finally:
             await link.aclose()
-            os.close(master)
-            os.close(slave)
-    asyncio.run(asyncio.wait_for(main(), 30.0))
+            for fd in close:
+                os.close(fd)
+    asyncio.run(asyncio.wait_for(main(), timeout_s))
 
 
 def test_a_radio_missing_or_lost_is_told_and_opened_again_beside_the_udp_link(tmp_path,
@@ -501,16 +507,8 @@ def test_a_radio_missing_or_lost_is_told_and_opened_again_beside_the_udp_link(tm
         os.close(master)
         st.sock.close()
 
-    async def main():
-        await link.open()
-        try:
-            await link.write([cycle_record()])
-            await asyncio.to_thread(scenario)
-        finally:
-            await link.aclose()
-
     with caplog.at_level(logging.INFO, logger="uvd.mavlink"):
-        asyncio.run(asyncio.wait_for(main(), 60.0))
+        _with_link(link, scenario, 60.0)
     said = [r.getMessage() for r in caplog.records if "serial" in r.getMessage()]
     assert len(said) <= 6, said  # told, not at every wake
     assert f"MAVLink serial {path} not open: [Errno 2] No such file or directory; the UDP " \
