@@ -297,3 +297,22 @@ def test_the_documented_can_log_filter_keeps_the_received_frames_and_plays(tmp_p
     assert played.returncode == 0, played.stderr
     sent = [line for line in played.stdout.splitlines() if line.startswith("Timestamp:")]
     assert len(sent) == 10 and all("ID:      181" in line for line in sent)
+
+
+def test_the_daemon_under_test_of_a_fault_run_starts_without_zenoh_or_its_fdc_source(tmp_path):
+    """``uvd demo --fault``'s black box holds ``[faults.fdc] enabled`` (uvd-fdc over Zenoh):
+    the daemon under test, which has no Zenoh, refused to start ("faults.fdc.enabled: uvd-fdc's
+    samples come over Zenoh") and the run could not be replayed in real time."""
+    from uvd.io.toml import dump_toml, read_toml
+    from uvd.runtime.config import DEFAULT_CONFIG, load_config
+    from uvd.runtime.replay.realtime import live_config
+    data = read_toml(DEFAULT_CONFIG)
+    data["faults"] = {"fdc": {"enabled": True, "accept": "confirm"}}
+    text = dump_toml(data)
+    (tmp_path / "recorded.toml").write_text(text)
+    assert load_config(tmp_path / "recorded.toml").faults.fdc.enabled  # valid as recorded
+    out = live_config(text, tmp_path, interface="virtual", channel="uvd-x",
+                      can_port=None)
+    cfg = load_config(out)
+    assert not cfg.telemetry.zenoh.enabled and not cfg.faults.fdc.enabled
+    assert cfg.faults.fdc.accept == "confirm"  # the rest of the table as recorded
