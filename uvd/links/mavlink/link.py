@@ -430,7 +430,7 @@ class MavlinkLink:
 
     def _lose_serial(self, exc: BaseException) -> None:
         """The line failed under a read (a USB adapter unplugged): closed, told once, tried
-        again from the next wake on."""
+        again after the wait it opened with (:data:`SERIAL_RETRY_S`'s first)."""
         with contextlib.suppress(Exception):
             self._serial.close()
         self._serial = None
