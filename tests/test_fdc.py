@@ -59,12 +59,15 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
                 time.sleep(0.1)
             # the operator's η (the fault accommodated, or repaired and cleared): a new
             # baseline of the vehicle as it is now, against which a later fault is found
-            s.put("uvd/sub1/event", json.dumps({
+            cleared = json.dumps({
                 "kind": "command", "text": "SetThrusterEta from mavlink 255/190: ok — "
                 "thruster 4 eta 1 (mavlink 255/190); given up: none",
                 "record": {"type": "command", "t_ns": 300_000_000_000,
-                           "command": "SetThrusterEta", "ok": True, "source": "mavlink"}}))
+                           "command": "SetThrusterEta", "ok": True, "source": "mavlink",
+                           "args": {"thruster": 4, "eta": 1.0, "source": "mavlink"}}})
+            s.put("uvd/sub1/event", cleared)
             _wait_for_line(lines, "sub1: thruster effectiveness changed (SetThrusterEta from")
+            s.put("uvd/sub1/event", cleared)  # cleared again: no change, no new baseline
             for k in range(300, 600):  # the drags stay 1.5×; the masses 1.1× from 500 s
                 scale = {"drags": 1.5, **({"masses": 1.1} if k >= 500 else {})}
                 pub.put(json.dumps({**_payload(float(k), rng, scale=scale), "seq": k,
@@ -94,6 +97,7 @@ def test_the_client_reports_and_publishes_a_fault(tmp_path):
     jsonschema.Draft202012Validator(schema).validate(d)
     assert 200e9 <= d["t_ns"] <= 203e9
     assert "FAULT sub1: entanglement" in out and "not JSON" in out and "sub1: gone" in out
+    assert out.count("thruster effectiveness changed") == 1, out
     stats = json.loads((tmp_path / "stats.json").read_text())  # --stats: what arrived
     key = "uvd/sub1/estimate/aid6"
     assert stats["received"] == {key: 599} and stats["lost"] == {key: 1}
@@ -373,3 +377,30 @@ def test_the_client_names_a_weak_thruster_from_state_and_params(tmp_path, busy_m
     assert "e+" not in out.split("FAULT sub2")[1].split("\n")[0]  # no 10¹³ σ
 
 
+
+
+@pytest.mark.parametrize("event, what", [
+    ({"kind": "command", "record": {"command": "SetThrusterEta", "ok": True,
+                                    "args": {"thruster": 4, "eta": 0.5}}}, (4, 0.5)),
+    ({"kind": "command", "record": {"command": "SetThrusterEta", "ok": False,
+                                    "args": {"thruster": 9, "eta": 0.5}}}, None),
+    ({"kind": "command", "record": {"command": "FaultReport", "ok": True, "reason":
+                                    "uvd-fdc: thruster 4 eta 0.48 (confidence 8.78); confirmed: "
+                                    "… → thruster 4 eta 0.476 (uvd-fdc); given up: none"}},
+     (4, 0.476)),
+    ({"kind": "command", "record": {"command": "FaultReport", "ok": True, "reason":
+                                    "uvd-fdc: thruster 7 eta 0.27 (confidence 24.3); awaiting "
+                                    "the daemon's residual (…)"}}, None),
+    ({"kind": "failsafe", "record": {"kind": "accommodated", "reason":
+                                     "uvd-fdc: thruster 7 eta 0.27 (confidence 24.3); "
+                                     "confirmed: … → thruster 7 eta 0.271 (uvd-fdc); given up: "
+                                     "none"}}, (7, 0.271)),
+    ({"kind": "failsafe", "record": {"kind": "accommodated", "reason":
+                                     "thruster 1 eta 0 (amplifier); given up: surge"}}, (1, 0.0)),
+    ({"kind": "failsafe", "record": {"kind": "fired", "reason": "leak"}}, None),
+    ({"kind": "command", "record": {"command": "SetThrusterEta", "ok": True}}, True),
+    ({"kind": "lifecycle", "record": "not a table"}, None),
+])
+def test_the_eta_an_event_sets_is_read_from_its_record(event, what):
+    from uvd.fdc.client import eta_set
+    assert eta_set(event) == what

@@ -14,7 +14,8 @@ the operator's ``SetThrusterEta``, a fault sample acted on, the amplifier's own 
 accommodated): the vehicle is another from then on — a fault accommodated, or a thruster
 repaired and cleared — and a later fault is found against it (before session 34 a vehicle
 that had alarmed once was held faulty until its daemon restarted: no second fault was ever
-reported). Nothing of the daemon is imported: only the wire contract.
+reported); an event setting the η this client saw set last changes nothing. Nothing of the
+daemon is imported: only the wire contract.
 """
 
 from __future__ import annotations
@@ -230,6 +231,8 @@ class FleetWatch:
         self.thrusters: dict[str, object] = {}  # vehicle → its thruster matrix B (None: unknown)
         self.asked: set[str] = set()  # vehicles asked for B (again when they come back)
         self.settled: set[str] = set()  # vehicles whose question for B is answered
+        #: vehicle → thruster → the η its events last set it to (:meth:`on_event`)
+        self.etas: dict[str, dict[int, float]] = {}
         self.early: dict[str, deque] = {}  # vehicle → state samples before its first estimate
 
     def say(self, text: str) -> None:
@@ -294,12 +297,20 @@ class FleetWatch:
 
     def on_event(self, sample) -> None:
         """An event of the vehicle's (``uvd.event.v1``) that changed its thruster
-        effectiveness: its detectors start a new baseline (the module docstring)."""
+        effectiveness: its detectors start a new baseline (the module docstring). One that
+        sets a thruster to the η this client saw it set to last changes nothing (an operator
+        clearing a thruster twice: each new baseline costs ``warmup_s + baseline_s``)."""
         payload = self._json_object(sample)
-        if payload is None or not eta_changed(payload):
+        what = None if payload is None else eta_set(payload)
+        if what is None:
             return
         vehicle = str(sample.key_expr).split("/")[1]
         with self.lock:
+            seen = self.etas.setdefault(vehicle, {})
+            if what is not True:
+                if seen.get(what[0]) == what[1]:
+                    return
+                seen[what[0]] = what[1]
             for key in [k for k in self.detectors if k[0] == vehicle]:
                 del self.detectors[key], self.aligned[key]
             self.early.pop(vehicle, None)
@@ -315,6 +326,7 @@ class FleetWatch:
             for key in [k for k in self.detectors if k[0] == vehicle]:
                 del self.detectors[key], self.aligned[key]
             self.thrusters.pop(vehicle, None)
+            self.etas.pop(vehicle, None)
             self.asked.discard(vehicle)
             self.settled.discard(vehicle)
             self.early.pop(vehicle, None)
@@ -431,20 +443,38 @@ class FleetWatch:
         return None
 
 
-def eta_changed(event: dict) -> bool:
-    """Whether a vehicle's event (``uvd.event.v1``: kind, text, record) changed a thruster's
-    effectiveness η: the operator's ``SetThrusterEta`` done, a ``FaultReport`` acted on (its
-    reason goes on "→ thruster …") or a failsafe ``accommodated`` event (the amplifier's
-    fault, or a fault sample confirmed after it waited)."""
+#: "thruster 4 eta 0.476 (" in a reason: the η a thruster was set to and by whom
+_SET_ETA = re.compile(r"thruster ([0-9]+) eta ([0-9.]+(?:e-?[0-9]+)?) \(")
+
+
+def eta_set(event: dict) -> tuple[int, float] | None | bool:
+    """What a vehicle's event (``uvd.event.v1``: kind, text, record) set a thruster's
+    effectiveness η to: (thruster, η) of the operator's ``SetThrusterEta`` done (its
+    arguments), of a ``FaultReport`` acted on (its reason goes on "→ thruster 4 eta 0.476
+    (uvd-fdc)") or of a failsafe ``accommodated`` event (the amplifier's fault, or a fault
+    sample confirmed after it waited); True for such an event whose numbers do not read;
+    None for any other event."""
     r = event.get("record")
     if not isinstance(r, dict):
-        return False
+        return None
     if event.get("kind") == "failsafe":
-        return r.get("kind") == "accommodated"
+        if r.get("kind") != "accommodated":
+            return None
+        found = _SET_ETA.findall(str(r.get("reason")))
+        return (int(found[-1][0]), float(found[-1][1])) if found else True
     if event.get("kind") != "command" or r.get("ok") is not True:
-        return False
-    return r.get("command") == "SetThrusterEta" or (
-        r.get("command") == "FaultReport" and "→ thruster" in str(r.get("reason")))
+        return None
+    if r.get("command") == "SetThrusterEta":
+        args = r.get("args") if isinstance(r.get("args"), dict) else {}
+        try:
+            return int(args["thruster"]), float(args["eta"])
+        except (KeyError, TypeError, ValueError):
+            return True
+    reason = str(r.get("reason"))
+    if r.get("command") != "FaultReport" or "→ thruster" not in reason:
+        return None
+    found = _SET_ETA.findall(reason.split("→", 1)[1])
+    return (int(found[0][0]), float(found[0][1])) if found else True
 
 
 def _arguments(argv: list[str] | None) -> tuple[argparse.Namespace, CusumSettings]:
