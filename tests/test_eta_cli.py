@@ -78,3 +78,9 @@ def test_uvd_eta_refuses_what_is_not_an_effectiveness_and_a_silent_link(capsys):
     err = capsys.readouterr().err
     assert "not in [0, 1]" in err and "not a number nor 'clear'" in err
     assert f"no vehicle heartbeat from 127.0.0.1:{port} within 0.5 s" in err
+
+
+def test_the_eta_echoed_is_the_float32_mavlink_carries():
+    from uvd.commands.eta import _eta
+    assert _eta("1e-320") == 0.0 and _eta("clear") == 1.0 and _eta("0.5") == 0.5
+    assert f"{_eta('0.1'):g}" == "0.1" and _eta("0.1") != 0.1  # float32's 0.1, printed as 0.1

@@ -16,6 +16,7 @@ Exit code 0 when the daemon accepted it, 1 when it refused (the reason is in its
 from __future__ import annotations
 
 import math
+import struct
 import sys
 
 from uvd.cliargs import positive_int
@@ -42,7 +43,9 @@ def _eta(text: str) -> float:
         raise ValueError(f"eta {text!r} is not a number nor 'clear'") from None
     if not (math.isfinite(e) and 0.0 <= e <= 1.0):
         raise ValueError(f"eta {text!r} is not in [0, 1]")
-    return e
+    # what COMMAND_LONG's param2 carries, a float32, and so what the echo says: "1e-320" was
+    # echoed as 9.99989e-321 though 0 went out
+    return struct.unpack("<f", struct.pack("<f", e))[0]
 
 
 def _run(args) -> int:
