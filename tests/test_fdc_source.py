@@ -8,8 +8,11 @@ carries one over a real router)."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
+from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 
@@ -122,6 +125,11 @@ def test_a_sample_that_comes_at_once_awaits_the_residual_then_is_decided(health,
     else:
         assert e["kind"] == "refused" and "not acted on" in e["reason"]
         assert st.thruster_eta is None and st.fdc.contradicted == 1
+    # the event as a client reads it: against the published schema file alone (its kind
+    # "refused" is new in session 34), not the daemon's classes
+    schema = json.loads((Path(__file__).parents[1] / "uvd" / "telemetry" / "schemas"
+                         / "uvd.failsafe.v1.json").read_text())
+    jsonschema.Draft202012Validator(schema).validate(e)
 
 
 def test_a_newer_sample_of_a_thruster_replaces_the_one_that_awaits():
