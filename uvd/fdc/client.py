@@ -307,9 +307,11 @@ class FleetWatch:
         vehicle = str(sample.key_expr).split("/")[1]
         with self.lock:
             seen = self.etas.setdefault(vehicle, {})
-            if what is not True:
-                if seen.get(what[0]) == what[1]:
-                    return
+            if what is True:  # a thruster set to an η not read here: none is known now
+                seen.clear()
+            elif seen.get(what[0]) == what[1]:
+                return
+            else:
                 seen[what[0]] = what[1]
             for key in [k for k in self.detectors if k[0] == vehicle]:
                 del self.detectors[key], self.aligned[key]
@@ -443,25 +445,19 @@ class FleetWatch:
         return None
 
 
-#: "thruster 4 eta 0.476 (" in a reason: the η a thruster was set to and by whom
-_SET_ETA = re.compile(r"thruster ([0-9]+) eta ([0-9.]+(?:e-?[0-9]+)?) \(")
-
-
 def eta_set(event: dict) -> tuple[int, float] | None | bool:
     """What a vehicle's event (``uvd.event.v1``: kind, text, record) set a thruster's
-    effectiveness η to: (thruster, η) of the operator's ``SetThrusterEta`` done (its
-    arguments), of a ``FaultReport`` acted on (its reason goes on "→ thruster 4 eta 0.476
-    (uvd-fdc)") or of a failsafe ``accommodated`` event (the amplifier's fault, or a fault
-    sample confirmed after it waited); True for such an event whose numbers do not read;
-    None for any other event."""
+    effectiveness η to: (thruster, η) of the operator's ``SetThrusterEta`` done, from its
+    recorded arguments; True for an η set that is always a change — a ``FaultReport`` acted
+    on (its reason goes on "→ thruster …"), a failsafe ``accommodated`` event (a thruster
+    newly set by the amplifier's fault or a sample confirmed after it waited) — or a
+    ``SetThrusterEta`` whose arguments do not read; None for any other event. Only recorded
+    fields are read, never the words of a reason for numbers."""
     r = event.get("record")
     if not isinstance(r, dict):
         return None
     if event.get("kind") == "failsafe":
-        if r.get("kind") != "accommodated":
-            return None
-        found = _SET_ETA.findall(str(r.get("reason")))
-        return (int(found[-1][0]), float(found[-1][1])) if found else True
+        return True if r.get("kind") == "accommodated" else None
     if event.get("kind") != "command" or r.get("ok") is not True:
         return None
     if r.get("command") == "SetThrusterEta":
@@ -470,11 +466,9 @@ def eta_set(event: dict) -> tuple[int, float] | None | bool:
             return int(args["thruster"]), float(args["eta"])
         except (KeyError, TypeError, ValueError):
             return True
-    reason = str(r.get("reason"))
-    if r.get("command") != "FaultReport" or "→ thruster" not in reason:
-        return None
-    found = _SET_ETA.findall(reason.split("→", 1)[1])
-    return (int(found[0][0]), float(found[0][1])) if found else True
+    if r.get("command") == "FaultReport" and "→ thruster" in str(r.get("reason")):
+        return True
+    return None
 
 
 def _arguments(argv: list[str] | None) -> tuple[argparse.Namespace, CusumSettings]:
