@@ -378,11 +378,11 @@ def read_run(files: Sequence[Path], topics: Sequence[str], *,
 
 def load_run(path: str | Path):
     """A :class:`uvd.io.runlog.RunLog` of a run in any form uvd leaves: a black-box recording
-    (an ``.mcap`` holding a start record — its ``/uvd/cycle`` records of
-    :func:`drawn_files`) or what
-    :func:`uvd.io.runlog.load_runlog` reads (``.npz``, the telemetry's JSON lines). Before
-    session 33 ``uvd identify`` and ``uvd xval`` refused the daemon's own recording as
-    "another system's" and asked for a log profile."""
+    (an ``.mcap`` holding a start record — its ``/uvd/cycle`` records of :func:`drawn_files`)
+    or what :func:`uvd.io.runlog.load_runlog` reads (``.npz``, the telemetry's JSON lines).
+    Before session 33 ``uvd identify`` and ``uvd xval`` refused the daemon's own recording as
+    "another system's" and asked for a log profile. A folder of runs is told which file to
+    give (a ROS 2 bag's folder goes on to ``load_runlog``, which names its profile)."""
     from uvd.errors import ConfigError
     from uvd.io.runlog import load_runlog, runlog_from_records
     path = Path(path)
